@@ -1,0 +1,1 @@
+"""pipeline: ensembles, storage, statistics, plots and the rss6 command line."""

@@ -1,0 +1,364 @@
+"""Immutable scene description of a 6-RSS robot, read from a TOML file.
+
+A scene holds everything a run needs to know and nothing it computes: geometry,
+link sections, material, platform, gravity, trajectory (eq. 35), time step,
+damping, clearances and contact laws.  All values are SI inside; the TOML keys
+carry their units in their names.  Loading checks every key strictly (unknown,
+missing, wrong type, non-physical value) and raises :class:`SceneError` naming
+the key, then checks that the trajectory stays inside the workspace.
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "SceneError", "Scene", "Geometry", "RectangleSection", "TubeSection",
+    "Material", "Platform", "Trajectory", "Damping", "Clearances", "ContactLaw",
+    "load_scene", "parse_scene", "embedded_scene_names", "resolve_scene_path",
+]
+
+
+class SceneError(ValueError):
+    """A scene file that cannot describe a physical robot; the message names the key."""
+
+
+def _frozen(values) -> np.ndarray:
+    arr = np.array(values, dtype=float)
+    arr.flags.writeable = False
+    return arr
+
+
+def _rot_z(angle: np.ndarray) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    z, o = np.zeros_like(angle), np.ones_like(angle)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1),
+                     np.stack([z, z, o], -1)], -2)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Joint layout (eq. 2-3): base joints a_i, platform joints p_i (platform frame), links."""
+    base_radius: float
+    base_angles: np.ndarray        # theta_i = u_i, rad
+    platform_radius: float
+    platform_angles: np.ndarray    # beta_i, rad
+    crank_length: float            # L_ac, m
+    rod_length: float              # L_cb, m
+
+    @property
+    def a(self) -> np.ndarray:
+        """Base joint centres a_i = R1 [cos theta_i, sin theta_i, 0] (6, 3), m."""
+        th = self.base_angles
+        return _frozen(self.base_radius * np.stack([np.cos(th), np.sin(th), 0 * th], -1))
+
+    @property
+    def p(self) -> np.ndarray:
+        """Platform joint centres in the platform frame n_i* (6, 3), m."""
+        be = self.platform_angles
+        return _frozen(self.platform_radius * np.stack([np.cos(be), np.sin(be), 0 * be], -1))
+
+    @property
+    def k(self) -> np.ndarray:
+        """Leg mounting rotations k_i = Rz(u_i) (6, 3, 3), eq. 2."""
+        return _frozen(_rot_z(self.base_angles))
+
+    @property
+    def w(self) -> np.ndarray:
+        """Revolute axes w_i = [-sin u_i, cos u_i, 0] (6, 3)."""
+        return _frozen(self.k[:, :, 1])
+
+
+@dataclass(frozen=True)
+class RectangleSection:
+    """Solid rectangle: ``axial_width`` along the revolute axis, ``height`` in the plane of motion, m."""
+    axial_width: float
+    height: float
+
+
+@dataclass(frozen=True)
+class TubeSection:
+    """Circular tube, outer and inner diameters, m."""
+    outer_diameter: float
+    inner_diameter: float
+
+
+@dataclass(frozen=True)
+class Material:
+    density: float          # kg/m^3
+    youngs_modulus: float   # Pa
+    shear_modulus: float    # Pa
+
+    @property
+    def poisson_ratio(self) -> float:
+        """nu = E / (2 G) - 1 (isotropic)."""
+        return self.youngs_modulus / (2.0 * self.shear_modulus) - 1.0
+
+
+@dataclass(frozen=True)
+class Platform:
+    mass: float             # kg
+    inertia: np.ndarray     # principal moments about o_p in platform axes, kg m^2
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Eq. 35: pose_k(t) = offset_k + amplitude_k sin(2 pi f t), pose = (x, y, z, n1, n2, n3)."""
+    frequency: float        # Hz
+    offset: np.ndarray      # (6,) m and rad
+    amplitude: np.ndarray   # (6,) m and rad
+    duration: float         # s
+
+
+@dataclass(frozen=True)
+class Damping:
+    """Rayleigh damping C = mass_coefficient M + stiffness_coefficient K."""
+    mass_coefficient: float       # 1/s
+    stiffness_coefficient: float  # s
+
+
+@dataclass(frozen=True)
+class Clearances:
+    """Maximum clearances (Table 2), m."""
+    revolute_radial: float
+    revolute_axial: float
+    spherical_C: float
+    spherical_B: float
+
+
+@dataclass(frozen=True)
+class ContactLaw:
+    """Joint contact geometry and the laws of eq. 17-18."""
+    journal_radius: float         # m
+    sphere_radius: float          # m
+    restitution: float            # xi
+    exponent: float               # n
+    friction_coefficient: float   # mu_d
+    stick_velocity: float         # v0, m/s
+    slip_velocity: float          # v1, m/s
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Everything one run of rss6 needs to know, immutable."""
+    name: str
+    geometry: Geometry
+    crank_section: RectangleSection
+    rod_section: TubeSection
+    material: Material
+    platform: Platform
+    gravity: float                # m/s^2 along -Z
+    trajectory: Trajectory
+    time_step: float              # s
+    damping: Damping
+    clearance: Clearances
+    contact: ContactLaw
+    source_text: str = field(default="", repr=False, compare=False)
+    source_path: str = field(default="", repr=False, compare=False)
+
+    @property
+    def times(self) -> np.ndarray:
+        """Output time grid t_k = k dt on [0, duration], s."""
+        n = int(round(self.trajectory.duration / self.time_step))
+        return np.arange(n + 1) * self.time_step
+
+    @property
+    def gravity_vector(self) -> np.ndarray:
+        return np.array([0.0, 0.0, -self.gravity])
+
+
+# --- the schema ------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Key:
+    kind: type                  # float, int or str
+    length: int | None = None   # array length, None for a scalar
+    check: str | None = None    # 'positive', 'nonnegative', 'unit' (0, 1]
+
+
+_POS, _NONNEG = "positive", "nonnegative"
+_SCHEMA: dict = {
+    "name": _Key(str),
+    "geometry": {
+        "base_radius_m": _Key(float, check=_POS),
+        "base_angles_deg": _Key(float, 6),
+        "platform_radius_m": _Key(float, check=_POS),
+        "platform_angles_deg": _Key(float, 6),
+        "crank_length_m": _Key(float, check=_POS),
+        "rod_length_m": _Key(float, check=_POS),
+    },
+    "crank_section": {"axial_width_m": _Key(float, check=_POS),
+                      "height_m": _Key(float, check=_POS)},
+    "rod_section": {"outer_diameter_m": _Key(float, check=_POS),
+                    "inner_diameter_m": _Key(float, check=_NONNEG)},
+    "material": {"density_kg_m3": _Key(float, check=_POS),
+                 "youngs_modulus_Pa": _Key(float, check=_POS),
+                 "shear_modulus_Pa": _Key(float, check=_POS)},
+    "platform": {"mass_kg": _Key(float, check=_POS),
+                 "inertia_kg_m2": _Key(float, 3, check=_POS)},
+    "environment": {"gravity_m_s2": _Key(float, check=_NONNEG)},
+    "trajectory": {
+        "frequency_Hz": _Key(float, check=_NONNEG),
+        "position_offset_m": _Key(float, 3),
+        "position_amplitude_m": _Key(float, 3),
+        "angle_offset_deg": _Key(float, 3),
+        "angle_amplitude_deg": _Key(float, 3),
+        "duration_s": _Key(float, check=_POS),
+    },
+    "simulation": {"time_step_s": _Key(float, check=_POS)},
+    "damping": {"mass_coefficient_per_s": _Key(float, check=_NONNEG),
+                "stiffness_coefficient_s": _Key(float, check=_NONNEG)},
+    "clearance": {"revolute_radial_m": _Key(float, check=_NONNEG),
+                  "revolute_axial_m": _Key(float, check=_NONNEG),
+                  "spherical_C_m": _Key(float, check=_NONNEG),
+                  "spherical_B_m": _Key(float, check=_NONNEG)},
+    "contact": {"journal_radius_m": _Key(float, check=_POS),
+                "sphere_radius_m": _Key(float, check=_POS),
+                "restitution": _Key(float, check="unit"),
+                "exponent": _Key(float, check=_POS),
+                "friction_coefficient": _Key(float, check=_NONNEG),
+                "stick_velocity_m_s": _Key(float, check=_POS),
+                "slip_velocity_m_s": _Key(float, check=_POS)},
+}
+
+
+def _where(path: tuple[str, ...]) -> str:
+    return f"[{'.'.join(path[:-1])}] {path[-1]}" if len(path) > 1 else path[0]
+
+
+def _scalar(value, spec: _Key, path) -> float | int | str:
+    if spec.kind is str:
+        if not isinstance(value, str):
+            raise SceneError(f"{_where(path)}: expected a string, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{_where(path)}: expected a number, got {value!r}")
+    if spec.kind is int and not isinstance(value, int):
+        raise SceneError(f"{_where(path)}: expected an integer, got {value!r}")
+    if not math.isfinite(value):
+        raise SceneError(f"{_where(path)}: must be finite, got {value!r}")
+    bad = {_POS: value <= 0, _NONNEG: value < 0, "unit": not 0 < value <= 1}.get(spec.check, False)
+    if bad:
+        rule = {_POS: "positive", _NONNEG: "non-negative", "unit": "in (0, 1]"}[spec.check]
+        raise SceneError(f"{_where(path)}: must be {rule}, got {value!r}")
+    return spec.kind(value)
+
+
+def _read_key(value, spec: _Key, path):
+    if spec.length is None:
+        return _scalar(value, spec, path)
+    if not isinstance(value, list) or len(value) != spec.length:
+        raise SceneError(f"{_where(path)}: expected a list of {spec.length} numbers, got {value!r}")
+    return [_scalar(v, spec, path) for v in value]
+
+
+def _read_table(table: dict, schema: dict, path: tuple[str, ...] = ()) -> dict:
+    """Check ``table`` against ``schema``: no unknown, no missing keys, right types and signs."""
+    for key in table:
+        if key not in schema:
+            near = difflib.get_close_matches(key, list(schema), n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise SceneError(f"unknown key {_where(path + (key,))}{hint}")
+    out = {}
+    for key, spec in schema.items():
+        if key not in table:
+            raise SceneError(f"missing key {_where(path + (key,))}")
+        value = table[key]
+        if isinstance(spec, dict):
+            if not isinstance(value, dict):
+                raise SceneError(f"[{'.'.join(path + (key,))}] must be a table")
+            out[key] = _read_table(value, spec, path + (key,))
+        else:
+            out[key] = _read_key(value, spec, path + (key,))
+    return out
+
+
+def _build(v: dict, text: str, source: str) -> Scene:
+    g, tr, ct = v["geometry"], v["trajectory"], v["contact"]
+    rod = TubeSection(v["rod_section"]["outer_diameter_m"], v["rod_section"]["inner_diameter_m"])
+    if rod.inner_diameter >= rod.outer_diameter:
+        raise SceneError("[rod_section] inner_diameter_m: must be smaller than outer_diameter_m, "
+                         f"got {rod.inner_diameter!r} >= {rod.outer_diameter!r}")
+    mat = Material(**{k: v["material"][f] for k, f in
+                      [("density", "density_kg_m3"), ("youngs_modulus", "youngs_modulus_Pa"),
+                       ("shear_modulus", "shear_modulus_Pa")]})
+    if not -1.0 < mat.poisson_ratio <= 0.5:
+        raise SceneError(f"[material] shear_modulus_Pa: implies Poisson ratio E/(2G)-1 = "
+                         f"{mat.poisson_ratio:.3f}, outside (-1, 0.5]")
+    if ct["stick_velocity_m_s"] >= ct["slip_velocity_m_s"]:
+        raise SceneError("[contact] stick_velocity_m_s: must be smaller than slip_velocity_m_s")
+    dt, duration = v["simulation"]["time_step_s"], tr["duration_s"]
+    steps = duration / dt
+    if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
+        raise SceneError(f"[simulation] time_step_s: {dt!r} does not divide "
+                         f"[trajectory] duration_s = {duration!r} into whole steps")
+    deg = np.radians
+    return Scene(
+        name=v["name"],
+        geometry=Geometry(g["base_radius_m"], _frozen(deg(g["base_angles_deg"])),
+                          g["platform_radius_m"], _frozen(deg(g["platform_angles_deg"])),
+                          g["crank_length_m"], g["rod_length_m"]),
+        crank_section=RectangleSection(v["crank_section"]["axial_width_m"],
+                                       v["crank_section"]["height_m"]),
+        rod_section=rod,
+        material=mat,
+        platform=Platform(v["platform"]["mass_kg"], _frozen(v["platform"]["inertia_kg_m2"])),
+        gravity=v["environment"]["gravity_m_s2"],
+        trajectory=Trajectory(
+            tr["frequency_Hz"],
+            _frozen(tr["position_offset_m"] + list(deg(tr["angle_offset_deg"]))),
+            _frozen(tr["position_amplitude_m"] + list(deg(tr["angle_amplitude_deg"]))),
+            duration),
+        time_step=dt,
+        damping=Damping(v["damping"]["mass_coefficient_per_s"],
+                        v["damping"]["stiffness_coefficient_s"]),
+        clearance=Clearances(**{k: v["clearance"][f"{k}_m"] for k in
+                                ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")}),
+        contact=ContactLaw(ct["journal_radius_m"], ct["sphere_radius_m"], ct["restitution"],
+                           ct["exponent"], ct["friction_coefficient"], ct["stick_velocity_m_s"],
+                           ct["slip_velocity_m_s"]),
+        source_text=text, source_path=source)
+
+
+def parse_scene(text: str, source: str = "<string>") -> Scene:
+    """Build a scene from TOML text and check its trajectory stays in the workspace."""
+    from .kinematics import check_workspace  # kinematics needs the Scene type only at run time
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{source}: not valid TOML: {exc}") from None
+    try:
+        scene = _build(_read_table(raw, _SCHEMA), text, source)
+        check_workspace(scene)
+    except SceneError as exc:
+        raise SceneError(f"{source}: {exc}") from None
+    return scene
+
+
+def embedded_scene_names() -> list[str]:
+    """Names of the scenes shipped with the package (``paper``, ``smoke``, ...)."""
+    return sorted(p.name[:-5] for p in resources.files("rss6_configs").iterdir()
+                  if p.name.endswith(".toml"))
+
+
+def resolve_scene_path(config: str | Path):
+    """A file path, or the name of an embedded scene; SceneError if neither exists."""
+    path = Path(config)
+    if path.is_file():
+        return path
+    if str(config) in embedded_scene_names():
+        return resources.files("rss6_configs") / f"{config}.toml"
+    raise SceneError(f"{config}: no such scene file (embedded scenes: "
+                     f"{', '.join(embedded_scene_names())})")
+
+
+def load_scene(config: str | Path) -> Scene:
+    """Load and check a scene from a TOML file path or an embedded scene name."""
+    path = resolve_scene_path(config)
+    return parse_scene(path.read_text(encoding="utf-8"), str(config))

@@ -1,0 +1,97 @@
+"""Scene loading: the reference values, and one named error per kind of bad input."""
+import re
+
+import numpy as np
+import pytest
+
+from rss6core import SceneError, parse_scene
+from rss6core.scene import embedded_scene_names, load_scene
+
+
+def _edit(text, old, new):
+    assert old in text, f"fixture text lacks {old!r}"
+    return text.replace(old, new, 1)
+
+
+def test_paper_values_in_si(paper):
+    assert paper.geometry.base_radius == pytest.approx(0.14527)
+    assert np.degrees(paper.geometry.platform_angles) == pytest.approx([-80, 80, 40, 200, 160, 320])
+    assert paper.trajectory.amplitude == pytest.approx([0, 0.05, 0.08, np.radians(20), np.radians(20), 0])
+    assert paper.times[-1] == pytest.approx(2.0) and len(paper.times) == 2001
+    assert paper.material.poisson_ratio == pytest.approx(70 / 53 - 1)
+
+
+def test_embedded_scenes_ship_with_the_package():
+    assert {"paper", "paper_050", "smoke"} <= set(embedded_scene_names())
+    assert load_scene("paper_050").clearance.spherical_B == pytest.approx(0.5e-3)
+
+
+def test_scene_is_immutable(paper):
+    with pytest.raises(AttributeError):
+        paper.time_step = 1.0
+    with pytest.raises(ValueError):
+        paper.geometry.base_angles[0] = 0.0
+
+
+def test_unknown_key_is_named_with_a_suggestion(paper_text):
+    with pytest.raises(SceneError, match=r"unknown key \[geometry\] crank_lenght_m.*crank_length_m"):
+        parse_scene(_edit(paper_text, "crank_length_m", "crank_lenght_m"))
+
+
+def test_missing_key_is_named(paper_text):
+    with pytest.raises(SceneError, match=r"missing key \[platform\] mass_kg"):
+        parse_scene(_edit(paper_text, "mass_kg = 1.366\n", ""))
+
+
+def test_wrong_type_is_named(paper_text):
+    with pytest.raises(SceneError, match=r"\[geometry\] rod_length_m: expected a number"):
+        parse_scene(_edit(paper_text, "rod_length_m = 0.500", 'rod_length_m = "0.5"'))
+
+
+def test_wrong_array_length_is_named(paper_text):
+    with pytest.raises(SceneError, match=r"\[geometry\] base_angles_deg: expected a list of 6"):
+        parse_scene(_edit(paper_text, "[-15.0, 15.0,", "[15.0,"))
+
+
+def test_negative_length_is_rejected(paper_text):
+    with pytest.raises(SceneError, match=r"\[geometry\] crank_length_m: must be positive"):
+        parse_scene(_edit(paper_text, "crank_length_m = 0.216", "crank_length_m = -0.216"))
+
+
+def test_negative_clearance_is_rejected(paper_text):
+    with pytest.raises(SceneError, match=r"\[clearance\] spherical_C_m: must be non-negative"):
+        parse_scene(_edit(paper_text, "spherical_C_m = 0.25e-3", "spherical_C_m = -0.25e-3"))
+
+
+def test_zero_mass_is_rejected(paper_text):
+    with pytest.raises(SceneError, match=r"\[platform\] mass_kg: must be positive, got 0"):
+        parse_scene(_edit(paper_text, "mass_kg = 1.366", "mass_kg = 0.0"))
+
+
+def test_unreachable_trajectory_names_leg_and_time(paper_text):
+    # 200 mm vertical amplitude lifts the platform out of reach of the legs
+    text = _edit(paper_text, "[0.0, 0.050, 0.080]", "[0.0, 0.050, 0.200]")
+    with pytest.raises(SceneError, match=r"workspace: leg \d cannot reach .* at t = \d+\.\d+ s") as e:
+        parse_scene(text)
+    leg, t = map(float, re.search(r"leg (\d) .* t = ([\d.]+) s", str(e.value)).groups())
+    assert 1 <= leg <= 6 and 0 < t < 0.5  # first excursion is in the first quarter period
+
+
+def test_time_step_must_divide_duration(paper_text):
+    with pytest.raises(SceneError, match=r"\[simulation\] time_step_s: .* whole steps"):
+        parse_scene(_edit(paper_text, "time_step_s = 1.0e-3", "time_step_s = 3.0e-3"))
+
+
+def test_tube_inner_diameter_below_outer(paper_text):
+    with pytest.raises(SceneError, match=r"\[rod_section\] inner_diameter_m"):
+        parse_scene(_edit(paper_text, "inner_diameter_m = 0.010", "inner_diameter_m = 0.030"))
+
+
+def test_not_toml_is_named():
+    with pytest.raises(SceneError, match=r"bad.toml: not valid TOML"):
+        parse_scene("name = ", "bad.toml")
+
+
+def test_missing_file_is_named(tmp_path):
+    with pytest.raises(SceneError, match=r"nope.toml: no such scene file"):
+        load_scene(tmp_path / "nope.toml")
