@@ -1,0 +1,322 @@
+"""Kineto-elastodynamic (KED) assembly of the 6-RSS robot: a block-arrow system per time step.
+
+Elastic displacements are superposed on the ideal rigid motion (paper sec. 5):
+M(t) U'' + C(t) U' + K(t) U = F(t) (eq. 32), with the matrices taken at the rigid
+configuration of each instant and F the rigid-body inertia and gravity loads.
+
+Each link's DOFs live in its own frame, where its matrices are constant:
+- crank i (frame: x along A->C, y = w_i, z = x cross y), clamped at A_i (the
+  motor holds alpha_i): nodes 1..n, 6 DOFs each;
+- rod i (frame: x along C->B): its end translations are not DOFs of their own:
+  at C they equal the crank tip's (spherical joint: forces pass, moments do
+  not, so end rotations are free), at B they follow the platform, eq. 27,
+  u_B = u_0 + theta_0 x r_i.  Rod torsion is dropped: for a straight beam it is
+  uncoupled from bending and axial motion and nothing loads it (spherical ends,
+  rigid rod angular acceleration normal to the rod), so this removes the rods'
+  zero spin mode and changes no other response;
+- platform: rigid, 6 DOFs (translation of o_p and small rotation), base frame.
+Only the small maps from crank tip and platform to the rod ends (and the
+platform inertia) vary in time: the link matrices are constant, so a step
+matrix is condensed once onto the crank tips and rod ends and factorised per
+instant as 3 DOFs per leg bordered by the 6 platform DOFs (:class:`StepSolver`).
+Eq. 26's frame-motion terms (2 B^T M B' U', B^T M B'' U) are not in the
+matrices; :func:`frame_coupling_forces` measures what they would add.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .beam import link_matrices
+from .dynamics import rod_angular_motion
+from .kinematics import RigidMotion, crank_axes
+from .sections import section_properties
+
+__all__ = ["ElasticModel", "build_elastic_model", "EndMaps", "end_maps", "link_frames", "split",
+           "join", "apply", "apply_pair", "internal_force", "StepSolver", "dense_matrices", "rigid_loads", "frame_coupling_forces"]
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    z = np.zeros_like(v[..., 0])
+    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
+                     np.stack([v[..., 2], z, -v[..., 0]], -1),
+                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+
+
+@dataclass(frozen=True)
+class ElasticModel:
+    """Constant (frame-independent) part of the KED model of one scene and mesh.
+
+    Leg vector: crank nodes 1..n (6 n, crank frame), then the rod's own DOFs
+    (5 n - 1, rod frame).  Rod matrices are ordered [own DOFs, C end (3), B end (3)].
+    """
+    elements: int
+    crank_K: np.ndarray       # (6n, 6n) crank nodes 1..n
+    crank_M: np.ndarray
+    crank_M_full: np.ndarray  # (6(n+1), 6(n+1)) with the clamped node, for loads
+    rod_K: np.ndarray         # (5n+5, 5n+5) [own, C end, B end]
+    rod_M: np.ndarray
+    rod_M_full: np.ndarray    # (6(n+1), 6(n+1)) natural node order, for loads
+    rod_order: np.ndarray     # rod full-vector indices of [own, C end, B end]
+    platform_mass: float
+    platform_inertia: np.ndarray  # (3,) principal, platform frame
+    mass_damping: float       # Rayleigh lambda_1, 1/s
+    stiffness_damping: float  # Rayleigh lambda_2, s
+
+    @property
+    def crank_dofs(self) -> int:
+        return self.crank_K.shape[0]
+
+    @property
+    def rod_dofs(self) -> int:
+        """The rod's own DOFs (ends excluded)."""
+        return self.rod_K.shape[0] - 6
+
+    @property
+    def leg_dofs(self) -> int:
+        """DOFs of one leg: 6 n crank + 5 n - 1 rod."""
+        return self.crank_dofs + self.rod_dofs
+
+    @property
+    def dofs(self) -> int:
+        """Total DOFs: six legs plus the platform."""
+        return 6 * self.leg_dofs + 6
+
+    @property
+    def tip(self) -> slice:
+        """Crank tip (C_i) translations within the crank part of a leg vector."""
+        return slice(self.crank_dofs - 6, self.crank_dofs - 3)
+
+
+def build_elastic_model(scene, elements: int) -> ElasticModel:
+    """Link matrices and DOF layout for ``elements`` beam elements per link."""
+    mat = scene.material
+    E, G, rho = mat.youngs_modulus, mat.shear_modulus, mat.density
+    Kc, Mc = link_matrices(section_properties(scene.crank_section), E, G, rho,
+                           scene.geometry.crank_length, elements)
+    Kr, Mr = link_matrices(section_properties(scene.rod_section), E, G, rho,
+                           scene.geometry.rod_length, elements)
+    n6 = 6 * elements
+    ends = np.r_[0:3, n6:n6 + 3]
+    torsion = np.arange(3, n6 + 6, 6)
+    order = np.r_[np.setdiff1d(np.arange(n6 + 6), np.r_[ends, torsion]), ends]
+    return ElasticModel(elements, Kc[6:, 6:], Mc[6:, 6:], Mc, Kr[np.ix_(order, order)],
+                        Mr[np.ix_(order, order)], Mr, order, scene.platform.mass,
+                        np.array(scene.platform.inertia), scene.damping.mass_coefficient,
+                        scene.damping.stiffness_coefficient)
+
+
+@dataclass(frozen=True)
+class EndMaps:
+    """Time-varying part of the system at a batch of instants (leading axis T).
+
+    Q = R_r^T R_c maps the crank tip (crank frame) to the rod's C end (rod frame);
+    H = R_r^T [I, -[r_i]x] maps the platform DOFs to the rod's B end (eq. 27);
+    platform_inertia is R I_p R^T about o_p.
+    """
+    Q: np.ndarray                 # (T, 6, 3, 3)
+    H: np.ndarray                 # (T, 6, 3, 6)
+    platform_inertia: np.ndarray  # (T, 3, 3)
+
+    def __getitem__(self, k) -> "EndMaps":
+        return EndMaps(self.Q[k], self.H[k], self.platform_inertia[k])
+
+
+def link_frames(motion: RigidMotion, geometry) -> tuple[np.ndarray, np.ndarray]:
+    """Crank and rod frames (T, 6, 3, 3), columns = local x, y, z in base coordinates."""
+    w = np.broadcast_to(geometry.w, motion.c.shape)
+    xc = (motion.c - geometry.a) / geometry.crank_length
+    crank = np.stack([xc, w, np.cross(xc, w)], -1)
+    xr = (motion.b - motion.c) / geometry.rod_length
+    yr = w - np.einsum("tli,tli->tl", w, xr)[..., None] * xr
+    yr /= np.linalg.norm(yr, axis=-1, keepdims=True)
+    return crank, np.stack([xr, yr, np.cross(xr, yr)], -1)
+
+
+def end_maps(model: ElasticModel, motion: RigidMotion, geometry) -> EndMaps:
+    """The time-varying maps of the system at every instant of ``motion``."""
+    crank, rod = link_frames(motion, geometry)
+    Q = np.einsum("tlji,tljk->tlik", rod, crank)
+    J = np.concatenate([np.broadcast_to(np.eye(3), motion.r.shape + (3,)), -_skew(motion.r)], -1)
+    H = np.einsum("tlji,tljk->tlik", rod, J)
+    R = motion.platform.R
+    return EndMaps(Q, H, np.einsum("tij,j,tkj->tik", R, model.platform_inertia, R))
+
+
+def split(model: ElasticModel, x: np.ndarray):
+    """System vector (..., N) -> crank (..., 6, 6n), rod (..., 6, 5n-1), platform (..., 6) views."""
+    legs = x[..., :-6].reshape(x.shape[:-1] + (6, model.leg_dofs))
+    return legs[..., :model.crank_dofs], legs[..., model.crank_dofs:], x[..., -6:]
+
+
+def join(crank: np.ndarray, rod: np.ndarray, platform: np.ndarray) -> np.ndarray:
+    legs = np.concatenate([crank, rod], -1)
+    return np.concatenate([legs.reshape(legs.shape[:-2] + (-1,)), platform], -1)
+
+
+def _local(model: ElasticModel, maps: EndMaps, x: np.ndarray):
+    """Crank (..., 6, 6n) and rod [own, C end, B end] (..., 6, 5n+5) local vectors of x."""
+    c, f, p = split(model, x)
+    e_C = (maps.Q @ c[..., model.tip, None])[..., 0]
+    e_B = (maps.H @ p[..., None, :, None])[..., 0]
+    return c, np.concatenate([f, e_C, e_B], -1), p
+
+
+def apply_pair(model: ElasticModel, maps: EndMaps, x_mass: np.ndarray,
+               x_stiff: np.ndarray) -> np.ndarray:
+    """M x_mass + K x_stiff at one instant (``maps`` for that instant); x (..., N)."""
+    cm, rm, pm = _local(model, maps, x_mass)
+    ck, rk, _ = _local(model, maps, x_stiff)
+    yc = cm @ model.crank_M + ck @ model.crank_K
+    yr = rm @ model.rod_M + rk @ model.rod_K
+    nf = model.rod_dofs
+    yc[..., model.tip] += (yr[..., None, nf:nf + 3] @ maps.Q)[..., 0, :]
+    yp = np.einsum("...lj,ljk->...k", yr[..., nf + 3:], maps.H)
+    yp[..., :3] += model.platform_mass * pm[..., :3]
+    yp[..., 3:] += pm[..., 3:] @ maps.platform_inertia
+    return join(yc, yr[..., :nf], yp)
+
+
+def apply(model: ElasticModel, maps: EndMaps, x: np.ndarray, mass: float,
+          stiffness: float) -> np.ndarray:
+    """(mass M + stiffness K) x at one instant."""
+    return apply_pair(model, maps, mass * x, stiffness * x)
+
+
+def internal_force(model: ElasticModel, maps: EndMaps, d: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """C v + K d with Rayleigh C = lambda_1 M + lambda_2 K, at one instant."""
+    return apply_pair(model, maps, model.mass_damping * v, d + model.stiffness_damping * v)
+
+
+class StepSolver:
+    """Solves (mass M + stiffness K) x = r at a batch of instants by static condensation.
+
+    The crank interior and the rod's own DOFs have constant matrices, so they are
+    condensed once onto the crank tips and the rod ends; per instant only a
+    block-arrow system of 3 DOFs per leg plus the 6 platform DOFs is factorised.
+    """
+
+    def __init__(self, model: ElasticModel, maps: EndMaps, mass: float, stiffness: float):
+        self.model, self.maps = model, maps
+        Ec = mass * model.crank_M + stiffness * model.crank_K
+        Er = mass * model.rod_M + stiffness * model.rod_K
+        t = np.arange(model.crank_dofs)[model.tip]
+        i = np.setdiff1d(np.arange(model.crank_dofs), t)
+        self._ci, self._ct = i, t
+        self._Ec_ii_inv = np.linalg.inv(Ec[np.ix_(i, i)])
+        self._Ec_it = Ec[np.ix_(i, t)]
+        Sc = Ec[np.ix_(t, t)] - self._Ec_it.T @ self._Ec_ii_inv @ self._Ec_it
+        nf = model.rod_dofs
+        self._Er_ff_inv = np.linalg.inv(Er[:nf, :nf])
+        self._Er_fe = Er[:nf, nf:]
+        Sr = Er[nf:, nf:] - self._Er_fe.T @ self._Er_ff_inv @ self._Er_fe
+        Q, H = maps.Q, maps.H
+        QT = np.swapaxes(Q, -1, -2)
+        legs = Sc + QT @ Sr[:3, :3] @ Q                       # (T, 6, 3, 3)
+        self._border = QT @ Sr[:3, 3:] @ H                     # (T, 6, 3, 6)
+        plat = np.einsum("tlji,jk,tlkm->tim", H, Sr[3:, 3:], H)
+        plat[..., :3, :3] += mass * model.platform_mass * np.eye(3)
+        plat[..., 3:, 3:] += mass * maps.platform_inertia
+        self._legs_inv = np.linalg.inv(legs)
+        self._W = self._legs_inv @ self._border
+        self._schur_inv = np.linalg.inv(plat - np.einsum("tlji,tljk->tik", self._border, self._W))
+
+    def solve(self, k: int, r: np.ndarray) -> np.ndarray:
+        """x at instant k of the batch; r (..., N)."""
+        m = self.model
+        rc, rf, rp = split(m, r)
+        y_ci = rc[..., self._ci] @ self._Ec_ii_inv       # symmetric inverses: row form
+        y_f = rf @ self._Er_ff_inv
+        g = y_f @ self._Er_fe                            # (..., 6, 6) rod-end loads of the own DOFs
+        Q, H = self.maps.Q[k], self.maps.H[k]
+        r_tip = rc[..., self._ct] - y_ci @ self._Ec_it - (g[..., None, :3] @ Q)[..., 0, :]
+        r_p = rp - np.einsum("...lj,ljk->...k", g[..., 3:], H)
+        u = (self._legs_inv[k] @ r_tip[..., None])[..., 0]
+        x_p = (self._schur_inv[k] @ (r_p - np.einsum("lji,...lj->...i", self._border[k], u))[..., None])[..., 0]
+        x_tip = u - (self._W[k] @ x_p[..., None, :, None])[..., 0]
+        x_ci = y_ci - x_tip @ self._Ec_it.T @ self._Ec_ii_inv
+        e = np.concatenate([(Q @ x_tip[..., None])[..., 0], (H @ x_p[..., None, :, None])[..., 0]], -1)
+        x_f = y_f - e @ self._Er_fe.T @ self._Er_ff_inv
+        xc = np.empty(rc.shape)
+        xc[..., self._ci], xc[..., self._ct] = x_ci, x_tip
+        return join(xc, x_f, x_p)
+
+
+def dense_matrices(model: ElasticModel, maps: EndMaps) -> tuple[np.ndarray, np.ndarray]:
+    """Full M and K (N, N) at one instant, for modal analysis and tests."""
+    eye = np.eye(model.dofs)
+    return apply(model, maps, eye, 1.0, 0.0), apply(model, maps, eye, 0.0, 1.0)
+
+
+def _nodal_field(frames, lin: np.ndarray, ang: np.ndarray) -> np.ndarray:
+    """Stack per-node [R^T lin_k, R^T ang] into (T, 6, 6(n+1)) local vectors."""
+    loc_lin = np.einsum("tlji,tlkj->tlki", frames, lin)
+    loc_ang = np.einsum("tlji,tlj->tli", frames, ang)
+    nodes = lin.shape[2]
+    return np.concatenate([loc_lin, np.broadcast_to(loc_ang[:, :, None], loc_lin.shape)],
+                          -1).reshape(lin.shape[0], 6, 6 * nodes)
+
+
+def rigid_loads(model: ElasticModel, motion: RigidMotion, scene) -> np.ndarray:
+    """Rigid-body inertia and gravity loads F = M (g - a_rigid) on the system DOFs (T, N), N."""
+    geo, g = scene.geometry, scene.gravity_vector
+    crank, rod = link_frames(motion, geo)
+    maps = end_maps(model, motion, geo)
+    s = np.linspace(0.0, 1.0, model.elements + 1)[None, None, :, None]
+    e = crank_axes(geo)[None]
+    arm = (motion.c - geo.a)[:, :, None, :]
+    # crank nodes at s L_ac turn about the fixed axis e: a = alpha'' e x r - alpha'^2 r
+    a_crank = s * (motion.alpha_ddot[..., None, None] * np.cross(e[:, :, None], arm)
+                   - (motion.alpha_dot ** 2)[..., None, None] * arm)
+    f_crank = _nodal_field(crank, g - a_crank, -motion.alpha_ddot[..., None] * e) @ model.crank_M_full
+    # rod: rigid acceleration is linear along the rod
+    a_rod = motion.c_ddot[:, :, None] + s * (motion.b_ddot - motion.c_ddot)[:, :, None]
+    f_rod = _nodal_field(rod, g - a_rod, -rod_angular_motion(motion)[2]) @ model.rod_M_full
+    F = _to_independent(model, maps, f_crank[..., 6:], f_rod[..., model.rod_order])
+    pm, Ip = motion.platform, maps.platform_inertia
+    F[:, -6:-3] += model.platform_mass * (g - pm.a)
+    F[:, -3:] -= (np.einsum("tij,tj->ti", Ip, pm.omega_dot)
+                  + np.cross(pm.omega, np.einsum("tij,tj->ti", Ip, pm.omega)))
+    return F
+
+
+def _to_independent(model: ElasticModel, maps: EndMaps, f_crank: np.ndarray,
+                    f_rod: np.ndarray) -> np.ndarray:
+    """Map link-local nodal forces (crank nodes 1..n; rod [own, C, B]) to the system DOFs."""
+    nf = model.rod_dofs
+    f_crank = f_crank.copy()
+    f_crank[..., model.tip] += (f_rod[..., None, nf:nf + 3] @ maps.Q)[..., 0, :]
+    platform = np.einsum("...lj,...ljk->...k", f_rod[..., nf + 3:], maps.H)
+    return join(f_crank, f_rod[..., :nf], platform)
+
+
+def frame_coupling_forces(model: ElasticModel, motion: RigidMotion, scene,
+                          d: np.ndarray) -> np.ndarray:
+    """Generalised forces (T, N) of eq. 26's frame-motion terms along a computed response d (T, N).
+
+    In a link frame turning at Omega (local axes) the elastic motion q has the
+    extra inertia M (2 Omega~ q' + (Omega~' + Omega~^2) q), the local form of
+    2 B^T M B' U' + B^T M B'' U; returned with a minus sign, as a load.  Rates
+    are central differences of the history, so the rod ends' time-varying maps
+    are differentiated too.
+    """
+    t = motion.t
+    crank, rod = link_frames(motion, scene.geometry)
+    maps = end_maps(model, motion, scene.geometry)
+    c, f, p = split(model, d)
+    rod_ends = np.concatenate([(maps.Q @ c[..., model.tip, None])[..., 0],
+                               (maps.H @ p[:, None, :, None])[..., 0]], -1)
+    crank_full = np.concatenate([np.zeros(c.shape[:2] + (6,)), c], -1)
+    rod_full = np.zeros(f.shape[:2] + (6 * model.elements + 6,))
+    rod_full[..., model.rod_order] = np.concatenate([f, rod_ends], -1)
+
+    def extra(M, q, frames):
+        Om = np.einsum("tlji,tljk->tlik", frames, np.gradient(frames, t, axis=0))
+        q3 = q.reshape(q.shape[:2] + (-1, 3))
+        acc = (2 * np.einsum("tlij,tlkj->tlki", Om, np.gradient(q3, t, axis=0))
+               + np.einsum("tlij,tlkj->tlki", np.gradient(Om, t, axis=0) + Om @ Om, q3))
+        return -acc.reshape(q.shape) @ M
+
+    return _to_independent(model, maps, extra(model.crank_M_full, crank_full, crank)[..., 6:],
+                           extra(model.rod_M_full, rod_full, rod)[..., model.rod_order])
