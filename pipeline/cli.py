@@ -10,13 +10,71 @@ import json
 import sys
 
 from rss6core import SceneError, __version__, load_scene
+from rss6core.scene import INTEGRATORS, MODELS
 
-from .summary import format_summary, scene_summary
+from .summary import error_summary, format_errors, format_summary, scene_summary
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text}")
+    return value
 
 
 def _check(args) -> int:
     summary = scene_summary(load_scene(args.config))
     print(json.dumps(summary, indent=2) if args.json else format_summary(summary))
+    return 0
+
+
+def _simulate(args) -> int:
+    import time
+
+    from rss6core.models import simulate
+
+    from .store import run_dataset, write_netcdf
+    scene = load_scene(args.config)
+    sim = scene.simulation
+    model = args.model or sim.model
+    integrator = args.integrator or sim.integrator
+    dt = args.dt or sim.time_step
+    elements = args.elements or sim.elements_per_link
+    start = time.perf_counter()
+    try:
+        result = simulate(scene, model, integrator, dt, elements)
+    except ValueError as exc:  # a time step that does not divide the duration, ...
+        raise SceneError(f"{args.config}: {exc}") from None
+    wall = time.perf_counter() - start
+    ds = run_dataset(scene, result, model=model, integrator=integrator, dt=dt, elements=elements,
+                     wall_time=wall)
+    if args.output:
+        write_netcdf(ds, args.output)
+    summary = error_summary(ds)
+    if args.json:
+        print(json.dumps({**summary, "wall_time_s": wall, "status": result.status,
+                          "message": result.message, "model": model, "integrator": integrator,
+                          "time_step_s": dt, "elements_per_link": elements}, indent=2))
+    else:
+        print(f"scene {scene.name!r}, model {model}, {integrator}, dt = {dt:g} s, "
+              f"{elements} elements per link: {result.status} in {wall:.2f} s")
+        print(format_errors(summary))
+    if result.status != "finished":
+        print(f"rss6: run failed: {result.message}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -30,6 +88,16 @@ def build_parser() -> argparse.ArgumentParser:
                        help="scene TOML file or embedded scene name (default: paper)")
     check.add_argument("--json", action="store_true", help="print one JSON object")
     check.set_defaults(func=_check)
+    sim = sub.add_parser("simulate", help="run one deterministic simulation")
+    sim.add_argument("config", nargs="?", default="paper",
+                     help="scene TOML file or embedded scene name (default: paper)")
+    sim.add_argument("--model", choices=MODELS, help="model level (default: the scene's)")
+    sim.add_argument("--integrator", choices=INTEGRATORS, help="time integrator (default: the scene's)")
+    sim.add_argument("--dt", type=_positive_float, help="time step, s (default: the scene's)")
+    sim.add_argument("--elements", type=_positive_int, help="beam elements per link")
+    sim.add_argument("-o", "--output", help="write the error histories to this netCDF file")
+    sim.add_argument("--json", action="store_true", help="print one JSON object (SI units)")
+    sim.set_defaults(func=_simulate)
     return parser
 
 

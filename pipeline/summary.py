@@ -5,9 +5,10 @@ import numpy as np
 
 from rss6core.dynamics import inverse_dynamics
 from rss6core.kinematics import rigid_motion
+from rss6core.models import natural_frequencies
 from rss6core.sections import crank_inertia, rod_inertia
 
-__all__ = ["scene_summary", "format_summary"]
+__all__ = ["scene_summary", "format_summary", "error_summary", "format_errors"]
 
 
 def scene_summary(scene) -> dict:
@@ -15,6 +16,7 @@ def scene_summary(scene) -> dict:
     motion = rigid_motion(scene)
     loads = inverse_dynamics(scene, motion)
     alpha = np.degrees(motion.alpha)
+    omega = natural_frequencies(scene)
     return {
         "scene": scene.name,
         "source": scene.source_path,
@@ -28,6 +30,12 @@ def scene_summary(scene) -> dict:
                               (("A", loads.force_A), ("C", loads.force_C), ("B", loads.force_B))},
         "link_masses_kg": {"crank": crank_inertia(scene).mass, "rod": rod_inertia(scene).mass,
                            "platform": scene.platform.mass},
+        "model": scene.simulation.model,
+        "elements_per_link": scene.simulation.elements_per_link,
+        "dof": int(len(omega)),
+        "natural_frequencies_Hz": (omega[:12] / (2 * np.pi)).tolist(),
+        # undamped explicit limit; Rayleigh stiffness damping lowers it further
+        "critical_time_step_s": float(2.0 / omega[-1]),
     }
 
 
@@ -45,5 +53,35 @@ def format_summary(s: dict) -> str:
         row("min crank angle [deg]", [r[0] for r in s["crank_angle_range_deg"]]),
         row("max crank angle [deg]", [r[1] for r in s["crank_angle_range_deg"]]),
         row("max |torque| [N m]", s["max_actuator_torque_Nm"]),
-    ] + [row(f"max |F_{j}| [N]", v) for j, v in s["max_joint_force_N"].items()]
+    ] + [row(f"max |F_{j}| [N]", v) for j, v in s["max_joint_force_N"].items()] + [
+        f"elastic model: {s['elements_per_link']} elements per link, {s['dof']} DOFs; lowest "
+        f"natural frequencies [Hz]: " + ", ".join(f"{f:.1f}" for f in s["natural_frequencies_Hz"][:6]),
+        f"explicit critical time step 2/omega_max: {s['critical_time_step_s']:.3e} s"]
+    return "\n".join(lines)
+
+
+def error_summary(ds) -> dict:
+    """JSON-ready max and mean |error| per quantity and direction of a run Dataset, SI."""
+    out = {}
+    for name in ("max_abs_error", "mean_abs_error"):
+        var = ds[name]
+        out[name] = {q: {d: float(var.sel(quantity=q, direction=d)) for d in var.direction.values}
+                     for q in var.quantity.values}
+    return out
+
+
+_DISPLAY = {"displacement": (1e3, "mm", 1.0, "rad"), "velocity": (1e3, "mm/s", 1.0, "rad/s"),
+            "acceleration": (1e3, "mm/s^2", 1.0, "rad/s^2")}
+
+
+def format_errors(summary: dict) -> str:
+    """Table of :func:`error_summary` in the paper's display units."""
+    head = f"{'':<31s}" + "".join(f"{d:>11s}" for d in ("x", "y", "z", "rx", "ry", "rz"))
+    lines = [head]
+    for stat in ("max_abs_error", "mean_abs_error"):
+        for q, vals in summary[stat].items():
+            ft, ut, fr, ur = _DISPLAY[q]
+            label = f"{stat.split('_')[0]} |{q[:5]}| [{ut}; {ur}]"
+            cells = [vals[d] * ft for d in ("x", "y", "z")] + [vals[d] * fr for d in ("rx", "ry", "rz")]
+            lines.append(f"{label:<31s}" + "".join(f"{c:11.3e}" for c in cells))
     return "\n".join(lines)

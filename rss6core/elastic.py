@@ -17,11 +17,11 @@ from .assembly import (ElasticModel, StepSolver, apply, build_elastic_model, end
 from .integrators import Integrator
 from .kinematics import rigid_motion
 
-__all__ = ["ElasticResult", "simulate_elastic", "time_grid", "quasi_static_state", "elastic_energy"]
+__all__ = ["SimulationResult", "simulate_elastic", "time_grid", "quasi_static_state", "elastic_energy"]
 
 
 @dataclass(frozen=True)
-class ElasticResult:
+class SimulationResult:
     """Platform elastic error (actual minus ideal rigid pose) and solver diagnostics, SI."""
     t: np.ndarray             # (T,) s
     displacement: np.ndarray  # (T, 6) x, y, z [m], rx, ry, rz [rad]
@@ -67,7 +67,7 @@ def quasi_static_state(scene, model: ElasticModel, t0: float = 0.0, h: float = 1
 def simulate_elastic(scene, elements: int = 4, integrator: Integrator | None = None,
                      dt: float | None = None, model: ElasticModel | None = None,
                      initial=None, chunk: int = 200, keep_states: bool = False,
-                     divergence_limit: float = 1.0) -> ElasticResult:
+                     divergence_limit: float = 1.0) -> SimulationResult:
     """Integrate eq. 32 along the scene's trajectory; the platform error is its elastic motion.
 
     ``initial`` is (d, v, a) or None for the quasi-static state at t = 0;
@@ -115,7 +115,7 @@ def simulate_elastic(scene, elements: int = 4, integrator: Integrator | None = N
         if status == "failed":
             break
     p = hist[..., -6:]
-    return ElasticResult(t, p[0], p[1], p[2], status, message, steps,
+    return SimulationResult(t, p[0], p[1], p[2], status, message, steps,
                          tuple(hist) if keep_states else None)
 
 

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .scene import INTEGRATORS
+
 __all__ = ["Integrator", "INTEGRATORS", "make_integrator"]
 
 
@@ -61,12 +63,14 @@ class Integrator:
         return 1.0 - self.alpha_m, w * self.gamma * h, w * self.beta * h * h
 
 
-INTEGRATORS = ("newmark", "hht", "generalized-alpha", "central-difference")
 
 
 def make_integrator(name: str, newmark_beta: float = 0.25, newmark_gamma: float = 0.5,
                     hht_alpha: float = 0.05, spectral_radius: float = 0.8) -> Integrator:
-    """The integrator called ``name`` with its parameters (others are ignored)."""
+    """The integrator called ``name`` with its parameters (others are ignored).
+
+    Names: newmark, hht, generalized-alpha, central-difference.
+    """
     if name == "newmark":
         return Integrator.newmark(newmark_beta, newmark_gamma)
     if name == "hht":

@@ -20,7 +20,7 @@ import numpy as np
 
 __all__ = [
     "SceneError", "Scene", "Geometry", "RectangleSection", "TubeSection",
-    "Material", "Platform", "Trajectory", "Damping", "Clearances", "ContactLaw",
+    "Material", "Platform", "Trajectory", "Simulation", "Damping", "Clearances", "ContactLaw",
     "load_scene", "parse_scene", "embedded_scene_names", "resolve_scene_path",
 ]
 
@@ -144,6 +144,23 @@ class ContactLaw:
     slip_velocity: float          # v1, m/s
 
 
+MODELS = ("rigid", "elastic")
+INTEGRATORS = ("newmark", "hht", "generalized-alpha", "central-difference")
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """Model level, integrator and mesh a run uses unless the command line overrides them."""
+    time_step: float          # s
+    model: str
+    integrator: str
+    elements_per_link: int
+    newmark_beta: float
+    newmark_gamma: float
+    hht_alpha: float
+    spectral_radius: float    # generalized-alpha rho_inf
+
+
 @dataclass(frozen=True)
 class Scene:
     """Everything one run of rss6 needs to know, immutable."""
@@ -155,7 +172,7 @@ class Scene:
     platform: Platform
     gravity: float                # m/s^2 along -Z
     trajectory: Trajectory
-    time_step: float              # s
+    simulation: Simulation
     damping: Damping
     clearance: Clearances
     contact: ContactLaw
@@ -169,6 +186,10 @@ class Scene:
         return np.arange(n + 1) * self.time_step
 
     @property
+    def time_step(self) -> float:
+        return self.simulation.time_step
+
+    @property
     def gravity_vector(self) -> np.ndarray:
         return np.array([0.0, 0.0, -self.gravity])
 
@@ -180,6 +201,9 @@ class _Key:
     kind: type                  # float, int or str
     length: int | None = None   # array length, None for a scalar
     check: str | None = None    # 'positive', 'nonnegative', 'unit' (0, 1]
+    default: object = None      # value when the key is absent; None: the key is required
+    choices: tuple = ()         # allowed strings
+    bounds: tuple = ()          # (lo, hi) closed interval for numbers
 
 
 _POS, _NONNEG = "positive", "nonnegative"
@@ -211,7 +235,16 @@ _SCHEMA: dict = {
         "angle_amplitude_deg": _Key(float, 3),
         "duration_s": _Key(float, check=_POS),
     },
-    "simulation": {"time_step_s": _Key(float, check=_POS)},
+    "simulation": {
+        "time_step_s": _Key(float, check=_POS),
+        "model": _Key(str, default="elastic", choices=MODELS),
+        "integrator": _Key(str, default="newmark", choices=INTEGRATORS),
+        "elements_per_link": _Key(int, default=4, bounds=(1, 64)),
+        "newmark_beta": _Key(float, default=0.25, bounds=(0.0, 0.5)),
+        "newmark_gamma": _Key(float, default=0.5, bounds=(0.0, 1.0)),
+        "hht_alpha": _Key(float, default=0.05, bounds=(0.0, 1.0 / 3.0)),
+        "spectral_radius": _Key(float, default=0.8, bounds=(0.0, 1.0)),
+    },
     "damping": {"mass_coefficient_per_s": _Key(float, check=_NONNEG),
                 "stiffness_coefficient_s": _Key(float, check=_NONNEG)},
     "clearance": {"revolute_radial_m": _Key(float, check=_NONNEG),
@@ -236,6 +269,8 @@ def _scalar(value, spec: _Key, path) -> float | int | str:
     if spec.kind is str:
         if not isinstance(value, str):
             raise SceneError(f"{_where(path)}: expected a string, got {value!r}")
+        if spec.choices and value not in spec.choices:
+            raise SceneError(f"{_where(path)}: {value!r} is not one of {', '.join(spec.choices)}")
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(f"{_where(path)}: expected a number, got {value!r}")
@@ -247,6 +282,9 @@ def _scalar(value, spec: _Key, path) -> float | int | str:
     if bad:
         rule = {_POS: "positive", _NONNEG: "non-negative", "unit": "in (0, 1]"}[spec.check]
         raise SceneError(f"{_where(path)}: must be {rule}, got {value!r}")
+    if spec.bounds and not spec.bounds[0] <= value <= spec.bounds[1]:
+        raise SceneError(f"{_where(path)}: must lie in [{spec.bounds[0]:g}, {spec.bounds[1]:g}], "
+                         f"got {value!r}")
     return spec.kind(value)
 
 
@@ -268,6 +306,9 @@ def _read_table(table: dict, schema: dict, path: tuple[str, ...] = ()) -> dict:
     out = {}
     for key, spec in schema.items():
         if key not in table:
+            if isinstance(spec, _Key) and spec.default is not None:
+                out[key] = spec.default
+                continue
             raise SceneError(f"missing key {_where(path + (key,))}")
         value = table[key]
         if isinstance(spec, dict):
@@ -315,7 +356,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
             _frozen(tr["position_offset_m"] + list(deg(tr["angle_offset_deg"]))),
             _frozen(tr["position_amplitude_m"] + list(deg(tr["angle_amplitude_deg"]))),
             duration),
-        time_step=dt,
+        simulation=Simulation(**{k.removesuffix("_s"): val for k, val in v["simulation"].items()}),
         damping=Damping(v["damping"]["mass_coefficient_per_s"],
                         v["damping"]["stiffness_coefficient_s"]),
         clearance=Clearances(**{k: v["clearance"][f"{k}_m"] for k in
