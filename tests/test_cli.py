@@ -39,3 +39,42 @@ def test_console_script_is_installed():
     proc = subprocess.run([str(script), "check", "paper", "--json"],
                           capture_output=True, text=True, check=True)
     assert json.loads(proc.stdout)["scene"] == "paper"
+
+
+def test_check_json_reports_modal_data(capsys):
+    assert main(["check", "smoke", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["dof"] == 264 and len(out["natural_frequencies_Hz"]) == 12
+    assert out["natural_frequencies_Hz"] == sorted(out["natural_frequencies_Hz"])
+    assert 0 < out["critical_time_step_s"] < 1e-4
+
+
+def test_simulate_json_and_netcdf(tmp_path, capsys):
+    import netCDF4
+    out_file = tmp_path / "run.nc"
+    assert main(["simulate", str(CONFIGS / "smoke.toml"), "--model", "elastic",
+                 "-o", str(out_file), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for stat in ("max_abs_error", "mean_abs_error"):
+        assert set(out[stat]) == {"displacement", "velocity", "acceleration"}
+        assert set(out[stat]["velocity"]) == {"x", "y", "z", "rx", "ry", "rz"}
+    assert out["wall_time_s"] > 0 and out["status"] == "finished"
+    with netCDF4.Dataset(out_file) as nc:
+        assert nc.Conventions == "CF-1.10" and nc.model == "elastic"
+        assert nc.variables["error"].dimensions == ("quantity", "time", "direction")
+        assert nc.variables["time"].units == "s"
+        stored = nc.variables["max_abs_error"][:]
+        assert "elements_per_link" in nc.scene_toml
+    # the file's summaries are the JSON's numbers
+    assert stored[0, 2] == pytest.approx(out["max_abs_error"]["displacement"]["z"], rel=1e-12)
+
+
+def test_simulate_rigid_is_the_reference(capsys):
+    assert main(["simulate", "smoke", "--model", "rigid", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert all(v == 0 for q in out["max_abs_error"].values() for v in q.values())
+
+
+def test_simulate_bad_time_step_is_a_usage_error(capsys):
+    assert main(["simulate", "smoke", "--dt", "0.0003"]) == 2
+    assert "does not divide" in capsys.readouterr().err
