@@ -34,7 +34,8 @@ from .kinematics import RigidMotion, crank_axes
 from .sections import section_properties
 
 __all__ = ["ElasticModel", "build_elastic_model", "EndMaps", "end_maps", "link_frames", "split",
-           "join", "apply", "apply_pair", "internal_force", "StepSolver", "dense_matrices", "rigid_loads", "frame_coupling_forces"]
+           "join", "apply", "apply_pair", "internal_force", "StepSolver", "dense_matrices",
+           "rigid_loads", "frame_coupling_forces"]
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -233,7 +234,8 @@ class StepSolver:
         r_tip = rc[..., self._ct] - y_ci @ self._Ec_it - (g[..., None, :3] @ Q)[..., 0, :]
         r_p = rp - np.einsum("...lj,ljk->...k", g[..., 3:], H)
         u = (self._legs_inv[k] @ r_tip[..., None])[..., 0]
-        x_p = (self._schur_inv[k] @ (r_p - np.einsum("lji,...lj->...i", self._border[k], u))[..., None])[..., 0]
+        r_p = r_p - np.einsum("lji,...lj->...i", self._border[k], u)
+        x_p = (self._schur_inv[k] @ r_p[..., None])[..., 0]
         x_tip = u - (self._W[k] @ x_p[..., None, :, None])[..., 0]
         x_ci = y_ci - x_tip @ self._Ec_it.T @ self._Ec_ii_inv
         e = np.concatenate([(Q @ x_tip[..., None])[..., 0], (H @ x_p[..., None, :, None])[..., 0]], -1)

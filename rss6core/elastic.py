@@ -2,9 +2,9 @@
 
 Per chunk of steps the condensed step matrices are factorised for all steps at
 once (numpy over time); the step loop then only does small matrix-vector
-products with constant link matrices and the time-varying end maps.  A run that blows up (non-finite state or an elastic
-displacement above ``divergence_limit``) stops with status 'failed' and a
-message; it does not raise.
+products with constant link matrices and the time-varying end maps.  A run
+that blows up (non-finite state or an elastic displacement above
+``divergence_limit``) stops with status 'failed' and a message; it does not raise.
 """
 from __future__ import annotations
 
@@ -82,8 +82,9 @@ def simulate_elastic(scene, elements: int = 4, integrator: Integrator | None = N
     lam1, lam2 = model.mass_damping, model.stiffness_damping
     am, af, beta, gamma = integrator.alpha_m, integrator.alpha_f, integrator.beta, integrator.gamma
     weighted = am != 0.0 or af != 0.0
-    hist = np.full((3, len(t), d.shape[-1]), np.nan)
-    hist[:, 0] = d, v, a
+    keep = slice(None) if keep_states else slice(-6, None)  # full states or the platform's
+    hist = np.full((3, len(t), d[..., keep].shape[-1]), np.nan)
+    hist[:, 0] = d[keep], v[keep], a[keep]
     status, message, steps = "finished", "", 0
     maps, F = _system(scene, model, t[:1])
     Ma, rest = apply(model, maps[0], a, 1.0, 0.0), internal_force(model, maps[0], d, v)
@@ -110,13 +111,13 @@ def simulate_elastic(scene, elements: int = 4, integrator: Integrator | None = N
                 message = (f"diverged at t = {t[k]:.6g} s (step {k}): elastic displacement "
                            f"{np.abs(d).max():.3g} exceeds {divergence_limit:g} or is not finite")
                 break
-            hist[:, k] = d, v, a
+            hist[:, k] = d[keep], v[keep], a[keep]
             steps = k
         if status == "failed":
             break
     p = hist[..., -6:]
     return SimulationResult(t, p[0], p[1], p[2], status, message, steps,
-                         tuple(hist) if keep_states else None)
+                            tuple(hist) if keep_states else None)
 
 
 def elastic_energy(scene, model: ElasticModel, t: np.ndarray, d: np.ndarray, v: np.ndarray):
