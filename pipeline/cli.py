@@ -55,7 +55,7 @@ def _simulate(args) -> int:
     elements = args.elements or sim.elements_per_link
     start = time.perf_counter()
     try:
-        result = simulate(scene, model, integrator, dt, elements)
+        result = simulate(scene, model, integrator, dt, elements, args.seed, args.realization)
     except ValueError as exc:  # a time step that does not divide the duration, ...
         raise SceneError(f"{args.config}: {exc}") from None
     wall = time.perf_counter() - start
@@ -95,6 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--integrator", choices=INTEGRATORS, help="time integrator (default: the scene's)")
     sim.add_argument("--dt", type=_positive_float, help="time step, s (default: the scene's)")
     sim.add_argument("--elements", type=_positive_int, help="beam elements per link")
+    sim.add_argument("--seed", type=int, default=0, help="random seed of the run (default 0)")
+    sim.add_argument("--realization", type=int, default=0,
+                     help="which clearance realisation of the seeded run (default 0)")
     sim.add_argument("-o", "--output", help="write the error histories to this netCDF file")
     sim.add_argument("--json", action="store_true", help="print one JSON object (SI units)")
     sim.set_defaults(func=_simulate)

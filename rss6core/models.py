@@ -3,6 +3,8 @@
 Every level reports the same outputs: the platform pose error (actual minus
 ideal rigid pose) as displacement, velocity and acceleration over time.
 - rigid (L0): the reference itself, so its error is zero by definition;
+- quasi-static (L1): rigid links, clearance eccentricities through the
+  linearised leg closure (:mod:`.quasi_static`); needs a realisation;
 - elastic (L2): kineto-elastodynamics with ideal joints (:mod:`.elastic`).
 """
 from __future__ import annotations
@@ -11,17 +13,24 @@ import numpy as np
 import scipy.linalg
 
 from .assembly import build_elastic_model, dense_matrices, end_maps
+from .clearance import draw_clearances
 from .elastic import SimulationResult, simulate_elastic, time_grid
 from .integrators import make_integrator
 from .kinematics import rigid_motion
+from .quasi_static import quasi_static_error
 from .scene import MODELS
 
 __all__ = ["simulate", "natural_frequencies", "MODELS"]
 
 
 def simulate(scene, model: str | None = None, integrator: str | None = None,
-             dt: float | None = None, elements: int | None = None) -> SimulationResult:
-    """One deterministic run of ``model`` (default: the scene's) along the scene's trajectory."""
+             dt: float | None = None, elements: int | None = None, seed: int = 0,
+             realization: int = 0) -> SimulationResult:
+    """One run of ``model`` (default: the scene's) along the scene's trajectory.
+
+    Clearance levels use realisation ``realization`` of the run seeded ``seed``;
+    the same pair always gives the same result.
+    """
     sim = scene.simulation
     model = model or sim.model
     if model not in MODELS:
@@ -31,6 +40,12 @@ def simulate(scene, model: str | None = None, integrator: str | None = None,
         t = time_grid(scene.trajectory.duration, dt)
         zero = np.zeros((len(t), 6))
         return SimulationResult(t, zero, zero, zero, "finished", "", len(t) - 1)
+    if model == "quasi-static":
+        t = time_grid(scene.trajectory.duration, dt)
+        d, v, a = quasi_static_error(scene, rigid_motion(scene, t),
+                                     draw_clearances(scene, seed, realization),
+                                     sim.quasi_static_eccentricity)
+        return SimulationResult(t, d, v, a, "finished", "", len(t) - 1)
     method = make_integrator(integrator or sim.integrator, sim.newmark_beta, sim.newmark_gamma,
                              sim.hht_alpha, sim.spectral_radius)
     return simulate_elastic(scene, elements or sim.elements_per_link, method, dt)

@@ -20,7 +20,7 @@ import numpy as np
 
 __all__ = [
     "SceneError", "Scene", "Geometry", "RectangleSection", "TubeSection",
-    "Material", "Platform", "Trajectory", "Simulation", "Damping", "Clearances", "ContactLaw",
+    "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping", "Clearances", "ContactLaw",
     "load_scene", "parse_scene", "embedded_scene_names", "resolve_scene_path",
 ]
 
@@ -144,7 +144,7 @@ class ContactLaw:
     slip_velocity: float          # v1, m/s
 
 
-MODELS = ("rigid", "elastic")
+MODELS = ("rigid", "quasi-static", "elastic")
 INTEGRATORS = ("newmark", "hht", "generalized-alpha", "central-difference")
 
 
@@ -159,6 +159,18 @@ class Simulation:
     newmark_gamma: float
     hht_alpha: float
     spectral_radius: float    # generalized-alpha rho_inf
+    quasi_static_eccentricity: str  # 'drawn' or 'reaction' (at the boundary, along the L0 force)
+
+
+@dataclass(frozen=True)
+class Sampling:
+    """Clearance sampling laws (MODEL.md section 4); means and stds as fractions of the size."""
+    radial_mean: float
+    radial_std: float
+    axial_mean: float
+    axial_std: float
+    direction: str            # 'uniform' on the sphere, or the paper's eta-angle law
+    size_tolerance: float     # relative std of the clearance sizes (0: exact sizes)
 
 
 @dataclass(frozen=True)
@@ -175,6 +187,7 @@ class Scene:
     simulation: Simulation
     damping: Damping
     clearance: Clearances
+    sampling: Sampling
     contact: ContactLaw
     source_text: str = field(default="", repr=False, compare=False)
     source_path: str = field(default="", repr=False, compare=False)
@@ -244,6 +257,15 @@ _SCHEMA: dict = {
         "newmark_gamma": _Key(float, default=0.5, bounds=(0.0, 1.0)),
         "hht_alpha": _Key(float, default=0.05, bounds=(0.0, 1.0 / 3.0)),
         "spectral_radius": _Key(float, default=0.8, bounds=(0.0, 1.0)),
+        "quasi_static_eccentricity": _Key(str, default="drawn", choices=("drawn", "reaction")),
+    },
+    "sampling": {  # MODEL.md section 4; mean and std as fractions of the clearance size
+        "radial_mean": _Key(float, default=0.5, bounds=(0.0, 1.0)),
+        "radial_std": _Key(float, default=0.25, check=_NONNEG),
+        "axial_mean": _Key(float, default=0.0, bounds=(-1.0, 1.0)),
+        "axial_std": _Key(float, default=0.5, check=_NONNEG),
+        "direction": _Key(str, default="uniform", choices=("uniform", "paper")),
+        "size_tolerance": _Key(float, default=0.0, bounds=(0.0, 0.5)),
     },
     "damping": {"mass_coefficient_per_s": _Key(float, check=_NONNEG),
                 "stiffness_coefficient_s": _Key(float, check=_NONNEG)},
@@ -309,6 +331,10 @@ def _read_table(table: dict, schema: dict, path: tuple[str, ...] = ()) -> dict:
             if isinstance(spec, _Key) and spec.default is not None:
                 out[key] = spec.default
                 continue
+            if isinstance(spec, dict) and all(isinstance(v, _Key) and v.default is not None
+                                              for v in spec.values()):
+                out[key] = _read_table({}, spec, path + (key,))  # an optional table
+                continue
             raise SceneError(f"missing key {_where(path + (key,))}")
         value = table[key]
         if isinstance(spec, dict):
@@ -361,6 +387,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
                         v["damping"]["stiffness_coefficient_s"]),
         clearance=Clearances(**{k: v["clearance"][f"{k}_m"] for k in
                                 ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")}),
+        sampling=Sampling(**v["sampling"]),
         contact=ContactLaw(ct["journal_radius_m"], ct["sphere_radius_m"], ct["restitution"],
                            ct["exponent"], ct["friction_coefficient"], ct["stick_velocity_m_s"],
                            ct["slip_velocity_m_s"]),

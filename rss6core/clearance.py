@@ -1,0 +1,89 @@
+"""Clearance realisations: the sampling laws of MODEL.md section 4 (paper sec. 2.2-2.4).
+
+One realisation fixes, per leg i, the clearance sizes and eccentricities of the
+revolute A_i (radial, in the plane normal to w_i, and axial along w_i) and of
+the spherical joints C_i and B_i.  Eccentricities are in the base frame:
+e_A = journal (crank) centre minus bearing (base) centre, e_C = ball (rod) minus
+socket (crank), e_B = ball (rod) minus socket (platform).
+- radial magnitude ~ Normal(mu, sigma) truncated to [0, delta_r] (eq. 5),
+  direction ~ U(0, 2 pi) in the plane normal to w_i;
+- axial ~ Normal(mu_a, sigma_a) truncated to [-delta_a, delta_a] (eq. 7);
+- spherical magnitude k_s delta_s, k_s ~ U(0, 1), direction uniform on the
+  sphere (eta_d1 = arccos(1 - 2 u)); the paper's eta_d1 = pi u (eq. 9, not
+  uniform on the sphere) is the option ``direction = "paper"``.
+Realisation r of a run with seed s draws from its own stream
+SeedSequence([s, r]), so results do not depend on chunking or worker count.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtr, ndtri
+
+__all__ = ["ClearanceDraw", "realization_rng", "truncated_normal", "sphere_directions",
+           "draw_clearances"]
+
+
+def realization_rng(seed: int, realization: int) -> np.random.Generator:
+    """The random stream of realisation ``realization`` of a run seeded ``seed``."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), int(realization)]))
+
+
+def truncated_normal(rng: np.random.Generator, mean, std, low, high, size) -> np.ndarray:
+    """Normal(mean, std) truncated to [low, high], by inverting the CDF (one uniform per draw)."""
+    mean, std = np.asarray(mean, float), np.asarray(std, float)
+    if np.any(std <= 0):
+        return np.clip(np.broadcast_to(mean, size), low, high).astype(float)
+    lo, hi = ndtr((np.asarray(low) - mean) / std), ndtr((np.asarray(high) - mean) / std)
+    u = rng.uniform(size=size)
+    return np.clip(mean + std * ndtri(lo + u * (hi - lo)), low, high)
+
+
+def sphere_directions(rng: np.random.Generator, size: int, law: str = "uniform") -> np.ndarray:
+    """Unit vectors (size, 3): uniform on the sphere, or the paper's eta_d1 = pi u variant."""
+    u1, u2 = rng.uniform(size=size), rng.uniform(size=size)
+    eta1 = np.arccos(1.0 - 2.0 * u1) if law == "uniform" else np.pi * u1
+    eta2 = 2.0 * np.pi * u2
+    return np.stack([np.sin(eta1) * np.cos(eta2), np.sin(eta1) * np.sin(eta2), np.cos(eta1)], -1)
+
+
+@dataclass(frozen=True)
+class ClearanceDraw:
+    """The clearance sizes (m) and eccentricity vectors (m, base frame) of one realisation."""
+    radial_size: np.ndarray   # (6,) delta_r of A_i
+    axial_size: np.ndarray    # (6,) delta_a of A_i
+    size_C: np.ndarray        # (6,)
+    size_B: np.ndarray        # (6,)
+    e_A: np.ndarray           # (6, 3) radial + axial
+    e_C: np.ndarray           # (6, 3)
+    e_B: np.ndarray           # (6, 3)
+
+
+def _sizes(rng, nominal: float, tolerance: float) -> np.ndarray:
+    """Six clearance sizes: nominal, or Normal(nominal, tolerance nominal) truncated to [0, 2 nominal]."""
+    if tolerance == 0.0 or nominal == 0.0:
+        rng.uniform(size=6)  # keep the stream's layout the same with and without tolerances
+        return np.full(6, nominal)
+    return truncated_normal(rng, nominal, tolerance * nominal, 0.0, 2.0 * nominal, 6)
+
+
+def draw_clearances(scene, seed: int, realization: int) -> ClearanceDraw:
+    """Draw realisation ``realization`` of the scene's clearance laws from its own stream."""
+    cl, law = scene.clearance, scene.sampling
+    rng = realization_rng(seed, realization)
+    tol = law.size_tolerance
+    dr, da = _sizes(rng, cl.revolute_radial, tol), _sizes(rng, cl.revolute_axial, tol)
+    dC, dB = _sizes(rng, cl.spherical_C, tol), _sizes(rng, cl.spherical_B, tol)
+    radial = truncated_normal(rng, law.radial_mean * dr, law.radial_std * dr, 0.0, dr, 6)
+    theta = rng.uniform(0.0, 2.0 * np.pi, size=6)
+    axial = truncated_normal(rng, law.axial_mean * da, law.axial_std * da, -da, da, 6)
+    u = scene.geometry.base_angles
+    # the plane normal to w_i is spanned by the horizontal radial direction and Z
+    plane_x = np.stack([np.cos(u), np.sin(u), 0 * u], -1)
+    plane_y = np.broadcast_to([0.0, 0.0, 1.0], (6, 3))
+    e_A = ((radial * np.cos(theta))[:, None] * plane_x + (radial * np.sin(theta))[:, None] * plane_y
+           + axial[:, None] * scene.geometry.w)
+    e_C = (rng.uniform(size=6) * dC)[:, None] * sphere_directions(rng, 6, law.direction)
+    e_B = (rng.uniform(size=6) * dB)[:, None] * sphere_directions(rng, 6, law.direction)
+    return ClearanceDraw(dr, da, dC, dB, e_A, e_C, e_B)

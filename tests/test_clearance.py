@@ -1,0 +1,133 @@
+"""Sampling laws (Kolmogorov-Smirnov against their stated laws) and the quasi-static level."""
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from rss6core.clearance import draw_clearances, realization_rng, sphere_directions
+from rss6core.kinematics import rigid_motion
+from rss6core.models import simulate
+from rss6core.quasi_static import quasi_static_error
+
+N = 1500  # realisations: 9000 samples per law
+
+
+@pytest.fixture(scope="module")
+def draws(paper):
+    return [draw_clearances(paper, 7, r) for r in range(N)]
+
+
+def _ks(samples, cdf):
+    return stats.kstest(samples, cdf).pvalue
+
+
+def test_radial_magnitude_is_truncated_normal_with_uniform_direction(paper, draws):
+    d = paper.clearance.revolute_radial
+    law = paper.sampling
+    w = paper.geometry.w
+    e = np.array([dr.e_A for dr in draws])                       # (N, 6, 3)
+    radial = e - np.einsum("rli,li->rl", e, w)[..., None] * w
+    mag = np.linalg.norm(radial, axis=-1).ravel()
+    mu, sd = law.radial_mean * d, law.radial_std * d
+    tn = stats.truncnorm((0 - mu) / sd, (d - mu) / sd, loc=mu, scale=sd)
+    assert _ks(mag, tn.cdf) > 1e-3
+    u = paper.geometry.base_angles
+    px = np.stack([np.cos(u), np.sin(u), 0 * u], -1)
+    angle = np.arctan2(radial[..., 2], np.einsum("rli,li->rl", radial, px)).ravel() % (2 * np.pi)
+    assert _ks(angle, stats.uniform(0, 2 * np.pi).cdf) > 1e-3
+
+
+def test_axial_is_truncated_normal(paper, draws):
+    d = paper.clearance.revolute_axial
+    law = paper.sampling
+    axial = np.array([np.einsum("li,li->l", dr.e_A, paper.geometry.w) for dr in draws]).ravel()
+    mu, sd = law.axial_mean * d, law.axial_std * d
+    assert _ks(axial, stats.truncnorm((-d - mu) / sd, (d - mu) / sd, loc=mu, scale=sd).cdf) > 1e-3
+
+
+@pytest.mark.parametrize("joint", ["C", "B"])
+def test_spherical_magnitude_uniform_and_direction_uniform_on_sphere(paper, draws, joint):
+    size = getattr(paper.clearance, f"spherical_{joint}")
+    e = np.array([getattr(dr, f"e_{joint}") for dr in draws]).reshape(-1, 3)
+    mag = np.linalg.norm(e, axis=-1)
+    assert _ks(mag / size, stats.uniform(0, 1).cdf) > 1e-3
+    cos_eta1 = e[:, 2] / mag
+    assert _ks(cos_eta1, stats.uniform(-1, 2).cdf) > 1e-3
+
+
+def test_paper_eta_law_is_not_uniform_on_the_sphere():
+    rng = realization_rng(3, 0)
+    cos_eta1 = sphere_directions(rng, 9000, "paper")[:, 2]
+    assert _ks(cos_eta1, stats.uniform(-1, 2).cdf) < 1e-6
+    eta1 = np.arccos(cos_eta1)
+    assert _ks(eta1, stats.uniform(0, np.pi).cdf) > 1e-3
+
+
+def test_draw_depends_on_seed_and_realization_only(paper):
+    a, b = draw_clearances(paper, 11, 5), draw_clearances(paper, 11, 5)
+    assert all(np.array_equal(x, y) for x, y in zip(dataclasses.astuple(a), dataclasses.astuple(b)))
+    assert not np.array_equal(a.e_C, draw_clearances(paper, 11, 6).e_C)
+    assert not np.array_equal(a.e_C, draw_clearances(paper, 12, 5).e_C)
+
+
+def test_size_tolerance_varies_the_sizes(paper):
+    scene = dataclasses.replace(paper, sampling=dataclasses.replace(paper.sampling, size_tolerance=0.1))
+    sizes = np.array([draw_clearances(scene, 1, r).size_C for r in range(400)]).ravel()
+    nominal = paper.clearance.spherical_C
+    assert sizes.min() >= 0 and sizes.max() <= 2 * nominal
+    assert np.std(sizes) == pytest.approx(0.1 * nominal, rel=0.1)
+
+
+def _worst_case_bound(scene, motion):
+    """Independent worst case: max over admissible e of each error component, leg by leg.
+
+    error = G^-1 rhs, rhs_i = n_i . (e_A + e_C - e_B); each term's extreme is attained
+    separately: radial delta_r |n - (n.w) w|, axial delta_a |n.w|, spheres delta_C + delta_B.
+    """
+    n = motion.c - motion.b
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    G = np.concatenate([n, np.cross(motion.r, n)], -1)
+    Ginv = np.linalg.pinv(G)
+    w = scene.geometry.w
+    nw = np.einsum("tli,li->tl", n, w)
+    c = scene.clearance
+    reach = (c.revolute_radial * np.sqrt(np.maximum(1 - nw ** 2, 0)) + c.revolute_axial * np.abs(nw)
+             + c.spherical_C + c.spherical_B)
+    return np.einsum("tkl,tl->tk", np.abs(Ginv), reach), Ginv, n
+
+
+def test_quasi_static_never_exceeds_the_worst_case_bound(paper):
+    motion = rigid_motion(paper, paper.times[::10])
+    bound, _, _ = _worst_case_bound(paper, motion)
+    for r in range(60):
+        for mode in ("drawn", "reaction"):
+            d, _, _ = quasi_static_error(paper, motion, draw_clearances(paper, 5, r), mode)
+            assert np.all(np.abs(d) <= bound * (1 + 1e-12))
+
+
+def test_worst_case_bound_is_attained(paper):
+    """Eccentricities chosen against the bound's signs reach it: the bound is tight and L1 is linear."""
+    motion = rigid_motion(paper, np.array([0.299, 0.3, 0.301]))
+    bound, Ginv, n = _worst_case_bound(paper, motion)
+    bound, Ginv, n = bound[1:2], Ginv[1:2], n[1:2]
+    k = 2  # z
+    s = np.sign(Ginv[0, k])[:, None]          # per leg: push n.e up or down
+    w = paper.geometry.w
+    n0 = n[0]
+    radial = n0 - np.einsum("li,li->l", n0, w)[:, None] * w
+    c = paper.clearance
+    draw = draw_clearances(paper, 0, 0)
+    draw = dataclasses.replace(
+        draw,
+        e_A=s * (c.revolute_radial * radial / np.linalg.norm(radial, axis=-1, keepdims=True)
+                 + c.revolute_axial * np.sign(np.einsum("li,li->l", n0, w))[:, None] * w),
+        e_C=s * c.spherical_C * n0, e_B=-s * c.spherical_B * n0)
+    d, _, _ = quasi_static_error(paper, motion, draw, "drawn")
+    assert abs(d[1, k]) == pytest.approx(bound[0, k], rel=1e-9)
+
+
+def test_quasi_static_errors_are_of_the_clearance_order(paper):
+    r = simulate(paper, "quasi-static", realization=3)
+    peak = np.abs(r.displacement[:, :3]).max()
+    assert 0.2 * paper.clearance.spherical_C < peak < 10 * paper.clearance.spherical_C
