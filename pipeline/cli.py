@@ -78,6 +78,53 @@ def _simulate(args) -> int:
     return 0
 
 
+def _run(args) -> int:
+    from .run import EnsembleSpec, run_ensemble
+    from .stats import ensemble_stats, format_stats
+    scene = load_scene(args.config)
+    sim = scene.simulation
+    model = args.model or sim.model
+    spec = EnsembleSpec(scene.source_text, str(args.config), model,
+                        args.integrator or sim.integrator, args.dt or sim.time_step,
+                        args.elements or sim.elements_per_link, args.seed, args.store)
+    output = args.output or f"{scene.name}_{model}.nc"
+    try:
+        ds = run_ensemble(spec, args.n, output, workers=args.workers, scheduler=args.scheduler,
+                          chunk=args.chunk)
+    except KeyboardInterrupt:
+        print(f"rss6: interrupted; finished chunks are kept in {output}.parts; rerun the same "
+              "command to continue", file=sys.stderr)
+        return 130
+    print(f"wrote {output}: {ds.sizes['realization']} realisations of the {model} level "
+          f"({ds.attrs['n_failed']} failed)")
+    print(format_stats(ensemble_stats(ds, quantity="displacement")))
+    return 0
+
+
+def _stats(args) -> int:
+    from .stats import ensemble_stats, format_stats
+    from .store import open_ensemble
+    try:
+        result = ensemble_stats(open_ensemble(args.file), args.quantity, args.direction)
+    except ValueError as exc:  # unknown quantity or direction
+        raise SceneError(str(exc)) from None
+    print(json.dumps(result, indent=2) if args.json else format_stats(result))
+    return 0
+
+
+def _plot(args) -> int:
+    from .plots import plot_ensemble
+    from .store import open_ensemble
+    ds = open_ensemble(args.file)
+    paths = plot_ensemble(ds, args.output)
+    if "error" not in ds:
+        print("no time histories in the file (run with --store full): envelope plots skipped",
+              file=sys.stderr)
+    for p in paths:
+        print(p)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rss6", description="Joint clearance and link elasticity errors of a 6-RSS robot.")
@@ -101,15 +148,46 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("-o", "--output", help="write the error histories to this netCDF file")
     sim.add_argument("--json", action="store_true", help="print one JSON object (SI units)")
     sim.set_defaults(func=_simulate)
+
+    run = sub.add_parser("run", help="run a Monte Carlo ensemble of clearance realisations")
+    run.add_argument("config", nargs="?", default="paper",
+                     help="scene TOML file or embedded scene name (default: paper)")
+    run.add_argument("-n", type=_positive_int, default=32, help="realisations (default 32)")
+    run.add_argument("-o", "--output", help="ensemble netCDF file (default: SCENE_MODEL.nc)")
+    run.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    run.add_argument("--model", choices=MODELS, help="model level (default: the scene's)")
+    run.add_argument("--integrator", choices=INTEGRATORS)
+    run.add_argument("--dt", type=_positive_float, help="time step, s")
+    run.add_argument("--elements", type=_positive_int, help="beam elements per link")
+    run.add_argument("--workers", type=_positive_int, default=2,
+                     help="local dask workers, one thread each (default 2)")
+    run.add_argument("--scheduler", help="address of an existing dask.distributed scheduler")
+    run.add_argument("--chunk", type=_positive_int, default=8, help="realisations per task")
+    run.add_argument("--store", choices=("summary", "full"), default="summary",
+                     help="summary: per-realisation maxima and means; full: also time histories")
+    run.set_defaults(func=_run)
+
+    st = sub.add_parser("stats", help="error statistics of an ensemble file")
+    st.add_argument("file")
+    st.add_argument("--quantity", help="displacement, velocity or acceleration (default: all)")
+    st.add_argument("--direction", help="x, y, z, rx, ry or rz (default: all)")
+    st.add_argument("--json", action="store_true", help="print one JSON object (SI units)")
+    st.set_defaults(func=_stats)
+
+    pl = sub.add_parser("plot", help="PNG figures of an ensemble file")
+    pl.add_argument("file")
+    pl.add_argument("-o", "--output", default="plots", help="output folder (default: plots)")
+    pl.set_defaults(func=_plot)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from .store import EnsembleFileError
     try:
         return args.func(args)
-    except SceneError as exc:
+    except (SceneError, EnsembleFileError) as exc:
         print(f"rss6: error: {exc}", file=sys.stderr)
         return 2
 

@@ -79,3 +79,113 @@ def write_netcdf(ds: xr.Dataset, path) -> None:
     tmp = f"{path}.part"
     ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
     os.replace(tmp, path)
+
+
+# --- ensembles -------------------------------------------------------------
+
+JOINTS = tuple(f"{j}{i}" for j in "ACB" for i in range(1, 7))
+IDENTITY = ("scene_toml", "model", "integrator", "time_step_s", "elements_per_link", "seed", "store")
+
+
+class EnsembleFileError(ValueError):
+    """A file that is not a complete rss6 ensemble, or one from a different run."""
+
+
+def realization_dataset(scene, result, draw, realization: int, store: str, *, model: str,
+                        integrator: str, dt: float, elements: int, seed: int) -> xr.Dataset:
+    """One realisation as a length-1 slice of the ensemble file (MODEL.md section 7)."""
+    err = np.abs(_history(result))
+    finite = np.isfinite(err).any(axis=1)
+    with np.errstate(invalid="ignore", all="ignore"):
+        peak = np.where(finite, np.nanmax(np.where(np.isfinite(err), err, -np.inf), axis=1), np.nan)
+        mean = np.nanmean(err, axis=1)
+    size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
+    axial = np.concatenate([draw.axial_size, np.full(12, np.nan)])
+    ecc = np.concatenate([draw.e_A, draw.e_C, draw.e_B])
+    mixed = "m or rad, per direction (see coordinate 'unit'); time derivatives thereof"
+    data = {
+        "max_abs_error": (("quantity", "realization", "direction"), peak[:, None],
+                          {"long_name": "per-realisation maximum over time of |platform pose error|",
+                           "units": mixed, "cell_methods": "time: maximum"}),
+        "mean_abs_error": (("quantity", "realization", "direction"), mean[:, None],
+                           {"long_name": "per-realisation mean over time of |platform pose error|",
+                            "units": mixed, "cell_methods": "time: mean"}),
+        "clearance_size": (("realization", "joint"), size[None],
+                           {"long_name": "drawn clearance size (radial for A_i, spherical for C_i, B_i)",
+                            "units": "m"}),
+        "axial_clearance_size": (("realization", "joint"), axial[None],
+                                 {"long_name": "drawn axial clearance size of the revolute A_i",
+                                  "units": "m"}),
+        "eccentricity": (("realization", "joint", "component"), ecc[None],
+                         {"long_name": "drawn eccentricity, distal minus proximal joint element, base frame",
+                          "units": "m"}),
+        "status": (("realization",), np.array([result.status], dtype=object),
+                   {"long_name": "solver status (finished or failed)"}),
+        "status_message": (("realization",), np.array([result.message], dtype=object),
+                           {"long_name": "solver message"}),
+        "steps": (("realization",), np.array([result.steps], dtype=np.int64),
+                  {"long_name": "time steps completed", "units": "1"}),
+    }
+    coords = {"realization": ("realization", np.array([realization], dtype=np.int64),
+                              {"long_name": "realisation index", "axis": "E"})}
+    if store == "full":
+        data["error"] = (("realization", "quantity", "time", "direction"), _history(result)[None],
+                         {"long_name": "platform pose error, actual minus ideal rigid pose",
+                          "units": mixed})
+        coords["time"] = ("time", result.t, {"units": "s", "standard_name": "time", "axis": "T"})
+    ds = xr.Dataset(data, coords=coords)
+    return ds
+
+
+def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: str, dt: float,
+                    elements: int, seed: int, store: str) -> xr.Dataset:
+    """Concatenate realisations (sorted) and add coordinates and provenance."""
+    ds = xr.concat(parts, dim="realization", data_vars="minimal", coords="minimal",
+                   compat="override", join="override") if len(parts) > 1 else parts[0]
+    ds = ds.sortby("realization")
+    ds = ds.assign_coords(
+        direction=("direction", list(DIRECTIONS), {"long_name": "platform pose direction, base frame"}),
+        quantity=("quantity", list(QUANTITIES)),
+        joint=("joint", list(JOINTS), {"long_name": "clearance joint"}),
+        component=("component", ["x", "y", "z"], {"long_name": "base-frame vector component"}),
+        unit=(("quantity", "direction"), _unit_table(), {"long_name": "SI unit of each element"}))
+    ds.attrs = {
+        "Conventions": "CF-1.10",
+        "title": f"rss6 ensemble: {model} level, scene {scene.name!r}",
+        "source": f"rss6 {__version__}",
+        "rss6_version": __version__,
+        "scene_name": scene.name,
+        "scene_toml": scene.source_text,
+        "model": model,
+        "integrator": integrator,
+        "time_step_s": dt,
+        "elements_per_link": elements,
+        "seed": seed,
+        "store": store,
+        "n_realizations": int(ds.sizes["realization"]),
+        "n_failed": int((ds["status"].values != "finished").sum()),
+    }
+    return ds
+
+
+def identity(attrs: dict) -> dict:
+    """The attributes that must match for two pieces to belong to the same ensemble."""
+    return {k: attrs.get(k) for k in IDENTITY}
+
+
+def open_ensemble(path) -> xr.Dataset:
+    """Open an ensemble file fully into memory; EnsembleFileError names the file and the problem."""
+    import os
+    if not os.path.exists(path):
+        raise EnsembleFileError(f"{path}: no such file")
+    try:
+        with xr.open_dataset(path, engine="netcdf4") as ds:
+            ds = ds.load()
+    except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...
+        raise EnsembleFileError(f"{path}: not a readable netCDF file "
+                                f"(truncated or corrupt?): {exc}") from None
+    missing = [k for k in ("max_abs_error", "mean_abs_error", "status") if k not in ds]
+    if missing or "rss6_version" not in ds.attrs or "realization" not in ds.dims:
+        raise EnsembleFileError(f"{path}: not an rss6 ensemble file (missing "
+                                f"{', '.join(missing) or 'rss6 attributes'})")
+    return ds

@@ -1,0 +1,99 @@
+"""PNG figures of an ensemble file: error envelopes, histograms of maxima, Monte Carlo convergence."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy import stats as sps  # noqa: E402
+
+__all__ = ["plot_ensemble"]
+
+_UNITS = {"displacement": ("mm", "rad"), "velocity": ("mm/s", "rad/s"),
+          "acceleration": ("mm/s$^2$", "rad/s$^2$")}
+_DIRS = ("x", "y", "z", "rx", "ry", "rz")
+
+
+def _scale(q: str, d: str) -> tuple[float, str]:
+    return (1e3, _UNITS[q][0]) if d in ("x", "y", "z") else (1.0, _UNITS[q][1])
+
+
+def _grid(title: str):
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6.5), constrained_layout=True)
+    fig.suptitle(title)
+    return fig, axes.ravel()
+
+
+def _envelope(ds, q: str, out: Path, finished) -> Path:
+    err = ds["error"].sel(quantity=q).values[finished]            # (R, T, 6)
+    t = ds["time"].values
+    fig, axes = _grid(f"{ds.attrs['model']} level, scene {ds.attrs['scene_name']}: {q} error "
+                      f"envelope over {err.shape[0]} realisations")
+    for k, (ax, d) in enumerate(zip(axes, _DIRS)):
+        f, unit = _scale(q, d)
+        e = err[..., k] * f
+        lo, med, hi = np.nanquantile(e, [0.05, 0.5, 0.95], axis=0)
+        ax.fill_between(t, lo, hi, alpha=0.3, label="5-95 %")
+        ax.plot(t, med, lw=1.2, label="median")
+        ax.plot(t, np.nanmax(np.abs(e), axis=0), "k--", lw=0.8, label="max |error|")
+        ax.set(xlabel="time [s]", ylabel=f"{d} error [{unit}]", title=d)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    path = out / f"envelope_{q}.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _histograms(ds, q: str, out: Path, finished) -> Path:
+    peak = ds["max_abs_error"].sel(quantity=q).values[finished]    # (R, 6)
+    fig, axes = _grid(f"per-realisation max |{q} error| over {peak.shape[0]} realisations")
+    for k, (ax, d) in enumerate(zip(axes, _DIRS)):
+        f, unit = _scale(q, d)
+        ax.hist(peak[:, k] * f, bins=min(30, max(5, peak.shape[0] // 4)), color="C0", alpha=0.8)
+        ax.set(xlabel=f"max |{d} error| [{unit}]", ylabel="realisations", title=d)
+        ax.grid(alpha=0.3)
+    path = out / f"hist_max_{q}.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _convergence(ds, q: str, out: Path, finished) -> Path:
+    peak = ds["max_abs_error"].sel(quantity=q).values[finished]
+    n = np.arange(1, peak.shape[0] + 1)
+    fig, axes = _grid(f"Monte Carlo convergence: running mean of max |{q} error| with 95 % CI")
+    for k, (ax, d) in enumerate(zip(axes, _DIRS)):
+        f, unit = _scale(q, d)
+        x = peak[:, k] * f
+        mean = np.cumsum(x) / n
+        var = np.array([np.var(x[:i], ddof=1) if i > 1 else np.nan for i in n])
+        half = sps.t.ppf(0.975, np.maximum(n - 1, 1)) * np.sqrt(var / n)
+        ax.fill_between(n, mean - half, mean + half, alpha=0.3, label="95 % CI")
+        ax.plot(n, mean, lw=1.2, label="running mean")
+        ax.set(xlabel="realisations", ylabel=f"mean max |{d} error| [{unit}]", title=d)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    path = out / f"convergence_{q}.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_ensemble(ds, out_dir) -> list[Path]:
+    """Write the figures to ``out_dir``; envelopes only when the file holds full histories."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    finished = ds["status"].values == "finished"
+    if not finished.any():
+        raise ValueError("no finished realisation to plot")
+    paths = []
+    for q in ("displacement", "velocity", "acceleration"):
+        if "error" in ds:
+            paths.append(_envelope(ds, q, out, finished))
+        paths.append(_histograms(ds, q, out, finished))
+        paths.append(_convergence(ds, q, out, finished))
+    return paths

@@ -1,0 +1,178 @@
+"""Monte Carlo ensembles on dask: realisations in chunks, finished chunks written durably.
+
+``run_ensemble`` runs realisations 0..N-1 of a scene in chunks, each chunk a dask
+task, on a local cluster of W single-threaded workers (BLAS pinned to one
+thread) or on an existing dask.distributed scheduler.  Each finished chunk is
+written at once to ``OUT.nc.parts/`` (write to a temporary name, then rename),
+so an interrupted run (Ctrl-C, a killed process, a crashed worker) loses at
+most the chunks in flight; rerunning the same command skips what is stored and
+refuses pieces from a different scene, model or seed.  When all realisations
+are stored they are merged into OUT.nc and the parts are removed.
+Realisation r draws from the stream (seed, r) only, so the file does not depend
+on the chunk size or the number of workers.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rss6core import parse_scene
+from rss6core.clearance import draw_clearances
+from rss6core.models import simulate
+
+from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
+                    realization_dataset, write_netcdf)
+
+__all__ = ["EnsembleSpec", "run_chunk", "run_ensemble", "BLAS_ENV"]
+
+BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                             "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
+
+
+@dataclass(frozen=True)
+class EnsembleSpec:
+    """What an ensemble computes (everything but its size and where it runs)."""
+    scene_text: str
+    source: str
+    model: str
+    integrator: str
+    dt: float
+    elements: int
+    seed: int
+    store: str = "summary"
+
+    def scene(self):
+        return parse_scene(self.scene_text, self.source)
+
+    def attrs(self) -> dict:
+        return {"scene_toml": self.scene_text, "model": self.model, "integrator": self.integrator,
+                "time_step_s": self.dt, "elements_per_link": self.elements, "seed": self.seed,
+                "store": self.store}
+
+
+def run_chunk(spec: EnsembleSpec, realizations: list[int]):
+    """Simulate the given realisations; returns their ensemble Dataset (a dask task)."""
+    scene = spec.scene()
+    parts = []
+    for r in realizations:
+        try:
+            result = simulate(scene, spec.model, spec.integrator, spec.dt, spec.elements,
+                              spec.seed, r)
+        except (ArithmeticError, np.linalg.LinAlgError) as exc:  # numerical failure: record it
+            from rss6core.elastic import SimulationResult, time_grid
+            t = time_grid(scene.trajectory.duration, spec.dt)
+            nan = np.full((len(t), 6), np.nan)
+            result = SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
+        parts.append(realization_dataset(scene, result, draw_clearances(scene, spec.seed, r), r,
+                                         spec.store, model=spec.model, integrator=spec.integrator,
+                                         dt=spec.dt, elements=spec.elements, seed=spec.seed))
+    return finish_ensemble(parts, scene, **_kw(spec))
+
+
+def _kw(spec: EnsembleSpec) -> dict:
+    return dict(model=spec.model, integrator=spec.integrator, dt=spec.dt,
+                elements=spec.elements, seed=spec.seed, store=spec.store)
+
+
+def _check_identity(path, attrs: dict, spec: EnsembleSpec) -> None:
+    theirs, ours = identity(attrs), identity(spec.attrs())
+    diff = [k for k in ours if str(theirs[k]) != str(ours[k])]
+    if diff:
+        what = ", ".join(f"{k} ({theirs[k]!r} there, {ours[k]!r} here)" if k != "scene_toml"
+                         else "scene_toml (a different scene file)" for k in diff)
+        raise EnsembleFileError(f"{path}: refusing to mix ensembles: it was made with a different "
+                                f"{what}; choose another output file or the same settings")
+
+
+def _stored(output: Path, spec: EnsembleSpec) -> tuple[list, set]:
+    """Datasets already stored for this ensemble (final file and parts) and their realisations."""
+    pieces, done = [], set()
+    candidates = ([output] if output.exists() else []) + sorted(_parts_dir(output).glob("*.nc"))
+    for path in candidates:
+        ds = open_ensemble(path)
+        _check_identity(path, ds.attrs, spec)
+        pieces.append(ds)
+        done.update(int(r) for r in ds["realization"].values)
+    return pieces, done
+
+
+def _parts_dir(output: Path) -> Path:
+    return output.with_name(output.name + ".parts")
+
+
+class _Progress:
+    """A bar on a terminal, plain lines otherwise."""
+
+    def __init__(self, total: int, done: int, stream=sys.stderr):
+        self.total, self.done, self.stream = total, done, stream
+        self.tty, self.start, self.last = stream.isatty(), time.perf_counter(), 0.0
+
+    def advance(self, n: int) -> None:
+        self.done += n
+        elapsed = time.perf_counter() - self.start
+        frac = self.done / max(self.total, 1)
+        if self.tty:
+            bar = "#" * int(30 * frac)
+            self.stream.write(f"\r[{bar:<30s}] {self.done}/{self.total} realisations, {elapsed:.1f} s")
+            if self.done >= self.total:
+                self.stream.write("\n")
+        elif elapsed - self.last >= 2.0 or self.done >= self.total:
+            self.last = elapsed
+            self.stream.write(f"rss6 run: {self.done}/{self.total} realisations "
+                              f"({100 * frac:.0f} %), {elapsed:.1f} s\n")
+        self.stream.flush()
+
+
+def _client(workers: int, scheduler: str | None):
+    from dask.distributed import Client, LocalCluster
+    if scheduler:
+        return Client(scheduler, timeout="20s"), None
+    os.environ.update(BLAS_ENV)  # inherited by the worker processes
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None, host="127.0.0.1")
+    return Client(cluster), cluster
+
+
+def run_ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
+                 chunk: int = 8, progress: bool = True):
+    """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset."""
+    if n < 1:
+        raise ValueError(f"the number of realisations must be at least 1, got {n}")
+    if chunk < 1 or workers < 1:
+        raise ValueError("--chunk and --workers must be at least 1")
+    output = Path(output)
+    pieces, done = _stored(output, spec)
+    todo = [r for r in range(n) if r not in done]
+    chunks = [todo[i:i + chunk] for i in range(0, len(todo), chunk)]
+    parts = _parts_dir(output)
+    bar = _Progress(n, n - len(todo)) if progress else None
+    if chunks:
+        parts.mkdir(parents=True, exist_ok=True)
+        from dask.distributed import as_completed
+        client, cluster = _client(workers, scheduler)
+        try:
+            futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
+            for future in as_completed(futures):
+                ds = future.result()
+                first, last = int(ds.realization[0]), int(ds.realization[-1])
+                write_netcdf(ds, parts / f"chunk-{first:07d}-{last:07d}.nc")
+                pieces.append(ds)
+                if bar:
+                    bar.advance(ds.sizes["realization"])
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    merged = finish_ensemble(pieces, spec.scene(), **_kw(spec)) if len(pieces) != 1 or chunks \
+        else pieces[0]
+    if chunks or not output.exists():
+        write_netcdf(merged, output)
+    if parts.exists():
+        shutil.rmtree(parts)
+    return merged
