@@ -1,0 +1,172 @@
+"""Ensembles: reproducibility across workers and chunks, resume, refusal, file checks, statistics."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import netCDF4
+import numpy as np
+import pytest
+from scipy import stats as sps
+
+from pipeline.cli import main
+from pipeline.run import EnsembleSpec, run_ensemble
+from pipeline.stats import ensemble_stats, summarize
+from pipeline.store import EnsembleFileError, open_ensemble
+from tests.conftest import CONFIGS
+
+SMOKE = CONFIGS / "smoke.toml"
+
+
+def _spec(seed=3, model="quasi-static", store="summary", text=None):
+    return EnsembleSpec(text or SMOKE.read_text(), str(SMOKE), model, "newmark", 1e-3, 4, seed, store)
+
+
+def _summaries(ds):
+    return np.concatenate([ds["max_abs_error"].values.ravel(), ds["mean_abs_error"].values.ravel(),
+                           ds["eccentricity"].values.ravel()])
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    path = tmp_path_factory.mktemp("ref") / "ref.nc"
+    return run_ensemble(_spec(), 10, path, workers=2, chunk=4, progress=False), path
+
+
+def test_same_seed_same_summaries_any_workers_and_chunks(reference, tmp_path):
+    ref, _ = reference
+    one = run_ensemble(_spec(), 10, tmp_path / "one.nc", workers=1, chunk=3, progress=False)
+    assert np.array_equal(_summaries(one), _summaries(ref))
+    assert list(one.realization.values) == list(range(10))
+    other_seed = run_ensemble(_spec(seed=4), 10, tmp_path / "s4.nc", workers=1, chunk=10, progress=False)
+    assert not np.array_equal(_summaries(other_seed), _summaries(ref))
+
+
+def test_file_reads_correctly_with_netcdf4_directly(reference):
+    ref, path = reference
+    with netCDF4.Dataset(path) as nc:
+        assert nc.Conventions == "CF-1.10" and nc.model == "quasi-static" and nc.seed == 3
+        assert "[simulation]" in nc.scene_toml
+        var = nc.variables["max_abs_error"]
+        assert var.dimensions == ("quantity", "realization", "direction")
+        assert "m or rad" in var.units
+        assert nc.variables["realization"].axis == "E"
+        assert nc.variables["clearance_size"].units == "m"
+        assert np.array_equal(var[:], ref["max_abs_error"].values)
+        assert list(nc.variables["status"][:]) == ["finished"] * 10
+
+
+def test_statistics_agree_with_plain_numpy(reference):
+    ref, path = reference
+    out = ensemble_stats(open_ensemble(path))
+    x = ref["max_abs_error"].sel(quantity="velocity", direction="y").values
+    s = out["stats"]["velocity"]["y"]["max"]
+    assert s["mean"] == pytest.approx(np.mean(x), rel=1e-14)
+    assert s["std"] == pytest.approx(np.std(x, ddof=1), rel=1e-14)
+    assert s["sem"] == pytest.approx(np.std(x, ddof=1) / np.sqrt(10), rel=1e-14)
+    assert s["q95"] == pytest.approx(np.quantile(x, 0.95), rel=1e-14)
+    assert s["max"] == np.max(x)
+    lo, hi = s["ci95"]["mean"]
+    half = sps.t.ppf(0.975, 9) * s["sem"]
+    assert (lo, hi) == pytest.approx((np.mean(x) - half, np.mean(x) + half), rel=1e-12)
+    assert s["q05"] <= s["q50"] <= s["q95"] <= s["q99"] <= s["max"]
+    assert out["n_realizations"] == 10
+
+
+def test_confidence_interval_of_a_quantile_covers_the_truth():
+    """Distribution-free quantile CIs cover the true median of U(0,1) in ~95 % of samples."""
+    rng = np.random.default_rng(0)
+    hits = [summarize(rng.uniform(size=50))["ci95"]["q50"] for _ in range(400)]
+    coverage = np.mean([lo <= 0.5 <= hi for lo, hi in hits])
+    assert 0.92 < coverage < 0.995
+
+
+def test_different_seed_or_config_is_refused(reference, tmp_path):
+    _, path = reference
+    with pytest.raises(EnsembleFileError, match=r"refusing to mix ensembles.*seed"):
+        run_ensemble(_spec(seed=99), 12, path, progress=False)
+    other = SMOKE.read_text().replace("mass_kg = 1.366", "mass_kg = 1.5")
+    with pytest.raises(EnsembleFileError, match=r"refusing to mix.*different scene file"):
+        run_ensemble(_spec(text=other), 12, path, progress=False)
+
+
+def test_truncated_and_foreign_files_are_named(reference, tmp_path):
+    _, path = reference
+    cut = tmp_path / "cut.nc"
+    cut.write_bytes(path.read_bytes()[:2000])
+    with pytest.raises(EnsembleFileError, match=r"cut.nc: not a readable netCDF"):
+        open_ensemble(cut)
+    foreign = tmp_path / "foreign.nc"
+    with netCDF4.Dataset(foreign, "w") as nc:
+        nc.createDimension("x", 3)
+        nc.createVariable("t", "f8", ("x",))[:] = [1, 2, 3]
+    with pytest.raises(EnsembleFileError, match=r"foreign.nc: not an rss6 ensemble"):
+        open_ensemble(foreign)
+    assert main(["stats", str(foreign)]) == 2
+
+
+def test_extending_an_ensemble_keeps_what_is_stored(reference, tmp_path):
+    ref, _ = reference
+    path = tmp_path / "grow.nc"
+    run_ensemble(_spec(), 4, path, workers=1, chunk=2, progress=False)
+    grown = run_ensemble(_spec(), 10, path, workers=1, chunk=2, progress=False)
+    assert np.array_equal(_summaries(grown), _summaries(ref))
+
+
+def _cli(*args):
+    return [sys.executable, "-m", "pipeline.cli", *args]
+
+
+@pytest.mark.slow
+def test_killed_run_resumes_to_the_same_file(tmp_path):
+    """Kill -9 the whole run after some chunks are stored; the rerun ends identical."""
+    args = ["run", str(SMOKE), "-n", "12", "--chunk", "1", "--workers", "1", "--model", "elastic",
+            "--seed", "5"]
+    killed = tmp_path / "killed.nc"
+    proc = subprocess.Popen(_cli(*args, "-o", str(killed)), start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    parts = Path(str(killed) + ".parts")
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(parts.glob("*.nc"))) < 3:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    stored = len(list(parts.glob("*.nc")))
+    assert 3 <= stored < 12 and not killed.exists()
+    subprocess.run(_cli(*args, "-o", str(killed)), check=True, capture_output=True)
+    whole = tmp_path / "whole.nc"
+    subprocess.run(_cli(*args, "-o", str(whole)), check=True, capture_output=True)
+    a, b = open_ensemble(killed), open_ensemble(whole)
+    assert np.array_equal(_summaries(a), _summaries(b)) and not parts.exists()
+
+
+def test_scheduler_address_runs_on_an_existing_cluster(reference, tmp_path):
+    from dask.distributed import LocalCluster
+    ref, _ = reference
+    with LocalCluster(n_workers=1, threads_per_worker=1, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        ds = run_ensemble(_spec(), 10, tmp_path / "sched.nc", scheduler=cluster.scheduler_address,
+                          chunk=5, progress=False)
+    assert np.array_equal(_summaries(ds), _summaries(ref))
+
+
+def test_smoke_ensemble_through_the_cli(tmp_path, capsys):
+    """What CI runs: 8 realisations, 2 workers, then stats and plot."""
+    out = tmp_path / "smoke.nc"
+    assert main(["run", str(SMOKE), "-n", "8", "--workers", "2", "--model", "quasi-static",
+                 "--store", "full", "-o", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["stats", str(out), "--json"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    assert js["n_realizations"] == 8
+    entry = js["stats"]["displacement"]["z"]["max"]
+    assert set(entry) >= {"mean", "std", "sem", "q05", "q50", "q95", "q99", "max", "ci95"}
+    assert set(entry["ci95"]) >= {"mean", "q05", "q50", "q95", "q99", "max"}
+    assert main(["stats", str(out), "--quantity", "velocity", "--direction", "rx"]) == 0
+    assert "velocity" in capsys.readouterr().out
+    assert main(["plot", str(out), "-o", str(tmp_path / "plots")]) == 0
+    pngs = sorted(p.name for p in (tmp_path / "plots").glob("*.png"))
+    assert len(pngs) == 9 and all((tmp_path / "plots" / p).stat().st_size > 10_000 for p in pngs)
