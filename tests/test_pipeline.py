@@ -170,3 +170,13 @@ def test_smoke_ensemble_through_the_cli(tmp_path, capsys):
     assert main(["plot", str(out), "-o", str(tmp_path / "plots")]) == 0
     pngs = sorted(p.name for p in (tmp_path / "plots").glob("*.png"))
     assert len(pngs) == 9 and all((tmp_path / "plots" / p).stat().st_size > 10_000 for p in pngs)
+
+
+def test_failed_realisations_are_recorded_and_the_ensemble_goes_on(tmp_path):
+    """Central difference at 1 ms (500x its critical step) diverges: stored as failed, with its message."""
+    spec = EnsembleSpec(SMOKE.read_text(), str(SMOKE), "elastic", "central-difference", 1e-3, 1, 0)
+    ds = run_ensemble(spec, 2, tmp_path / "fail.nc", workers=1, chunk=2, progress=False)
+    assert list(ds["status"].values) == ["failed", "failed"]
+    assert all("diverged at t =" in m for m in ds["status_message"].values)
+    assert ds.attrs["n_failed"] == 2
+    assert ensemble_stats(open_ensemble(tmp_path / "fail.nc"))["n_realizations"] == 0
