@@ -27,6 +27,12 @@ def _grid(title: str):
     return fig, axes.ravel()
 
 
+def _save(fig, path: Path) -> Path:
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def _envelope(ds, q: str, out: Path, finished) -> Path:
     err = ds["error"].sel(quantity=q).values[finished]            # (R, T, 6)
     t = ds["time"].values
@@ -42,10 +48,7 @@ def _envelope(ds, q: str, out: Path, finished) -> Path:
         ax.set(xlabel="time [s]", ylabel=f"{d} error [{unit}]", title=d)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
-    path = out / f"envelope_{q}.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, out / f"envelope_{q}.png")
 
 
 def _histograms(ds, q: str, out: Path, finished) -> Path:
@@ -56,10 +59,7 @@ def _histograms(ds, q: str, out: Path, finished) -> Path:
         ax.hist(peak[:, k] * f, bins=min(30, max(5, peak.shape[0] // 4)), color="C0", alpha=0.8)
         ax.set(xlabel=f"max |{d} error| [{unit}]", ylabel="realisations", title=d)
         ax.grid(alpha=0.3)
-    path = out / f"hist_max_{q}.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, out / f"hist_max_{q}.png")
 
 
 def _convergence(ds, q: str, out: Path, finished) -> Path:
@@ -77,10 +77,7 @@ def _convergence(ds, q: str, out: Path, finished) -> Path:
         ax.set(xlabel="realisations", ylabel=f"mean max |{d} error| [{unit}]", title=d)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
-    path = out / f"convergence_{q}.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, out / f"convergence_{q}.png")
 
 
 def plot_ensemble(ds, out_dir) -> list[Path]:

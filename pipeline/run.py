@@ -69,9 +69,7 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
             t = time_grid(scene.trajectory.duration, spec.dt)
             nan = np.full((len(t), 6), np.nan)
             result = SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
-        parts.append(realization_dataset(scene, result, draw_clearances(scene, spec.seed, r), r,
-                                         spec.store, model=spec.model, integrator=spec.integrator,
-                                         dt=spec.dt, elements=spec.elements, seed=spec.seed))
+        parts.append(realization_dataset(result, draw_clearances(scene, spec.seed, r), r, spec.store))
     return finish_ensemble(parts, scene, **_kw(spec))
 
 

@@ -19,6 +19,18 @@ UNITS = {"displacement": ("m", "rad"), "velocity": ("m s-1", "rad s-1"),
          "acceleration": ("m s-2", "rad s-2")}
 
 
+MIXED_UNITS = "m or rad, per direction (see coordinate 'unit'); time derivatives thereof"
+
+
+def _provenance(scene, title: str, *, model: str, integrator: str, dt: float,
+                elements: int) -> dict:
+    """Global attributes every rss6 file carries: conventions, version, scene text, settings."""
+    return {"Conventions": "CF-1.10", "title": title, "source": f"rss6 {__version__}",
+            "rss6_version": __version__, "scene_name": scene.name, "scene_toml": scene.source_text,
+            "model": model, "integrator": integrator, "time_step_s": dt,
+            "elements_per_link": elements}
+
+
 def _unit_table() -> np.ndarray:
     return np.array([[UNITS[q][0]] * 3 + [UNITS[q][1]] * 3 for q in QUANTITIES])
 
@@ -31,19 +43,18 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
                 wall_time: float) -> xr.Dataset:
     """One simulation as a self-describing Dataset: error histories, summaries, provenance."""
     err = _history(result)
-    mixed = "m or rad, per direction (see coordinate 'unit'); time derivatives thereof"
     finite = np.isfinite(err)
-    summary_attrs = {"units": mixed, "cell_methods": "time: maximum"}
+    summary_attrs = {"units": MIXED_UNITS, "cell_methods": "time: maximum"}
     return xr.Dataset(
         data_vars={
             "error": (("quantity", "time", "direction"), err,
                       {"long_name": "platform pose error, actual minus ideal rigid pose",
-                       "units": mixed}),
+                       "units": MIXED_UNITS}),
             "max_abs_error": (("quantity", "direction"),
                               np.where(finite.any(1), np.nanmax(np.abs(err), axis=1), np.nan),
                               {"long_name": "maximum over time of |error|", **summary_attrs}),
             "mean_abs_error": (("quantity", "direction"), np.nanmean(np.abs(err), axis=1),
-                               {"long_name": "mean over time of |error|", "units": mixed,
+                               {"long_name": "mean over time of |error|", "units": MIXED_UNITS,
                                 "cell_methods": "time: mean"}),
         },
         coords={
@@ -56,16 +67,8 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
                      {"long_name": "SI unit of each element"}),
         },
         attrs={
-            "Conventions": "CF-1.10",
-            "title": f"rss6 {model} simulation of scene {scene.name!r}",
-            "source": f"rss6 {__version__}",
-            "rss6_version": __version__,
-            "scene_name": scene.name,
-            "scene_toml": scene.source_text,
-            "model": model,
-            "integrator": integrator,
-            "time_step_s": dt,
-            "elements_per_link": elements,
+            **_provenance(scene, f"rss6 {model} simulation of scene {scene.name!r}", model=model,
+                          integrator=integrator, dt=dt, elements=elements),
             "status": result.status,
             "status_message": result.message,
             "steps": result.steps,
@@ -91,8 +94,7 @@ class EnsembleFileError(ValueError):
     """A file that is not a complete rss6 ensemble, or one from a different run."""
 
 
-def realization_dataset(scene, result, draw, realization: int, store: str, *, model: str,
-                        integrator: str, dt: float, elements: int, seed: int) -> xr.Dataset:
+def realization_dataset(result, draw, realization: int, store: str) -> xr.Dataset:
     """One realisation as a length-1 slice of the ensemble file (MODEL.md section 7)."""
     err = np.abs(_history(result))
     finite = np.isfinite(err).any(axis=1)
@@ -102,14 +104,13 @@ def realization_dataset(scene, result, draw, realization: int, store: str, *, mo
     size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
     axial = np.concatenate([draw.axial_size, np.full(12, np.nan)])
     ecc = np.concatenate([draw.e_A, draw.e_C, draw.e_B])
-    mixed = "m or rad, per direction (see coordinate 'unit'); time derivatives thereof"
     data = {
         "max_abs_error": (("quantity", "realization", "direction"), peak[:, None],
                           {"long_name": "per-realisation maximum over time of |platform pose error|",
-                           "units": mixed, "cell_methods": "time: maximum"}),
+                           "units": MIXED_UNITS, "cell_methods": "time: maximum"}),
         "mean_abs_error": (("quantity", "realization", "direction"), mean[:, None],
                            {"long_name": "per-realisation mean over time of |platform pose error|",
-                            "units": mixed, "cell_methods": "time: mean"}),
+                            "units": MIXED_UNITS, "cell_methods": "time: mean"}),
         "clearance_size": (("realization", "joint"), size[None],
                            {"long_name": "drawn clearance size (radial for A_i, spherical for C_i, B_i)",
                             "units": "m"}),
@@ -131,10 +132,9 @@ def realization_dataset(scene, result, draw, realization: int, store: str, *, mo
     if store == "full":
         data["error"] = (("realization", "quantity", "time", "direction"), _history(result)[None],
                          {"long_name": "platform pose error, actual minus ideal rigid pose",
-                          "units": mixed})
+                          "units": MIXED_UNITS})
         coords["time"] = ("time", result.t, {"units": "s", "standard_name": "time", "axis": "T"})
-    ds = xr.Dataset(data, coords=coords)
-    return ds
+    return xr.Dataset(data, coords=coords)
 
 
 def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: str, dt: float,
@@ -150,16 +150,8 @@ def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: s
         component=("component", ["x", "y", "z"], {"long_name": "base-frame vector component"}),
         unit=(("quantity", "direction"), _unit_table(), {"long_name": "SI unit of each element"}))
     ds.attrs = {
-        "Conventions": "CF-1.10",
-        "title": f"rss6 ensemble: {model} level, scene {scene.name!r}",
-        "source": f"rss6 {__version__}",
-        "rss6_version": __version__,
-        "scene_name": scene.name,
-        "scene_toml": scene.source_text,
-        "model": model,
-        "integrator": integrator,
-        "time_step_s": dt,
-        "elements_per_link": elements,
+        **_provenance(scene, f"rss6 ensemble: {model} level, scene {scene.name!r}", model=model,
+                      integrator=integrator, dt=dt, elements=elements),
         "seed": seed,
         "store": store,
         "n_realizations": int(ds.sizes["realization"]),
