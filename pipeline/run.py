@@ -89,14 +89,20 @@ def _check_identity(path, attrs: dict, spec: EnsembleSpec) -> None:
 
 
 def _stored(output: Path, spec: EnsembleSpec) -> tuple[list, set]:
-    """Datasets already stored for this ensemble (final file and parts) and their realisations."""
+    """Datasets already stored for this ensemble (final file and parts) and their realisations.
+
+    Each realisation is taken once: parts left beside a finished file (a run stopped
+    between writing it and removing the parts) add only what the file lacks.
+    """
     pieces, done = [], set()
     candidates = ([output] if output.exists() else []) + sorted(_parts_dir(output).glob("*.nc"))
     for path in candidates:
         ds = open_ensemble(path)
         _check_identity(path, ds.attrs, spec)
-        pieces.append(ds)
-        done.update(int(r) for r in ds["realization"].values)
+        new = [int(r) for r in ds["realization"].values if int(r) not in done]
+        if new:
+            pieces.append(ds.sel(realization=new))
+            done.update(new)
     return pieces, done
 
 
@@ -167,9 +173,9 @@ def run_ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler
             client.close()
             if cluster is not None:
                 cluster.close()
-    merged = finish_ensemble(pieces, spec.scene(), **_kw(spec)) if len(pieces) != 1 or chunks \
-        else pieces[0]
-    if chunks or not output.exists():
+    up_to_date = not chunks and len(pieces) == 1 and output.exists()  # the file alone holds all
+    merged = pieces[0] if up_to_date else finish_ensemble(pieces, spec.scene(), **_kw(spec))
+    if not up_to_date:
         write_netcdf(merged, output)
     if parts.exists():
         shutil.rmtree(parts)

@@ -15,7 +15,7 @@ from scipy import stats as sps
 from pipeline.cli import main
 from pipeline.run import EnsembleSpec, run_ensemble
 from pipeline.stats import ensemble_stats, summarize
-from pipeline.store import EnsembleFileError, open_ensemble
+from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
 from tests.conftest import CONFIGS
 
 SMOKE = CONFIGS / "smoke.toml"
@@ -114,6 +114,19 @@ def test_extending_an_ensemble_keeps_what_is_stored(reference, tmp_path):
     run_ensemble(_spec(), 4, path, workers=1, chunk=2, progress=False)
     grown = run_ensemble(_spec(), 10, path, workers=1, chunk=2, progress=False)
     assert np.array_equal(_summaries(grown), _summaries(ref))
+
+
+def test_parts_left_beside_a_finished_file_add_no_duplicates(reference, tmp_path):
+    """A run stopped between writing OUT.nc and removing OUT.nc.parts: the rerun takes each realisation once."""
+    ref, _ = reference
+    path = tmp_path / "left.nc"
+    run_ensemble(_spec(), 10, path, workers=1, chunk=5, progress=False)
+    parts = Path(str(path) + ".parts")
+    parts.mkdir()
+    write_netcdf(open_ensemble(path).isel(realization=[0, 1]), parts / "chunk-0000000-0000001.nc")
+    again = run_ensemble(_spec(), 10, path, workers=1, chunk=5, progress=False)
+    assert list(again.realization.values) == list(range(10)) and not parts.exists()
+    assert np.array_equal(_summaries(open_ensemble(path)), _summaries(ref))
 
 
 def _cli(*args):
