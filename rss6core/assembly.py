@@ -29,13 +29,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .beam import link_matrices
-from .dynamics import rod_angular_motion
+from .dynamics import euler_moment, platform_inertia_world, rod_angular_motion
 from .kinematics import RigidMotion, crank_axes
 from .sections import section_properties
 
 __all__ = ["ElasticModel", "build_elastic_model", "EndMaps", "end_maps", "link_frames", "split",
            "join", "apply", "apply_pair", "internal_force", "StepSolver", "dense_matrices",
-           "rigid_loads", "frame_coupling_forces"]
+           "system_at", "rigid_loads", "frame_coupling_forces"]
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -135,14 +135,16 @@ def link_frames(motion: RigidMotion, geometry) -> tuple[np.ndarray, np.ndarray]:
     return crank, np.stack([xr, yr, np.cross(xr, yr)], -1)
 
 
-def end_maps(model: ElasticModel, motion: RigidMotion, geometry) -> EndMaps:
-    """The time-varying maps of the system at every instant of ``motion``."""
-    crank, rod = link_frames(motion, geometry)
+def _maps(model: ElasticModel, motion: RigidMotion, crank: np.ndarray, rod: np.ndarray) -> EndMaps:
     Q = np.einsum("tlji,tljk->tlik", rod, crank)
     J = np.concatenate([np.broadcast_to(np.eye(3), motion.r.shape + (3,)), -_skew(motion.r)], -1)
     H = np.einsum("tlji,tljk->tlik", rod, J)
-    R = motion.platform.R
-    return EndMaps(Q, H, np.einsum("tij,j,tkj->tik", R, model.platform_inertia, R))
+    return EndMaps(Q, H, platform_inertia_world(model.platform_inertia, motion.platform.R))
+
+
+def end_maps(model: ElasticModel, motion: RigidMotion, geometry) -> EndMaps:
+    """The time-varying maps of the system at every instant of ``motion``."""
+    return _maps(model, motion, *link_frames(motion, geometry))
 
 
 def split(model: ElasticModel, x: np.ndarray):
@@ -260,11 +262,20 @@ def _nodal_field(frames, lin: np.ndarray, ang: np.ndarray) -> np.ndarray:
                           -1).reshape(lin.shape[0], 6, 6 * nodes)
 
 
+def system_at(model: ElasticModel, motion: RigidMotion, scene) -> tuple[EndMaps, np.ndarray]:
+    """End maps and rigid loads at every instant of ``motion``, sharing one set of link frames."""
+    crank, rod = link_frames(motion, scene.geometry)
+    maps = _maps(model, motion, crank, rod)
+    return maps, _loads(model, motion, scene, crank, rod, maps)
+
+
 def rigid_loads(model: ElasticModel, motion: RigidMotion, scene) -> np.ndarray:
     """Rigid-body inertia and gravity loads F = M (g - a_rigid) on the system DOFs (T, N), N."""
+    return system_at(model, motion, scene)[1]
+
+
+def _loads(model, motion, scene, crank, rod, maps) -> np.ndarray:
     geo, g = scene.geometry, scene.gravity_vector
-    crank, rod = link_frames(motion, geo)
-    maps = end_maps(model, motion, geo)
     s = np.linspace(0.0, 1.0, model.elements + 1)[None, None, :, None]
     e = crank_axes(geo)[None]
     arm = (motion.c - geo.a)[:, :, None, :]
@@ -276,10 +287,9 @@ def rigid_loads(model: ElasticModel, motion: RigidMotion, scene) -> np.ndarray:
     a_rod = motion.c_ddot[:, :, None] + s * (motion.b_ddot - motion.c_ddot)[:, :, None]
     f_rod = _nodal_field(rod, g - a_rod, -rod_angular_motion(motion)[2]) @ model.rod_M_full
     F = _to_independent(model, maps, f_crank[..., 6:], f_rod[..., model.rod_order])
-    pm, Ip = motion.platform, maps.platform_inertia
+    pm = motion.platform
     F[:, -6:-3] += model.platform_mass * (g - pm.a)
-    F[:, -3:] -= (np.einsum("tij,tj->ti", Ip, pm.omega_dot)
-                  + np.cross(pm.omega, np.einsum("tij,tj->ti", Ip, pm.omega)))
+    F[:, -3:] -= euler_moment(maps.platform_inertia, pm.omega, pm.omega_dot)
     return F
 
 
@@ -305,7 +315,7 @@ def frame_coupling_forces(model: ElasticModel, motion: RigidMotion, scene,
     """
     t = motion.t
     crank, rod = link_frames(motion, scene.geometry)
-    maps = end_maps(model, motion, scene.geometry)
+    maps = _maps(model, motion, crank, rod)
     c, f, p = split(model, d)
     rod_ends = np.concatenate([(maps.Q @ c[..., model.tip, None])[..., 0],
                                (maps.H @ p[:, None, :, None])[..., 0]], -1)

@@ -17,7 +17,8 @@ import numpy as np
 from .kinematics import RigidMotion, crank_axes
 from .sections import crank_inertia, rod_inertia
 
-__all__ = ["RigidLoads", "inverse_dynamics", "rod_angular_motion", "mechanical_energy"]
+__all__ = ["RigidLoads", "inverse_dynamics", "rod_angular_motion", "mechanical_energy",
+           "platform_inertia_world", "euler_moment"]
 
 
 def _dot(x, y):
@@ -45,8 +46,15 @@ def rod_angular_motion(m: RigidMotion) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return u, np.cross(u, m.c_dot - m.b_dot) / L, np.cross(u, m.c_ddot - m.b_ddot) / L
 
 
-def _platform_inertia_world(scene, R: np.ndarray) -> np.ndarray:
-    return np.einsum("tij,j,tkj->tik", R, scene.platform.inertia, R)
+def platform_inertia_world(principal: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """R diag(I) R^T (T, 3, 3): the platform inertia about o_p in base axes, kg m^2."""
+    return np.einsum("tij,j,tkj->tik", R, principal, R)
+
+
+def euler_moment(I: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray) -> np.ndarray:
+    """I omega' + omega x I omega (T, 3): the rate of angular momentum of a rigid body, N m."""
+    return (np.einsum("tij,tj->ti", I, omega_dot)
+            + np.cross(omega, np.einsum("tij,tj->ti", I, omega)))
 
 
 def inverse_dynamics(scene, m: RigidMotion) -> RigidLoads:
@@ -61,12 +69,10 @@ def inverse_dynamics(scene, m: RigidMotion) -> RigidLoads:
     m_req = rod.inertia[1] * wd_rod + np.cross(-0.5 * L * u, rod.mass * (a_rod - g))
     f_perp = np.cross(u, m_req) / L
     # platform Newton-Euler fixes the axial part: F_i = f_i u_i + f_perp_i
-    Ip = _platform_inertia_world(scene, pm.R)
-    w = pm.omega
+    Ip = platform_inertia_world(scene.platform.inertia, pm.R)
     rhs = -np.concatenate([
         scene.platform.mass * (pm.a - g) + f_perp.sum(axis=1),
-        np.einsum("tij,tj->ti", Ip, pm.omega_dot) + np.cross(w, np.einsum("tij,tj->ti", Ip, w))
-        + np.cross(m.r, f_perp).sum(axis=1)], axis=-1)
+        euler_moment(Ip, pm.omega, pm.omega_dot) + np.cross(m.r, f_perp).sum(axis=1)], axis=-1)
     G = np.concatenate([u, np.cross(m.r, u)], axis=-1).transpose(0, 2, 1)  # columns per leg
     f_axial = np.linalg.solve(G, rhs[..., None])[..., 0]
     f_rod_B = f_axial[..., None] * u + f_perp
@@ -89,7 +95,7 @@ def mechanical_energy(scene, m: RigidMotion) -> tuple[np.ndarray, np.ndarray]:
     pm = m.platform
     _, w_rod, _ = rod_angular_motion(m)
     v_rod = 0.5 * (m.c_dot + m.b_dot)
-    Ip = _platform_inertia_world(scene, pm.R)
+    Ip = platform_inertia_world(scene.platform.inertia, pm.R)
     kinetic = (0.5 * crank.inertia[1] * np.sum(m.alpha_dot ** 2, axis=1)
                + 0.5 * rod.mass * np.sum(_dot(v_rod, v_rod), axis=1)
                + 0.5 * rod.inertia[1] * np.sum(_dot(w_rod, w_rod), axis=1)

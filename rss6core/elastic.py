@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .assembly import (ElasticModel, StepSolver, apply, build_elastic_model, end_maps,
-                       internal_force, rigid_loads)
+from .assembly import (ElasticModel, StepSolver, apply, build_elastic_model, internal_force,
+                       system_at)
 from .integrators import Integrator
 from .kinematics import rigid_motion
 
@@ -44,8 +44,7 @@ def time_grid(duration: float, dt: float) -> np.ndarray:
 
 
 def _system(scene, model: ElasticModel, t: np.ndarray):
-    motion = rigid_motion(scene, t)
-    return end_maps(model, motion, scene.geometry), rigid_loads(model, motion, scene)
+    return system_at(model, rigid_motion(scene, t), scene)
 
 
 def quasi_static_state(scene, model: ElasticModel, t0: float = 0.0, h: float = 1e-4):
