@@ -41,6 +41,13 @@ def _check(args) -> int:
     return 0
 
 
+def _settings(args, scene) -> tuple[str, str, float, int]:
+    """Model, integrator, time step and mesh: the command line's, else the scene's."""
+    sim = scene.simulation
+    return (args.model or sim.model, args.integrator or sim.integrator,
+            args.dt or sim.time_step, args.elements or sim.elements_per_link)
+
+
 def _simulate(args) -> int:
     import time
 
@@ -48,11 +55,7 @@ def _simulate(args) -> int:
 
     from .store import run_dataset, write_netcdf
     scene = load_scene(args.config)
-    sim = scene.simulation
-    model = args.model or sim.model
-    integrator = args.integrator or sim.integrator
-    dt = args.dt or sim.time_step
-    elements = args.elements or sim.elements_per_link
+    model, integrator, dt, elements = _settings(args, scene)
     start = time.perf_counter()
     try:
         result = simulate(scene, model, integrator, dt, elements, args.seed, args.realization)
@@ -82,11 +85,9 @@ def _run(args) -> int:
     from .run import EnsembleSpec, run_ensemble
     from .stats import ensemble_stats, format_stats
     scene = load_scene(args.config)
-    sim = scene.simulation
-    model = args.model or sim.model
-    spec = EnsembleSpec(scene.source_text, str(args.config), model,
-                        args.integrator or sim.integrator, args.dt or sim.time_step,
-                        args.elements or sim.elements_per_link, args.seed, args.store)
+    model, integrator, dt, elements = _settings(args, scene)
+    spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements,
+                        args.seed, args.store)
     output = args.output or f"{scene.name}_{model}.nc"
     try:
         ds = run_ensemble(spec, args.n, output, workers=args.workers, scheduler=args.scheduler,

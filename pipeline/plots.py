@@ -12,13 +12,14 @@ from scipy import stats as sps  # noqa: E402
 
 __all__ = ["plot_ensemble"]
 
-_UNITS = {"displacement": ("mm", "rad"), "velocity": ("mm/s", "rad/s"),
-          "acceleration": ("mm/s$^2$", "rad/s$^2$")}
-_DIRS = ("x", "y", "z", "rx", "ry", "rz")
+from .store import DIRECTIONS as _DIRS  # noqa: E402
+from .store import display_unit  # noqa: E402
 
 
 def _scale(q: str, d: str) -> tuple[float, str]:
-    return (1e3, _UNITS[q][0]) if d in ("x", "y", "z") else (1.0, _UNITS[q][1])
+    """Display factor and unit, with the square typeset for matplotlib."""
+    f, unit = display_unit(q, d)
+    return f, unit.replace("^2", "$^2$")
 
 
 def _grid(title: str):

@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats as sps
 
+from .store import display_unit
+
 __all__ = ["QUANTILES", "summarize", "ensemble_stats", "format_stats"]
 
 QUANTILES = {"q05": 0.05, "q50": 0.5, "q95": 0.95, "q99": 0.99}
@@ -77,10 +79,6 @@ def ensemble_stats(ds, quantity: str | None = None, direction: str | None = None
     return {"n_realizations": int(finished.sum()), "n_failed": int((~finished).sum()), "stats": out}
 
 
-_SCALE = {"displacement": ("mm", "rad"), "velocity": ("mm/s", "rad/s"),
-          "acceleration": ("mm/s^2", "rad/s^2")}
-
-
 def format_stats(result: dict) -> str:
     """A table in the paper's display units (mm, mm/s, mm/s^2 and rad, rad/s, rad/s^2)."""
     cols = ("mean", "std", "q05", "q50", "q95", "q99", "max")
@@ -91,8 +89,7 @@ def format_stats(result: dict) -> str:
              + f"{'mean 95% CI':>25s}"]
     for q, by_dir in result["stats"].items():
         for d, by_stat in by_dir.items():
-            unit = _SCALE[q][0] if d in ("x", "y", "z") else _SCALE[q][1]
-            f = 1e3 if d in ("x", "y", "z") else 1.0
+            f, unit = display_unit(q, d)
             for stat, s in by_stat.items():
                 ci = s["ci95"].get("mean", [float("nan")] * 2)
                 lines.append(f"{q:<13s}{d:<4s}{stat:<5s}{unit:<8s}"

@@ -11,12 +11,21 @@ import xarray as xr
 
 from rss6core import __version__
 
-__all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "run_dataset", "write_netcdf"]
+__all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "display_unit", "run_dataset", "write_netcdf"]
 
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
 QUANTITIES = ("displacement", "velocity", "acceleration")
 UNITS = {"displacement": ("m", "rad"), "velocity": ("m s-1", "rad s-1"),
          "acceleration": ("m s-2", "rad s-2")}
+_DISPLAY = {"displacement": ("mm", "rad"), "velocity": ("mm/s", "rad/s"),
+            "acceleration": ("mm/s^2", "rad/s^2")}
+
+
+def display_unit(quantity: str, direction: str) -> tuple[float, str]:
+    """Factor from SI and unit of the paper's display units (mm, mm/s, mm/s^2; rad, rad/s, rad/s^2)."""
+    if direction in ("x", "y", "z"):
+        return 1e3, _DISPLAY[quantity][0]
+    return 1.0, _DISPLAY[quantity][1]
 
 
 MIXED_UNITS = "m or rad, per direction (see coordinate 'unit'); time derivatives thereof"

@@ -8,6 +8,8 @@ from rss6core.kinematics import rigid_motion
 from rss6core.models import natural_frequencies
 from rss6core.sections import crank_inertia, rod_inertia
 
+from .store import DIRECTIONS, display_unit
+
 __all__ = ["scene_summary", "format_summary", "error_summary", "format_errors"]
 
 
@@ -70,18 +72,14 @@ def error_summary(ds) -> dict:
     return out
 
 
-_DISPLAY = {"displacement": (1e3, "mm", 1.0, "rad"), "velocity": (1e3, "mm/s", 1.0, "rad/s"),
-            "acceleration": (1e3, "mm/s^2", 1.0, "rad/s^2")}
-
-
 def format_errors(summary: dict) -> str:
     """Table of :func:`error_summary` in the paper's display units."""
-    head = f"{'':<31s}" + "".join(f"{d:>11s}" for d in ("x", "y", "z", "rx", "ry", "rz"))
+    head = f"{'':<31s}" + "".join(f"{d:>11s}" for d in DIRECTIONS)
     lines = [head]
     for stat in ("max_abs_error", "mean_abs_error"):
         for q, vals in summary[stat].items():
-            ft, ut, fr, ur = _DISPLAY[q]
-            label = f"{stat.split('_')[0]} |{q[:5]}| [{ut}; {ur}]"
-            cells = [vals[d] * ft for d in ("x", "y", "z")] + [vals[d] * fr for d in ("rx", "ry", "rz")]
+            units = [display_unit(q, d) for d in DIRECTIONS]
+            label = f"{stat.split('_')[0]} |{q[:5]}| [{units[0][1]}; {units[3][1]}]"
+            cells = [vals[d] * f for d, (f, _) in zip(DIRECTIONS, units)]
             lines.append(f"{label:<31s}" + "".join(f"{c:11.3e}" for c in cells))
     return "\n".join(lines)
