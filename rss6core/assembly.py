@@ -35,7 +35,7 @@ from .sections import section_properties
 
 __all__ = ["ElasticModel", "build_elastic_model", "EndMaps", "end_maps", "link_frames", "split",
            "join", "apply", "apply_pair", "internal_force", "StepSolver", "dense_matrices",
-           "system_at", "rigid_loads", "frame_coupling_forces"]
+           "system_at", "rigid_loads", "link_loads", "frame_coupling_forces"]
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -275,6 +275,19 @@ def rigid_loads(model: ElasticModel, motion: RigidMotion, scene) -> np.ndarray:
 
 
 def _loads(model, motion, scene, crank, rod, maps) -> np.ndarray:
+    f_crank, f_rod, f_platform = link_loads(model, motion, scene, crank, rod, maps.platform_inertia)
+    F = _to_independent(model, maps, f_crank[..., 6:], f_rod)
+    F[:, -6:] += f_platform
+    return F
+
+
+def link_loads(model: ElasticModel, motion: RigidMotion, scene, crank: np.ndarray, rod: np.ndarray,
+               platform_inertia: np.ndarray):
+    """Rigid-body inertia and gravity loads M (g - a_rigid) per link, in link frames, N.
+
+    Returns the crank's (T, 6, 6(n+1)) on all its nodes (the clamped one first),
+    the rod's (T, 6, 5n+5) in the order [own, C end, B end], and the platform's (T, 6).
+    """
     geo, g = scene.geometry, scene.gravity_vector
     s = np.linspace(0.0, 1.0, model.elements + 1)[None, None, :, None]
     e = crank_axes(geo)[None]
@@ -286,11 +299,10 @@ def _loads(model, motion, scene, crank, rod, maps) -> np.ndarray:
     # rod: rigid acceleration is linear along the rod
     a_rod = motion.c_ddot[:, :, None] + s * (motion.b_ddot - motion.c_ddot)[:, :, None]
     f_rod = _nodal_field(rod, g - a_rod, -rod_angular_motion(motion)[2]) @ model.rod_M_full
-    F = _to_independent(model, maps, f_crank[..., 6:], f_rod[..., model.rod_order])
     pm = motion.platform
-    F[:, -6:-3] += model.platform_mass * (g - pm.a)
-    F[:, -3:] -= euler_moment(maps.platform_inertia, pm.omega, pm.omega_dot)
-    return F
+    f_platform = np.concatenate([model.platform_mass * (g - pm.a),
+                                 -euler_moment(platform_inertia, pm.omega, pm.omega_dot)], -1)
+    return f_crank, f_rod[..., model.rod_order], f_platform
 
 
 def _to_independent(model: ElasticModel, maps: EndMaps, f_crank: np.ndarray,

@@ -31,6 +31,9 @@ class SimulationResult:
     message: str
     steps: int                # steps taken
     states: tuple | None = None  # full (d, v, a) histories (T, N) when asked for
+    peak_abs_error: np.ndarray | None = None      # (3, 6) max |error| over internal steps, if finer
+    contact_force_peak: np.ndarray | None = None  # (18,) N, joints A1..A6, C1..C6, B1..B6
+    iterations: int = 0                           # Newton iterations (contact level)
 
 
 def time_grid(duration: float, dt: float) -> np.ndarray:

@@ -33,9 +33,12 @@ def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
 
 
 def reaction_eccentricities(scene, motion: RigidMotion, draw: ClearanceDraw):
-    """e_A, e_C, e_B (T, 6, 3) at the clearance boundary, opposite the force on the distal part.
+    """e_A, e_C, e_B (T, 6, 3) at the clearance boundary, opposite the force on the ball side.
 
-    Where a joint force vanishes the drawn direction is kept.
+    The ball (journal) is pressed against the wall it is pushed towards, so e =
+    -delta F_ball/|F_ball|.  The ball side is the distal body at A (crank) and C
+    (rod) but the proximal one at B (the rod's ball in the platform's socket):
+    there F_ball = -force_B.  Where a joint force vanishes the drawn direction is kept.
     """
     loads = inverse_dynamics(scene, motion)
     w = scene.geometry.w[None]
@@ -46,7 +49,7 @@ def reaction_eccentricities(scene, motion: RigidMotion, draw: ClearanceDraw):
     e_A = (-draw.radial_size[:, None] * _unit(fa_radial, -drawn_radial[None])
            - (draw.axial_size * np.sign(fa_axial))[..., None] * w)
     e_C = -draw.size_C[:, None] * _unit(loads.force_C, -draw.e_C[None])
-    e_B = -draw.size_B[:, None] * _unit(loads.force_B, -draw.e_B[None])
+    e_B = draw.size_B[:, None] * _unit(loads.force_B, draw.e_B[None])
     return e_A, e_C, e_B
 
 

@@ -142,9 +142,10 @@ class ContactLaw:
     friction_coefficient: float   # mu_d
     stick_velocity: float         # v0, m/s
     slip_velocity: float          # v1, m/s
+    impact_speed_floor: float = 1e-3  # m/s, lower bound of delta_dot_c1 in eq. 17 (resting contact)
 
 
-MODELS = ("rigid", "quasi-static", "elastic")
+MODELS = ("rigid", "quasi-static", "elastic", "paper", "contact")
 INTEGRATORS = ("newmark", "hht", "generalized-alpha", "central-difference")
 
 
@@ -160,6 +161,7 @@ class Simulation:
     hht_alpha: float
     spectral_radius: float    # generalized-alpha rho_inf
     quasi_static_eccentricity: str  # 'drawn' or 'reaction' (at the boundary, along the L0 force)
+    contact_time_step: float = 1e-4  # s, internal step of the contact level (L4)
 
 
 @dataclass(frozen=True)
@@ -258,6 +260,7 @@ _SCHEMA: dict = {
         "hht_alpha": _Key(float, default=0.05, bounds=(0.0, 1.0 / 3.0)),
         "spectral_radius": _Key(float, default=0.8, bounds=(0.0, 1.0)),
         "quasi_static_eccentricity": _Key(str, default="drawn", choices=("drawn", "reaction")),
+        "contact_time_step_s": _Key(float, default=1e-4, check=_POS),
     },
     "sampling": {  # MODEL.md section 4; mean and std as fractions of the clearance size
         "radial_mean": _Key(float, default=0.5, bounds=(0.0, 1.0)),
@@ -279,7 +282,8 @@ _SCHEMA: dict = {
                 "exponent": _Key(float, check=_POS),
                 "friction_coefficient": _Key(float, check=_NONNEG),
                 "stick_velocity_m_s": _Key(float, check=_POS),
-                "slip_velocity_m_s": _Key(float, check=_POS)},
+                "slip_velocity_m_s": _Key(float, check=_POS),
+                "impact_speed_floor_m_s": _Key(float, default=1e-3, check=_POS)},
 }
 
 
@@ -365,6 +369,10 @@ def _build(v: dict, text: str, source: str) -> Scene:
     if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
         raise SceneError(f"[simulation] time_step_s: {dt!r} does not divide "
                          f"[trajectory] duration_s = {duration!r} into whole steps")
+    ratio = dt / v["simulation"]["contact_time_step_s"]
+    if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
+        raise SceneError(f"[simulation] contact_time_step_s: must divide time_step_s = {dt!r} "
+                         "into whole steps")
     deg = np.radians
     return Scene(
         name=v["name"],
@@ -390,7 +398,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
         sampling=Sampling(**v["sampling"]),
         contact=ContactLaw(ct["journal_radius_m"], ct["sphere_radius_m"], ct["restitution"],
                            ct["exponent"], ct["friction_coefficient"], ct["stick_velocity_m_s"],
-                           ct["slip_velocity_m_s"]),
+                           ct["slip_velocity_m_s"], ct["impact_speed_floor_m_s"]),
         source_text=text, source_path=source)
 
 

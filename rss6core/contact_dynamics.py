@@ -1,0 +1,550 @@
+"""Contact level (L4): clearance joints as contact pairs on top of the KED model, batched over realisations.
+
+Small-displacement (perturbation) dynamics around the ideal motion, as in the
+elastic level (:mod:`.assembly`), but the joints are no longer ideal: every
+link is a free body held only by contact forces.
+- crank i: nodes 0..n in its own frame; node 0 (the journal at A_i) may
+  translate (its rotations stay clamped: the motor holds alpha_i, and the
+  journal does not tilt in its bearing, as in the paper's sec. 2.3);
+- rod i: all nodes, both ends free (its own frame, torsion dropped as in L2);
+- platform: rigid, 6 DOFs, base frame.
+The relative displacements of the joint elements are the clearance state
+(base frame): e_A = crank node 0 (the bearing is fixed), e_C = rod C end - crank
+tip, e_B = rod B end - (u_0 + theta_0 x r_i).  While |e| stays inside the
+clearance the joint is in free flight; beyond it the Lankarani-Nikravesh force
+(eq. 17) and the modified Coulomb friction (eq. 18) act on the pair.  The
+sliding velocity includes the ideal relative rotation of the joint elements,
+(omega_ball - omega_socket) x R n, which dominates it; friction forces act at
+the joint centres (their moment, at most mu R F_N, is left out, as in eq. 19).
+The revolute's axial faces use the radial stiffness and no friction.
+
+Every link's matrices are constant in its frame, so each step condenses the
+links onto their joint nodes once for the whole batch; Newton iterations on the
+contact forces then solve, per realisation, a block-arrow system of 12 joint DOFs
+per leg bordered by the 6 platform DOFs.  Realisations are an array axis: the
+per-step matrices, factorizations and rigid loads are shared by the batch.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .assembly import _skew, build_elastic_model, link_frames, link_loads
+from .beam import link_matrices
+from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
+from .dynamics import platform_inertia_world, rod_angular_motion
+from .elastic import SimulationResult, time_grid
+from .integrators import Integrator
+from .kinematics import crank_axes, rigid_motion
+from .quasi_static import closure_matrix
+from .sections import section_properties
+
+__all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactBatch"]
+
+TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
+TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
+MAX_ITERATIONS = 30
+
+
+@dataclass(frozen=True)
+class JointModel:
+    """Constant link matrices of the contact level: every link free, joint nodes as boundaries."""
+    elements: int
+    crank_K: np.ndarray       # (6n+3): node 0 translations, then nodes 1..n
+    crank_M: np.ndarray
+    crank_boundary: np.ndarray  # crank indices of node 0 (3) and tip (3) translations
+    rod_K: np.ndarray         # (5n+5) [own, C end, B end], as in the elastic model
+    rod_M: np.ndarray
+    platform_mass: float
+    platform_inertia: np.ndarray
+    mass_damping: float
+    stiffness_damping: float
+    elastic: object           # the ElasticModel it shares loads and rod layout with
+
+    @property
+    def crank_dofs(self) -> int:
+        return self.crank_K.shape[0]
+
+    @property
+    def rod_dofs(self) -> int:
+        return self.rod_K.shape[0]
+
+    @property
+    def leg_dofs(self) -> int:
+        return self.crank_dofs + self.rod_dofs
+
+    @property
+    def dofs(self) -> int:
+        return 6 * self.leg_dofs + 6
+
+
+def build_joint_model(scene, elements: int) -> JointModel:
+    """Link matrices with free journals and free rod ends for ``elements`` elements per link."""
+    em = build_elastic_model(scene, elements)
+    mat = scene.material
+    Kc, Mc = link_matrices(section_properties(scene.crank_section), mat.youngs_modulus,
+                           mat.shear_modulus, mat.density, scene.geometry.crank_length, elements)
+    keep = np.r_[0:3, 6:6 * (elements + 1)]
+    n6 = 6 * elements
+    boundary = np.r_[0:3, n6 - 3:n6]   # node 0 translations; node n translations (offset by the 3 kept)
+    return JointModel(elements, Kc[np.ix_(keep, keep)], Mc[np.ix_(keep, keep)], boundary,
+                      em.rod_K, em.rod_M, em.platform_mass, em.platform_inertia, em.mass_damping,
+                      em.stiffness_damping, em)
+
+
+def _split(jm: JointModel, x: np.ndarray):
+    legs = x[..., :-6].reshape(x.shape[:-1] + (6, jm.leg_dofs))
+    return legs[..., :jm.crank_dofs], legs[..., jm.crank_dofs:], x[..., -6:]
+
+
+def _join(crank, rod, platform) -> np.ndarray:
+    legs = np.concatenate([crank, rod], -1)
+    return np.concatenate([legs.reshape(legs.shape[:-2] + (-1,)), platform], -1)
+
+
+class _Condensed:
+    """Links condensed onto their joint nodes for the step matrix mass M + stiffness K (constant)."""
+
+    def __init__(self, jm: JointModel, mass: float, stiffness: float):
+        self.mass = mass
+        parts = []
+        for M, K, b in ((jm.crank_M, jm.crank_K, jm.crank_boundary),
+                        (jm.rod_M, jm.rod_K, np.arange(jm.rod_dofs - 6, jm.rod_dofs))):
+            E = mass * M + stiffness * K
+            i = np.setdiff1d(np.arange(E.shape[0]), b)
+            inv = np.linalg.inv(E[np.ix_(i, i)])
+            P = inv @ E[np.ix_(i, b)]
+            parts.append((i, b, inv, E[np.ix_(i, b)], P, E[np.ix_(b, b)] - E[np.ix_(b, i)] @ P))
+        self.crank, self.rod = parts
+        S = np.zeros((12, 12))
+        S[:6, :6], S[6:, 6:] = self.crank[5], self.rod[5]
+        self.legs = S   # (12, 12): crank node 0, crank tip, rod C end, rod B end (link frames)
+
+    def condense(self, rc, rr):
+        """Right-hand sides (..., 6, 12) on the joint nodes, and the interior parts for recovery."""
+        out, keep = [], []
+        for r, (i, b, inv, Eib, _, _) in ((rc, self.crank), (rr, self.rod)):
+            y = r[..., i] @ inv                       # symmetric inverse: row form
+            out.append(r[..., b] - y @ Eib)
+            keep.append(y)
+        return np.concatenate(out, -1), keep
+
+    def recover(self, xb, keep, shape_c, shape_r):
+        """Full link vectors from the joint-node solution xb (..., 6, 12)."""
+        xs = []
+        for y, xpart, (i, b, _, _, P, _), shape in ((keep[0], xb[..., :6], self.crank, shape_c),
+                                                     (keep[1], xb[..., 6:], self.rod, shape_r)):
+            x = np.empty(shape)
+            x[..., i] = y - xpart @ P.T
+            x[..., b] = xpart
+            xs.append(x)
+        return xs
+
+
+@dataclass(frozen=True)
+class _Joints:
+    """Per-realisation contact data (leading axis R): clearance sizes, stiffnesses, initial draw."""
+    radial: np.ndarray   # (R, 6) m
+    axial: np.ndarray
+    size_C: np.ndarray
+    size_B: np.ndarray
+    k_A: np.ndarray      # (R, 6) N/m^1.5
+    k_C: np.ndarray
+    k_B: np.ndarray
+    e_A: np.ndarray      # (R, 6, 3) initial eccentricities, base frame
+    e_C: np.ndarray
+    e_B: np.ndarray
+
+
+def _joints(scene, draws) -> _Joints:
+    stack = {f: np.stack([getattr(d, f) for d in draws]) for f in
+             ("radial_size", "axial_size", "size_C", "size_B", "e_A", "e_C", "e_B")}
+    for name, key in (("radial_size", "revolute_radial_m"), ("axial_size", "revolute_axial_m"),
+                      ("size_C", "spherical_C_m"), ("size_B", "spherical_B_m")):
+        if np.any(stack[name] <= 0.0):
+            raise ValueError(f"the contact level needs positive clearances; [clearance] {key} is "
+                             "zero (use the elastic level for ideal joints)")
+    ct, mat = scene.contact, scene.material
+    nu = poisson_ratio(mat.youngs_modulus, mat.shear_modulus)
+    E = mat.youngs_modulus
+
+    def k(r, size):
+        return hertz_stiffness(r, r + size, E, nu, E, nu)
+
+    return _Joints(stack["radial_size"], stack["axial_size"], stack["size_C"], stack["size_B"],
+                   k(ct.journal_radius, stack["radial_size"]), k(ct.sphere_radius, stack["size_C"]),
+                   k(ct.sphere_radius, stack["size_B"]), stack["e_A"], stack["e_C"], stack["e_B"])
+
+
+def _ball(e, de, size, stiffness, impact, law, omega, radius, friction=True):
+    """Force on the ball (journal) side of a ball-in-socket pair and its Jacobians (base frame).
+
+    e, de (..., 3) relative displacement and velocity; returns force (..., 3),
+    d force/d e and d force/d de (..., 3, 3), penetration, its rate and F_N (...).
+    """
+    rho = np.linalg.norm(e, axis=-1)
+    safe = np.maximum(rho, 1e-300)
+    n = e / safe[..., None]
+    delta = rho - size
+    rate = np.einsum("...i,...i->...", n, de)
+    F, dF, dFr = lankarani_nikravesh(delta, rate, impact, stiffness, law.exponent, law.restitution)
+    nn = n[..., :, None] * n[..., None, :]
+    eye = np.eye(3)
+    force = -F[..., None] * n
+    De = -dF[..., None, None] * nn - (F / safe)[..., None, None] * (eye - nn)
+    Dv = -dFr[..., None, None] * nn
+    if friction and law.friction_coefficient > 0.0:
+        Pn = eye - nn
+        slip = np.einsum("...ij,...j->...i", Pn, de + radius * np.cross(omega, n))
+        ft, jac, dft = coulomb_friction(F, slip, law.friction_coefficient, law.stick_velocity,
+                                        law.slip_velocity)
+        force = force + ft
+        De = De + dft[..., :, None] * (dF[..., None] * n)[..., None, :]
+        Dv = Dv + jac @ Pn + dft[..., :, None] * (dFr[..., None] * n)[..., None, :]
+    return force, De, Dv, delta, rate, F
+
+
+def _revolute(e, de, w, joints: _Joints, impact, law, omega, radius):
+    """Radial (journal in bearing) and axial (faces) contact of the revolute A_i, base frame."""
+    Pw = np.eye(3) - w[:, :, None] * w[:, None, :]
+    e_r = np.einsum("lij,...lj->...li", Pw, e)
+    fr, Der, Dvr, dr, rr, Fr = _ball(e_r, de, joints.radial, joints.k_A, impact[..., 0], law, omega,
+                                     radius)
+    Der = Der @ Pw
+    s = np.einsum("li,...li->...l", w, e)
+    sign = np.where(s >= 0.0, 1.0, -1.0)
+    na = sign[..., None] * w
+    da = np.abs(s) - joints.axial
+    ra = np.einsum("...li,...li->...l", na, de)
+    Fa, dFa, dFra = lankarani_nikravesh(da, ra, impact[..., 1], joints.k_A, law.exponent,
+                                        law.restitution)
+    ww = w[:, :, None] * w[:, None, :]
+    force = fr - Fa[..., None] * na
+    return (force, Der - dFa[..., None, None] * ww, Dvr - dFra[..., None, None] * ww,
+            np.stack([dr, da], -1), np.stack([rr, ra], -1), np.stack([Fr, Fa], -1))
+
+
+@dataclass
+class ContactBatch:
+    """Results of a batch of realisations (leading axis R), on the output time grid."""
+    t: np.ndarray                 # (T,) s
+    displacement: np.ndarray      # (R, T, 6)
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    peak: np.ndarray              # (R, 3, 6) max |error| over every internal step
+    contact_peak: np.ndarray      # (R, 18) max |contact force| per joint A1..A6, C1..C6, B1..B6, N
+    status: list
+    message: list
+    steps: np.ndarray             # (R,) internal steps completed
+    iterations: np.ndarray        # (R,) Newton iterations in all
+
+    def result(self, k: int) -> SimulationResult:
+        return SimulationResult(self.t, self.displacement[k], self.velocity[k], self.acceleration[k],
+                                self.status[k], self.message[k], int(self.steps[k]),
+                                peak_abs_error=self.peak[k], contact_force_peak=self.contact_peak[k],
+                                iterations=int(self.iterations[k]))
+
+
+class _Chunk:
+    """Shared, per-instant data of a run of steps: frames, maps, loads, ideal angular velocities."""
+
+    def __init__(self, scene, jm: JointModel, t: np.ndarray):
+        motion = rigid_motion(scene, t)
+        self.Rc, self.Rr = link_frames(motion, scene.geometry)
+        self.Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
+        fc, fr, fp = link_loads(jm.elastic, motion, scene, self.Rc, self.Rr, self.Ip)
+        self.F = _join(fc[..., np.r_[0:3, 6:fc.shape[-1]]], fr, fp)
+        self.J = np.concatenate([np.broadcast_to(np.eye(3), motion.r.shape + (3,)), -_skew(motion.r)], -1)
+        w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
+        w_rod = rod_angular_motion(motion)[1]
+        self.omega = (w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :])
+        self.motion = motion
+
+
+def _platform_mass(jm: JointModel, Ip: np.ndarray) -> np.ndarray:
+    M = np.zeros(Ip.shape[:-2] + (6, 6))
+    M[..., :3, :3] = jm.platform_mass * np.eye(3)
+    M[..., 3:, 3:] = Ip
+    return M
+
+
+def _internal(jm: JointModel, Mp, d, v) -> np.ndarray:
+    """C v + K d (Rayleigh C = lambda_1 M + lambda_2 K), per link; the platform has mass only."""
+    l1, l2 = jm.mass_damping, jm.stiffness_damping
+    dc, dr, dp = _split(jm, d)
+    vc, vr, vp = _split(jm, v)
+    return _join((l1 * vc) @ jm.crank_M + (dc + l2 * vc) @ jm.crank_K,
+                 (l1 * vr) @ jm.rod_M + (dr + l2 * vr) @ jm.rod_K,
+                 l1 * np.einsum("ij,...j->...i", Mp, vp))
+
+
+def _mass(jm: JointModel, Mp, a) -> np.ndarray:
+    ac, ar, ap = _split(jm, a)
+    return _join(ac @ jm.crank_M, ar @ jm.rod_M, np.einsum("ij,...j->...i", Mp, ap))
+
+
+def _joint_nodes(jm: JointModel, x) -> tuple[np.ndarray, np.ndarray]:
+    """Joint-node vectors (..., 6, 12) [crank node 0, tip, rod C end, rod B end] and platform (..., 6)."""
+    c, r, p = _split(jm, x)
+    return np.concatenate([c[..., jm.crank_boundary], r[..., -6:]], -1), p
+
+
+def _relative(ch: _Chunk, k: int, xb, xp):
+    """Relative displacements e_A, e_C, e_B (..., 6, 3) of the joint elements, base frame."""
+    Rc, Rr, J = ch.Rc[k], ch.Rr[k], ch.J[k]
+    A = np.einsum("lij,...lj->...li", Rc, xb[..., 0:3])
+    tip = np.einsum("lij,...lj->...li", Rc, xb[..., 3:6])
+    C = np.einsum("lij,...lj->...li", Rr, xb[..., 6:9]) - tip
+    B = np.einsum("lij,...lj->...li", Rr, xb[..., 9:12]) - np.einsum("lij,...j->...li", J, xp)
+    return A, C, B
+
+
+class _Contacts:
+    """Contact state carried between steps: impact speeds, contact flags, penetration rates."""
+
+    def __init__(self, shape, floor: float):
+        self.floor = floor
+        self.stored = np.full(shape + (6, 4), floor)    # A radial, A axial, C, B
+        self.in_contact = np.zeros(shape + (6, 4), bool)
+        self.rate = np.zeros(shape + (6, 4))
+
+    def impact(self):
+        """Impact speeds delta_dot_c1 for this step: stored, or the approach speed of a new contact."""
+        return np.where(self.in_contact, self.stored, np.maximum(self.rate, self.floor))
+
+    def update(self, delta, rate, used):
+        self.stored = np.where((delta > 0) & ~self.in_contact, used, self.stored)
+        self.in_contact, self.rate = delta > 0, rate
+
+
+def _evaluate(scene, ch: _Chunk, k, joints, contacts, impact, xb, xp, vb, vp):
+    law = scene.contact
+    eA, eC, eB = _relative(ch, k, xb, xp)
+    vA, vC, vB = _relative(ch, k, vb, vp)
+    wA, wC, wB = (o[k] for o in ch.omega)
+    fA, DeA, DvA, dA, rA, FA = _revolute(eA, vA, scene.geometry.w, joints, impact, law, wA,
+                                         law.journal_radius)
+    fC, DeC, DvC, dC, rC, FC = _ball(eC, vC, joints.size_C, joints.k_C, impact[..., 2], law, wC,
+                                     law.sphere_radius)
+    fB, DeB, DvB, dB, rB, FB = _ball(eB, vB, joints.size_B, joints.k_B, impact[..., 3], law, wB,
+                                     law.sphere_radius)
+    delta = np.concatenate([dA, dC[..., None], dB[..., None]], -1)
+    rate = np.concatenate([rA, rC[..., None], rB[..., None]], -1)
+    return (fA, fC, fB), (DeA, DeC, DeB), (DvA, DvC, DvB), delta, rate
+
+
+def _generalized(ch: _Chunk, k, f):
+    """Contact forces on the joint nodes (..., 6, 12) (link frames) and on the platform (..., 6)."""
+    fA, fC, fB = f
+    Rc, Rr, J = ch.Rc[k], ch.Rr[k], ch.J[k]
+    loc = np.concatenate([np.einsum("lji,...lj->...li", Rc, fA),
+                          -np.einsum("lji,...lj->...li", Rc, fC),
+                          np.einsum("lji,...lj->...li", Rr, fC),
+                          np.einsum("lji,...lj->...li", Rr, fB)], -1)
+    return loc, -np.einsum("lji,...lj->...i", J, fB)
+
+
+def _tangent(ch: _Chunk, k, D, Sl, Sp):
+    """Newton matrix blocks: legs (..., 6, 12, 12), border (..., 6, 12, 6), (..., 6, 6, 12), platform."""
+    DA, DC, DB = D
+    Rc, Rr, J = ch.Rc[k], ch.Rr[k], ch.J[k]
+    RcT, RrT = np.swapaxes(Rc, -1, -2), np.swapaxes(Rr, -1, -2)
+    L = np.broadcast_to(Sl, DA.shape[:-2] + (12, 12)).copy()
+    L[..., 0:3, 0:3] -= RcT @ DA @ Rc
+    L[..., 6:9, 6:9] -= RrT @ DC @ Rr
+    L[..., 6:9, 3:6] += RrT @ DC @ Rc
+    L[..., 3:6, 6:9] += RcT @ DC @ Rr
+    L[..., 3:6, 3:6] -= RcT @ DC @ Rc
+    L[..., 9:12, 9:12] -= RrT @ DB @ Rr
+    border = np.zeros(DA.shape[:-2] + (12, 6))
+    border[..., 9:12, :] = RrT @ DB @ J
+    lower = np.swapaxes(J, -1, -2) @ DB @ Rr          # (..., 6, 6, 3)
+    P = Sp - np.einsum("lji,...ljk,lkm->...im", J, DB, J)
+    return L, border, lower, P
+
+
+def _solve_arrow(L, border, lower, P, rl, rp):
+    """Solve [L B; C P] [x; y] = [rl; rp] with L block-diagonal over legs."""
+    sol = np.linalg.solve(L, np.concatenate([rl[..., None], border], -1))
+    u, W = sol[..., 0], sol[..., 1:]
+    schur = P - np.einsum("...lij,...ljk->...ik", lower, W[..., 9:12, :])
+    y = np.linalg.solve(schur, (rp - np.einsum("...lij,...lj->...i", lower, u[..., 9:12]))[..., None])[..., 0]
+    return u - np.einsum("...lij,...j->...li", W, y), y
+
+
+def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
+    """Links rigidly offset by the drawn eccentricities, at rest relative to the ideal motion.
+
+    Crank i translates by e_A,i; the platform takes the linearised-closure error of
+    the draw (so that no rod is stretched); each rod follows its two ends
+    rigidly (static condensation of its end offsets reproduces a rigid motion).
+    """
+    motion = rigid_motion(scene, np.array([t0]))
+    Rc, Rr = (f[0] for f in link_frames(motion, scene.geometry))
+    R = joints.e_A.shape[0]
+    G, n = closure_matrix(motion)
+    rhs = np.einsum("li,rli->rl", n[0], joints.e_A + joints.e_C - joints.e_B)
+    xp = np.linalg.solve(G[0], rhs[..., None])[..., 0]
+    crank = np.zeros((R, 6, jm.crank_dofs))
+    local_A = np.einsum("lji,rlj->rli", Rc, joints.e_A)
+    trans = np.r_[0:3, np.concatenate([3 + 6 * k + np.arange(3) for k in range(jm.elements)])]
+    crank[..., trans] = np.tile(local_A, jm.elements + 1)
+    J = np.concatenate([np.eye(3)[None].repeat(6, 0), -_skew(motion.r[0])], -1)
+    ends = np.concatenate([np.einsum("lji,rlj->rli", Rr, joints.e_A + joints.e_C),
+                           np.einsum("lji,rlj->rli", Rr, np.einsum("lij,rj->rli", J, xp) + joints.e_B)],
+                          -1)
+    nf = jm.rod_dofs - 6
+    Kff, Kfe = jm.rod_K[:nf, :nf], jm.rod_K[:nf, nf:]
+    own = -ends @ np.linalg.solve(Kff, Kfe).T
+    return _join(crank, np.concatenate([own, ends], -1), xp)
+
+
+def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | None = None,
+                     dt: float | None = None, output_step: float | None = None,
+                     model: JointModel | None = None, chunk: int = 200,
+                     divergence_limit: float = 1.0) -> ContactBatch:
+    """Integrate the contact level for a batch of clearance draws (one realisation each).
+
+    ``dt`` is the internal step (default: the scene's contact time step);
+    histories are kept every ``output_step`` (default: the scene's time step);
+    peaks are taken over every internal step.  A realisation whose Newton
+    iteration fails or whose state diverges is marked failed; the others go on.
+    """
+    integrator = integrator or Integrator.newmark()
+    jm = model or build_joint_model(scene, elements)
+    sim = scene.simulation
+    h = sim.contact_time_step if dt is None else dt
+    out = max(h, sim.time_step if output_step is None else output_step)
+    every = int(round(out / h))
+    if abs(every * h - out) > 1e-9 * out:
+        raise ValueError(f"output step {out!r} s is not a multiple of the time step {h!r} s")
+    t = time_grid(scene.trajectory.duration, h)
+    t_out = t[::every]
+    joints = _joints(scene, draws)
+    R = len(draws)
+    contacts = _Contacts((R,), scene.contact.impact_speed_floor)
+    beta, gamma, am, af = integrator.beta, integrator.gamma, integrator.alpha_m, integrator.alpha_f
+    cM, cC, cK = integrator.step_coefficients(h)
+    lam1, lam2 = jm.mass_damping, jm.stiffness_damping
+    step = _Condensed(jm, cM + cC * lam1, cC * lam2 + cK)
+    start = _Condensed(jm, 1.0, 0.0)
+    wf, bh2, gh = 1.0 - af, beta * h * h, gamma * h
+
+    hist = np.full((3, R, len(t_out), 6), np.nan)
+    peak = np.zeros((R, 3, 6))
+    cpeak = np.zeros((R, 18))
+    alive = np.ones(R, bool)
+    status, message = ["finished"] * R, [""] * R
+    steps, iters = np.zeros(R, np.int64), np.zeros(R, np.int64)
+
+    def newton(ch, j, cond, coef_p, rhs, dp, vp, a_guess, bh2, gh, w):
+        """Joint-node accelerations for a step; returns a, contact forces, converged flags."""
+        Mp = _platform_mass(jm, ch.Ip[j])
+        rc, rr, rp = _split(jm, rhs)
+        rb, keep = cond.condense(rc, rr)
+        db, dpp = _joint_nodes(jm, dp)
+        vb, vpp = _joint_nodes(jm, vp)
+        ab, ap = _joint_nodes(jm, a_guess)
+        Sp = coef_p * Mp
+        impact = contacts.impact()
+        done = np.zeros(R, bool)
+        count = np.zeros(R, np.int64)
+        last = np.full(R, np.inf)           # residual norm at the last accepted iterate
+        lam = np.ones(R)                    # step length of the last update
+        base_l, base_p = ab, ap
+        step_l, step_p = np.zeros_like(ab), np.zeros_like(ap)
+        for _ in range(MAX_ITERATIONS):
+            xb, xp = db + bh2 * ab, dpp + bh2 * ap
+            ub, up = vb + gh * ab, vpp + gh * ap
+            f, De, Dv, delta, rate = _evaluate(scene, ch, j, joints, contacts, impact, xb, xp, ub, up)
+            gl, gp = _generalized(ch, j, f)
+            res_l = ab @ cond.legs.T - rb - w * gl
+            res_p = np.einsum("ij,...j->...i", Sp, ap) - rp - w * gp
+            norm = np.sqrt((res_l ** 2).sum((-1, -2)) + (res_p ** 2).sum(-1))
+            # backtrack where the full Newton step made the residual worse (contact kinks)
+            worse = ~done & (norm > last) & (lam > 1.0 / 64.0)
+            if worse.any():
+                lam = np.where(worse, 0.5 * lam, lam)
+                ab = np.where(worse[:, None, None], base_l - lam[:, None, None] * step_l, ab)
+                ap = np.where(worse[:, None], base_p - lam[:, None] * step_p, ap)
+                count += worse
+                continue
+            last = np.where(done, last, norm)
+            D = tuple(w * (bh2 * a + gh * b) for a, b in zip(De, Dv))
+            L, border, lower, P = _tangent(ch, j, D, cond.legs, Sp)
+            dl, dpl = _solve_arrow(L, border, lower, P, res_l, res_p)
+            base_l, base_p, step_l, step_p, lam = ab, ap, dl, dpl, np.ones(R)
+            ab, ap = ab - dl, ap - dpl
+            count += ~done
+            small = np.abs(np.concatenate([dl.reshape(R, -1), dpl], -1)).max(-1)
+            done |= (bh2 * small <= TOL_DISPLACEMENT) & (gh * small <= TOL_VELOCITY)
+            if done.all():
+                break
+        xb, xp = db + bh2 * ab, dpp + bh2 * ap
+        ub, up = vb + gh * ab, vpp + gh * ap
+        f, _, _, delta, rate = _evaluate(scene, ch, j, joints, contacts, impact, xb, xp, ub, up)
+        gl, gp = _generalized(ch, j, f)
+        ac, ar = cond.recover(ab, keep, rc.shape, rr.shape)
+        a = _join(ac, ar, ap)
+        return a, f, _join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count, delta, rate, impact
+
+    ch = _Chunk(scene, jm, t[:1])
+    d = initial_state(scene, jm, joints)
+    v = np.zeros_like(d)
+    Mp0 = _platform_mass(jm, ch.Ip[0])
+    rhs0 = ch.F[0] - _internal(jm, Mp0, d, v)
+    a, f, g, ok, _, delta, rate, used = newton(ch, 0, start, 1.0, rhs0, d, v, np.zeros_like(d), 0.0, 0.0, 1.0)
+    contacts.update(delta, rate, used)
+    weighted = am != 0.0 or af != 0.0
+    Ma, rest, Fn, gn = _mass(jm, Mp0, a), _internal(jm, Mp0, d, v), ch.F[0], g
+    _record(hist, peak, cpeak, 0, 0, d, v, a, f, every, alive)
+    for s0 in range(1, len(t), chunk):
+        s1 = min(s0 + chunk, len(t))
+        ch = _Chunk(scene, jm, t[s0:s1])
+        for j in range(s1 - s0):
+            k = s0 + j
+            dp = d + h * v + (0.5 - beta) * h * h * a
+            vp = v + (1.0 - gamma) * h * a
+            Mp = _platform_mass(jm, ch.Ip[j])
+            r = wf * (ch.F[j] - _internal(jm, Mp, dp, vp))
+            if weighted:
+                r += af * (Fn + gn - rest) - am * Ma
+            a_new, f, g, ok, count, delta, rate, used = newton(ch, j, step, cM + cC * lam1, r, dp, vp,
+                                                               a, bh2, gh, wf)
+            d_new, v_new = dp + bh2 * a_new, vp + gh * a_new
+            bad = alive & ~(ok & np.isfinite(d_new).all(-1) & (np.abs(d_new).max(-1) < divergence_limit))
+            for i in np.flatnonzero(bad):
+                alive[i] = False
+                status[i] = "failed"
+                message[i] = (f"Newton on the contact forces did not converge in {MAX_ITERATIONS} "
+                              f"iterations at t = {t[k]:.6g} s (step {k})" if not ok[i] else
+                              f"diverged at t = {t[k]:.6g} s (step {k}): displacement "
+                              f"{np.abs(d_new[i]).max():.3g} exceeds {divergence_limit:g} or is not finite")
+            d, v, a = (np.where(alive[:, None], x, 0.0) for x in (d_new, v_new, a_new))
+            contacts.update(delta, rate, used)
+            iters += np.where(alive, count, 0)
+            steps[alive] = k
+            if weighted:
+                Ma, rest, Fn, gn = _mass(jm, Mp, a), _internal(jm, Mp, d, v), ch.F[j], g
+            _record(hist, peak, cpeak, k, j, d, v, a, f, every, alive)
+        if not alive.any():
+            break
+    return ContactBatch(t_out, hist[0], hist[1], hist[2], peak, cpeak, status, message, steps, iters)
+
+
+def _full_contact(jm: JointModel, gl, shape_c, shape_r):
+    """Generalised contact forces on the joint nodes spread into full link vectors."""
+    gc, gr = np.zeros(shape_c), np.zeros(shape_r)
+    gc[..., jm.crank_boundary] = gl[..., :6]
+    gr[..., -6:] = gl[..., 6:]
+    return gc, gr
+
+
+def _record(hist, peak, cpeak, k, j, d, v, a, f, every, alive):
+    p = np.stack([d[..., -6:], v[..., -6:], a[..., -6:]], 1)     # (R, 3, 6)
+    np.maximum(peak, np.where(alive[:, None, None], np.abs(p), 0.0), out=peak)
+    mags = np.concatenate([np.linalg.norm(x, axis=-1) for x in f], -1)
+    np.maximum(cpeak, np.where(alive[:, None], mags, 0.0), out=cpeak)
+    if k % every == 0:
+        hist[:, alive, k // every] = np.moveaxis(p, 1, 0)[:, alive]
