@@ -12,7 +12,7 @@ import sys
 from rss6core import SceneError, __version__, load_scene
 from rss6core.scene import INTEGRATORS, MODELS
 
-from .summary import error_summary, format_errors, format_summary, scene_summary
+from .summary import contact_peaks, error_summary, format_errors, format_summary, scene_summary
 
 
 def _positive_float(text: str) -> float:
@@ -43,9 +43,11 @@ def _check(args) -> int:
 
 def _settings(args, scene) -> tuple[str, str, float, int]:
     """Model, integrator, time step and mesh: the command line's, else the scene's."""
+    from rss6core.models import default_time_step
     sim = scene.simulation
-    return (args.model or sim.model, args.integrator or sim.integrator,
-            args.dt or sim.time_step, args.elements or sim.elements_per_link)
+    model = args.model or sim.model
+    return (model, args.integrator or sim.integrator,
+            args.dt or default_time_step(scene, model), args.elements or sim.elements_per_link)
 
 
 def _simulate(args) -> int:
@@ -67,6 +69,8 @@ def _simulate(args) -> int:
     if args.output:
         write_netcdf(ds, args.output)
     summary = error_summary(ds)
+    if result.contact_force_peak is not None:
+        summary["max_contact_force_N"] = contact_peaks(result.contact_force_peak)
     if args.json:
         print(json.dumps({**summary, "wall_time_s": wall, "status": result.status,
                           "message": result.message, "model": model, "integrator": integrator,
@@ -75,6 +79,9 @@ def _simulate(args) -> int:
         print(f"scene {scene.name!r}, model {model}, {integrator}, dt = {dt:g} s, "
               f"{elements} elements per link: {result.status} in {wall:.2f} s")
         print(format_errors(summary))
+        if "max_contact_force_N" in summary:
+            print("max contact force (N): " + ", ".join(
+                f"{k} {v:.4g}" for k, v in summary["max_contact_force_N"].items()))
     if result.status != "finished":
         print(f"rss6: run failed: {result.message}", file=sys.stderr)
         return 1

@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from rss6core import parse_scene
-from rss6core.clearance import draw_clearances
-from rss6core.models import simulate
+from rss6core.models import simulate_batch, stored_draw
 
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
                     realization_dataset, write_netcdf)
@@ -59,17 +58,18 @@ class EnsembleSpec:
 def run_chunk(spec: EnsembleSpec, realizations: list[int]):
     """Simulate the given realisations; returns their ensemble Dataset (a dask task)."""
     scene = spec.scene()
-    parts = []
-    for r in realizations:
-        try:
-            result = simulate(scene, spec.model, spec.integrator, spec.dt, spec.elements,
-                              spec.seed, r)
-        except (ArithmeticError, np.linalg.LinAlgError) as exc:  # numerical failure: record it
-            from rss6core.elastic import SimulationResult, time_grid
-            t = time_grid(scene.trajectory.duration, spec.dt)
-            nan = np.full((len(t), 6), np.nan)
-            result = SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
-        parts.append(realization_dataset(result, draw_clearances(scene, spec.seed, r), r, spec.store))
+    try:
+        results = simulate_batch(scene, spec.model, spec.integrator, spec.dt, spec.elements,
+                                 spec.seed, realizations)
+    except (ArithmeticError, np.linalg.LinAlgError) as exc:  # numerical failure: record it
+        from rss6core.elastic import SimulationResult, time_grid
+        t = time_grid(scene.trajectory.duration, spec.dt)
+        nan = np.full((len(t), 6), np.nan)
+        results = [SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
+                   ] * len(realizations)
+    parts = [realization_dataset(result, stored_draw(scene, spec.model, spec.seed, r, spec.dt), r,
+                                 spec.store)
+             for r, result in zip(realizations, results)]
     return finish_ensemble(parts, scene, **_kw(spec))
 
 

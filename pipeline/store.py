@@ -44,6 +44,10 @@ def _unit_table() -> np.ndarray:
     return np.array([[UNITS[q][0]] * 3 + [UNITS[q][1]] * 3 for q in QUANTITIES])
 
 
+_CONTACT_ATTRS = {"long_name": "maximum over time of the contact force magnitude per joint",
+                  "units": "N"}
+
+
 def _history(result) -> np.ndarray:
     return np.stack([result.displacement, result.velocity, result.acceleration])
 
@@ -54,21 +58,28 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
     err = _history(result)
     finite = np.isfinite(err)
     summary_attrs = {"units": MIXED_UNITS, "cell_methods": "time: maximum"}
+    peak = np.where(finite.any(1), np.nanmax(np.abs(err), axis=1), np.nan)
+    if result.peak_abs_error is not None:  # taken over every internal step, finer than the output
+        peak = np.where(np.isfinite(peak), result.peak_abs_error, np.nan)
+    extra = {}
+    if result.contact_force_peak is not None:
+        extra["max_contact_force"] = (("joint",), result.contact_force_peak, _CONTACT_ATTRS)
     return xr.Dataset(
         data_vars={
             "error": (("quantity", "time", "direction"), err,
                       {"long_name": "platform pose error, actual minus ideal rigid pose",
                        "units": MIXED_UNITS}),
-            "max_abs_error": (("quantity", "direction"),
-                              np.where(finite.any(1), np.nanmax(np.abs(err), axis=1), np.nan),
+            "max_abs_error": (("quantity", "direction"), peak,
                               {"long_name": "maximum over time of |error|", **summary_attrs}),
             "mean_abs_error": (("quantity", "direction"), np.nanmean(np.abs(err), axis=1),
                                {"long_name": "mean over time of |error|", "units": MIXED_UNITS,
                                 "cell_methods": "time: mean"}),
+            **extra,
         },
         coords={
             "time": ("time", result.t, {"units": "s", "long_name": "time", "axis": "T",
                                         "standard_name": "time"}),
+            **({"joint": ("joint", list(JOINTS))} if extra else {}),
             "direction": ("direction", list(DIRECTIONS),
                           {"long_name": "platform pose direction in the base frame"}),
             "quantity": ("quantity", list(QUANTITIES)),
@@ -110,6 +121,8 @@ def realization_dataset(result, draw, realization: int, store: str) -> xr.Datase
     with np.errstate(invalid="ignore", all="ignore"):
         peak = np.where(finite, np.nanmax(np.where(np.isfinite(err), err, -np.inf), axis=1), np.nan)
         mean = np.nanmean(err, axis=1)
+    if result.peak_abs_error is not None:  # taken over every internal step, finer than the output
+        peak = np.where(finite, result.peak_abs_error, np.nan)
     size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
     axial = np.concatenate([draw.axial_size, np.full(12, np.nan)])
     ecc = np.concatenate([draw.e_A, draw.e_C, draw.e_B])
@@ -136,6 +149,9 @@ def realization_dataset(result, draw, realization: int, store: str) -> xr.Datase
         "steps": (("realization",), np.array([result.steps], dtype=np.int64),
                   {"long_name": "time steps completed", "units": "1"}),
     }
+    if result.contact_force_peak is not None:
+        data["max_contact_force"] = (("realization", "joint"), result.contact_force_peak[None],
+                                     _CONTACT_ATTRS)
     coords = {"realization": ("realization", np.array([realization], dtype=np.int64),
                               {"long_name": "realisation index", "axis": "E"})}
     if store == "full":

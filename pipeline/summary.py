@@ -72,6 +72,12 @@ def error_summary(ds) -> dict:
     return out
 
 
+def contact_peaks(peak) -> dict:
+    """Max contact force per joint family {A, C, B} (N) from per-joint peaks A1..A6, C1..C6, B1..B6."""
+    peak = np.asarray(peak, float).reshape(3, 6)
+    return {family: float(np.max(row)) for family, row in zip("ACB", peak)}
+
+
 def format_errors(summary: dict) -> str:
     """Table of :func:`error_summary` in the paper's display units."""
     head = f"{'':<31s}" + "".join(f"{d:>11s}" for d in DIRECTIONS)

@@ -68,22 +68,30 @@ def _sizes(rng, nominal: float, tolerance: float) -> np.ndarray:
     return truncated_normal(rng, nominal, tolerance * nominal, 0.0, 2.0 * nominal, 6)
 
 
-def draw_clearances(scene, seed: int, realization: int) -> ClearanceDraw:
-    """Draw realisation ``realization`` of the scene's clearance laws from its own stream."""
+def draw_clearances(scene, seed: int, realization: int, steps: int | None = None) -> ClearanceDraw:
+    """Draw realisation ``realization`` of the scene's clearance laws from its own stream.
+
+    With ``steps`` the sizes are drawn once and the eccentricities ``steps`` times
+    (leading axis), as the paper level redraws them every time step (sec. 2).
+    """
     cl, law = scene.clearance, scene.sampling
     rng = realization_rng(seed, realization)
     tol = law.size_tolerance
     dr, da = _sizes(rng, cl.revolute_radial, tol), _sizes(rng, cl.revolute_axial, tol)
     dC, dB = _sizes(rng, cl.spherical_C, tol), _sizes(rng, cl.spherical_B, tol)
-    radial = truncated_normal(rng, law.radial_mean * dr, law.radial_std * dr, 0.0, dr, 6)
-    theta = rng.uniform(0.0, 2.0 * np.pi, size=6)
-    axial = truncated_normal(rng, law.axial_mean * da, law.axial_std * da, -da, da, 6)
+    shape = (6,) if steps is None else (steps, 6)
+    radial = truncated_normal(rng, law.radial_mean * dr, law.radial_std * dr, 0.0, dr, shape)
+    theta = rng.uniform(0.0, 2.0 * np.pi, size=shape)
+    axial = truncated_normal(rng, law.axial_mean * da, law.axial_std * da, -da, da, shape)
     u = scene.geometry.base_angles
     # the plane normal to w_i is spanned by the horizontal radial direction and Z
     plane_x = np.stack([np.cos(u), np.sin(u), 0 * u], -1)
     plane_y = np.broadcast_to([0.0, 0.0, 1.0], (6, 3))
-    e_A = ((radial * np.cos(theta))[:, None] * plane_x + (radial * np.sin(theta))[:, None] * plane_y
-           + axial[:, None] * scene.geometry.w)
-    e_C = (rng.uniform(size=6) * dC)[:, None] * sphere_directions(rng, 6, law.direction)
-    e_B = (rng.uniform(size=6) * dB)[:, None] * sphere_directions(rng, 6, law.direction)
+    e_A = ((radial * np.cos(theta))[..., None] * plane_x + (radial * np.sin(theta))[..., None] * plane_y
+           + axial[..., None] * scene.geometry.w)
+    count = int(np.prod(shape))
+    e_C = ((rng.uniform(size=shape) * dC)[..., None]
+           * sphere_directions(rng, count, law.direction).reshape(shape + (3,)))
+    e_B = ((rng.uniform(size=shape) * dB)[..., None]
+           * sphere_directions(rng, count, law.direction).reshape(shape + (3,)))
     return ClearanceDraw(dr, da, dC, dB, e_A, e_C, e_B)

@@ -474,6 +474,8 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
             D = tuple(w * (bh2 * a + gh * b) for a, b in zip(De, Dv))
             L, border, lower, P = _tangent(ch, j, D, cond.legs, Sp)
             dl, dpl = _solve_arrow(L, border, lower, P, res_l, res_p)
+            # converged realisations keep their iterate: a result never depends on its batch
+            dl, dpl = np.where(done[:, None, None], 0.0, dl), np.where(done[:, None], 0.0, dpl)
             base_l, base_p, step_l, step_p, lam = ab, ap, dl, dpl, np.ones(R)
             ab, ap = ab - dl, ap - dpl
             count += ~done

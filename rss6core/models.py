@@ -5,7 +5,14 @@ ideal rigid pose) as displacement, velocity and acceleration over time.
 - rigid (L0): the reference itself, so its error is zero by definition;
 - quasi-static (L1): rigid links, clearance eccentricities through the
   linearised leg closure (:mod:`.quasi_static`); needs a realisation;
-- elastic (L2): kineto-elastodynamics with ideal joints (:mod:`.elastic`).
+- elastic (L2): kineto-elastodynamics with ideal joints (:mod:`.elastic`);
+- paper (L3): the seed's method, clearances redrawn every step on top of L2
+  (:mod:`.paper_method`); needs a realisation;
+- contact (L4): clearance joints as contact pairs on top of L2
+  (:mod:`.contact_dynamics`); the realisation's draw is the initial eccentricity.
+:func:`simulate_batch` runs many realisations of one scene and shares what they
+share: L2 is computed once for all realisations of L2 and L3, and L4 integrates
+the batch as one array.
 """
 from __future__ import annotations
 
@@ -14,13 +21,31 @@ import scipy.linalg
 
 from .assembly import build_elastic_model, dense_matrices, end_maps
 from .clearance import draw_clearances
+from .contact_dynamics import simulate_contact
 from .elastic import SimulationResult, simulate_elastic, time_grid
 from .integrators import make_integrator
 from .kinematics import rigid_motion
+from .paper_method import paper_contact_forces, paper_draw, paper_kinematic_error
 from .quasi_static import quasi_static_error
 from .scene import MODELS
 
-__all__ = ["simulate", "natural_frequencies", "MODELS"]
+__all__ = ["simulate", "simulate_batch", "default_time_step", "stored_draw", "natural_frequencies",
+           "MODELS"]
+
+
+def stored_draw(scene, model: str, seed: int, realization: int, dt: float):
+    """The draw an ensemble file records for a realisation: the paper level's first step, else the draw."""
+    if model == "paper":
+        draw = paper_draw(scene, seed, realization, len(time_grid(scene.trajectory.duration, dt)))
+        return type(draw)(draw.radial_size, draw.axial_size, draw.size_C, draw.size_B,
+                          draw.e_A[0], draw.e_C[0], draw.e_B[0])
+    return draw_clearances(scene, seed, realization)
+
+
+def default_time_step(scene, model: str) -> float:
+    """The scene's time step for ``model``: the contact level has its own, finer one."""
+    sim = scene.simulation
+    return sim.contact_time_step if model == "contact" else sim.time_step
 
 
 def simulate(scene, model: str | None = None, integrator: str | None = None,
@@ -31,24 +56,51 @@ def simulate(scene, model: str | None = None, integrator: str | None = None,
     Clearance levels use realisation ``realization`` of the run seeded ``seed``;
     the same pair always gives the same result.
     """
+    return simulate_batch(scene, model, integrator, dt, elements, seed, [realization])[0]
+
+
+def simulate_batch(scene, model: str | None = None, integrator: str | None = None,
+                   dt: float | None = None, elements: int | None = None, seed: int = 0,
+                   realizations=(0,)) -> list[SimulationResult]:
+    """Realisations ``realizations`` of the run seeded ``seed``, one result each, in order."""
     sim = scene.simulation
     model = model or sim.model
     if model not in MODELS:
         raise ValueError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
-    dt = sim.time_step if dt is None else dt
-    if model == "rigid":
+    dt = default_time_step(scene, model) if dt is None else dt
+    elements = elements or sim.elements_per_link
+    realizations = list(realizations)
+    if model in ("rigid", "quasi-static"):
         t = time_grid(scene.trajectory.duration, dt)
-        zero = np.zeros((len(t), 6))
-        return SimulationResult(t, zero, zero, zero, "finished", "", len(t) - 1)
-    if model == "quasi-static":
-        t = time_grid(scene.trajectory.duration, dt)
-        d, v, a = quasi_static_error(scene, rigid_motion(scene, t),
-                                     draw_clearances(scene, seed, realization),
-                                     sim.quasi_static_eccentricity)
-        return SimulationResult(t, d, v, a, "finished", "", len(t) - 1)
+        if model == "rigid":
+            zero = np.zeros((len(t), 6))
+            return [SimulationResult(t, zero, zero, zero, "finished", "", len(t) - 1)] * len(realizations)
+        motion = rigid_motion(scene, t)
+        out = []
+        for r in realizations:
+            d, v, a = quasi_static_error(scene, motion, draw_clearances(scene, seed, r),
+                                         sim.quasi_static_eccentricity)
+            out.append(SimulationResult(t, d, v, a, "finished", "", len(t) - 1))
+        return out
     method = make_integrator(integrator or sim.integrator, sim.newmark_beta, sim.newmark_gamma,
                              sim.hht_alpha, sim.spectral_radius)
-    return simulate_elastic(scene, elements or sim.elements_per_link, method, dt)
+    if model == "contact":
+        batch = simulate_contact(scene, [draw_clearances(scene, seed, r) for r in realizations],
+                                 elements, method, dt)
+        return [batch.result(k) for k in range(len(realizations))]
+    elastic = simulate_elastic(scene, elements, method, dt)
+    if model == "elastic":
+        return [elastic] * len(realizations)
+    motion = rigid_motion(scene, elastic.t)
+    out = []
+    for r in realizations:
+        draw = paper_draw(scene, seed, r, len(elastic.t))
+        d, v, a = paper_kinematic_error(scene, motion, draw)
+        force = paper_contact_forces(scene, draw, dt)
+        out.append(SimulationResult(elastic.t, elastic.displacement + d, elastic.velocity + v,
+                                    elastic.acceleration + a, elastic.status, elastic.message,
+                                    elastic.steps, contact_force_peak=force.max(0)))
+    return out
 
 
 def natural_frequencies(scene, elements: int | None = None, t: float = 0.0) -> np.ndarray:

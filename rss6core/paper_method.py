@@ -1,0 +1,84 @@
+"""The seed paper's clearance method (L3): clearance vectors redrawn every time step on top of L2.
+
+Faithful to the paper (sec. 2-5), with each step's draw from the realisation's own stream:
+- eccentricities e_A, e_C, e_B are drawn afresh at every time step (eq. 5, 7, 9);
+- virtual lengths (eq. 33): the crank's distance from bearing centre to socket C
+  grows by dl_ac = x_c . e_A, the rod's socket-to-socket distance by
+  dl_cb = x_r . (e_C - e_B) (x_c, x_r unit link axes);
+- their kinematic error is the platform error that keeps every leg closed with
+  the changed lengths, from the linearised closure (as in L1, with only the
+  components along the link axes): n_i . (dp + dtheta x r_i) = (n_i . x_c) dl_ac - dl_cb;
+- the contact force of eq. 17-19 uses the penetration e - delta of eq. 6, 8, 10.
+The platform error is the elastic error of eq. 32 plus the kinematic error;
+velocity and acceleration of the kinematic part are its time derivatives on the
+step grid (central differences), as the method defines no other.
+
+Where the method is ill-posed (measured in the tests and the README):
+- the drawn eccentricities lie inside the clearance by construction (|e| <= delta),
+  so the penetration of eq. 6-10 is never positive and the LN and friction forces
+  of eq. 17-19 are identically zero; and a joint force pair applied to the two
+  elements of an ideal joint cancels in the assembled eq. 32 anyway;
+- a fresh draw every step is white noise: the kinematic velocity error grows
+  like 1/dt and the acceleration error like 1/dt^2 as the step is refined, so
+  those statistics measure the time step, not the robot;
+- the length-dependent matrices of eq. 34 (rho(t) = M_l / (l_c A)) change
+  stiffness by at most 3 dl/l (0.7 % for 0.25 mm on the 216 mm crank), which
+  moves the elastic error by well under a micrometre; they are not rebuilt.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .assembly import link_frames
+from .clearance import draw_clearances
+from .contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
+from .kinematics import RigidMotion
+from .quasi_static import closure_matrix
+
+__all__ = ["virtual_lengths", "paper_kinematic_error", "paper_contact_forces"]
+
+
+def virtual_lengths(scene, motion: RigidMotion, draw) -> tuple[np.ndarray, np.ndarray]:
+    """Crank and rod virtual lengths dl_ac, dl_cb (T, 6), m (eq. 33) for per-step draws (T, 6, 3)."""
+    crank, rod = link_frames(motion, scene.geometry)
+    x_c, x_r = crank[..., 0], rod[..., 0]
+    return (np.einsum("tli,tli->tl", x_c, draw.e_A),
+            np.einsum("tli,tli->tl", x_r, draw.e_C - draw.e_B))
+
+
+def paper_kinematic_error(scene, motion: RigidMotion, draw):
+    """Platform error (T, 6) of the virtual lengths, and its first and second time derivatives."""
+    G, n = closure_matrix(motion)
+    crank, _ = link_frames(motion, scene.geometry)
+    dl_ac, dl_cb = virtual_lengths(scene, motion, draw)
+    rhs = np.einsum("tli,tli->tl", n, crank[..., 0]) * dl_ac - dl_cb
+    d = np.linalg.solve(G, rhs[..., None])[..., 0]
+    t = motion.t
+    v = np.gradient(d, t, axis=0, edge_order=2)
+    return d, v, np.gradient(v, t, axis=0, edge_order=2)
+
+
+def paper_contact_forces(scene, draw, dt: float) -> np.ndarray:
+    """Normal contact force magnitudes (T, 18) N of eq. 17 for the per-step draws, joints A, C, B.
+
+    The penetration rate is the change of |e| between steps; the initial contact
+    speed is the joint's first positive rate (the scene's floor otherwise).
+    """
+    ct, mat = scene.contact, scene.material
+    nu = poisson_ratio(mat.youngs_modulus, mat.shear_modulus)
+    E = mat.youngs_modulus
+    w = scene.geometry.w
+    e_r = draw.e_A - np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
+    rho = np.concatenate([np.linalg.norm(e_r, axis=-1), np.linalg.norm(draw.e_C, axis=-1),
+                          np.linalg.norm(draw.e_B, axis=-1)], -1)
+    size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
+    radius = np.repeat([ct.journal_radius, ct.sphere_radius, ct.sphere_radius], 6)
+    K = hertz_stiffness(radius, radius + size, E, nu, E, nu)
+    rate = np.gradient(rho, dt, axis=0)
+    impact = np.maximum(np.max(rate, axis=0), ct.impact_speed_floor)
+    return lankarani_nikravesh(rho - size, rate, impact, K, ct.exponent, ct.restitution)[0]
+
+
+def paper_draw(scene, seed: int, realization: int, steps: int):
+    """The realisation's per-step draw (sizes once, eccentricities ``steps`` times)."""
+    return draw_clearances(scene, seed, realization, steps=steps)
