@@ -30,11 +30,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .assembly import _skew, build_elastic_model, link_frames, link_loads
+from .assembly import _skew, build_elastic_model, end_maps, link_frames, link_loads, split
 from .beam import link_matrices
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
-from .elastic import SimulationResult, time_grid
+from .elastic import SimulationResult, quasi_static_state, time_grid
 from .integrators import Integrator
 from .kinematics import crank_axes, rigid_motion
 from .quasi_static import closure_matrix
@@ -44,7 +44,7 @@ __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactBatch"
 
 TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
 TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
-MAX_ITERATIONS = 30
+MAX_ITERATIONS = 60
 
 
 @dataclass(frozen=True)
@@ -373,15 +373,29 @@ def _solve_arrow(L, border, lower, P, rl, rp):
     return u - np.einsum("...lij,...j->...li", W, y), y
 
 
-def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
-    """Links rigidly offset by the drawn eccentricities, at rest relative to the ideal motion.
+def _lift(jm: JointModel, maps, x: np.ndarray) -> np.ndarray:
+    """An elastic-level (ideal joint) state in the contact level's layout: joints closed."""
+    c, f, p = split(jm.elastic, x)
+    e_C = (maps.Q @ c[..., jm.elastic.tip, None])[..., 0]
+    e_B = (maps.H @ p[..., None, :, None])[..., 0]
+    crank = np.concatenate([np.zeros(c.shape[:-1] + (3,)), c], -1)
+    return _join(crank, np.concatenate([f, e_C, e_B], -1), p)
 
-    Crank i translates by e_A,i; the platform takes the linearised-closure error of
-    the draw (so that no rod is stretched); each rod follows its two ends
-    rigidly (static condensation of its end offsets reproduces a rigid motion).
+
+def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
+    """The elastic level's quasi-static state with every link rigidly offset by the drawn eccentricities.
+
+    The links carry the quasi-static deformation of the ideal-joint robot (so
+    that the level tends to the elastic one as the clearance vanishes) and sit
+    at rest relative to it; crank i translates by e_A,i; the platform takes the
+    linearised-closure error of the draw (so that no rod is stretched); each rod
+    follows its two ends rigidly (static condensation of its end offsets
+    reproduces a rigid motion).  Returns (d, v) (R, N).
     """
     motion = rigid_motion(scene, np.array([t0]))
     Rc, Rr = (f[0] for f in link_frames(motion, scene.geometry))
+    maps = end_maps(jm.elastic, motion, scene.geometry)[0]
+    d_el, v_el, _ = quasi_static_state(scene, jm.elastic, t0)
     R = joints.e_A.shape[0]
     G, n = closure_matrix(motion)
     rhs = np.einsum("li,rli->rl", n[0], joints.e_A + joints.e_C - joints.e_B)
@@ -397,7 +411,8 @@ def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
     nf = jm.rod_dofs - 6
     Kff, Kfe = jm.rod_K[:nf, :nf], jm.rod_K[:nf, nf:]
     own = -ends @ np.linalg.solve(Kff, Kfe).T
-    return _join(crank, np.concatenate([own, ends], -1), xp)
+    offset = _join(crank, np.concatenate([own, ends], -1), xp)
+    return offset + _lift(jm, maps, d_el), np.broadcast_to(_lift(jm, maps, v_el), offset.shape).copy()
 
 
 def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | None = None,
@@ -463,7 +478,7 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
             res_p = np.einsum("ij,...j->...i", Sp, ap) - rp - w * gp
             norm = np.sqrt((res_l ** 2).sum((-1, -2)) + (res_p ** 2).sum(-1))
             # backtrack where the full Newton step made the residual worse (contact kinks)
-            worse = ~done & (norm > last) & (lam > 1.0 / 64.0)
+            worse = ~done & (norm > last) & (lam > 1.0 / 256.0)
             if worse.any():
                 lam = np.where(worse, 0.5 * lam, lam)
                 ab = np.where(worse[:, None, None], base_l - lam[:, None, None] * step_l, ab)
@@ -492,8 +507,7 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
         return a, f, _join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count, delta, rate, impact
 
     ch = _Chunk(scene, jm, t[:1])
-    d = initial_state(scene, jm, joints)
-    v = np.zeros_like(d)
+    d, v = initial_state(scene, jm, joints)
     Mp0 = _platform_mass(jm, ch.Ip[0])
     rhs0 = ch.F[0] - _internal(jm, Mp0, d, v)
     a, f, g, ok, _, delta, rate, used = newton(ch, 0, start, 1.0, rhs0, d, v, np.zeros_like(d), 0.0, 0.0, 1.0)

@@ -1,0 +1,208 @@
+"""Contact laws (eq. 17-18), the paper level (L3) and the contact level (L4): laws, limits, repeatability."""
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from rss6core.clearance import draw_clearances
+from rss6core.contact_dynamics import _ball, simulate_contact
+from rss6core.contact_laws import (coulomb_friction, friction_factor, hertz_stiffness,
+                                   lankarani_nikravesh, poisson_ratio)
+from rss6core.kinematics import rigid_motion
+from rss6core.models import simulate, simulate_batch
+from rss6core.paper_method import paper_contact_forces, paper_draw, paper_kinematic_error
+from rss6core.quasi_static import quasi_static_error
+
+
+def _with(scene, **tables):
+    """A copy of ``scene`` with fields of its sub-tables replaced: _with(s, trajectory={'duration': 1})."""
+    return dataclasses.replace(scene, **{name: dataclasses.replace(getattr(scene, name), **fields)
+                                         for name, fields in tables.items()})
+
+
+def _clearance(scene, size):
+    return _with(scene, clearance=dict(revolute_radial=size, revolute_axial=size,
+                                       spherical_C=size, spherical_B=size))
+
+
+# --- laws ------------------------------------------------------------------
+
+def test_hertz_stiffness_matches_the_papers_form_for_two_materials():
+    # eq. 17 as printed: 4 Ei Eo / (3 [Ei + Eo - (Eo nu_i^2 + Ei nu_o^2)]) sqrt(Ri Ro / (Ro - Ri))
+    Ei, nui, Eo, nuo, Ri, Ro = 210e9, 0.29, 70e9, 0.32, 0.010, 0.01025
+    paper = 4 * Ei * Eo / (3 * (Ei + Eo - (Eo * nui ** 2 + Ei * nuo ** 2))) * np.sqrt(Ri * Ro / (Ro - Ri))
+    assert hertz_stiffness(Ri, Ro, Ei, nui, Eo, nuo) == pytest.approx(paper, rel=1e-12)
+    # the paper scene's aluminium pair: nu from E and G, K of order 1e10 N/m^1.5
+    nu = poisson_ratio(70e9, 26.5e9)
+    assert nu == pytest.approx(70 / 53 - 1)
+    assert 1e10 < hertz_stiffness(0.010, 0.01025, 70e9, nu, 70e9, nu) < 1e11
+    with pytest.raises(ValueError, match="outer"):
+        hertz_stiffness(0.011, 0.010, 70e9, nu, 70e9, nu)
+
+
+def _restitution(K, m, v, xi=0.9, n=1.5):
+    """Rebound over impact speed of a mass m hitting a rigid wall at v under eq. 17."""
+    def rhs(t, y):
+        return [y[1], -lankarani_nikravesh(y[0], y[1], v, K, n, xi)[0] / m]
+
+    def leaves(t, y):
+        return y[0]
+    leaves.terminal, leaves.direction = True, -1
+    span = 50 * (m / (K * np.sqrt(v))) ** 0.4   # many contact durations
+    sol = solve_ivp(rhs, [0, span], [1e-18, v], method="DOP853", rtol=1e-10, atol=1e-18,
+                    events=leaves)
+    return -sol.y_events[0][0][1] / v
+
+
+def test_lankarani_nikravesh_restitution_is_xi_for_any_stiffness_mass_and_speed():
+    values = np.array([_restitution(K, m, v) for K in (1e9, 3e10, 1e12) for m in (0.1, 1.0, 10.0)
+                       for v in (1e-3, 0.1, 1.0)])
+    assert np.all(np.abs(values / 0.9 - 1) < 0.03)      # LN's hysteresis gives 0.913 for xi = 0.9
+    assert values.max() - values.min() < 1e-5           # the model's scale invariance
+
+
+def test_lankarani_nikravesh_is_zero_apart_and_never_pulls():
+    F, dF, dFr = lankarani_nikravesh(np.array([-1e-6, 0.0, 1e-6, 1e-6]),
+                                     np.array([0.0, 0.0, 0.0, -10.0]), 0.1, 1e10, 1.5, 0.9)
+    assert F[0] == F[1] == 0 and F[3] == 0 and dF[3] == 0
+    assert F[2] == pytest.approx(1e10 * 1e-9)
+
+
+def test_friction_vanishes_below_v0_and_is_full_above_v1():
+    v0, v1, mu, FN = 1e-4, 1e-2, 0.1, 50.0
+    cd, _ = friction_factor(np.array([0.0, 0.5e-4, v0, 0.5 * (v0 + v1), v1, 1.0]), v0, v1)
+    np.testing.assert_allclose(cd, [0, 0, 0, 0.5, 1, 1], atol=1e-15)
+    d = np.array([0.6, -0.8, 0.0])
+    for speed, scale in ((0.9 * v0, 0.0), (2 * v1, 1.0), (0.5 * (v0 + v1), 0.5)):
+        Ft, _, _ = coulomb_friction(FN, speed * d, mu, v0, v1)
+        np.testing.assert_allclose(Ft, -scale * mu * FN * d, atol=1e-12)
+
+
+def test_contact_jacobians_match_finite_differences():
+    law = dataclasses.replace(_law(), impact_speed_floor=1e-3)
+    rng = np.random.default_rng(4)
+    e = rng.normal(size=3)
+    e *= 2.5003e-4 / np.linalg.norm(e)                   # 0.3 um into a 0.25 mm clearance
+    de = 0.02 * rng.normal(size=3)
+    omega = rng.normal(size=3)
+    args = (2.5e-4, 3e10, 0.05, law, omega, 0.01)
+    f, De, Dv, *_ = _ball(e, de, *args)
+    h = 1e-12
+    num_e = np.stack([(_ball(e + h * u, de, *args)[0] - _ball(e - h * u, de, *args)[0]) / (2 * h)
+                      for u in np.eye(3)], -1)
+    num_v = np.stack([(_ball(e, de + 1e-8 * u, *args)[0] - _ball(e, de - 1e-8 * u, *args)[0]) / 2e-8
+                      for u in np.eye(3)], -1)
+    np.testing.assert_allclose(Dv, num_v, rtol=1e-5, atol=1e-6 * np.abs(num_v).max())
+    # d/de leaves out friction's and the rate's turn with the normal (a modified Newton)
+    normal = np.outer(e, e) / (e @ e)
+    np.testing.assert_allclose(normal @ De @ normal, normal @ num_e @ normal, rtol=1e-4)
+
+
+def _law():
+    from rss6core.scene import ContactLaw
+    return ContactLaw(0.01, 0.01, 0.9, 1.5, 0.1, 1e-4, 1e-2)
+
+
+# --- paper level (L3) -------------------------------------------------------
+
+def test_paper_level_keeps_every_leg_closed_with_its_virtual_lengths(paper):
+    t = paper.times[:50]
+    motion = rigid_motion(paper, t)
+    draw = paper_draw(paper, 3, 1, len(t))
+    d, _, _ = paper_kinematic_error(paper, motion, draw)
+    # independent check with positions: crank tip moved along the crank by the virtual
+    # length, platform joint moved by the error, leg length L_cb + dl_cb (exact geometry)
+    geo = paper.geometry
+    x_c = (motion.c - geo.a) / geo.crank_length
+    x_r = (motion.b - motion.c) / geo.rod_length
+    dl_ac = np.einsum("tli,tli->tl", x_c, draw.e_A)
+    dl_cb = np.einsum("tli,tli->tl", x_r, draw.e_C - draw.e_B)
+    c = motion.c + dl_ac[..., None] * x_c
+    b = motion.b + d[:, None, :3] + np.cross(d[:, None, 3:], motion.r)
+    gap = np.linalg.norm(b - c, axis=-1) - (geo.rod_length + dl_cb)
+    unclosed = np.linalg.norm(motion.b - c, axis=-1) - (geo.rod_length + dl_cb)
+    assert np.abs(unclosed).max() > 1e-4                 # the virtual lengths do open the legs
+    assert np.abs(gap).max() < 2e-6                      # closed to second order, (0.5 mm)^2 / L
+
+
+def test_paper_level_contact_forces_vanish_because_draws_stay_inside(paper):
+    draw = paper_draw(paper, 0, 0, len(paper.times))
+    assert np.all(paper_contact_forces(paper, draw, paper.time_step) == 0.0)
+
+
+def test_paper_level_velocity_error_grows_like_one_over_the_time_step(smoke):
+    mean_v = [np.abs(simulate(smoke, "paper", dt=dt).velocity[:, :3]).mean() for dt in (2e-3, 1e-3, 5e-4)]
+    ratios = np.array(mean_v[1:]) / np.array(mean_v[:-1])
+    np.testing.assert_allclose(ratios, 2.0, rtol=0.15)
+
+
+# --- contact level (L4) -----------------------------------------------------
+
+def test_contact_tends_to_elastic_as_the_clearance_vanishes(smoke):
+    scene = _with(smoke, trajectory=dict(duration=0.1))
+    elastic = simulate(scene, "elastic", dt=1e-4)
+    diffs = []
+    for size in (1e-4, 1e-5, 1e-6):
+        s = _clearance(scene, size)
+        run = simulate_contact(s, [draw_clearances(s, 0, 0)], dt=1e-4, output_step=1e-4)
+        assert run.status == ["finished"], run.message
+        diffs.append(np.abs(run.displacement[0, :, :3] - elastic.displacement[:, :3]).max())
+    diffs = np.array(diffs)
+    # the gap to the ideal-joint solution shrinks with the clearance, about in proportion
+    assert np.all(diffs[1:] < diffs[:-1] / 5)
+    assert np.all(diffs < 8 * np.array([1e-4, 1e-5, 1e-6]))
+
+
+def test_contact_on_a_slow_trajectory_agrees_with_quasi_static(paper):
+    """Paper trajectory slowed tenfold: after the joints settle (0.1 s) the contact level is the
+    quasi-static level (joints at their walls along the rigid reactions) plus the elastic
+    deflection, to 3 % of the largest quasi-static error; without the elastic part, to 5 %."""
+    scene = _with(paper, trajectory=dict(frequency=0.1, duration=0.5))
+    draw = draw_clearances(scene, 0, 0)
+    run = simulate_contact(scene, [draw], dt=1e-4)
+    assert run.status == ["finished"], run.message
+    qs = quasi_static_error(scene, rigid_motion(scene, run.t), draw, "reaction")[0]
+    elastic = simulate(scene, "elastic", dt=scene.time_step).displacement
+    late = run.t >= 0.1
+    scale = np.abs(qs[:, :3]).max()
+    assert scale > 0.5e-3                                      # the sag is of the clearance's order
+    assert np.abs(run.displacement[0] - qs - elastic)[late, :3].max() < 0.03 * scale
+    assert np.abs(run.displacement[0] - qs)[late, :3].max() < 0.05 * scale
+
+
+def test_contact_batch_equals_one_at_a_time_bit_for_bit(smoke):
+    scene = _with(smoke, trajectory=dict(duration=0.03))
+    draws = [draw_clearances(scene, 5, r) for r in range(3)]
+    batch = simulate_contact(scene, draws)
+    for k, draw in enumerate(draws):
+        one = simulate_contact(scene, [draw])
+        assert np.array_equal(one.displacement[0], batch.displacement[k])
+        assert np.array_equal(one.acceleration[0], batch.acceleration[k])
+        assert np.array_equal(one.contact_peak[0], batch.contact_peak[k])
+
+
+@pytest.mark.parametrize("model", ["paper", "contact", "quasi-static"])
+def test_same_seed_and_realization_give_identical_output(smoke, model):
+    scene = _with(smoke, trajectory=dict(duration=0.05))
+    a, b = (simulate_batch(scene, model, seed=11, realizations=[2])[0] for _ in range(2))
+    for q in ("displacement", "velocity", "acceleration"):
+        assert np.array_equal(getattr(a, q), getattr(b, q))
+    other = simulate_batch(scene, model, seed=11, realizations=[3])[0]
+    assert not np.array_equal(a.displacement, other.displacement)
+
+
+def test_contact_level_refuses_zero_clearance(smoke):
+    s = _with(smoke, clearance=dict(spherical_B=0.0))
+    with pytest.raises(ValueError, match="spherical_B_m"):
+        simulate(s, "contact")
+
+
+def test_a_newton_failure_is_reported_and_the_batch_returns(smoke, monkeypatch):
+    import rss6core.contact_dynamics as cd
+    scene = _with(smoke, trajectory=dict(duration=0.05))
+    monkeypatch.setattr(cd, "MAX_ITERATIONS", 1)       # no step can confirm convergence
+    run = simulate_contact(scene, [draw_clearances(scene, 0, r) for r in range(2)])
+    assert run.status == ["failed", "failed"]
+    assert all("Newton" in m and "t = 0.0001 s (step 1)" in m for m in run.message)
+    assert np.all(np.isnan(run.displacement[:, 1:]))
