@@ -95,3 +95,20 @@ def test_not_toml_is_named():
 def test_missing_file_is_named(tmp_path):
     with pytest.raises(SceneError, match=r"nope.toml: no such scene file"):
         load_scene(tmp_path / "nope.toml")
+
+
+def test_contact_time_step_must_divide_the_time_step(paper_text):
+    text = _edit(paper_text, "time_step_s = 1.0e-3", "time_step_s = 1.0e-3\ncontact_time_step_s = 3.0e-4")
+    with pytest.raises(SceneError, match=r"\[simulation\] contact_time_step_s"):
+        parse_scene(text)
+    fine = parse_scene(_edit(paper_text, "time_step_s = 1.0e-3",
+                             "time_step_s = 1.0e-3\ncontact_time_step_s = 2.5e-4"))
+    assert fine.simulation.contact_time_step == pytest.approx(2.5e-4)
+    assert fine.contact.impact_speed_floor == pytest.approx(1e-3)
+
+
+def test_new_models_are_accepted_and_a_typo_is_named(paper_text):
+    for model in ("paper", "contact"):
+        assert parse_scene(_edit(paper_text, 'model = "elastic"', f'model = "{model}"')).simulation.model == model
+    with pytest.raises(SceneError, match=r"\[simulation\] model.*'contakt'"):
+        parse_scene(_edit(paper_text, 'model = "elastic"', 'model = "contakt"'))
