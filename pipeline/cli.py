@@ -43,10 +43,10 @@ def _check(args) -> int:
 
 def _settings(args, scene) -> tuple[str, str, float, int]:
     """Model, integrator, time step and mesh: the command line's, else the scene's."""
-    from rss6core.models import default_time_step
+    from rss6core.models import default_integrator, default_time_step
     sim = scene.simulation
     model = args.model or sim.model
-    return (model, args.integrator or sim.integrator,
+    return (model, args.integrator or default_integrator(scene, model),
             args.dt or default_time_step(scene, model), args.elements or sim.elements_per_link)
 
 

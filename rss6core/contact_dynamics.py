@@ -35,7 +35,7 @@ from .beam import link_matrices
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
 from .elastic import SimulationResult, quasi_static_state, time_grid
-from .integrators import Integrator
+from .integrators import Integrator, make_integrator
 from .kinematics import crank_axes, rigid_motion
 from .quasi_static import closure_matrix
 from .sections import section_properties
@@ -421,14 +421,16 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
                      divergence_limit: float = 1.0) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (one realisation each).
 
-    ``dt`` is the internal step (default: the scene's contact time step);
+    ``dt`` is the internal step and ``integrator`` the method (default: the scene's
+    contact time step and contact integrator);
     histories are kept every ``output_step`` (default: the scene's time step);
     peaks are taken over every internal step.  A realisation whose Newton
     iteration fails or whose state diverges is marked failed; the others go on.
     """
-    integrator = integrator or Integrator.newmark()
-    jm = model or build_joint_model(scene, elements)
     sim = scene.simulation
+    integrator = integrator or make_integrator(sim.contact_integrator, sim.newmark_beta,
+                                               sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
+    jm = model or build_joint_model(scene, elements)
     h = sim.contact_time_step if dt is None else dt
     out = max(h, sim.time_step if output_step is None else output_step)
     every = int(round(out / h))

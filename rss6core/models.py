@@ -29,8 +29,8 @@ from .paper_method import paper_contact_forces, paper_draw, paper_kinematic_erro
 from .quasi_static import quasi_static_error
 from .scene import MODELS
 
-__all__ = ["simulate", "simulate_batch", "default_time_step", "stored_draw", "natural_frequencies",
-           "MODELS"]
+__all__ = ["simulate", "simulate_batch", "default_time_step", "default_integrator", "stored_draw",
+           "natural_frequencies", "MODELS"]
 
 
 def stored_draw(scene, model: str, seed: int, realization: int, dt: float):
@@ -46,6 +46,12 @@ def default_time_step(scene, model: str) -> float:
     """The scene's time step for ``model``: the contact level has its own, finer one."""
     sim = scene.simulation
     return sim.contact_time_step if model == "contact" else sim.time_step
+
+
+def default_integrator(scene, model: str) -> str:
+    """The scene's integrator for ``model``: the contact level has its own (README, contact level)."""
+    sim = scene.simulation
+    return sim.contact_integrator if model == "contact" else sim.integrator
 
 
 def simulate(scene, model: str | None = None, integrator: str | None = None,
@@ -82,8 +88,8 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
                                          sim.quasi_static_eccentricity)
             out.append(SimulationResult(t, d, v, a, "finished", "", len(t) - 1))
         return out
-    method = make_integrator(integrator or sim.integrator, sim.newmark_beta, sim.newmark_gamma,
-                             sim.hht_alpha, sim.spectral_radius)
+    method = make_integrator(integrator or default_integrator(scene, model), sim.newmark_beta,
+                             sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
     if model == "contact":
         batch = simulate_contact(scene, [draw_clearances(scene, seed, r) for r in realizations],
                                  elements, method, dt)

@@ -162,6 +162,7 @@ class Simulation:
     spectral_radius: float    # generalized-alpha rho_inf
     quasi_static_eccentricity: str  # 'drawn' or 'reaction' (at the boundary, along the L0 force)
     contact_time_step: float = 1e-4  # s, internal step of the contact level (L4)
+    contact_integrator: str = "generalized-alpha"  # its integrator: damps unresolved contact chatter
 
 
 @dataclass(frozen=True)
@@ -261,6 +262,7 @@ _SCHEMA: dict = {
         "spectral_radius": _Key(float, default=0.8, bounds=(0.0, 1.0)),
         "quasi_static_eccentricity": _Key(str, default="drawn", choices=("drawn", "reaction")),
         "contact_time_step_s": _Key(float, default=1e-4, check=_POS),
+        "contact_integrator": _Key(str, default="generalized-alpha", choices=INTEGRATORS),
     },
     "sampling": {  # MODEL.md section 4; mean and std as fractions of the clearance size
         "radial_mean": _Key(float, default=0.5, bounds=(0.0, 1.0)),

@@ -117,7 +117,7 @@ def test_extending_an_ensemble_keeps_what_is_stored(reference, tmp_path):
 
 
 def test_parts_left_beside_a_finished_file_add_no_duplicates(reference, tmp_path):
-    """A run stopped between writing OUT.nc and removing OUT.nc.parts: the rerun takes each realisation once."""
+    """A run stopped between writing OUT.nc and removing OUT.nc.parts: the rerun takes each once."""
     ref, _ = reference
     path = tmp_path / "left.nc"
     run_ensemble(_spec(), 10, path, workers=1, chunk=5, progress=False)

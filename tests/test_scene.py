@@ -109,6 +109,7 @@ def test_contact_time_step_must_divide_the_time_step(paper_text):
 
 def test_new_models_are_accepted_and_a_typo_is_named(paper_text):
     for model in ("paper", "contact"):
-        assert parse_scene(_edit(paper_text, 'model = "elastic"', f'model = "{model}"')).simulation.model == model
+        scene = parse_scene(_edit(paper_text, 'model = "elastic"', f'model = "{model}"'))
+        assert scene.simulation.model == model
     with pytest.raises(SceneError, match=r"\[simulation\] model.*'contakt'"):
         parse_scene(_edit(paper_text, 'model = "elastic"', 'model = "contakt"'))
