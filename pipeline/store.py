@@ -52,15 +52,24 @@ def _history(result) -> np.ndarray:
     return np.stack([result.displacement, result.velocity, result.acceleration])
 
 
+def _summaries(result) -> tuple[np.ndarray, np.ndarray]:
+    """Max and mean over time of |error| (quantity, direction); NaN where nothing finite was computed."""
+    err = np.abs(_history(result))
+    finite = np.isfinite(err).any(axis=1)
+    with np.errstate(invalid="ignore", all="ignore"):
+        peak = np.where(finite, np.nanmax(np.where(np.isfinite(err), err, -np.inf), axis=1), np.nan)
+        mean = np.nanmean(err, axis=1)
+    if result.peak_abs_error is not None:  # taken over every internal step, finer than the output
+        peak = np.where(finite, result.peak_abs_error, np.nan)
+    return peak, mean
+
+
 def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elements: int,
                 wall_time: float) -> xr.Dataset:
     """One simulation as a self-describing Dataset: error histories, summaries, provenance."""
     err = _history(result)
-    finite = np.isfinite(err)
     summary_attrs = {"units": MIXED_UNITS, "cell_methods": "time: maximum"}
-    peak = np.where(finite.any(1), np.nanmax(np.abs(err), axis=1), np.nan)
-    if result.peak_abs_error is not None:  # taken over every internal step, finer than the output
-        peak = np.where(np.isfinite(peak), result.peak_abs_error, np.nan)
+    peak, mean = _summaries(result)
     extra = {}
     if result.contact_force_peak is not None:
         extra["max_contact_force"] = (("joint",), result.contact_force_peak, _CONTACT_ATTRS)
@@ -71,7 +80,7 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
                        "units": MIXED_UNITS}),
             "max_abs_error": (("quantity", "direction"), peak,
                               {"long_name": "maximum over time of |error|", **summary_attrs}),
-            "mean_abs_error": (("quantity", "direction"), np.nanmean(np.abs(err), axis=1),
+            "mean_abs_error": (("quantity", "direction"), mean,
                                {"long_name": "mean over time of |error|", "units": MIXED_UNITS,
                                 "cell_methods": "time: mean"}),
             **extra,
@@ -116,13 +125,7 @@ class EnsembleFileError(ValueError):
 
 def realization_dataset(result, draw, realization: int, store: str) -> xr.Dataset:
     """One realisation as a length-1 slice of the ensemble file (MODEL.md section 7)."""
-    err = np.abs(_history(result))
-    finite = np.isfinite(err).any(axis=1)
-    with np.errstate(invalid="ignore", all="ignore"):
-        peak = np.where(finite, np.nanmax(np.where(np.isfinite(err), err, -np.inf), axis=1), np.nan)
-        mean = np.nanmean(err, axis=1)
-    if result.peak_abs_error is not None:  # taken over every internal step, finer than the output
-        peak = np.where(finite, result.peak_abs_error, np.nan)
+    peak, mean = _summaries(result)
     size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
     axial = np.concatenate([draw.axial_size, np.full(12, np.nan)])
     ecc = np.concatenate([draw.e_A, draw.e_C, draw.e_B])

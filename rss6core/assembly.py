@@ -33,9 +33,10 @@ from .dynamics import euler_moment, platform_inertia_world, rod_angular_motion
 from .kinematics import RigidMotion, crank_axes
 from .sections import section_properties
 
-__all__ = ["ElasticModel", "build_elastic_model", "EndMaps", "end_maps", "link_frames", "split",
-           "join", "apply", "apply_pair", "internal_force", "StepSolver", "dense_matrices",
-           "system_at", "rigid_loads", "link_loads", "frame_coupling_forces"]
+__all__ = ["LegLayout", "ElasticModel", "build_elastic_model", "EndMaps", "end_maps", "link_frames",
+           "frame_maps", "split", "join", "apply", "apply_pair", "internal_force", "StepSolver",
+           "dense_matrices", "system_at", "rigid_loads", "link_loads", "platform_point_map",
+           "frame_coupling_forces"]
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -45,8 +46,25 @@ def _skew(v: np.ndarray) -> np.ndarray:
                      np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
 
 
+class LegLayout:
+    """System vector layout shared by the KED levels: six legs [crank, rod], then 6 platform DOFs.
+
+    Subclasses say how many DOFs a crank and a rod carry (``crank_dofs``, ``rod_dofs``).
+    """
+
+    @property
+    def leg_dofs(self) -> int:
+        """DOFs of one leg: crank plus rod."""
+        return self.crank_dofs + self.rod_dofs
+
+    @property
+    def dofs(self) -> int:
+        """Total DOFs: six legs plus the platform."""
+        return 6 * self.leg_dofs + 6
+
+
 @dataclass(frozen=True)
-class ElasticModel:
+class ElasticModel(LegLayout):
     """Constant (frame-independent) part of the KED model of one scene and mesh.
 
     Leg vector: crank nodes 1..n (6 n, crank frame), then the rod's own DOFs
@@ -73,16 +91,6 @@ class ElasticModel:
     def rod_dofs(self) -> int:
         """The rod's own DOFs (ends excluded)."""
         return self.rod_K.shape[0] - 6
-
-    @property
-    def leg_dofs(self) -> int:
-        """DOFs of one leg: 6 n crank + 5 n - 1 rod."""
-        return self.crank_dofs + self.rod_dofs
-
-    @property
-    def dofs(self) -> int:
-        """Total DOFs: six legs plus the platform."""
-        return 6 * self.leg_dofs + 6
 
     @property
     def tip(self) -> slice:
@@ -135,20 +143,25 @@ def link_frames(motion: RigidMotion, geometry) -> tuple[np.ndarray, np.ndarray]:
     return crank, np.stack([xr, yr, np.cross(xr, yr)], -1)
 
 
-def _maps(model: ElasticModel, motion: RigidMotion, crank: np.ndarray, rod: np.ndarray) -> EndMaps:
+def platform_point_map(r: np.ndarray) -> np.ndarray:
+    """[I, -[r]x] (..., 3, 6): displacement u + theta x r of a platform point at r (eq. 27)."""
+    return np.concatenate([np.broadcast_to(np.eye(3), r.shape + (3,)), -_skew(r)], -1)
+
+
+def frame_maps(model: ElasticModel, motion: RigidMotion, crank: np.ndarray, rod: np.ndarray) -> EndMaps:
+    """The end maps of ``motion`` from link frames already computed (see :func:`link_frames`)."""
     Q = np.einsum("tlji,tljk->tlik", rod, crank)
-    J = np.concatenate([np.broadcast_to(np.eye(3), motion.r.shape + (3,)), -_skew(motion.r)], -1)
-    H = np.einsum("tlji,tljk->tlik", rod, J)
+    H = np.einsum("tlji,tljk->tlik", rod, platform_point_map(motion.r))
     return EndMaps(Q, H, platform_inertia_world(model.platform_inertia, motion.platform.R))
 
 
 def end_maps(model: ElasticModel, motion: RigidMotion, geometry) -> EndMaps:
     """The time-varying maps of the system at every instant of ``motion``."""
-    return _maps(model, motion, *link_frames(motion, geometry))
+    return frame_maps(model, motion, *link_frames(motion, geometry))
 
 
-def split(model: ElasticModel, x: np.ndarray):
-    """System vector (..., N) -> crank (..., 6, 6n), rod (..., 6, 5n-1), platform (..., 6) views."""
+def split(model: LegLayout, x: np.ndarray):
+    """System vector (..., N) -> crank (..., 6, n_c), rod (..., 6, n_r), platform (..., 6) views."""
     legs = x[..., :-6].reshape(x.shape[:-1] + (6, model.leg_dofs))
     return legs[..., :model.crank_dofs], legs[..., model.crank_dofs:], x[..., -6:]
 
@@ -265,7 +278,7 @@ def _nodal_field(frames, lin: np.ndarray, ang: np.ndarray) -> np.ndarray:
 def system_at(model: ElasticModel, motion: RigidMotion, scene) -> tuple[EndMaps, np.ndarray]:
     """End maps and rigid loads at every instant of ``motion``, sharing one set of link frames."""
     crank, rod = link_frames(motion, scene.geometry)
-    maps = _maps(model, motion, crank, rod)
+    maps = frame_maps(model, motion, crank, rod)
     return maps, _loads(model, motion, scene, crank, rod, maps)
 
 
@@ -327,7 +340,7 @@ def frame_coupling_forces(model: ElasticModel, motion: RigidMotion, scene,
     """
     t = motion.t
     crank, rod = link_frames(motion, scene.geometry)
-    maps = _maps(model, motion, crank, rod)
+    maps = frame_maps(model, motion, crank, rod)
     c, f, p = split(model, d)
     rod_ends = np.concatenate([(maps.Q @ c[..., model.tip, None])[..., 0],
                                (maps.H @ p[:, None, :, None])[..., 0]], -1)

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .assembly import _skew, build_elastic_model, end_maps, link_frames, link_loads, split
+from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
+                       platform_point_map, split)
 from .beam import link_matrices
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
@@ -48,7 +49,7 @@ MAX_ITERATIONS = 60
 
 
 @dataclass(frozen=True)
-class JointModel:
+class JointModel(LegLayout):
     """Constant link matrices of the contact level: every link free, joint nodes as boundaries."""
     elements: int
     crank_K: np.ndarray       # (6n+3): node 0 translations, then nodes 1..n
@@ -70,14 +71,6 @@ class JointModel:
     def rod_dofs(self) -> int:
         return self.rod_K.shape[0]
 
-    @property
-    def leg_dofs(self) -> int:
-        return self.crank_dofs + self.rod_dofs
-
-    @property
-    def dofs(self) -> int:
-        return 6 * self.leg_dofs + 6
-
 
 def build_joint_model(scene, elements: int) -> JointModel:
     """Link matrices with free journals and free rod ends for ``elements`` elements per link."""
@@ -91,16 +84,6 @@ def build_joint_model(scene, elements: int) -> JointModel:
     return JointModel(elements, Kc[np.ix_(keep, keep)], Mc[np.ix_(keep, keep)], boundary,
                       em.rod_K, em.rod_M, em.platform_mass, em.platform_inertia, em.mass_damping,
                       em.stiffness_damping, em)
-
-
-def _split(jm: JointModel, x: np.ndarray):
-    legs = x[..., :-6].reshape(x.shape[:-1] + (6, jm.leg_dofs))
-    return legs[..., :jm.crank_dofs], legs[..., jm.crank_dofs:], x[..., -6:]
-
-
-def _join(crank, rod, platform) -> np.ndarray:
-    legs = np.concatenate([crank, rod], -1)
-    return np.concatenate([legs.reshape(legs.shape[:-2] + (-1,)), platform], -1)
 
 
 class _Condensed:
@@ -254,8 +237,8 @@ class _Chunk:
         self.Rc, self.Rr = link_frames(motion, scene.geometry)
         self.Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
         fc, fr, fp = link_loads(jm.elastic, motion, scene, self.Rc, self.Rr, self.Ip)
-        self.F = _join(fc[..., np.r_[0:3, 6:fc.shape[-1]]], fr, fp)
-        self.J = np.concatenate([np.broadcast_to(np.eye(3), motion.r.shape + (3,)), -_skew(motion.r)], -1)
+        self.F = join(fc[..., np.r_[0:3, 6:fc.shape[-1]]], fr, fp)
+        self.J = platform_point_map(motion.r)
         w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
         w_rod = rod_angular_motion(motion)[1]
         self.omega = (w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :])
@@ -272,21 +255,21 @@ def _platform_mass(jm: JointModel, Ip: np.ndarray) -> np.ndarray:
 def _internal(jm: JointModel, Mp, d, v) -> np.ndarray:
     """C v + K d (Rayleigh C = lambda_1 M + lambda_2 K), per link; the platform has mass only."""
     l1, l2 = jm.mass_damping, jm.stiffness_damping
-    dc, dr, dp = _split(jm, d)
-    vc, vr, vp = _split(jm, v)
-    return _join((l1 * vc) @ jm.crank_M + (dc + l2 * vc) @ jm.crank_K,
+    dc, dr, dp = split(jm, d)
+    vc, vr, vp = split(jm, v)
+    return join((l1 * vc) @ jm.crank_M + (dc + l2 * vc) @ jm.crank_K,
                  (l1 * vr) @ jm.rod_M + (dr + l2 * vr) @ jm.rod_K,
                  l1 * np.einsum("ij,...j->...i", Mp, vp))
 
 
 def _mass(jm: JointModel, Mp, a) -> np.ndarray:
-    ac, ar, ap = _split(jm, a)
-    return _join(ac @ jm.crank_M, ar @ jm.rod_M, np.einsum("ij,...j->...i", Mp, ap))
+    ac, ar, ap = split(jm, a)
+    return join(ac @ jm.crank_M, ar @ jm.rod_M, np.einsum("ij,...j->...i", Mp, ap))
 
 
 def _joint_nodes(jm: JointModel, x) -> tuple[np.ndarray, np.ndarray]:
     """Joint-node vectors (..., 6, 12) [crank node 0, tip, rod C end, rod B end] and platform (..., 6)."""
-    c, r, p = _split(jm, x)
+    c, r, p = split(jm, x)
     return np.concatenate([c[..., jm.crank_boundary], r[..., -6:]], -1), p
 
 
@@ -379,7 +362,7 @@ def _lift(jm: JointModel, maps, x: np.ndarray) -> np.ndarray:
     e_C = (maps.Q @ c[..., jm.elastic.tip, None])[..., 0]
     e_B = (maps.H @ p[..., None, :, None])[..., 0]
     crank = np.concatenate([np.zeros(c.shape[:-1] + (3,)), c], -1)
-    return _join(crank, np.concatenate([f, e_C, e_B], -1), p)
+    return join(crank, np.concatenate([f, e_C, e_B], -1), p)
 
 
 def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
@@ -393,8 +376,9 @@ def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
     reproduces a rigid motion).  Returns (d, v) (R, N).
     """
     motion = rigid_motion(scene, np.array([t0]))
-    Rc, Rr = (f[0] for f in link_frames(motion, scene.geometry))
-    maps = end_maps(jm.elastic, motion, scene.geometry)[0]
+    crank_frames, rod_frames = link_frames(motion, scene.geometry)
+    Rc, Rr = crank_frames[0], rod_frames[0]
+    maps = frame_maps(jm.elastic, motion, crank_frames, rod_frames)[0]
     d_el, v_el, _ = quasi_static_state(scene, jm.elastic, t0)
     R = joints.e_A.shape[0]
     G, n = closure_matrix(motion)
@@ -404,14 +388,14 @@ def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
     local_A = np.einsum("lji,rlj->rli", Rc, joints.e_A)
     trans = np.r_[0:3, np.concatenate([3 + 6 * k + np.arange(3) for k in range(jm.elements)])]
     crank[..., trans] = np.tile(local_A, jm.elements + 1)
-    J = np.concatenate([np.eye(3)[None].repeat(6, 0), -_skew(motion.r[0])], -1)
+    J = platform_point_map(motion.r[0])
     ends = np.concatenate([np.einsum("lji,rlj->rli", Rr, joints.e_A + joints.e_C),
                            np.einsum("lji,rlj->rli", Rr, np.einsum("lij,rj->rli", J, xp) + joints.e_B)],
                           -1)
     nf = jm.rod_dofs - 6
     Kff, Kfe = jm.rod_K[:nf, :nf], jm.rod_K[:nf, nf:]
     own = -ends @ np.linalg.solve(Kff, Kfe).T
-    offset = _join(crank, np.concatenate([own, ends], -1), xp)
+    offset = join(crank, np.concatenate([own, ends], -1), xp)
     return offset + _lift(jm, maps, d_el), np.broadcast_to(_lift(jm, maps, v_el), offset.shape).copy()
 
 
@@ -458,7 +442,7 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
     def newton(ch, j, cond, coef_p, rhs, dp, vp, a_guess, bh2, gh, w):
         """Joint-node accelerations for a step; returns a, contact forces, converged flags."""
         Mp = _platform_mass(jm, ch.Ip[j])
-        rc, rr, rp = _split(jm, rhs)
+        rc, rr, rp = split(jm, rhs)
         rb, keep = cond.condense(rc, rr)
         db, dpp = _joint_nodes(jm, dp)
         vb, vpp = _joint_nodes(jm, vp)
@@ -505,8 +489,8 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
         f, _, _, delta, rate = _evaluate(scene, ch, j, joints, contacts, impact, xb, xp, ub, up)
         gl, gp = _generalized(ch, j, f)
         ac, ar = cond.recover(ab, keep, rc.shape, rr.shape)
-        a = _join(ac, ar, ap)
-        return a, f, _join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count, delta, rate, impact
+        a = join(ac, ar, ap)
+        return a, f, join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count, delta, rate, impact
 
     ch = _Chunk(scene, jm, t[:1])
     d, v = initial_state(scene, jm, joints)

@@ -25,7 +25,7 @@ from .contact_dynamics import simulate_contact
 from .elastic import SimulationResult, simulate_elastic, time_grid
 from .integrators import make_integrator
 from .kinematics import rigid_motion
-from .paper_method import paper_contact_forces, paper_draw, paper_kinematic_error
+from .paper_method import PaperClosure, paper_contact_forces, paper_draw
 from .quasi_static import quasi_static_error
 from .scene import MODELS
 
@@ -97,11 +97,11 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
     elastic = simulate_elastic(scene, elements, method, dt)
     if model == "elastic":
         return [elastic] * len(realizations)
-    motion = rigid_motion(scene, elastic.t)
+    closure = PaperClosure(scene, rigid_motion(scene, elastic.t))
     out = []
     for r in realizations:
         draw = paper_draw(scene, seed, r, len(elastic.t))
-        d, v, a = paper_kinematic_error(scene, motion, draw)
+        d, v, a = closure.error(draw)
         force = paper_contact_forces(scene, draw, dt)
         out.append(SimulationResult(elastic.t, elastic.displacement + d, elastic.velocity + v,
                                     elastic.acceleration + a, elastic.status, elastic.message,

@@ -33,29 +33,31 @@ from .assembly import link_frames
 from .clearance import draw_clearances
 from .contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .kinematics import RigidMotion
-from .quasi_static import closure_matrix
+from .quasi_static import closure_matrix, time_derivatives
 
-__all__ = ["virtual_lengths", "paper_kinematic_error", "paper_contact_forces"]
-
-
-def virtual_lengths(scene, motion: RigidMotion, draw) -> tuple[np.ndarray, np.ndarray]:
-    """Crank and rod virtual lengths dl_ac, dl_cb (T, 6), m (eq. 33) for per-step draws (T, 6, 3)."""
-    crank, rod = link_frames(motion, scene.geometry)
-    x_c, x_r = crank[..., 0], rod[..., 0]
-    return (np.einsum("tli,tli->tl", x_c, draw.e_A),
-            np.einsum("tli,tli->tl", x_r, draw.e_C - draw.e_B))
+__all__ = ["PaperClosure", "paper_contact_forces", "paper_draw"]
 
 
-def paper_kinematic_error(scene, motion: RigidMotion, draw):
-    """Platform error (T, 6) of the virtual lengths, and its first and second time derivatives."""
-    G, n = closure_matrix(motion)
-    crank, _ = link_frames(motion, scene.geometry)
-    dl_ac, dl_cb = virtual_lengths(scene, motion, draw)
-    rhs = np.einsum("tli,tli->tl", n, crank[..., 0]) * dl_ac - dl_cb
-    d = np.linalg.solve(G, rhs[..., None])[..., 0]
-    t = motion.t
-    v = np.gradient(d, t, axis=0, edge_order=2)
-    return d, v, np.gradient(v, t, axis=0, edge_order=2)
+class PaperClosure:
+    """Link axes and the linearised leg closure along one motion, shared by every realisation's draws."""
+
+    def __init__(self, scene, motion: RigidMotion):
+        crank, rod = link_frames(motion, scene.geometry)
+        self.x_c, self.x_r = crank[..., 0], rod[..., 0]   # unit link axes (T, 6, 3)
+        self.G, n = closure_matrix(motion)
+        self.n_dot_xc = np.einsum("tli,tli->tl", n, self.x_c)
+        self.t = motion.t
+
+    def virtual_lengths(self, draw) -> tuple[np.ndarray, np.ndarray]:
+        """Crank and rod virtual lengths dl_ac, dl_cb (T, 6), m (eq. 33) for per-step draws (T, 6, 3)."""
+        return (np.einsum("tli,tli->tl", self.x_c, draw.e_A),
+                np.einsum("tli,tli->tl", self.x_r, draw.e_C - draw.e_B))
+
+    def error(self, draw):
+        """Platform error (T, 6) of the virtual lengths, and its first and second time derivatives."""
+        dl_ac, dl_cb = self.virtual_lengths(draw)
+        rhs = self.n_dot_xc * dl_ac - dl_cb
+        return time_derivatives(np.linalg.solve(self.G, rhs[..., None])[..., 0], self.t)
 
 
 def paper_contact_forces(scene, draw, dt: float) -> np.ndarray:

@@ -16,7 +16,7 @@ from .clearance import ClearanceDraw
 from .dynamics import inverse_dynamics
 from .kinematics import RigidMotion
 
-__all__ = ["closure_matrix", "reaction_eccentricities", "quasi_static_error"]
+__all__ = ["closure_matrix", "reaction_eccentricities", "quasi_static_error", "time_derivatives"]
 
 
 def closure_matrix(motion: RigidMotion) -> tuple[np.ndarray, np.ndarray]:
@@ -63,7 +63,10 @@ def quasi_static_error(scene, motion: RigidMotion, draw: ClearanceDraw, mode: st
     else:
         raise ValueError(f"quasi-static eccentricity must be 'drawn' or 'reaction', got {mode!r}")
     rhs = np.einsum("tli,tli->tl", n, np.broadcast_to(e_A + e_C - e_B, n.shape))
-    d = np.linalg.solve(G, rhs[..., None])[..., 0]
-    t = motion.t
+    return time_derivatives(np.linalg.solve(G, rhs[..., None])[..., 0], motion.t)
+
+
+def time_derivatives(d: np.ndarray, t: np.ndarray):
+    """d (T, ...) with its first and second time derivatives, second-order central differences."""
     v = np.gradient(d, t, axis=0, edge_order=2)
     return d, v, np.gradient(v, t, axis=0, edge_order=2)

@@ -11,7 +11,7 @@ from rss6core.contact_laws import (coulomb_friction, friction_factor, hertz_stif
                                    lankarani_nikravesh, poisson_ratio)
 from rss6core.kinematics import rigid_motion
 from rss6core.models import simulate, simulate_batch
-from rss6core.paper_method import paper_contact_forces, paper_draw, paper_kinematic_error
+from rss6core.paper_method import PaperClosure, paper_contact_forces, paper_draw
 from rss6core.quasi_static import quasi_static_error
 
 
@@ -110,7 +110,7 @@ def test_paper_level_keeps_every_leg_closed_with_its_virtual_lengths(paper):
     t = paper.times[:50]
     motion = rigid_motion(paper, t)
     draw = paper_draw(paper, 3, 1, len(t))
-    d, _, _ = paper_kinematic_error(paper, motion, draw)
+    d, _, _ = PaperClosure(paper, motion).error(draw)
     # independent check with positions: crank tip moved along the crank by the virtual
     # length, platform joint moved by the error, leg length L_cb + dl_cb (exact geometry)
     geo = paper.geometry
