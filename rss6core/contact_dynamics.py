@@ -170,7 +170,7 @@ def _ball(e, de, size, stiffness, impact, law, omega, radius, friction=True):
     safe = np.maximum(rho, 1e-300)
     n = e / safe[..., None]
     delta = rho - size
-    rate = np.einsum("...i,...i->...", n, de)
+    rate = (n * de).sum(-1)
     F, dF, dFr = lankarani_nikravesh(delta, rate, impact, stiffness, law.exponent, law.restitution)
     nn = n[..., :, None] * n[..., None, :]
     eye = np.eye(3)
@@ -179,7 +179,8 @@ def _ball(e, de, size, stiffness, impact, law, omega, radius, friction=True):
     Dv = -dFr[..., None, None] * nn
     if friction and law.friction_coefficient > 0.0:
         Pn = eye - nn
-        slip = np.einsum("...ij,...j->...i", Pn, de + radius * np.cross(omega, n))
+        v = de + radius * np.cross(omega, n)
+        slip = v - (n * v).sum(-1)[..., None] * n
         ft, jac, dft = coulomb_friction(F, slip, law.friction_coefficient, law.stick_velocity,
                                         law.slip_velocity)
         force = force + ft
@@ -188,24 +189,35 @@ def _ball(e, de, size, stiffness, impact, law, omega, radius, friction=True):
     return force, De, Dv, delta, rate, F
 
 
-def _revolute(e, de, w, joints: _Joints, impact, law, omega, radius):
-    """Radial (journal in bearing) and axial (faces) contact of the revolute A_i, base frame."""
+def _contacts(e, de, w, joints: _Joints, impact, law, omega, radius):
+    """All joints of a batch at once: A radial (journal in bearing), C and B (ball in socket), A axial.
+
+    e, de (..., 6, 3, 3) relative displacements and velocities [A, C, B], base
+    frame; omega (6, 3, 3) the ideal relative angular velocities; radius (3, 1)
+    the journal and sphere radii.  Returns forces (..., 6, 3, 3), their
+    Jacobians (..., 6, 3, 3, 3) and penetrations, rates and F_N (..., 6, 4)
+    ordered [A radial, A axial, C, B].
+    """
     Pw = np.eye(3) - w[:, :, None] * w[:, None, :]
-    e_r = np.einsum("lij,...lj->...li", Pw, e)
-    fr, Der, Dvr, dr, rr, Fr = _ball(e_r, de, joints.radial, joints.k_A, impact[..., 0], law, omega,
-                                     radius)
-    Der = Der @ Pw
-    s = np.einsum("li,...li->...l", w, e)
+    eA = e[..., 0, :]
+    radial = np.concatenate([(Pw @ eA[..., None])[..., None, :, 0], e[..., 1:, :]], -2)
+    size = np.stack([joints.radial, joints.size_C, joints.size_B], -1)
+    stiffness = np.stack([joints.k_A, joints.k_C, joints.k_B], -1)
+    f, De, Dv, d, r, F = _ball(radial, de, size, stiffness, impact[..., [0, 2, 3]], law, omega, radius)
+    s = (w * eA).sum(-1)
     sign = np.where(s >= 0.0, 1.0, -1.0)
     na = sign[..., None] * w
     da = np.abs(s) - joints.axial
-    ra = np.einsum("...li,...li->...l", na, de)
+    ra = (na * de[..., 0, :]).sum(-1)
     Fa, dFa, dFra = lankarani_nikravesh(da, ra, impact[..., 1], joints.k_A, law.exponent,
                                         law.restitution)
     ww = w[:, :, None] * w[:, None, :]
-    force = fr - Fa[..., None] * na
-    return (force, Der - dFa[..., None, None] * ww, Dvr - dFra[..., None, None] * ww,
-            np.stack([dr, da], -1), np.stack([rr, ra], -1), np.stack([Fr, Fa], -1))
+    f[..., 0, :] -= Fa[..., None] * na
+    De[..., 0, :, :] = De[..., 0, :, :] @ Pw - dFa[..., None, None] * ww
+    Dv[..., 0, :, :] -= dFra[..., None, None] * ww
+    order = [0, 3, 1, 2]   # [A radial, C, B, A axial] -> [A radial, A axial, C, B]
+    return (f, De, Dv, np.concatenate([d, da[..., None]], -1)[..., order],
+            np.concatenate([r, ra[..., None]], -1)[..., order])
 
 
 @dataclass
@@ -230,18 +242,22 @@ class ContactBatch:
 
 
 class _Chunk:
-    """Shared, per-instant data of a run of steps: frames, maps, loads, ideal angular velocities."""
+    """Shared, per-instant data of a run of steps: joint maps, loads, ideal angular velocities."""
 
     def __init__(self, scene, jm: JointModel, t: np.ndarray):
         motion = rigid_motion(scene, t)
-        self.Rc, self.Rr = link_frames(motion, scene.geometry)
+        Rc, Rr = link_frames(motion, scene.geometry)
         self.Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
-        fc, fr, fp = link_loads(jm.elastic, motion, scene, self.Rc, self.Rr, self.Ip)
+        fc, fr, fp = link_loads(jm.elastic, motion, scene, Rc, Rr, self.Ip)
         self.F = join(fc[..., np.r_[0:3, 6:fc.shape[-1]]], fr, fp)
-        self.J = platform_point_map(motion.r)
+        self.J = platform_point_map(motion.r)                  # (T, 6, 3, 6)
+        G = np.zeros(Rc.shape[:2] + (9, 12))                   # joint nodes -> [e_A, e_C, e_B]
+        G[..., 0:3, 0:3], G[..., 3:6, 3:6], G[..., 3:6, 6:9], G[..., 6:9, 9:12] = Rc, -Rc, Rr, Rr
+        self.G, self.Gt = G, np.ascontiguousarray(np.swapaxes(G, -1, -2))
+        self.Rr = Rr
         w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
         w_rod = rod_angular_motion(motion)[1]
-        self.omega = (w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :])
+        self.omega = np.stack([w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :]], -2)
         self.motion = motion
 
 
@@ -274,13 +290,10 @@ def _joint_nodes(jm: JointModel, x) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _relative(ch: _Chunk, k: int, xb, xp):
-    """Relative displacements e_A, e_C, e_B (..., 6, 3) of the joint elements, base frame."""
-    Rc, Rr, J = ch.Rc[k], ch.Rr[k], ch.J[k]
-    A = np.einsum("lij,...lj->...li", Rc, xb[..., 0:3])
-    tip = np.einsum("lij,...lj->...li", Rc, xb[..., 3:6])
-    C = np.einsum("lij,...lj->...li", Rr, xb[..., 6:9]) - tip
-    B = np.einsum("lij,...lj->...li", Rr, xb[..., 9:12]) - np.einsum("lij,...j->...li", J, xp)
-    return A, C, B
+    """Relative displacements [e_A, e_C, e_B] (..., 6, 3, 3) of the joint elements, base frame."""
+    e = (ch.G[k] @ xb[..., None]).reshape(xb.shape[:-1] + (3, 3))
+    e[..., 2, :] -= (ch.J[k] @ xp[..., None, :, None])[..., 0]
+    return e
 
 
 class _Contacts:
@@ -301,59 +314,50 @@ class _Contacts:
         self.in_contact, self.rate = delta > 0, rate
 
 
-def _evaluate(scene, ch: _Chunk, k, joints, contacts, impact, xb, xp, vb, vp):
+def _evaluate(scene, ch: _Chunk, k, joints, impact, xb, xp, vb, vp):
     law = scene.contact
-    eA, eC, eB = _relative(ch, k, xb, xp)
-    vA, vC, vB = _relative(ch, k, vb, vp)
-    wA, wC, wB = (o[k] for o in ch.omega)
-    fA, DeA, DvA, dA, rA, FA = _revolute(eA, vA, scene.geometry.w, joints, impact, law, wA,
-                                         law.journal_radius)
-    fC, DeC, DvC, dC, rC, FC = _ball(eC, vC, joints.size_C, joints.k_C, impact[..., 2], law, wC,
-                                     law.sphere_radius)
-    fB, DeB, DvB, dB, rB, FB = _ball(eB, vB, joints.size_B, joints.k_B, impact[..., 3], law, wB,
-                                     law.sphere_radius)
-    delta = np.concatenate([dA, dC[..., None], dB[..., None]], -1)
-    rate = np.concatenate([rA, rC[..., None], rB[..., None]], -1)
-    return (fA, fC, fB), (DeA, DeC, DeB), (DvA, DvC, DvB), delta, rate
+    radius = np.array([[law.journal_radius], [law.sphere_radius], [law.sphere_radius]])
+    return _contacts(_relative(ch, k, xb, xp), _relative(ch, k, vb, vp), scene.geometry.w, joints,
+                     impact, law, ch.omega[k], radius)
 
 
 def _generalized(ch: _Chunk, k, f):
     """Contact forces on the joint nodes (..., 6, 12) (link frames) and on the platform (..., 6)."""
-    fA, fC, fB = f
-    Rc, Rr, J = ch.Rc[k], ch.Rr[k], ch.J[k]
-    loc = np.concatenate([np.einsum("lji,...lj->...li", Rc, fA),
-                          -np.einsum("lji,...lj->...li", Rc, fC),
-                          np.einsum("lji,...lj->...li", Rr, fC),
-                          np.einsum("lji,...lj->...li", Rr, fB)], -1)
-    return loc, -np.einsum("lji,...lj->...i", J, fB)
+    loc = (ch.Gt[k] @ f.reshape(f.shape[:-2] + (9, 1)))[..., 0]
+    return loc, -(np.swapaxes(ch.J[k], -1, -2) @ f[..., 2, :, None])[..., 0].sum(-2)
 
 
 def _tangent(ch: _Chunk, k, D, Sl, Sp):
-    """Newton matrix blocks: legs (..., 6, 12, 12), border (..., 6, 12, 6), (..., 6, 6, 12), platform."""
-    DA, DC, DB = D
-    Rc, Rr, J = ch.Rc[k], ch.Rr[k], ch.J[k]
-    RcT, RrT = np.swapaxes(Rc, -1, -2), np.swapaxes(Rr, -1, -2)
-    L = np.broadcast_to(Sl, DA.shape[:-2] + (12, 12)).copy()
-    L[..., 0:3, 0:3] -= RcT @ DA @ Rc
-    L[..., 6:9, 6:9] -= RrT @ DC @ Rr
-    L[..., 6:9, 3:6] += RrT @ DC @ Rc
-    L[..., 3:6, 6:9] += RcT @ DC @ Rr
-    L[..., 3:6, 3:6] -= RcT @ DC @ Rc
-    L[..., 9:12, 9:12] -= RrT @ DB @ Rr
-    border = np.zeros(DA.shape[:-2] + (12, 6))
-    border[..., 9:12, :] = RrT @ DB @ J
-    lower = np.swapaxes(J, -1, -2) @ DB @ Rr          # (..., 6, 6, 3)
-    P = Sp - np.einsum("lji,...ljk,lkm->...im", J, DB, J)
+    """Newton matrix blocks: legs (..., 6, 12, 12), border (..., 6, 3, 6) on the rod B ends,
+    its transpose partner (..., 6, 6, 3), and the platform block (..., 6, 6)."""
+    full = np.zeros(D.shape[:-3] + (9, 9))
+    for j in range(3):
+        full[..., 3 * j:3 * j + 3, 3 * j:3 * j + 3] = D[..., j, :, :]
+    L = Sl - ch.Gt[k] @ full @ ch.G[k]
+    J, Rr = ch.J[k], ch.Rr[k]
+    DB = D[..., 2, :, :]
+    DBJ = DB @ J
+    border = np.swapaxes(Rr, -1, -2) @ DBJ
+    lower = np.swapaxes(J, -1, -2) @ DB @ Rr
+    P = Sp - (np.swapaxes(J, -1, -2) @ DBJ).sum(-3)
     return L, border, lower, P
 
 
+_B_COLUMNS = np.eye(12)[:, 9:12]
+
+
 def _solve_arrow(L, border, lower, P, rl, rp):
-    """Solve [L B; C P] [x; y] = [rl; rp] with L block-diagonal over legs."""
-    sol = np.linalg.solve(L, np.concatenate([rl[..., None], border], -1))
-    u, W = sol[..., 0], sol[..., 1:]
-    schur = P - np.einsum("...lij,...ljk->...ik", lower, W[..., 9:12, :])
-    y = np.linalg.solve(schur, (rp - np.einsum("...lij,...lj->...i", lower, u[..., 9:12]))[..., None])[..., 0]
-    return u - np.einsum("...lij,...j->...li", W, y), y
+    """Solve [L B; C P] [x; y] = [rl; rp], L block-diagonal over legs, B nonzero on the B-end rows only.
+
+    B = E border with E the B-end columns of the identity, so L^-1 B = (L^-1 E) border:
+    four right-hand sides per leg instead of seven.
+    """
+    rhs = np.concatenate([rl[..., None], np.broadcast_to(_B_COLUMNS, rl.shape + (3,))], -1)
+    sol = np.linalg.solve(L, rhs)
+    u, E = sol[..., 0], sol[..., 1:]
+    schur = P - (lower @ E[..., 9:12, :] @ border).sum(-3)
+    y = np.linalg.solve(schur, (rp - (lower @ u[..., 9:12, None])[..., 0].sum(-2))[..., None])[..., 0]
+    return u - (E @ (border @ y[..., None, :, None]))[..., 0], y
 
 
 def _lift(jm: JointModel, maps, x: np.ndarray) -> np.ndarray:
@@ -452,17 +456,26 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
         done = np.zeros(R, bool)
         count = np.zeros(R, np.int64)
         last = np.full(R, np.inf)           # residual norm at the last accepted iterate
+        gain = np.full(R, np.inf)           # |update| / |residual| of the last Newton solve
         lam = np.ones(R)                    # step length of the last update
         base_l, base_p = ab, ap
         step_l, step_p = np.zeros_like(ab), np.zeros_like(ap)
-        for _ in range(MAX_ITERATIONS):
+        for it in range(MAX_ITERATIONS + 1):
             xb, xp = db + bh2 * ab, dpp + bh2 * ap
             ub, up = vb + gh * ab, vpp + gh * ap
-            f, De, Dv, delta, rate = _evaluate(scene, ch, j, joints, contacts, impact, xb, xp, ub, up)
+            f, De, Dv, delta, rate = _evaluate(scene, ch, j, joints, impact, xb, xp, ub, up)
             gl, gp = _generalized(ch, j, f)
             res_l = ab @ cond.legs.T - rb - w * gl
-            res_p = np.einsum("ij,...j->...i", Sp, ap) - rp - w * gp
+            res_p = (Sp @ ap[..., None])[..., 0] - rp - w * gp
             norm = np.sqrt((res_l ** 2).sum((-1, -2)) + (res_p ** 2).sum(-1))
+            # converged when the update this residual calls for (the last solve's gain times
+            # it) moves no joint by more than the tolerances: the iterate just evaluated is kept
+            est = gain * norm
+            if it:   # the first iterate has no gain yet
+                done |= (bh2 * est <= TOL_DISPLACEMENT) & (gh * est <= TOL_VELOCITY)
+            done |= norm == 0.0
+            if done.all() or it == MAX_ITERATIONS:
+                break
             # backtrack where the full Newton step made the residual worse (contact kinks)
             worse = ~done & (norm > last) & (lam > 1.0 / 256.0)
             if worse.any():
@@ -472,22 +485,16 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
                 count += worse
                 continue
             last = np.where(done, last, norm)
-            D = tuple(w * (bh2 * a + gh * b) for a, b in zip(De, Dv))
+            D = w * (bh2 * De + gh * Dv)
             L, border, lower, P = _tangent(ch, j, D, cond.legs, Sp)
             dl, dpl = _solve_arrow(L, border, lower, P, res_l, res_p)
             # converged realisations keep their iterate: a result never depends on its batch
             dl, dpl = np.where(done[:, None, None], 0.0, dl), np.where(done[:, None], 0.0, dpl)
+            size = np.abs(np.concatenate([dl.reshape(R, -1), dpl], -1)).max(-1)
+            gain = np.where(done, gain, size / np.maximum(norm, 1e-300))
             base_l, base_p, step_l, step_p, lam = ab, ap, dl, dpl, np.ones(R)
             ab, ap = ab - dl, ap - dpl
             count += ~done
-            small = np.abs(np.concatenate([dl.reshape(R, -1), dpl], -1)).max(-1)
-            done |= (bh2 * small <= TOL_DISPLACEMENT) & (gh * small <= TOL_VELOCITY)
-            if done.all():
-                break
-        xb, xp = db + bh2 * ab, dpp + bh2 * ap
-        ub, up = vb + gh * ab, vpp + gh * ap
-        f, _, _, delta, rate = _evaluate(scene, ch, j, joints, contacts, impact, xb, xp, ub, up)
-        gl, gp = _generalized(ch, j, f)
         ac, ar = cond.recover(ab, keep, rc.shape, rr.shape)
         a = join(ac, ar, ap)
         return a, f, join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count, delta, rate, impact
@@ -546,7 +553,7 @@ def _full_contact(jm: JointModel, gl, shape_c, shape_r):
 def _record(hist, peak, cpeak, k, j, d, v, a, f, every, alive):
     p = np.stack([d[..., -6:], v[..., -6:], a[..., -6:]], 1)     # (R, 3, 6)
     np.maximum(peak, np.where(alive[:, None, None], np.abs(p), 0.0), out=peak)
-    mags = np.concatenate([np.linalg.norm(x, axis=-1) for x in f], -1)
+    mags = np.swapaxes(np.linalg.norm(f, axis=-1), -1, -2).reshape(f.shape[0], 18)
     np.maximum(cpeak, np.where(alive[:, None], mags, 0.0), out=cpeak)
     if k % every == 0:
         hist[:, alive, k // every] = np.moveaxis(p, 1, 0)[:, alive]
