@@ -133,6 +133,43 @@ def _plot(args) -> int:
     return 0
 
 
+def _tradeoff(args) -> int:
+    from .study import tradeoff, write_tradeoff
+    scene = load_scene(args.config)
+    print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")
+    ds = tradeoff(scene, args.n, args.seed)
+    ref = ds.attrs["reference"]
+    change = float(ds["reference_change"].max())
+    print(f"reference {ref}: its step halved and mesh doubled change the statistics by at most "
+          f"{100 * change:.2f} %" + ("" if change < 0.01 else " (not converged to 1 %)"))
+    rec = write_tradeoff(ds, args.output, args.tolerance)
+    print(f"wrote {args.output}/tradeoff.csv, tradeoff.nc, tradeoff.png")
+    if rec["setting"] is None:
+        print(f"no setting is within {100 * args.tolerance:g} % of the reference (closest: "
+              f"{100 * rec['best_error']:.1f} %); use the reference")
+    else:
+        print(f"cheapest within {100 * args.tolerance:g} %: {rec['setting']} (max error "
+              f"{100 * rec['max_relative_error']:.2f} %, {rec['seconds_per_realization']:.3g} s per "
+              f"realisation, {rec['speedup_vs_reference']:.1f}x cheaper than the reference)")
+    return 0
+
+
+def _stability(args) -> int:
+    from .study import stability, write_stability
+    scene = load_scene(args.config)
+    print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
+    rows, limits = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
+    write_stability(rows, limits, args.output)
+    print(f"wrote {args.output}/stability.csv, stability.png")
+    for name, lim in limits.items():
+        if isinstance(lim, dict):
+            print(f"{name}: " + ", ".join(f"{k.removesuffix('_s').replace('_', ' ')} "
+                                        + ("-" if v is None else f"{v:.3g} s") for k, v in lim.items()))
+        else:
+            print(f"{name.replace('_s', '')}: {lim:.3g} s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rss6", description="Joint clearance and link elasticity errors of a 6-RSS robot.")
@@ -170,7 +207,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--workers", type=_positive_int, default=2,
                      help="local dask workers, one thread each (default 2)")
     run.add_argument("--scheduler", help="address of an existing dask.distributed scheduler")
-    run.add_argument("--chunk", type=_positive_int, default=8, help="realisations per task")
+    run.add_argument("--chunk", type=_positive_int,
+                     help="realisations per task (default: n / workers, at most 64; each task "
+                          "integrates its realisations as one batch)")
     run.add_argument("--store", choices=("summary", "full"), default="summary",
                      help="summary: per-realisation maxima and means; full: also time histories")
     run.set_defaults(func=_run)
@@ -186,6 +225,28 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("file")
     pl.add_argument("-o", "--output", default="plots", help="output folder (default: plots)")
     pl.set_defaults(func=_plot)
+
+    tr = sub.add_parser("tradeoff", help="cost and error of every model level, integrator, step and mesh")
+    tr.add_argument("config", nargs="?", default="paper",
+                    help="scene TOML file or embedded scene name (default: paper)")
+    tr.add_argument("-o", "--output", default="tradeoff", help="output folder (default: tradeoff)")
+    tr.add_argument("-n", type=_positive_int, default=8, help="realisations per setting (default 8)")
+    tr.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    tr.add_argument("--tolerance", type=_positive_float, default=0.05,
+                    help="relative error allowed on every statistic (default 0.05)")
+    tr.set_defaults(func=_tradeoff)
+
+    sb = sub.add_parser("stability", help="time-step sweeps: stable, inaccurate or failed")
+    sb.add_argument("config", nargs="?", default="paper",
+                    help="scene TOML file or embedded scene name (default: paper)")
+    sb.add_argument("-o", "--output", default="stability", help="output folder (default: stability)")
+    sb.add_argument("-n", type=_positive_int, default=2, help="realisations per clearance run (default 2)")
+    sb.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    sb.add_argument("--tolerance", type=_positive_float, default=0.05,
+                    help="change vs the finest step that counts as inaccurate (default 0.05)")
+    sb.add_argument("--horizon", type=_positive_float, default=0.2,
+                    help="simulated time of the contact sweeps, s (default 0.2)")
+    sb.set_defaults(func=_stability)
     return parser
 
 

@@ -28,7 +28,7 @@ from rss6core.models import simulate_batch, stored_draw
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
                     realization_dataset, write_netcdf)
 
-__all__ = ["EnsembleSpec", "run_chunk", "run_ensemble", "BLAS_ENV"]
+__all__ = ["EnsembleSpec", "run_chunk", "run_ensemble", "default_chunk", "BLAS_ENV"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -68,7 +68,7 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
         results = [SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
                    ] * len(realizations)
     parts = [realization_dataset(result, stored_draw(scene, spec.model, spec.seed, r, spec.dt), r,
-                                 spec.store)
+                                 spec.store, scene.simulation.settle_time)
              for r, result in zip(realizations, results)]
     return finish_ensemble(parts, scene, **_kw(spec))
 
@@ -143,11 +143,20 @@ def _client(workers: int, scheduler: str | None):
     return Client(cluster), cluster
 
 
+MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
+
+
+def default_chunk(n: int, workers: int) -> int:
+    """Realisations per task: every worker busy, batches large, little work lost on an interrupt."""
+    return max(1, min(MAX_AUTO_CHUNK, -(-n // workers)))
+
+
 def run_ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
-                 chunk: int = 8, progress: bool = True):
+                 chunk: int | None = None, progress: bool = True):
     """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset."""
     if n < 1:
         raise ValueError(f"the number of realisations must be at least 1, got {n}")
+    chunk = default_chunk(n, workers) if chunk is None else chunk
     if chunk < 1 or workers < 1:
         raise ValueError("--chunk and --workers must be at least 1")
     output = Path(output)

@@ -153,7 +153,7 @@ def _joints(scene, draws) -> _Joints:
     E = mat.youngs_modulus
 
     def k(r, size):
-        return hertz_stiffness(r, r + size, E, nu, E, nu)
+        return ct.stiffness_scale * hertz_stiffness(r, r + size, E, nu, E, nu)
 
     return _Joints(stack["radial_size"], stack["axial_size"], stack["size_C"], stack["size_B"],
                    k(ct.journal_radius, stack["radial_size"]), k(ct.sphere_radius, stack["size_C"]),
@@ -406,13 +406,25 @@ def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
 def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | None = None,
                      dt: float | None = None, output_step: float | None = None,
                      model: JointModel | None = None, chunk: int = 200,
-                     divergence_limit: float = 1.0) -> ContactBatch:
+                     divergence_limit: float = 1.0, settle: float | None = None) -> ContactBatch:
+    """Integrate the contact level for a batch of clearance draws (see :func:`_simulate_contact`).
+
+    Overflow in a diverging realisation is detected and reported as its failure, not warned about.
+    """
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        return _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
+                                 divergence_limit, settle)
+
+
+def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
+                      divergence_limit, settle) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (one realisation each).
 
     ``dt`` is the internal step and ``integrator`` the method (default: the scene's
     contact time step and contact integrator);
     histories are kept every ``output_step`` (default: the scene's time step);
-    peaks are taken over every internal step.  A realisation whose Newton
+    peaks are taken over every internal step from ``settle`` s on (default: the
+    scene's settle time, the start-up transient left out).  A realisation whose Newton
     iteration fails or whose state diverges is marked failed; the others go on.
     """
     sim = scene.simulation
@@ -426,6 +438,7 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
         raise ValueError(f"output step {out!r} s is not a multiple of the time step {h!r} s")
     t = time_grid(scene.trajectory.duration, h)
     t_out = t[::every]
+    first_peak = int(np.ceil((sim.settle_time if settle is None else settle) / h - 1e-9))
     joints = _joints(scene, draws)
     R = len(draws)
     contacts = _Contacts((R,), scene.contact.impact_speed_floor)
@@ -507,7 +520,7 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
     contacts.update(delta, rate, used)
     weighted = am != 0.0 or af != 0.0
     Ma, rest, Fn, gn = _mass(jm, Mp0, a), _internal(jm, Mp0, d, v), ch.F[0], g
-    _record(hist, peak, cpeak, 0, 0, d, v, a, f, every, alive)
+    _record(hist, peak, cpeak, 0, d, v, a, f, every, alive, first_peak)
     for s0 in range(1, len(t), chunk):
         s1 = min(s0 + chunk, len(t))
         ch = _Chunk(scene, jm, t[s0:s1])
@@ -536,7 +549,7 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
             steps[alive] = k
             if weighted:
                 Ma, rest, Fn, gn = _mass(jm, Mp, a), _internal(jm, Mp, d, v), ch.F[j], g
-            _record(hist, peak, cpeak, k, j, d, v, a, f, every, alive)
+            _record(hist, peak, cpeak, k, d, v, a, f, every, alive, first_peak)
         if not alive.any():
             break
     return ContactBatch(t_out, hist[0], hist[1], hist[2], peak, cpeak, status, message, steps, iters)
@@ -550,10 +563,11 @@ def _full_contact(jm: JointModel, gl, shape_c, shape_r):
     return gc, gr
 
 
-def _record(hist, peak, cpeak, k, j, d, v, a, f, every, alive):
+def _record(hist, peak, cpeak, k, d, v, a, f, every, alive, first_peak):
     p = np.stack([d[..., -6:], v[..., -6:], a[..., -6:]], 1)     # (R, 3, 6)
-    np.maximum(peak, np.where(alive[:, None, None], np.abs(p), 0.0), out=peak)
-    mags = np.swapaxes(np.linalg.norm(f, axis=-1), -1, -2).reshape(f.shape[0], 18)
-    np.maximum(cpeak, np.where(alive[:, None], mags, 0.0), out=cpeak)
+    if k >= first_peak:
+        np.maximum(peak, np.where(alive[:, None, None], np.abs(p), 0.0), out=peak)
+        mags = np.swapaxes(np.linalg.norm(f, axis=-1), -1, -2).reshape(f.shape[0], 18)
+        np.maximum(cpeak, np.where(alive[:, None], mags, 0.0), out=cpeak)
     if k % every == 0:
         hist[:, alive, k // every] = np.moveaxis(p, 1, 0)[:, alive]

@@ -143,6 +143,7 @@ class ContactLaw:
     stick_velocity: float         # v0, m/s
     slip_velocity: float          # v1, m/s
     impact_speed_floor: float = 1e-3  # m/s, lower bound of delta_dot_c1 in eq. 17 (resting contact)
+    stiffness_scale: float = 1.0      # factor on eq. 17's Hertz stiffness K (sensitivity, stability)
 
 
 MODELS = ("rigid", "quasi-static", "elastic", "paper", "contact")
@@ -163,6 +164,7 @@ class Simulation:
     quasi_static_eccentricity: str  # 'drawn' or 'reaction' (at the boundary, along the L0 force)
     contact_time_step: float = 1e-4  # s, internal step of the contact level (L4)
     contact_integrator: str = "generalized-alpha"  # its integrator: damps unresolved contact chatter
+    settle_time: float = 0.0  # s, start-up transient left out of the error summaries (maxima, means)
 
 
 @dataclass(frozen=True)
@@ -263,6 +265,7 @@ _SCHEMA: dict = {
         "quasi_static_eccentricity": _Key(str, default="drawn", choices=("drawn", "reaction")),
         "contact_time_step_s": _Key(float, default=1e-4, check=_POS),
         "contact_integrator": _Key(str, default="generalized-alpha", choices=INTEGRATORS),
+        "settle_time_s": _Key(float, default=0.0, check=_NONNEG),
     },
     "sampling": {  # MODEL.md section 4; mean and std as fractions of the clearance size
         "radial_mean": _Key(float, default=0.5, bounds=(0.0, 1.0)),
@@ -285,7 +288,8 @@ _SCHEMA: dict = {
                 "friction_coefficient": _Key(float, check=_NONNEG),
                 "stick_velocity_m_s": _Key(float, check=_POS),
                 "slip_velocity_m_s": _Key(float, check=_POS),
-                "impact_speed_floor_m_s": _Key(float, default=1e-3, check=_POS)},
+                "impact_speed_floor_m_s": _Key(float, default=1e-3, check=_POS),
+                "stiffness_scale": _Key(float, default=1.0, check=_POS)},
 }
 
 
@@ -371,6 +375,9 @@ def _build(v: dict, text: str, source: str) -> Scene:
     if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
         raise SceneError(f"[simulation] time_step_s: {dt!r} does not divide "
                          f"[trajectory] duration_s = {duration!r} into whole steps")
+    if v["simulation"]["settle_time_s"] >= duration:
+        raise SceneError(f"[simulation] settle_time_s: must be shorter than [trajectory] duration_s "
+                         f"= {duration!r}, got {v['simulation']['settle_time_s']!r}")
     ratio = dt / v["simulation"]["contact_time_step_s"]
     if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
         raise SceneError(f"[simulation] contact_time_step_s: must divide time_step_s = {dt!r} "
@@ -400,7 +407,8 @@ def _build(v: dict, text: str, source: str) -> Scene:
         sampling=Sampling(**v["sampling"]),
         contact=ContactLaw(ct["journal_radius_m"], ct["sphere_radius_m"], ct["restitution"],
                            ct["exponent"], ct["friction_coefficient"], ct["stick_velocity_m_s"],
-                           ct["slip_velocity_m_s"], ct["impact_speed_floor_m_s"]),
+                           ct["slip_velocity_m_s"], ct["impact_speed_floor_m_s"],
+                           ct["stiffness_scale"]),
         source_text=text, source_path=source)
 
 

@@ -113,3 +113,18 @@ def test_new_models_are_accepted_and_a_typo_is_named(paper_text):
         assert scene.simulation.model == model
     with pytest.raises(SceneError, match=r"\[simulation\] model.*'contakt'"):
         parse_scene(_edit(paper_text, 'model = "elastic"', 'model = "contakt"'))
+
+
+def test_contact_stiffness_scale_defaults_to_one_and_must_be_positive(paper_text):
+    assert parse_scene(paper_text).contact.stiffness_scale == 1.0
+    line = next(ln for ln in paper_text.splitlines() if ln.startswith("slip_velocity_m_s"))
+    scaled = parse_scene(_edit(paper_text, line, line + "\nstiffness_scale = 10.0"))
+    assert scaled.contact.stiffness_scale == 10.0
+    with pytest.raises(SceneError, match=r"\[contact\] stiffness_scale"):
+        parse_scene(_edit(paper_text, line, line + "\nstiffness_scale = -1.0"))
+
+
+def test_settle_time_must_be_shorter_than_the_trajectory(paper_text):
+    assert parse_scene(paper_text).simulation.settle_time == 0.0
+    with pytest.raises(SceneError, match=r"\[simulation\] settle_time_s"):
+        parse_scene(_edit(paper_text, "time_step_s = 1.0e-3", "time_step_s = 1.0e-3\nsettle_time_s = 5.0"))

@@ -1,0 +1,192 @@
+"""Benchmark: ensemble throughput of the `paper` and `contact` levels on configs/paper.toml.
+
+Run on demand: ``python benchmarks/ensemble.py [--quick] [--json] [--profile]``.
+Measures, in one run and on this machine:
+- seconds per realisation one at a time (a batch of one) and batched (one
+  batch of many), and their ratio;
+- realisations per second through ``run_ensemble`` on a local dask cluster of
+  1 and 2 single-threaded workers (cluster start-up and worker imports not
+  counted), and the parallel efficiency (throughput of 2 / twice that of 1);
+- peak resident memory of a whole ``rss6 run`` (main process and its workers,
+  sampled every 0.05 s) for N = 100 and N = 1000 with ``--store summary``
+  (`paper` level), and that run's wall time.
+``--quick`` uses configs/smoke.toml (0.2 s) and small counts, and finishes in
+under a minute; ``--profile`` adds the top entries of a profile of each batched run.
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import json
+import os
+import pstats
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[var] = "1"  # before numpy is imported: one core per process
+
+import numpy as np  # noqa: E402
+
+from rss6core import load_scene  # noqa: E402
+from rss6core.models import default_integrator, default_time_step, simulate_batch  # noqa: E402
+
+CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+# counts per model: loop (one at a time), batched (one batch), workers (per throughput run)
+FULL = {"config": "paper.toml", "paper": (10, 200, 400), "contact": (2, 32, 32), "memory": (100, 1000)}
+QUICK = {"config": "smoke.toml", "paper": (3, 50, 100), "contact": (1, 6, 4), "memory": (100, 1000)}
+
+
+def _per_realization(scene, model, counts):
+    """Median seconds per realisation one at a time, and seconds per realisation of one batch."""
+    n_loop, n_batch, _ = counts
+    simulate_batch(scene, model, realizations=[0])            # warm-up: imports, caches
+    loop = []
+    for r in range(n_loop):
+        start = time.perf_counter()
+        simulate_batch(scene, model, realizations=[r])
+        loop.append(time.perf_counter() - start)
+    start = time.perf_counter()
+    simulate_batch(scene, model, realizations=range(n_batch))
+    return statistics.median(loop), (time.perf_counter() - start) / n_batch
+
+
+def _profile(scene, model, n, top=8):
+    prof = cProfile.Profile()
+    prof.runcall(simulate_batch, scene, model, realizations=range(n))
+    out = io.StringIO()
+    pstats.Stats(prof, stream=out).sort_stats("tottime").print_stats(top)
+    lines = [ln for ln in out.getvalue().splitlines() if ln.strip()]
+    start = next(i for i, ln in enumerate(lines) if ln.lstrip().startswith("ncalls"))
+    return lines[start:start + top + 1]
+
+
+def _throughput(scene, config, model, n, workers, tmp):
+    """Realisations per second of run_ensemble on a local cluster of ``workers`` workers."""
+    from dask.distributed import Client, LocalCluster
+
+    from pipeline.run import BLAS_ENV, EnsembleSpec, run_ensemble
+    os.environ.update(BLAS_ENV)
+    spec = EnsembleSpec(scene.source_text, str(config), model, default_integrator(scene, model),
+                        default_time_step(scene, model), scene.simulation.elements_per_link, 0)
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                      dashboard_address=None, host="127.0.0.1") as cluster, Client(cluster) as client:
+        client.run(lambda: __import__("rss6core.models"))     # imports off the clock
+        start = time.perf_counter()
+        run_ensemble(spec, n, Path(tmp) / f"{model}-{workers}.nc", scheduler=cluster.scheduler_address,
+                     chunk=max(1, n // 4), progress=False)
+        return n / (time.perf_counter() - start)
+
+
+def _tree_rss(pid: int) -> int:
+    """Resident bytes of a process and all its descendants (Linux /proc)."""
+    children = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+        except (OSError, IndexError, ValueError):
+            continue
+    total, todo = 0, [pid]
+    while todo:
+        p = todo.pop()
+        todo.extend(children.get(p, []))
+        try:
+            for line in Path(f"/proc/{p}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total += int(line.split()[1]) * 1024
+        except OSError:
+            continue
+    return total
+
+
+def _peak_rss(config, n, tmp):
+    """Peak resident MiB and wall seconds of ``rss6 run CONFIG -n N --model paper --store summary``."""
+    cmd = [sys.executable, "-m", "pipeline.cli", "run", str(config), "-n", str(n), "--model", "paper",
+           "--store", "summary", "-o", str(Path(tmp) / f"memory-{n}.nc")]
+    peak, start = 0, time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    stop = threading.Event()
+
+    def sample():
+        nonlocal peak
+        while not stop.is_set():
+            peak = max(peak, _tree_rss(proc.pid))
+            stop.wait(0.05)
+
+    sampler = threading.Thread(target=sample)
+    sampler.start()
+    _, err = proc.communicate()
+    stop.set()
+    sampler.join()
+    if proc.returncode:
+        raise RuntimeError(f"{' '.join(cmd)} failed: {err.strip()}")
+    return peak / 2 ** 20, time.perf_counter() - start
+
+
+def measure(quick: bool, profile: bool) -> dict:
+    plan = QUICK if quick else FULL
+    config = CONFIGS / plan["config"]
+    scene = load_scene(config)
+    out = {"config": f"configs/{plan['config']}", "per_realization_s": {}, "batched_speedup": {},
+           "realizations_per_s": {}, "parallel_efficiency": {}, "peak_rss_MiB": {}, "run_wall_s": {},
+           "profile": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        for model in ("paper", "contact"):
+            loop, batched = _per_realization(scene, model, plan[model])
+            out["per_realization_s"][model] = {"loop": loop, "batched": batched}
+            out["batched_speedup"][model] = loop / batched
+            n = plan[model][2]
+            rate = {str(w): _throughput(scene, config, model, n, w, tmp) for w in (1, 2)}
+            out["realizations_per_s"][model] = rate
+            out["parallel_efficiency"][model] = rate["2"] / (2 * rate["1"])
+            if profile:
+                out["profile"][model] = _profile(scene, model, plan[model][1])
+        for n in plan["memory"]:
+            peak, wall = _peak_rss(config, n, tmp)
+            out["peak_rss_MiB"][str(n)] = peak
+            out["run_wall_s"][str(n)] = wall
+    lo, hi = (str(n) for n in plan["memory"])
+    out["memory_growth"] = out["peak_rss_MiB"][hi] / out["peak_rss_MiB"][lo] - 1.0
+    out["projected_1000_s_2_workers"] = {m: 1000 / r["2"] for m, r in out["realizations_per_s"].items()}
+    out["machine"] = f"{os.cpu_count()} cores, {sys.platform}, numpy {np.__version__}"
+    if not profile:
+        del out["profile"]
+    return out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="configs/smoke.toml, small counts (< 1 min)")
+    parser.add_argument("--json", action="store_true", help="print the figures as JSON")
+    parser.add_argument("--profile", action="store_true", help="add each batched run's top profile entries")
+    args = parser.parse_args(argv)
+    out = measure(args.quick, args.profile)
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"{out['config']} ({out['machine']})")
+    print(f"{'model':8s} {'loop s/real':>12s} {'batched s/real':>15s} {'speedup':>8s} "
+          f"{'1 worker real/s':>16s} {'2 workers real/s':>17s} {'efficiency':>10s} {'1000 with 2 (s)':>16s}")
+    for m in out["per_realization_s"]:
+        p, r = out["per_realization_s"][m], out["realizations_per_s"][m]
+        print(f"{m:8s} {p['loop']:12.4f} {p['batched']:15.4f} {out['batched_speedup'][m]:8.1f} "
+              f"{r['1']:16.3f} {r['2']:17.3f} {out['parallel_efficiency'][m]:10.2f} "
+              f"{out['projected_1000_s_2_workers'][m]:16.1f}")
+    print("rss6 run --model paper --store summary: " + ", ".join(
+        f"N = {n}: peak {out['peak_rss_MiB'][n]:.0f} MiB, {out['run_wall_s'][n]:.1f} s"
+        for n in out["peak_rss_MiB"]) + f"; growth {100 * out['memory_growth']:.1f} %")
+    for m, lines in out.get("profile", {}).items():
+        print(f"\nprofile of one batched {m} run (top entries by own time):")
+        print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

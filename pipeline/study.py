@@ -1,0 +1,453 @@
+"""Speed against accuracy (``rss6 tradeoff``) and where methods fail (``rss6 stability``).
+
+Both run the same realisations (same seed) for many settings (model level,
+integrator, time step, elements per link) and compare the ensemble statistics
+users query, per quantity and direction: the mean and the 95 % quantile over
+realisations of each realisation's max |error| (as stored in ensemble files:
+after the scene's settle time, over every internal step for the contact
+level).  Relative errors are taken against a reference setting, with a floor
+of 0.1 % of the largest translation (rotation) statistic of that quantity so
+that a near-zero component cannot dominate.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+
+from rss6core.models import simulate_batch
+
+from .store import DIRECTIONS, QUANTITIES, _summaries
+
+__all__ = ["Setting", "STATISTICS", "measure", "relative_errors", "default_settings", "tradeoff",
+           "pareto_front", "recommend", "write_tradeoff", "stability", "write_stability"]
+
+STATISTICS = ("mean", "q95")
+RELATIVE_FLOOR = 1e-3
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One way to compute the ensemble: model level, integrator, time step (s), elements per link."""
+    model: str
+    integrator: str
+    dt: float
+    elements: int
+    stiffness_scale: float = 1.0
+
+    @property
+    def label(self) -> str:
+        extra = f", K x{self.stiffness_scale:g}" if self.stiffness_scale != 1.0 else ""
+        if self.model in ("rigid", "quasi-static"):
+            return f"{self.model} {self.dt * 1e3:g} ms"
+        return f"{self.model} {self.integrator} {self.dt * 1e3:g} ms {self.elements} el{extra}"
+
+
+def _scene_for(scene, setting: Setting):
+    if setting.stiffness_scale == scene.contact.stiffness_scale:
+        return scene
+    return dataclasses.replace(scene, contact=dataclasses.replace(
+        scene.contact, stiffness_scale=setting.stiffness_scale))
+
+
+def measure(scene, setting: Setting, n: int, seed: int = 0) -> dict:
+    """Run realisations 0..n-1 of ``setting`` as one batch: seconds per realisation, the ensemble
+    statistics (quantity, direction, statistic) in SI units, failures and their first message."""
+    start = time.perf_counter()
+    results = simulate_batch(_scene_for(scene, setting), setting.model, setting.integrator, setting.dt,
+                             setting.elements, seed, range(n))
+    wall = (time.perf_counter() - start) / n
+    peaks = np.stack([_summaries(r, scene.simulation.settle_time)[0] for r in results])  # (n, 3, 6)
+    failed = [r for r in results if r.status != "finished"]
+    with np.errstate(all="ignore"):
+        stats = np.stack([np.nanmean(peaks, 0), np.nanquantile(peaks, 0.95, 0)], -1)
+    return {"seconds_per_realization": wall, "statistics": stats, "failed": len(failed),
+            "message": failed[0].message if failed else "",
+            "steps": int(min(r.steps for r in results))}
+
+
+def relative_errors(stats: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """|stat - ref| / max(|ref|, floor) per (quantity, direction, statistic); see the module doc."""
+    ref = np.abs(reference)
+    floor = np.empty_like(ref)
+    for group in (slice(0, 3), slice(3, 6)):          # translations, rotations
+        floor[:, group] = RELATIVE_FLOOR * ref[:, group].max(axis=1, keepdims=True)
+    return np.abs(stats - reference) / np.maximum(ref, np.maximum(floor, 1e-300))
+
+
+def _dividing(total: float, h: float) -> float:
+    """The step nearest ``h`` that divides ``total`` into whole steps."""
+    return total / max(1, round(total / h))
+
+
+def _contact_step(scene, h: float) -> float:
+    """The contact step nearest ``h`` that the output step is a whole multiple of (or a multiple of it)."""
+    dt = scene.simulation.time_step
+    return _dividing(dt, h) if h <= dt else dt * round(h / dt)
+
+
+def _refine(setting: Setting) -> Setting:
+    return dataclasses.replace(setting, dt=setting.dt / 2, elements=2 * setting.elements)
+
+
+def default_settings(scene) -> tuple[list[Setting], Setting]:
+    """The settings compared by default, and the reference (the finest contact setting)."""
+    sim = scene.simulation
+    dt, dtc, el = sim.time_step, sim.contact_time_step, sim.elements_per_link
+    ig, igc = sim.integrator, sim.contact_integrator
+    half = max(1, el // 2)
+    out = [Setting("quasi-static", "newmark", dt, el)]
+    out += [Setting("elastic", i, dt, el) for i in ("newmark", "hht", "generalized-alpha")]
+    out += [Setting("elastic", ig, dt, half), Setting("elastic", ig, dt / 2, el)]
+    out += [Setting("paper", ig, dt, el), Setting("paper", ig, dt / 2, el)]
+    out += [Setting("contact", igc, _contact_step(scene, f * dtc), el) for f in (2.0, 1.0, 0.5, 0.25)]
+    out += [Setting("contact", igc, dtc, half), Setting("contact", "newmark", dtc, el)]
+    reference = Setting("contact", igc, _contact_step(scene, dtc / 8), el)
+    return out + [reference], reference
+
+
+def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | None = None,
+             log=print) -> xr.Dataset:
+    """Cost and error of every setting against the reference; the reference's own convergence
+    (its step halved and mesh doubled) is measured and stored in the attributes."""
+    if settings is None:
+        settings, reference = default_settings(scene)
+    reference = reference or settings[-1]
+    if reference not in settings:
+        settings = list(settings) + [reference]
+    runs = {}
+    for s in settings:
+        runs[s] = measure(scene, s, n, seed)
+        log(f"  {s.label}: {runs[s]['seconds_per_realization']:.3g} s per realisation"
+            + (f", {runs[s]['failed']} failed" if runs[s]["failed"] else ""))
+    check = _refine(reference)
+    fine = measure(scene, check, n, seed)
+    log(f"  reference check ({check.label}): {fine['seconds_per_realization']:.3g} s per realisation")
+    ref = runs[reference]["statistics"]
+    rel = np.stack([relative_errors(runs[s]["statistics"], ref) for s in settings])
+    convergence = relative_errors(ref, fine["statistics"])
+    ds = xr.Dataset(
+        {"model": ("setting", [s.model for s in settings]),
+         "integrator": ("setting", [s.integrator for s in settings]),
+         "dt": ("setting", [s.dt for s in settings], {"units": "s", "long_name": "time step"}),
+         "elements_per_link": ("setting", [s.elements for s in settings]),
+         "stiffness_scale": ("setting", [s.stiffness_scale for s in settings]),
+         "seconds_per_realization": ("setting", [runs[s]["seconds_per_realization"] for s in settings],
+                                     {"units": "s", "long_name": "wall time per realisation, batched"}),
+         "failed": ("setting", [runs[s]["failed"] for s in settings]),
+         "statistic_value": (("setting", "quantity", "direction", "statistic"),
+                             np.stack([runs[s]["statistics"] for s in settings]),
+                             {"units": "m, rad, m s-1, rad s-1, m s-2, rad s-2 by quantity and "
+                                       "direction (translations x, y, z; rotations rx, ry, rz)"}),
+         "relative_error": (("setting", "quantity", "direction", "statistic"), rel, {"units": "1"}),
+         "reference_change": (("quantity", "direction", "statistic"), convergence,
+                              {"units": "1", "long_name": "reference vs its step halved and mesh "
+                                                          "doubled"})},
+        coords={"setting": [s.label for s in settings], "quantity": list(QUANTITIES),
+                "direction": list(DIRECTIONS), "statistic": list(STATISTICS)},
+        attrs={"reference": reference.label, "reference_check": check.label,
+               "reference_check_seconds_per_realization": fine["seconds_per_realization"],
+               "realizations": n, "seed": seed, "scene_toml": scene.source_text,
+               "settle_time_s": scene.simulation.settle_time})
+    ds["max_relative_error"] = ds["relative_error"].max(("quantity", "direction", "statistic"))
+    ds["max_relative_error"].attrs["units"] = "1"
+    ds["modes"] = ("setting", [_dofs(scene, s) for s in settings])
+    ds["modes"].attrs["long_name"] = "modes kept (no modal reduction is offered: all DOFs)"
+    return ds
+
+
+def _dofs(scene, s: Setting) -> int:
+    if s.model in ("rigid", "quasi-static"):
+        return 6
+    from rss6core.assembly import build_elastic_model
+    from rss6core.contact_dynamics import build_joint_model
+    model = build_joint_model(scene, s.elements) if s.model == "contact" else build_elastic_model(
+        scene, s.elements)
+    return model.dofs
+
+
+def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """Indices of the settings no other setting beats in both cost and error, by cost."""
+    order = np.argsort(cost, kind="stable")
+    front, best = [], np.inf
+    for i in order:
+        if error[i] < best:
+            front.append(i)
+            best = error[i]
+    return np.array(front, int)
+
+
+def recommend(ds: xr.Dataset, tolerance: float) -> dict:
+    """The cheapest setting (not the reference) whose every statistic is within ``tolerance``."""
+    cost, err = ds["seconds_per_realization"].values, ds["max_relative_error"].values
+    ok = (err <= tolerance) & (ds["failed"].values == 0) & (ds["setting"].values != ds.attrs["reference"])
+    ref = int(np.flatnonzero(ds["setting"].values == ds.attrs["reference"])[0])
+    if not ok.any():
+        return {"setting": None, "reference": ds.attrs["reference"], "tolerance": tolerance,
+                "best_error": float(np.nanmin(np.where(ds["setting"].values != ds.attrs["reference"],
+                                                         err, np.nan)))}
+    i = int(np.flatnonzero(ok)[np.argmin(cost[ok])])
+    return {"setting": str(ds["setting"].values[i]), "reference": ds.attrs["reference"],
+            "tolerance": tolerance, "max_relative_error": float(err[i]),
+            "seconds_per_realization": float(cost[i]), "speedup_vs_reference": float(cost[ref] / cost[i])}
+
+
+def _columns(ds: xr.Dataset) -> list[str]:
+    return [f"rel_err_{q}_{d}_{s}" for q in QUANTITIES for d in DIRECTIONS for s in STATISTICS]
+
+
+def write_tradeoff(ds: xr.Dataset, outdir, tolerance: float) -> dict:
+    """DIR/tradeoff.csv, DIR/tradeoff.nc and DIR/tradeoff.png; returns the recommendation."""
+    from pathlib import Path
+
+    from .store import write_netcdf
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    header = ["setting", "model", "integrator", "dt_s", "elements_per_link", "modes", "stiffness_scale",
+              "seconds_per_realization", "failed", "max_rel_error"] + _columns(ds)
+    rows = []
+    for i in range(ds.sizes["setting"]):
+        rel = ds["relative_error"].values[i].reshape(-1)
+        rows.append([str(ds["setting"].values[i]), str(ds["model"].values[i]),
+                     str(ds["integrator"].values[i]), f"{float(ds['dt'].values[i]):.6g}",
+                     str(int(ds["elements_per_link"].values[i])), str(int(ds["modes"].values[i])),
+                     f"{float(ds['stiffness_scale'].values[i]):g}",
+                     f"{float(ds['seconds_per_realization'].values[i]):.6g}",
+                     str(int(ds["failed"].values[i])), f"{float(ds['max_relative_error'].values[i]):.6g}"]
+                    + [f"{x:.6g}" for x in rel])
+    _write_csv(out / "tradeoff.csv", header, rows)
+    write_netcdf(ds, out / "tradeoff.nc")
+    rec = recommend(ds, tolerance)
+    _plot_tradeoff(ds, out / "tradeoff.png", tolerance, rec)
+    return rec
+
+
+def _write_csv(path, header, rows) -> None:
+    import csv
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
+
+
+_COLOURS = {"rigid": "k", "quasi-static": "tab:green", "elastic": "tab:blue", "paper": "tab:orange",
+            "contact": "tab:red"}
+
+
+def _plot_tradeoff(ds, path, tolerance, rec) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    cost = ds["seconds_per_realization"].values
+    err = np.maximum(ds["max_relative_error"].values, 1e-6)
+    labels, models = ds["setting"].values, ds["model"].values
+    fig, ax = plt.subplots(figsize=(9, 6))
+    for m in dict.fromkeys(models):
+        sel = models == m
+        ax.scatter(cost[sel], err[sel], color=_COLOURS.get(m, "grey"), label=m, zorder=3)
+    for c, e, lab in zip(cost, err, labels):
+        ax.annotate(lab, (c, e), fontsize=6, xytext=(3, 3), textcoords="offset points")
+    front = pareto_front(cost, err)
+    ax.plot(cost[front], err[front], "k--", lw=1, label="Pareto front", zorder=2)
+    ax.axhline(tolerance, color="grey", lw=0.8, ls=":", label=f"tolerance {100 * tolerance:g} %")
+    ref = labels == ds.attrs["reference"]
+    ax.scatter(cost[ref], err[ref], marker="*", s=200, color="tab:red", edgecolor="k",
+               label="reference", zorder=4)
+    if rec["setting"]:
+        i = labels == rec["setting"]
+        ax.scatter(cost[i], err[i], s=160, facecolor="none", edgecolor="k", lw=1.5,
+                   label=f"cheapest within tolerance ({rec['speedup_vs_reference']:.0f}x cheaper)",
+                   zorder=5)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time per realisation, batched (s)")
+    ax.set_ylabel("max relative error of the ensemble statistics (1)")
+    ax.set_title(f"speed against accuracy: {ds.attrs.get('realizations')} realisations; reference "
+                 f"{ds.attrs['reference']}", fontsize=9)
+    ax.legend(fontsize=7, loc="lower left")
+    ax.grid(True, which="both", lw=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------------------------------------
+# stability
+
+
+def _horizon(scene, duration: float):
+    return dataclasses.replace(scene, trajectory=dataclasses.replace(scene.trajectory, duration=duration))
+
+
+def _explicit_limit(scene) -> float:
+    """2/omega_max (s): the central-difference limit of the undamped elastic model at t = 0."""
+    from rss6core.models import natural_frequencies
+    return 2.0 / natural_frequencies(scene)[-1]
+
+
+def _classify(run: dict, ref: dict, tolerance: float, growth: float = 10.0) -> tuple[str, str, float]:
+    """stable / inaccurate / failed, the reason, and the largest relative change vs the finest step."""
+    change = float(np.nanmax(relative_errors(run["statistics"], ref["statistics"])))
+    if run["failed"]:
+        return "failed", run["message"], change
+    if not np.all(np.isfinite(run["statistics"])):
+        return "failed", "non-finite state", change
+    if np.nanmax(run["statistics"][..., 0] / np.maximum(ref["statistics"][..., 0], 1e-300)) > growth:
+        return "failed", f"energy growth: error peaks over {growth:g} x the finest step's", change
+    if change > tolerance:
+        return "inaccurate", f"statistics change {100 * change:.1f} % vs the finest step", change
+    return "stable", "", change
+
+
+def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon: float = 0.2,
+              explicit_steps: int = 400, log=print) -> tuple[list[dict], dict]:
+    """Time-step sweeps per level and integrator (and contact stiffness): rows of the stability map
+    and the measured limits.  Implicit sweeps cover min(duration, horizon) for the contact level and
+    the whole trajectory otherwise; the explicit sweep ``explicit_steps`` steps around 2/omega_max."""
+    sim = scene.simulation
+    dt, dtc, el = sim.time_step, sim.contact_time_step, sim.elements_per_link
+    short = _horizon(scene, min(scene.trajectory.duration, horizon))
+    limit = _explicit_limit(scene)
+    rows = []
+
+    def sweep(sc, level, integrator, steps, scale=1.0, n_real=n):
+        runs = {h: measure(sc, Setting(level, integrator, h, el, scale), n_real, seed) for h in steps}
+        ref = runs[min(steps)]
+        for h in sorted(steps):
+            status, reason, change = _classify(runs[h], ref, tolerance)
+            rows.append({"level": level, "integrator": integrator, "dt_s": h, "stiffness_scale": scale,
+                         "horizon_s": sc.trajectory.duration, "status": status, "reason": reason,
+                         "max_rel_change": change,
+                         "seconds_per_realization": runs[h]["seconds_per_realization"],
+                         "velocity_mean_peak": float(np.nanmax(runs[h]["statistics"][1, :3, 0]))})
+            log(f"  {level} {integrator} dt {h:.3g} s K x{scale:g}: {status} {reason}")
+
+    T = scene.trajectory.duration
+
+    def steps(total, hs):
+        return sorted({_dividing(total, h) for h in hs})
+
+    for ig in ("newmark", "hht", "generalized-alpha"):
+        sweep(scene, "elastic", ig, steps(T, [f * dt for f in (16.0, 8.0, 4.0, 2.0, 1.0, 0.5)]), n_real=1)
+    rows.extend(_explicit_sweep(scene, limit, explicit_steps, tolerance, seed, log))
+    sweep(scene, "paper", sim.integrator, steps(T, [f * dt for f in (2.0, 1.0, 0.5, 0.25)]))
+    contact_steps = sorted({_contact_step(scene, f * dtc) for f in (8.0, 4.0, 2.0, 1.0, 0.5)})
+    for ig in (sim.contact_integrator, "newmark"):
+        for scale in (1.0, 10.0):
+            sweep(short, "contact", ig, contact_steps, scale)
+    limits = _limits(rows)
+    limits["central-difference 2/omega_max_s"] = limit
+    return rows, limits
+
+
+def _explicit_sweep(scene, limit, steps, tolerance, seed, log):
+    """Central differences around 2/omega_max on the undamped robot, every mode excited.
+
+    2/omega_max is the undamped limit; with the scene's stiffness-proportional damping the step
+    matrix holds lambda_2 K (the damping is treated implicitly), which moves the limit.  The run
+    starts from the quasi-static state plus a seeded random velocity of 1e-6 m/s (rad/s) scale and
+    lasts ``steps`` quarter-limit steps; it fails when the elastic displacement passes 1 mm.
+    """
+    from rss6core.assembly import build_elastic_model
+    from rss6core.elastic import quasi_static_state, simulate_elastic
+    from rss6core.integrators import Integrator
+    still = dataclasses.replace(_horizon(scene, steps * 0.25 * limit), damping=dataclasses.replace(
+        scene.damping, mass_coefficient=0.0, stiffness_coefficient=0.0))
+    model = build_elastic_model(still, scene.simulation.elements_per_link)
+    d, v, a = quasi_static_state(still, model)
+    v = v + np.random.default_rng(seed).normal(size=v.shape) * 1e-6
+    H = still.trajectory.duration
+    runs = {}
+    for h in sorted({_dividing(H, f * limit) for f in (0.25, 0.5, 0.9, 0.97, 1.03, 1.1, 1.5)}):
+        start = time.perf_counter()
+        r = simulate_elastic(still, model.elements, Integrator.central_difference(), h, model=model,
+                             initial=(d, v, a), divergence_limit=1e-3)
+        peaks = _summaries(r)[0]
+        runs[h] = {"statistics": np.stack([peaks, peaks], -1), "failed": int(r.status != "finished"),
+                   "message": r.message, "seconds_per_realization": time.perf_counter() - start}
+    ref = runs[min(runs)]
+    rows = []
+    for h, run in runs.items():
+        status, reason, change = _classify(run, ref, tolerance)
+        rows.append({"level": "elastic", "integrator": "central-difference (undamped)", "dt_s": h,
+                     "stiffness_scale": 1.0, "horizon_s": H, "status": status, "reason": reason,
+                     "max_rel_change": change if np.isfinite(change) else 1e300,
+                     "seconds_per_realization": run["seconds_per_realization"],
+                     "velocity_mean_peak": float(np.nanmax(run["statistics"][1, :3, 0]))})
+        log(f"  elastic central-difference (undamped) dt {h:.4g} s = {h / limit:.3f} x 2/omega_max: "
+            f"{status} {reason}")
+    return rows
+
+
+def _limits(rows) -> dict:
+    """Per (level, integrator, stiffness): the largest step not failed and the largest accurate one."""
+    out = {}
+    for key in dict.fromkeys((r["level"], r["integrator"], r["stiffness_scale"]) for r in rows):
+        sel = [r for r in rows if (r["level"], r["integrator"], r["stiffness_scale"]) == key]
+        ok = [r["dt_s"] for r in sel if r["status"] != "failed"]
+        bad = [r["dt_s"] for r in sel if r["status"] == "failed"]
+        good = [r["dt_s"] for r in sel if r["status"] == "stable"]
+        name = f"{key[0]} {key[1]}" + (f" K x{key[2]:g}" if key[2] != 1.0 else "")
+        out[name] = {"largest_not_failed_s": max(ok) if ok else None,
+                     "smallest_failed_s": min(bad) if bad else None,
+                     "largest_accurate_s": max(good) if good else None}
+    return out
+
+
+def write_stability(rows, limits, outdir) -> None:
+    """DIR/stability.csv and DIR/stability.png."""
+    from pathlib import Path
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    header = ["level", "integrator", "dt_s", "stiffness_scale", "horizon_s", "status", "stable",
+              "max_rel_change", "seconds_per_realization", "velocity_mean_peak_m_s", "reason"]
+    _write_csv(out / "stability.csv", header, [
+        [r["level"], r["integrator"], f"{r['dt_s']:.6g}", f"{r['stiffness_scale']:g}",
+         f"{r['horizon_s']:.6g}", r["status"], str(int(r["status"] != "failed")),
+         f"{r['max_rel_change']:.6g}", f"{r['seconds_per_realization']:.6g}",
+         f"{r['velocity_mean_peak']:.6g}", r["reason"]] for r in rows])
+    _plot_stability(rows, limits, out / "stability.png")
+
+
+def _plot_stability(rows, limits, path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    colour = {"stable": "tab:green", "inaccurate": "tab:orange", "failed": "tab:red"}
+    fig, axes = plt.subplots(1, 3, figsize=(15, 5), gridspec_kw={"width_ratios": [1.2, 1.2, 1]})
+    for ax, level in zip(axes[:2], ("elastic", "contact")):
+        keys = list(dict.fromkeys((r["integrator"], r["stiffness_scale"]) for r in rows
+                                  if r["level"] == level))
+        for y, key in enumerate(keys):
+            for r in rows:
+                if r["level"] == level and (r["integrator"], r["stiffness_scale"]) == key:
+                    ax.scatter(r["dt_s"], y, color=colour[r["status"]], s=60)
+        ax.set_yticks(range(len(keys)))
+        ax.set_yticklabels([f"{i}" + (f" K x{s:g}" if s != 1.0 else "") for i, s in keys], fontsize=8)
+        ax.set_xscale("log")
+        ax.set_xlabel("time step (s)")
+        ax.set_title(f"{level} level", fontsize=10)
+        ax.grid(True, which="both", lw=0.3)
+    axes[0].axvline(limits["central-difference 2/omega_max_s"], color="k", ls="--", lw=0.8,
+                    label="2/omega_max")
+    for status, c in colour.items():
+        axes[0].scatter([], [], color=c, label=status)
+    axes[0].legend(fontsize=7, loc="lower right")
+    paper = sorted((r for r in rows if r["level"] == "paper"), key=lambda r: r["dt_s"])
+    h = np.array([r["dt_s"] for r in paper])
+    v = np.array([r["velocity_mean_peak"] for r in paper])
+    axes[2].loglog(h, v * 1e3, "o-", color="tab:orange", label="paper level")
+    if len(h):
+        axes[2].loglog(h, v[0] * 1e3 * h[0] / h, "k:", lw=0.8, label="proportional to 1/dt")
+    axes[2].set_xlabel("time step (s)")
+    axes[2].set_ylabel("ensemble mean of max |velocity error|, largest of x, y, z (mm/s)")
+    axes[2].set_title("paper level: error against time step", fontsize=10)
+    axes[2].legend(fontsize=7)
+    axes[2].grid(True, which="both", lw=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+

@@ -1,0 +1,115 @@
+"""Speed/accuracy and stability studies: the commands on the smoke scene, and their pieces."""
+import csv
+import dataclasses
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from pipeline.cli import main
+from pipeline.study import STATISTICS, pareto_front, recommend, relative_errors
+from pipeline.store import DIRECTIONS, QUANTITIES
+from rss6core.contact_dynamics import simulate_contact
+from rss6core.clearance import draw_clearances
+from tests.conftest import CONFIGS
+
+SMOKE = str(CONFIGS / "smoke.toml")
+
+
+def _rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.fixture(scope="module")
+def tradeoff_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tradeoff")
+    assert main(["tradeoff", SMOKE, "-n", "1", "-o", str(out)]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def stability_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("stability")
+    assert main(["stability", SMOKE, "-n", "1", "-o", str(out), "--horizon", "0.05"]) == 0
+    return out
+
+
+def test_tradeoff_writes_every_setting_with_finite_columns(tradeoff_dir, capsys):
+    rows = _rows(tradeoff_dir / "tradeoff.csv")
+    stats = [f"rel_err_{q}_{d}_{s}" for q in QUANTITIES for d in DIRECTIONS for s in STATISTICS]
+    for col in ["model", "integrator", "dt_s", "elements_per_link", "modes",
+                "seconds_per_realization"] + stats:
+        assert col in rows[0], col
+    assert {r["model"] for r in rows} >= {"quasi-static", "elastic", "paper", "contact"}
+    for r in rows:
+        assert all(np.isfinite(float(r[c])) for c in ["dt_s", "seconds_per_realization"] + stats)
+        assert float(r["seconds_per_realization"]) > 0
+    ds = xr.open_dataset(tradeoff_dir / "tradeoff.nc")
+    ref = ds["relative_error"].sel(setting=ds.attrs["reference"])
+    assert float(ref.max()) == 0.0                               # the reference against itself
+    assert float(ds["reference_change"].max()) < 0.2             # halving its step changes little
+    assert (tradeoff_dir / "tradeoff.png").stat().st_size > 10_000
+
+
+def test_stability_map_and_the_explicit_limit(stability_dir):
+    rows = _rows(stability_dir / "stability.csv")
+    for col in ("level", "integrator", "dt_s", "status", "max_rel_change", "seconds_per_realization"):
+        assert col in rows[0]
+    assert {r["status"] for r in rows} <= {"stable", "inaccurate", "failed"}
+    assert all(np.isfinite(float(r[c])) for r in rows for c in ("dt_s", "max_rel_change",
+                                                                 "seconds_per_realization"))
+    explicit = [r for r in rows if r["integrator"].startswith("central-difference")]
+    from rss6core import load_scene
+    from rss6core.models import natural_frequencies
+    limit = 2.0 / natural_frequencies(load_scene(SMOKE))[-1]
+    for r in explicit:      # stable below 2/omega_max, diverging above it (within 3 %)
+        h = float(r["dt_s"])
+        if h < 0.97 * limit:
+            assert r["status"] != "failed", r
+        if h > 1.03 * limit:
+            assert r["status"] == "failed", r
+    for r in rows:          # the implicit elastic methods are unconditionally stable
+        if r["level"] == "elastic" and not r["integrator"].startswith("central"):
+            assert r["status"] != "failed", r
+    paper = sorted((r for r in rows if r["level"] == "paper"), key=lambda r: float(r["dt_s"]))
+    v = [float(r["velocity_mean_peak_m_s"]) for r in paper]
+    assert all(a > b for a, b in zip(v, v[1:]))  # the paper level's error grows as the step shrinks
+    assert (stability_dir / "stability.png").stat().st_size > 10_000
+
+
+def test_pareto_front_keeps_only_undominated_settings():
+    cost = np.array([1.0, 2.0, 3.0, 4.0, 0.5])
+    error = np.array([0.5, 0.6, 0.1, 0.05, 0.9])
+    assert pareto_front(cost, error).tolist() == [4, 0, 2, 3]
+
+
+def test_relative_error_floor_and_recommendation():
+    ref = np.zeros((3, 6, 2))
+    ref[:, :3] = 1.0
+    ref[:, 2] = 1e-9                 # a vanishing component is measured against 0.1 % of the largest
+    stats = ref + 1e-6
+    rel = relative_errors(stats, ref)
+    assert rel[:, 0].max() == pytest.approx(1e-6)
+    assert rel[:, 2].max() == pytest.approx(1e-6 / 1e-3)
+    ds = xr.Dataset({"seconds_per_realization": ("setting", [10.0, 1.0, 2.0, 0.5]),
+                     "max_relative_error": ("setting", [0.0, 0.04, 0.01, 0.2]),
+                     "failed": ("setting", [0, 0, 0, 0])},
+                    coords={"setting": ["ref", "a", "b", "c"]}, attrs={"reference": "ref"})
+    rec = recommend(ds, 0.05)
+    assert rec["setting"] == "a" and rec["speedup_vs_reference"] == pytest.approx(10.0)
+    assert recommend(ds, 0.001)["setting"] is None
+
+
+def test_settle_time_leaves_the_start_up_out_of_the_peaks(smoke):
+    scene = dataclasses.replace(smoke, trajectory=dataclasses.replace(smoke.trajectory, duration=0.06))
+    draws = [draw_clearances(scene, 0, 0)]
+    full = simulate_contact(scene, draws)
+    late = simulate_contact(scene, draws, settle=0.03)
+    assert np.array_equal(full.displacement, late.displacement)   # the motion is the same
+    after = late.t >= 0.03
+    for q, hist in enumerate((late.displacement, late.velocity, late.acceleration)):
+        sampled = np.abs(hist[0, after]).max(0)
+        assert np.all(late.peak[0, q] >= sampled)               # every internal step counts ...
+        assert np.all(late.peak[0, q] <= full.peak[0, q])       # ... but none before the settle time
+    assert np.any(late.peak[0, 2] < full.peak[0, 2])            # the start-up impacts are left out
