@@ -170,6 +170,16 @@ def _stability(args) -> int:
     return 0
 
 
+def _study_arguments(p, output: str, n: int, tolerance_help: str) -> None:
+    p.add_argument("config", nargs="?", default="paper",
+                   help="scene TOML file or embedded scene name (default: paper)")
+    p.add_argument("-o", "--output", default=output, help=f"output folder (default: {output})")
+    p.add_argument("-n", type=_positive_int, default=n, help=f"realisations per setting (default {n})")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--tolerance", type=_positive_float, default=0.05,
+                   help=f"{tolerance_help} (default 0.05)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rss6", description="Joint clearance and link elasticity errors of a 6-RSS robot.")
@@ -227,23 +237,11 @@ def build_parser() -> argparse.ArgumentParser:
     pl.set_defaults(func=_plot)
 
     tr = sub.add_parser("tradeoff", help="cost and error of every model level, integrator, step and mesh")
-    tr.add_argument("config", nargs="?", default="paper",
-                    help="scene TOML file or embedded scene name (default: paper)")
-    tr.add_argument("-o", "--output", default="tradeoff", help="output folder (default: tradeoff)")
-    tr.add_argument("-n", type=_positive_int, default=8, help="realisations per setting (default 8)")
-    tr.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    tr.add_argument("--tolerance", type=_positive_float, default=0.05,
-                    help="relative error allowed on every statistic (default 0.05)")
+    _study_arguments(tr, "tradeoff", 8, "relative error allowed on every statistic")
     tr.set_defaults(func=_tradeoff)
 
     sb = sub.add_parser("stability", help="time-step sweeps: stable, inaccurate or failed")
-    sb.add_argument("config", nargs="?", default="paper",
-                    help="scene TOML file or embedded scene name (default: paper)")
-    sb.add_argument("-o", "--output", default="stability", help="output folder (default: stability)")
-    sb.add_argument("-n", type=_positive_int, default=2, help="realisations per clearance run (default 2)")
-    sb.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    sb.add_argument("--tolerance", type=_positive_float, default=0.05,
-                    help="change vs the finest step that counts as inaccurate (default 0.05)")
+    _study_arguments(sb, "stability", 2, "change vs the finest step that counts as inaccurate")
     sb.add_argument("--horizon", type=_positive_float, default=0.2,
                     help="simulated time of the contact sweeps, s (default 0.2)")
     sb.set_defaults(func=_stability)

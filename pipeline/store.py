@@ -11,7 +11,8 @@ import xarray as xr
 
 from rss6core import __version__
 
-__all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "display_unit", "run_dataset", "write_netcdf"]
+__all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "display_unit", "error_summaries", "run_dataset",
+           "write_netcdf"]
 
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
 QUANTITIES = ("displacement", "velocity", "acceleration")
@@ -52,7 +53,7 @@ def _history(result) -> np.ndarray:
     return np.stack([result.displacement, result.velocity, result.acceleration])
 
 
-def _summaries(result, settle: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def error_summaries(result, settle: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Max and mean over t >= ``settle`` (s) of |error| (quantity, direction); NaN where nothing finite
     was computed.  The contact level's maxima come from every internal step after ``settle``."""
     err = np.abs(_history(result))[:, np.asarray(result.t) >= settle - 1e-12]
@@ -70,7 +71,7 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
     """One simulation as a self-describing Dataset: error histories, summaries, provenance."""
     err = _history(result)
     summary_attrs = {"units": MIXED_UNITS, "cell_methods": "time: maximum"}
-    peak, mean = _summaries(result, scene.simulation.settle_time)
+    peak, mean = error_summaries(result, scene.simulation.settle_time)
     extra = {}
     if result.contact_force_peak is not None:
         extra["max_contact_force"] = (("joint",), result.contact_force_peak, _CONTACT_ATTRS)
@@ -127,7 +128,7 @@ class EnsembleFileError(ValueError):
 def realization_dataset(result, draw, realization: int, store: str, settle: float = 0.0) -> xr.Dataset:
     """One realisation as a length-1 slice of the ensemble file (MODEL.md section 7); its summaries
     leave out t < ``settle`` (s)."""
-    peak, mean = _summaries(result, settle)
+    peak, mean = error_summaries(result, settle)
     size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
     axial = np.concatenate([draw.axial_size, np.full(12, np.nan)])
     ecc = np.concatenate([draw.e_A, draw.e_C, draw.e_B])

@@ -20,7 +20,7 @@ import xarray as xr
 
 from rss6core.models import simulate_batch
 
-from .store import DIRECTIONS, QUANTITIES, _summaries
+from .store import DIRECTIONS, QUANTITIES, error_summaries
 
 __all__ = ["Setting", "STATISTICS", "measure", "relative_errors", "default_settings", "tradeoff",
            "pareto_front", "recommend", "write_tradeoff", "stability", "write_stability"]
@@ -60,7 +60,7 @@ def measure(scene, setting: Setting, n: int, seed: int = 0) -> dict:
     results = simulate_batch(_scene_for(scene, setting), setting.model, setting.integrator, setting.dt,
                              setting.elements, seed, range(n))
     wall = (time.perf_counter() - start) / n
-    peaks = np.stack([_summaries(r, scene.simulation.settle_time)[0] for r in results])  # (n, 3, 6)
+    peaks = np.stack([error_summaries(r, scene.simulation.settle_time)[0] for r in results])  # (n, 3, 6)
     failed = [r for r in results if r.status != "finished"]
     with np.errstate(all="ignore"):
         stats = np.stack([np.nanmean(peaks, 0), np.nanquantile(peaks, 0.95, 0)], -1)
@@ -365,7 +365,7 @@ def _explicit_sweep(scene, limit, steps, tolerance, seed, log):
         start = time.perf_counter()
         r = simulate_elastic(still, model.elements, Integrator.central_difference(), h, model=model,
                              initial=(d, v, a), divergence_limit=1e-3)
-        peaks = _summaries(r)[0]
+        peaks = error_summaries(r)[0]
         runs[h] = {"statistics": np.stack([peaks, peaks], -1), "failed": int(r.status != "finished"),
                    "message": r.message, "seconds_per_realization": time.perf_counter() - start}
     ref = runs[min(runs)]
@@ -435,15 +435,17 @@ def _plot_stability(rows, limits, path) -> None:
                     label="2/omega_max")
     for status, c in colour.items():
         axes[0].scatter([], [], color=c, label=status)
-    axes[0].legend(fontsize=7, loc="lower right")
+    axes[0].legend(fontsize=7, loc="center left")
     paper = sorted((r for r in rows if r["level"] == "paper"), key=lambda r: r["dt_s"])
     h = np.array([r["dt_s"] for r in paper])
     v = np.array([r["velocity_mean_peak"] for r in paper])
     axes[2].loglog(h, v * 1e3, "o-", color="tab:orange", label="paper level")
     if len(h):
         axes[2].loglog(h, v[0] * 1e3 * h[0] / h, "k:", lw=0.8, label="proportional to 1/dt")
+    from matplotlib.ticker import NullFormatter
+    axes[2].xaxis.set_minor_formatter(NullFormatter())
     axes[2].set_xlabel("time step (s)")
-    axes[2].set_ylabel("ensemble mean of max |velocity error|, largest of x, y, z (mm/s)")
+    axes[2].set_ylabel("mean over realisations of max |velocity error|,\nlargest of x, y, z (mm/s)")
     axes[2].set_title("paper level: error against time step", fontsize=10)
     axes[2].legend(fontsize=7)
     axes[2].grid(True, which="both", lw=0.3)

@@ -25,7 +25,7 @@ def _spec(seed=3, model="quasi-static", store="summary", text=None):
     return EnsembleSpec(text or SMOKE.read_text(), str(SMOKE), model, "newmark", 1e-3, 4, seed, store)
 
 
-def _summaries(ds):
+def error_summaries(ds):
     return np.concatenate([ds["max_abs_error"].values.ravel(), ds["mean_abs_error"].values.ravel(),
                            ds["eccentricity"].values.ravel()])
 
@@ -39,10 +39,10 @@ def reference(tmp_path_factory):
 def test_same_seed_same_summaries_any_workers_and_chunks(reference, tmp_path):
     ref, _ = reference
     one = run_ensemble(_spec(), 10, tmp_path / "one.nc", workers=1, chunk=3, progress=False)
-    assert np.array_equal(_summaries(one), _summaries(ref))
+    assert np.array_equal(error_summaries(one), error_summaries(ref))
     assert list(one.realization.values) == list(range(10))
     other_seed = run_ensemble(_spec(seed=4), 10, tmp_path / "s4.nc", workers=1, chunk=10, progress=False)
-    assert not np.array_equal(_summaries(other_seed), _summaries(ref))
+    assert not np.array_equal(error_summaries(other_seed), error_summaries(ref))
 
 
 def test_file_reads_correctly_with_netcdf4_directly(reference):
@@ -113,7 +113,7 @@ def test_extending_an_ensemble_keeps_what_is_stored(reference, tmp_path):
     path = tmp_path / "grow.nc"
     run_ensemble(_spec(), 4, path, workers=1, chunk=2, progress=False)
     grown = run_ensemble(_spec(), 10, path, workers=1, chunk=2, progress=False)
-    assert np.array_equal(_summaries(grown), _summaries(ref))
+    assert np.array_equal(error_summaries(grown), error_summaries(ref))
 
 
 def test_parts_left_beside_a_finished_file_add_no_duplicates(reference, tmp_path):
@@ -126,7 +126,7 @@ def test_parts_left_beside_a_finished_file_add_no_duplicates(reference, tmp_path
     write_netcdf(open_ensemble(path).isel(realization=[0, 1]), parts / "chunk-0000000-0000001.nc")
     again = run_ensemble(_spec(), 10, path, workers=1, chunk=5, progress=False)
     assert list(again.realization.values) == list(range(10)) and not parts.exists()
-    assert np.array_equal(_summaries(open_ensemble(path)), _summaries(ref))
+    assert np.array_equal(error_summaries(open_ensemble(path)), error_summaries(ref))
 
 
 def _cli(*args):
@@ -153,7 +153,7 @@ def test_killed_run_resumes_to_the_same_file(tmp_path):
     whole = tmp_path / "whole.nc"
     subprocess.run(_cli(*args, "-o", str(whole)), check=True, capture_output=True)
     a, b = open_ensemble(killed), open_ensemble(whole)
-    assert np.array_equal(_summaries(a), _summaries(b)) and not parts.exists()
+    assert np.array_equal(error_summaries(a), error_summaries(b)) and not parts.exists()
 
 
 def test_scheduler_address_runs_on_an_existing_cluster(reference, tmp_path):
@@ -163,7 +163,7 @@ def test_scheduler_address_runs_on_an_existing_cluster(reference, tmp_path):
                       dashboard_address=None) as cluster:
         ds = run_ensemble(_spec(), 10, tmp_path / "sched.nc", scheduler=cluster.scheduler_address,
                           chunk=5, progress=False)
-    assert np.array_equal(_summaries(ds), _summaries(ref))
+    assert np.array_equal(error_summaries(ds), error_summaries(ref))
 
 
 def test_smoke_ensemble_through_the_cli(tmp_path, capsys):
