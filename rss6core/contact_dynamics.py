@@ -195,15 +195,15 @@ def _contacts(e, de, w, joints: _Joints, impact, law, omega, radius):
     e, de (..., 6, 3, 3) relative displacements and velocities [A, C, B], base
     frame; omega (6, 3, 3) the ideal relative angular velocities; radius (3, 1)
     the journal and sphere radii.  Returns forces (..., 6, 3, 3), their
-    Jacobians (..., 6, 3, 3, 3) and penetrations, rates and F_N (..., 6, 4)
-    ordered [A radial, A axial, C, B].
+    Jacobians d/de and d/dde (..., 6, 3, 3, 3), and penetrations and their rates
+    (..., 6, 4) ordered [A radial, A axial, C, B].
     """
     Pw = np.eye(3) - w[:, :, None] * w[:, None, :]
     eA = e[..., 0, :]
     radial = np.concatenate([(Pw @ eA[..., None])[..., None, :, 0], e[..., 1:, :]], -2)
     size = np.stack([joints.radial, joints.size_C, joints.size_B], -1)
     stiffness = np.stack([joints.k_A, joints.k_C, joints.k_B], -1)
-    f, De, Dv, d, r, F = _ball(radial, de, size, stiffness, impact[..., [0, 2, 3]], law, omega, radius)
+    f, De, Dv, d, r, _ = _ball(radial, de, size, stiffness, impact[..., [0, 2, 3]], law, omega, radius)
     s = (w * eA).sum(-1)
     sign = np.where(s >= 0.0, 1.0, -1.0)
     na = sign[..., None] * w
