@@ -65,8 +65,7 @@ def measure(scene, setting: Setting, n: int, seed: int = 0) -> dict:
     with np.errstate(all="ignore"):
         stats = np.stack([np.nanmean(peaks, 0), np.nanquantile(peaks, 0.95, 0)], -1)
     return {"seconds_per_realization": wall, "statistics": stats, "failed": len(failed),
-            "message": failed[0].message if failed else "",
-            "steps": int(min(r.steps for r in results))}
+            "message": failed[0].message if failed else ""}
 
 
 def relative_errors(stats: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -195,7 +194,7 @@ def recommend(ds: xr.Dataset, tolerance: float) -> dict:
             "seconds_per_realization": float(cost[i]), "speedup_vs_reference": float(cost[ref] / cost[i])}
 
 
-def _columns(ds: xr.Dataset) -> list[str]:
+def _columns() -> list[str]:
     return [f"rel_err_{q}_{d}_{s}" for q in QUANTITIES for d in DIRECTIONS for s in STATISTICS]
 
 
@@ -207,7 +206,7 @@ def write_tradeoff(ds: xr.Dataset, outdir, tolerance: float) -> dict:
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     header = ["setting", "model", "integrator", "dt_s", "elements_per_link", "modes", "stiffness_scale",
-              "seconds_per_realization", "failed", "max_rel_error"] + _columns(ds)
+              "seconds_per_realization", "failed", "max_rel_error"] + _columns()
     rows = []
     for i in range(ds.sizes["setting"]):
         rel = ds["relative_error"].values[i].reshape(-1)
@@ -238,9 +237,7 @@ _COLOURS = {"rigid": "k", "quasi-static": "tab:green", "elastic": "tab:blue", "p
 
 
 def _plot_tradeoff(ds, path, tolerance, rec) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .plots import plt   # the Agg backend, set once there
     cost = ds["seconds_per_realization"].values
     err = np.maximum(ds["max_relative_error"].values, 1e-6)
     labels, models = ds["setting"].values, ds["model"].values
@@ -315,15 +312,8 @@ def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon
 
     def sweep(sc, level, integrator, steps, scale=1.0, n_real=n):
         runs = {h: measure(sc, Setting(level, integrator, h, el, scale), n_real, seed) for h in steps}
-        ref = runs[min(steps)]
-        for h in sorted(steps):
-            status, reason, change = _classify(runs[h], ref, tolerance)
-            rows.append({"level": level, "integrator": integrator, "dt_s": h, "stiffness_scale": scale,
-                         "horizon_s": sc.trajectory.duration, "status": status, "reason": reason,
-                         "max_rel_change": change,
-                         "seconds_per_realization": runs[h]["seconds_per_realization"],
-                         "velocity_mean_peak": float(np.nanmax(runs[h]["statistics"][1, :3, 0]))})
-            log(f"  {level} {integrator} dt {h:.3g} s K x{scale:g}: {status} {reason}")
+        rows.extend(_rows(runs, level, integrator, scale, sc.trajectory.duration, tolerance, log,
+                          lambda h: f"dt {h:.3g} s K x{scale:g}"))
 
     T = scene.trajectory.duration
 
@@ -368,17 +358,23 @@ def _explicit_sweep(scene, limit, steps, tolerance, seed, log):
         peaks = error_summaries(r)[0]
         runs[h] = {"statistics": np.stack([peaks, peaks], -1), "failed": int(r.status != "finished"),
                    "message": r.message, "seconds_per_realization": time.perf_counter() - start}
+    return _rows(runs, "elastic", "central-difference (undamped)", 1.0, H, tolerance, log,
+                 lambda h: f"dt {h:.4g} s = {h / limit:.3f} x 2/omega_max")
+
+
+def _rows(runs: dict, level, integrator, scale, horizon, tolerance, log, describe) -> list[dict]:
+    """Rows of the stability map for one sweep {step: measured run}, each classified against the
+    sweep's finest step; ``describe(step)`` names the step in the log line."""
     ref = runs[min(runs)]
     rows = []
-    for h, run in runs.items():
-        status, reason, change = _classify(run, ref, tolerance)
-        rows.append({"level": "elastic", "integrator": "central-difference (undamped)", "dt_s": h,
-                     "stiffness_scale": 1.0, "horizon_s": H, "status": status, "reason": reason,
+    for h in sorted(runs):
+        status, reason, change = _classify(runs[h], ref, tolerance)
+        rows.append({"level": level, "integrator": integrator, "dt_s": h, "stiffness_scale": scale,
+                     "horizon_s": horizon, "status": status, "reason": reason,
                      "max_rel_change": change if np.isfinite(change) else 1e300,
-                     "seconds_per_realization": run["seconds_per_realization"],
-                     "velocity_mean_peak": float(np.nanmax(run["statistics"][1, :3, 0]))})
-        log(f"  elastic central-difference (undamped) dt {h:.4g} s = {h / limit:.3f} x 2/omega_max: "
-            f"{status} {reason}")
+                     "seconds_per_realization": runs[h]["seconds_per_realization"],
+                     "velocity_mean_peak": float(np.nanmax(runs[h]["statistics"][1, :3, 0]))})
+        log(f"  {level} {integrator} {describe(h)}: {status} {reason}")
     return rows
 
 
@@ -413,9 +409,7 @@ def write_stability(rows, limits, outdir) -> None:
 
 
 def _plot_stability(rows, limits, path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .plots import plt   # the Agg backend, set once there
     colour = {"stable": "tab:green", "inaccurate": "tab:orange", "failed": "tab:red"}
     fig, axes = plt.subplots(1, 3, figsize=(15, 5), gridspec_kw={"width_ratios": [1.2, 1.2, 1]})
     for ax, level in zip(axes[:2], ("elastic", "contact")):

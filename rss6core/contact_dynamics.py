@@ -242,7 +242,8 @@ class ContactBatch:
 
 
 class _Chunk:
-    """Shared, per-instant data of a run of steps: joint maps, loads, ideal angular velocities."""
+    """Shared, per-instant data of a run of steps: joint maps, loads, ideal angular velocities
+    (and the joint radii [journal, sphere, sphere] (3, 1), m, that the contact evaluation needs)."""
 
     def __init__(self, scene, jm: JointModel, t: np.ndarray):
         motion = rigid_motion(scene, t)
@@ -258,7 +259,8 @@ class _Chunk:
         w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
         w_rod = rod_angular_motion(motion)[1]
         self.omega = np.stack([w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :]], -2)
-        self.motion = motion
+        law = scene.contact
+        self.radius = np.array([[law.journal_radius], [law.sphere_radius], [law.sphere_radius]])
 
 
 def _platform_mass(jm: JointModel, Ip: np.ndarray) -> np.ndarray:
@@ -315,10 +317,8 @@ class _Contacts:
 
 
 def _evaluate(scene, ch: _Chunk, k, joints, impact, xb, xp, vb, vp):
-    law = scene.contact
-    radius = np.array([[law.journal_radius], [law.sphere_radius], [law.sphere_radius]])
     return _contacts(_relative(ch, k, xb, xp), _relative(ch, k, vb, vp), scene.geometry.w, joints,
-                     impact, law, ch.omega[k], radius)
+                     impact, scene.contact, ch.omega[k], ch.radius)
 
 
 def _generalized(ch: _Chunk, k, f):
