@@ -22,7 +22,9 @@ Every link's matrices are constant in its frame, so each step condenses the
 links onto their joint nodes once for the whole batch; Newton iterations on the
 contact forces then solve, per realisation, a block-arrow system of 12 joint DOFs
 per leg bordered by the 6 platform DOFs.  Realisations are an array axis: the
-per-step matrices, factorizations and rigid loads are shared by the batch.
+per-step matrices, factorizations and rigid loads are shared by the batch; the
+Newton iteration itself runs compiled (:mod:`.contact_kernel`), one realisation
+after another, with the vectorised numpy functions below as its reference.
 """
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ import numpy as np
 from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
                        platform_point_map, split)
 from .beam import link_matrices
+from .contact_kernel import newton_step
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
 from .elastic import SimulationResult, quasi_static_state, time_grid
@@ -46,6 +49,7 @@ __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactBatch"
 TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
 TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
 MAX_ITERATIONS = 60
+ENGINES = ("compiled", "numpy")
 
 
 @dataclass(frozen=True)
@@ -255,7 +259,7 @@ class _Chunk:
         G = np.zeros(Rc.shape[:2] + (9, 12))                   # joint nodes -> [e_A, e_C, e_B]
         G[..., 0:3, 0:3], G[..., 3:6, 3:6], G[..., 3:6, 6:9], G[..., 6:9, 9:12] = Rc, -Rc, Rr, Rr
         self.G, self.Gt = G, np.ascontiguousarray(np.swapaxes(G, -1, -2))
-        self.Rr = Rr
+        self.Rr = np.ascontiguousarray(Rr)
         w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
         w_rod = rod_angular_motion(motion)[1]
         self.omega = np.stack([w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :]], -2)
@@ -360,6 +364,70 @@ def _solve_arrow(L, border, lower, P, rl, rp):
     return u - (E @ (border @ y[..., None, :, None]))[..., 0], y
 
 
+def _newton_compiled(scene, ch: _Chunk, j, params, law_v, w_axes, joints, Sl, Sp, impact,
+                     rb, rp, db, dpp, vb, vpp, ab, ap, bh2, gh, w):
+    """One step's Newton iteration on the joint nodes, compiled (:func:`.contact_kernel.newton_step`)."""
+    R = ab.shape[0]
+    f = np.empty((R, 6, 3, 3))
+    gl, gp = np.empty((R, 6, 12)), np.empty((R, 6))
+    delta, rate = np.empty((R, 6, 4)), np.empty((R, 6, 4))
+    done, count = np.zeros(R, np.bool_), np.zeros(R, np.int64)
+    newton_step(ch.G[j], ch.J[j], ch.Rr[j], ch.omega[j], w_axes, ch.radius[:, 0], Sl,
+                np.ascontiguousarray(Sp), params, law_v, impact, rb, rp, db, dpp, vb, vpp, ab, ap,
+                float(bh2), float(gh), float(w), TOL_DISPLACEMENT, TOL_VELOCITY, MAX_ITERATIONS,
+                f, gl, gp, delta, rate, done, count)
+    return ab, ap, f, gl, gp, done, count, delta, rate
+
+
+def _newton_numpy(scene, ch: _Chunk, j, params, law_v, w_axes, joints, Sl, Sp, impact,
+                  rb, rp, db, dpp, vb, vpp, ab, ap, bh2, gh, w):
+    """The same iteration vectorised over the batch with numpy: the compiled kernel's reference."""
+    R = ab.shape[0]
+    done = np.zeros(R, bool)
+    count = np.zeros(R, np.int64)
+    last = np.full(R, np.inf)           # residual norm at the last accepted iterate
+    gain = np.full(R, np.inf)           # |update| / |residual| of the last Newton solve
+    lam = np.ones(R)                    # step length of the last update
+    base_l, base_p = ab, ap
+    step_l, step_p = np.zeros_like(ab), np.zeros_like(ap)
+    for it in range(MAX_ITERATIONS + 1):
+        xb, xp = db + bh2 * ab, dpp + bh2 * ap
+        ub, up = vb + gh * ab, vpp + gh * ap
+        f, De, Dv, delta, rate = _evaluate(scene, ch, j, joints, impact, xb, xp, ub, up)
+        gl, gp = _generalized(ch, j, f)
+        res_l = ab @ Sl.T - rb - w * gl
+        res_p = (Sp @ ap[..., None])[..., 0] - rp - w * gp
+        norm = np.sqrt((res_l ** 2).sum((-1, -2)) + (res_p ** 2).sum(-1))
+        # converged when the update this residual calls for (the last solve's gain times
+        # it) moves no joint by more than the tolerances: the iterate just evaluated is kept
+        est = gain * norm
+        if it:   # the first iterate has no gain yet
+            done |= (bh2 * est <= TOL_DISPLACEMENT) & (gh * est <= TOL_VELOCITY)
+        done |= norm == 0.0
+        if done.all() or it == MAX_ITERATIONS:
+            break
+        # backtrack where the full Newton step made the residual worse (contact kinks)
+        worse = ~done & (norm > last) & (lam > 1.0 / 256.0)
+        if worse.any():
+            lam = np.where(worse, 0.5 * lam, lam)
+            ab = np.where(worse[:, None, None], base_l - lam[:, None, None] * step_l, ab)
+            ap = np.where(worse[:, None], base_p - lam[:, None] * step_p, ap)
+            count += worse
+            continue
+        last = np.where(done, last, norm)
+        D = w * (bh2 * De + gh * Dv)
+        L, border, lower, P = _tangent(ch, j, D, Sl, Sp)
+        dl, dpl = _solve_arrow(L, border, lower, P, res_l, res_p)
+        # converged realisations keep their iterate: a result never depends on its batch
+        dl, dpl = np.where(done[:, None, None], 0.0, dl), np.where(done[:, None], 0.0, dpl)
+        size = np.abs(np.concatenate([dl.reshape(R, -1), dpl], -1)).max(-1)
+        gain = np.where(done, gain, size / np.maximum(norm, 1e-300))
+        base_l, base_p, step_l, step_p, lam = ab, ap, dl, dpl, np.ones(R)
+        ab, ap = ab - dl, ap - dpl
+        count += ~done
+    return ab, ap, f, gl, gp, done, count, delta, rate
+
+
 def _lift(jm: JointModel, maps, x: np.ndarray) -> np.ndarray:
     """An elastic-level (ideal joint) state in the contact level's layout: joints closed."""
     c, f, p = split(jm.elastic, x)
@@ -406,18 +474,23 @@ def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
 def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | None = None,
                      dt: float | None = None, output_step: float | None = None,
                      model: JointModel | None = None, chunk: int = 200,
-                     divergence_limit: float = 1.0, settle: float | None = None) -> ContactBatch:
+                     divergence_limit: float = 1.0, settle: float | None = None,
+                     engine: str = "compiled") -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (see :func:`_simulate_contact`).
 
     Overflow in a diverging realisation is detected and reported as its failure, not warned about.
+    ``engine`` runs each step's Newton iteration "compiled" (numba, :mod:`.contact_kernel`) or
+    with "numpy" (vectorised over the batch; about 5x slower, kept as the kernel's reference).
     """
+    if engine not in ENGINES:
+        raise ValueError(f"contact engine must be one of {', '.join(ENGINES)}, not {engine!r}")
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         return _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
-                                 divergence_limit, settle)
+                                 divergence_limit, settle, engine)
 
 
 def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
-                      divergence_limit, settle) -> ContactBatch:
+                      divergence_limit, settle, engine) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (one realisation each).
 
     ``dt`` is the internal step and ``integrator`` the method (default: the scene's
@@ -456,58 +529,28 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     status, message = ["finished"] * R, [""] * R
     steps, iters = np.zeros(R, np.int64), np.zeros(R, np.int64)
 
+    params = np.ascontiguousarray(np.stack([joints.radial, joints.axial, joints.size_C, joints.size_B,
+                                            joints.k_A, joints.k_C, joints.k_B], -1))
+    law = scene.contact
+    law_v = np.array([law.exponent, law.restitution, law.friction_coefficient, law.stick_velocity,
+                      law.slip_velocity])
+    w_axes = np.ascontiguousarray(scene.geometry.w, dtype=float)
+    solve = _newton_numpy if engine == "numpy" else _newton_compiled
+
     def newton(ch, j, cond, coef_p, rhs, dp, vp, a_guess, bh2, gh, w):
-        """Joint-node accelerations for a step; returns a, contact forces, converged flags."""
+        """Accelerations for a step; returns a, contact forces, generalised contact forces,
+        converged flags, iteration counts, penetrations, their rates and the impact speeds used."""
         Mp = _platform_mass(jm, ch.Ip[j])
         rc, rr, rp = split(jm, rhs)
         rb, keep = cond.condense(rc, rr)
         db, dpp = _joint_nodes(jm, dp)
         vb, vpp = _joint_nodes(jm, vp)
         ab, ap = _joint_nodes(jm, a_guess)
-        Sp = coef_p * Mp
         impact = contacts.impact()
-        done = np.zeros(R, bool)
-        count = np.zeros(R, np.int64)
-        last = np.full(R, np.inf)           # residual norm at the last accepted iterate
-        gain = np.full(R, np.inf)           # |update| / |residual| of the last Newton solve
-        lam = np.ones(R)                    # step length of the last update
-        base_l, base_p = ab, ap
-        step_l, step_p = np.zeros_like(ab), np.zeros_like(ap)
-        for it in range(MAX_ITERATIONS + 1):
-            xb, xp = db + bh2 * ab, dpp + bh2 * ap
-            ub, up = vb + gh * ab, vpp + gh * ap
-            f, De, Dv, delta, rate = _evaluate(scene, ch, j, joints, impact, xb, xp, ub, up)
-            gl, gp = _generalized(ch, j, f)
-            res_l = ab @ cond.legs.T - rb - w * gl
-            res_p = (Sp @ ap[..., None])[..., 0] - rp - w * gp
-            norm = np.sqrt((res_l ** 2).sum((-1, -2)) + (res_p ** 2).sum(-1))
-            # converged when the update this residual calls for (the last solve's gain times
-            # it) moves no joint by more than the tolerances: the iterate just evaluated is kept
-            est = gain * norm
-            if it:   # the first iterate has no gain yet
-                done |= (bh2 * est <= TOL_DISPLACEMENT) & (gh * est <= TOL_VELOCITY)
-            done |= norm == 0.0
-            if done.all() or it == MAX_ITERATIONS:
-                break
-            # backtrack where the full Newton step made the residual worse (contact kinks)
-            worse = ~done & (norm > last) & (lam > 1.0 / 256.0)
-            if worse.any():
-                lam = np.where(worse, 0.5 * lam, lam)
-                ab = np.where(worse[:, None, None], base_l - lam[:, None, None] * step_l, ab)
-                ap = np.where(worse[:, None], base_p - lam[:, None] * step_p, ap)
-                count += worse
-                continue
-            last = np.where(done, last, norm)
-            D = w * (bh2 * De + gh * Dv)
-            L, border, lower, P = _tangent(ch, j, D, cond.legs, Sp)
-            dl, dpl = _solve_arrow(L, border, lower, P, res_l, res_p)
-            # converged realisations keep their iterate: a result never depends on its batch
-            dl, dpl = np.where(done[:, None, None], 0.0, dl), np.where(done[:, None], 0.0, dpl)
-            size = np.abs(np.concatenate([dl.reshape(R, -1), dpl], -1)).max(-1)
-            gain = np.where(done, gain, size / np.maximum(norm, 1e-300))
-            base_l, base_p, step_l, step_p, lam = ab, ap, dl, dpl, np.ones(R)
-            ab, ap = ab - dl, ap - dpl
-            count += ~done
+        ab, ap, f, gl, gp, done, count, delta, rate = solve(
+            scene, ch, j, params, law_v, w_axes, joints, cond.legs, coef_p * Mp, impact,
+            rb, np.ascontiguousarray(rp), db, np.ascontiguousarray(dpp), vb,
+            np.ascontiguousarray(vpp), ab, np.ascontiguousarray(ap), bh2, gh, w)
         ac, ar = cond.recover(ab, keep, rc.shape, rr.shape)
         a = join(ac, ar, ap)
         return a, f, join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count, delta, rate, impact

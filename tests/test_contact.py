@@ -104,6 +104,28 @@ def _law():
     return ContactLaw(0.01, 0.01, 0.9, 1.5, 0.1, 1e-4, 1e-2)
 
 
+@pytest.mark.parametrize("depth, spin", [(-1e-6, 1.0), (3e-7, 0.0), (3e-7, 1e-3), (3e-7, 0.5),
+                                         (3e-7, 50.0)])
+def test_compiled_contact_pair_matches_the_vectorised_one(depth, spin):
+    """Apart; in contact sticking (no spin, tiny slip), in the friction ramp, and sliding."""
+    from rss6core.contact_kernel import ball
+    law = _law()
+    law_v = np.array([law.exponent, law.restitution, law.friction_coefficient, law.stick_velocity,
+                      law.slip_velocity])
+    rng = np.random.default_rng(9)
+    e = rng.normal(size=3)
+    e *= (2.5e-4 + depth) / np.linalg.norm(e)
+    de = 1e-5 * rng.normal(size=3)
+    omega = spin * rng.normal(size=3)
+    f, De, Dv, delta, rate, _ = _ball(e, de, 2.5e-4, 3e10, 0.05, law, omega, 0.01)
+    fc, Dec, Dvc = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
+    dc, rc = ball(e, de, 2.5e-4, 3e10, 0.05, law_v, omega, 0.01, fc, Dec, Dvc)
+    assert (dc, rc) == pytest.approx((delta, rate), rel=1e-12, abs=1e-22)
+    for mine, ref in ((fc, f), (Dec, De), (Dvc, Dv)):
+        np.testing.assert_allclose(mine, ref, rtol=1e-10, atol=1e-12 * max(np.abs(ref).max(), 1.0))
+    assert (np.abs(f).max() > 0) == (depth > 0)
+
+
 # --- paper level (L3) -------------------------------------------------------
 
 def test_paper_level_keeps_every_leg_closed_with_its_virtual_lengths(paper):
@@ -180,6 +202,24 @@ def test_contact_batch_equals_one_at_a_time_bit_for_bit(smoke):
         assert np.array_equal(one.displacement[0], batch.displacement[k])
         assert np.array_equal(one.acceleration[0], batch.acceleration[k])
         assert np.array_equal(one.contact_peak[0], batch.contact_peak[k])
+
+
+def test_compiled_and_numpy_contact_engines_agree(smoke):
+    """The compiled Newton kernel against the vectorised numpy iteration: same arithmetic in
+    another order, so equal to round-off (1e-9 of each history's largest value) with the same
+    Newton iteration counts, on a run whose joints are in contact and sliding."""
+    scene = _with(smoke, trajectory=dict(duration=0.02))
+    draws = [draw_clearances(scene, 2, r) for r in range(2)]
+    compiled = simulate_contact(scene, draws)
+    reference = simulate_contact(scene, draws, engine="numpy")
+    assert compiled.status == reference.status == ["finished"] * 2
+    assert np.array_equal(compiled.iterations, reference.iterations)
+    assert np.all(reference.contact_peak > 0)
+    for q in ("displacement", "velocity", "acceleration", "contact_peak"):
+        a, b = getattr(compiled, q), getattr(reference, q)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * np.abs(b).max())
+    with pytest.raises(ValueError, match="engine"):
+        simulate_contact(scene, draws, engine="fortran")
 
 
 @pytest.mark.parametrize("model", ["paper", "contact", "quasi-static"])
