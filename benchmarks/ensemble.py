@@ -39,7 +39,7 @@ from rss6core.models import default_integrator, default_time_step, simulate_batc
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 # counts per model: loop (one at a time), batched (one batch), workers (per throughput run)
-FULL = {"config": "paper.toml", "paper": (10, 200, 400), "contact": (1, 16, 16), "memory": (100, 1000)}
+FULL = {"config": "paper.toml", "paper": (10, 200, 400), "contact": (2, 64, 64), "memory": (100, 1000)}
 QUICK = {"config": "smoke.toml", "paper": (3, 50, 100), "contact": (1, 6, 4), "memory": (100, 1000)}
 
 

@@ -109,6 +109,19 @@ def _run(args) -> int:
     return 0
 
 
+def _report(args) -> int:
+    from .report import ReportPlan, write_report
+    plan = ReportPlan(args.n, args.family_n, args.workers, args.scheduler, args.seed)
+    try:
+        path = write_report(args.configs, args.output, plan, args.data)
+    except KeyboardInterrupt:
+        print("rss6: interrupted; finished ensembles and chunks are kept; rerun the same command "
+              "to continue", file=sys.stderr)
+        return 130
+    print(f"wrote {path}")
+    return 0
+
+
 def _stats(args) -> int:
     from .stats import ensemble_stats, format_stats
     from .store import open_ensemble
@@ -223,6 +236,20 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--store", choices=("summary", "full"), default="summary",
                      help="summary: per-realisation maxima and means; full: also time histories")
     run.set_defaults(func=_run)
+
+    rp = sub.add_parser("report", help="the paper's section 6 reproduced: OUT/results.md and figures")
+    rp.add_argument("configs", nargs="+", help="scene TOML files or embedded scene names")
+    rp.add_argument("-o", "--output", default="docs", help="output folder (default: docs)")
+    rp.add_argument("--data", help="folder of the ensemble files (default: OUTPUT/results-data)")
+    rp.add_argument("-n", type=_positive_int, default=1000,
+                    help="realisations per level and scene (default 1000)")
+    rp.add_argument("--family-n", type=_positive_int, default=100,
+                    help="realisations per joint-family run (default 100)")
+    rp.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    rp.add_argument("--workers", type=_positive_int, default=2,
+                    help="local dask workers, one thread each (default 2)")
+    rp.add_argument("--scheduler", help="address of an existing dask.distributed scheduler")
+    rp.set_defaults(func=_report)
 
     st = sub.add_parser("stats", help="error statistics of an ensemble file")
     st.add_argument("file")

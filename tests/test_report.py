@@ -1,0 +1,79 @@
+"""`rss6 report`: results.md and its figures from the files it wrote, on the smoke scene."""
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.cli import main
+from pipeline.report import OFF, PAPER_VALUES, with_clearance
+from pipeline.store import EnsembleFileError, open_ensemble
+from rss6core import parse_scene
+
+CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+
+
+def test_with_clearance_sets_only_the_clearance_keys(smoke):
+    text = with_clearance(smoke.source_text, {"spherical_C_m": 1e-5, "revolute_axial_m": 2e-5})
+    scene = parse_scene(text)
+    assert scene.clearance.spherical_C == 1e-5 and scene.clearance.revolute_axial == 2e-5
+    assert scene.clearance.spherical_B == smoke.clearance.spherical_B
+    changed = [a for a, b in zip(smoke.source_text.splitlines(), text.splitlines()) if a != b]
+    assert len(changed) == 2 and all(line.startswith(("spherical_C_m", "revolute_axial_m"))
+                                     for line in changed)
+    with pytest.raises(ValueError, match="spherical_D_m"):
+        with_clearance(smoke.source_text, {"spherical_D_m": 1e-5})
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("report")
+    assert main(["report", str(CONFIGS / "smoke.toml"), "-o", str(out), "-n", "3",
+                 "--family-n", "2"]) == 0
+    return out
+
+
+def test_report_links_figures_it_wrote(report):
+    md = (report / "results.md").read_text()
+    links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
+    assert len(links) == 4          # rigid motion, displacement, velocity, acceleration
+    for link in links:
+        png = report / link
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
+
+
+def test_report_numbers_come_from_its_files(report):
+    md = (report / "results.md").read_text()
+    data = report / "results-data"
+    contact = open_ensemble(data / "smoke_contact.nc")
+    assert contact.sizes["realization"] == 3
+    # the contact median of the per-realisation max |z displacement| in mm, as the table prints it
+    z = contact["max_abs_error"].sel(quantity="displacement", direction="z").values
+    row = next(line for line in md.splitlines() if line.startswith("| max \\|displacement error\\| | z |"))
+    cells = [c.strip() for c in row.strip("|").split(" | ")]
+    assert cells[3] == "0.0047"                                   # the paper's value
+    assert float(cells[8].split(" [")[0]) == pytest.approx(np.median(z) * 1e3, rel=5e-3)
+    # family runs: the other families at OFF, this one at the scene's clearance
+    only_c = open_ensemble(data / "smoke_contact_onlyC.nc")
+    sizes = only_c["clearance_size"].values
+    assert np.all(sizes[:, 6:12] == pytest.approx(0.25e-3)) and np.all(sizes[:, 12:] == OFF)
+    assert len(PAPER_VALUES) == 12 and md.count("| max \\|acceleration error\\|") >= 6
+
+
+def test_report_reuses_its_files_and_names_a_corrupt_one(report, tmp_path):
+    copy = tmp_path / "again"
+    shutil.copytree(report, copy)
+    (copy / "results.md").unlink()
+    before = {p.name: p.stat().st_mtime_ns for p in (copy / "results-data").iterdir()}
+    assert main(["report", str(CONFIGS / "smoke.toml"), "-o", str(copy), "-n", "3",
+                 "--family-n", "2"]) == 0
+    after = {p.name: p.stat().st_mtime_ns for p in (copy / "results-data").iterdir()}
+    assert after == before                                        # nothing rerun
+    assert (copy / "results.md").read_text() == (report / "results.md").read_text().replace(
+        str(report), str(copy))
+    elastic = copy / "results-data" / "smoke_elastic.nc"
+    elastic.write_bytes(elastic.read_bytes()[:500])
+    with pytest.raises(EnsembleFileError, match="smoke_elastic.nc"):
+        from pipeline.report import ReportPlan, write_report
+        write_report([str(CONFIGS / "smoke.toml")], copy, ReportPlan(3, 2))
