@@ -23,7 +23,7 @@ from rss6core.models import default_integrator, default_time_step
 
 from .run import EnsembleSpec, run_ensemble
 from .stats import summarize
-from .store import DIRECTIONS, open_ensemble, run_dataset, write_netcdf
+from .store import DIRECTIONS, EnsembleFileError, load_netcdf, open_ensemble, run_dataset, write_netcdf
 
 __all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "PAPER_VALUES", "OFF"]
 
@@ -227,17 +227,10 @@ def _error_figure(scene, quantity: str, files: dict, out: Path) -> Path:
 
 def _open_run(path):
     """A single-run file (the elastic level), opened into memory; EnsembleFileError if unreadable."""
-    import xarray as xr
-
-    from .store import EnsembleFileError
-    try:
-        with xr.open_dataset(path, engine="netcdf4") as ds:
-            ds = ds.load()
-    except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...
-        raise EnsembleFileError(f"{path}: not a readable netCDF file (truncated or corrupt?): "
-                                f"{exc}; delete it and rerun rss6 report") from None
+    ds = load_netcdf(path)
     if "error" not in ds:
-        raise EnsembleFileError(f"{path}: not an rss6 run file (no 'error' variable)")
+        raise EnsembleFileError(f"{path}: not an rss6 run file (no 'error' variable); delete it and "
+                                "rerun rss6 report")
     return ds
 
 

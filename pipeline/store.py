@@ -196,17 +196,22 @@ def identity(attrs: dict) -> dict:
     return {k: attrs.get(k) for k in IDENTITY}
 
 
-def open_ensemble(path) -> xr.Dataset:
-    """Open an ensemble file fully into memory; EnsembleFileError names the file and the problem."""
+def load_netcdf(path) -> xr.Dataset:
+    """Any netCDF file fully into memory; EnsembleFileError names the file if it is missing or unreadable."""
     import os
     if not os.path.exists(path):
         raise EnsembleFileError(f"{path}: no such file")
     try:
         with xr.open_dataset(path, engine="netcdf4") as ds:
-            ds = ds.load()
+            return ds.load()
     except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...
         raise EnsembleFileError(f"{path}: not a readable netCDF file "
                                 f"(truncated or corrupt?): {exc}") from None
+
+
+def open_ensemble(path) -> xr.Dataset:
+    """Open an ensemble file fully into memory; EnsembleFileError names the file and the problem."""
+    ds = load_netcdf(path)
     missing = [k for k in ("max_abs_error", "mean_abs_error", "status") if k not in ds]
     if missing or "rss6_version" not in ds.attrs or "realization" not in ds.dims:
         raise EnsembleFileError(f"{path}: not an rss6 ensemble file (missing "
