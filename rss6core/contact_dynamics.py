@@ -550,7 +550,7 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
         ab, ap, f, gl, gp, done, count, delta, rate = solve(
             scene, ch, j, params, law_v, w_axes, joints, cond.legs, coef_p * Mp, impact,
             rb, np.ascontiguousarray(rp), db, np.ascontiguousarray(dpp), vb,
-            np.ascontiguousarray(vpp), ab, np.ascontiguousarray(ap), bh2, gh, w)
+            np.ascontiguousarray(vpp), ab, ap.copy(), bh2, gh, w)   # ab, ap: updated in place
         ac, ar = cond.recover(ab, keep, rc.shape, rr.shape)
         a = join(ac, ar, ap)
         return a, f, join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count, delta, rate, impact
