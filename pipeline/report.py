@@ -319,19 +319,27 @@ def _explanations(scene, ens: dict) -> list[str]:
     qs = max(_median(ens["quasi-static"], "max", "displacement", d) for d in "xyz")
     ct = max(_median(ens["contact"], "max", "displacement", d) for d in "xyz")
     el = max(float(ens["elastic"]["max_abs_error"].sel(quantity="displacement", direction=d)) for d in "xyz")
+    sag = _median(ens["contact"], "mean", "displacement", "z")
+    how = ("eccentricities at the clearance boundary along the rigid joint reactions"
+           if scene.simulation.quasi_static_eccentricity == "reaction" else
+           "the drawn eccentricities through the linearised leg closure")
     if np.isfinite(paper_dx):
         out.append(
             f"- **Displacement ({scene.name}).** The paper's largest displacement error is "
             f"{paper_dx * 1e3:.4g} mm; our contact level's median per-realisation maximum is "
             f"{ct * 1e3:.3g} mm ({ct / paper_dx:.3g} times), and the rigid-link clearance kinematics alone "
-            f"(quasi-static level, the joints resting on their walls) gives {qs * 1e3:.3g} mm "
+            f"(quasi-static level, {how}) gives {qs * 1e3:.3g} mm "
             f"({qs / paper_dx:.3g} times). A joint with a {mm} mm clearance lets the platform move by the "
             "clearance's order through the leg closure (MODEL.md section 9), so an error of hundredths "
             "of a millimetre at {0} mm clearance cannot come from the clearances: the paper's eq. 33 "
             "keeps only the part of each clearance vector along the link axes (virtual lengths) and "
             "redraws it every step, which averages the kinematic error instead of letting the joints "
             "rest on their walls. The elastic (ideal-joint) error alone is "
-            f"{el * 1e3:.3g} mm.".format(mm))
+            f"{el * 1e3:.3g} mm. Most of the contact level's z error is a steady sag: its median mean "
+            f"|z error| is {sag * 1e3:.3g} mm against a median maximum of "
+            f"{_median(ens['contact'], 'max', 'displacement', 'z') * 1e3:.3g} mm, because under "
+            "gravity every joint rests on the wall of its clearance, and each leg's closure adds up "
+            "the offsets of its three joints (A, C, B).".format(mm))
     pv = PAPER_VALUES[("mean", "velocity", "z")].get(mm)
     if pv is not None:
         lv = _median(ens["paper"], "mean", "velocity", "z")
