@@ -10,13 +10,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import stats as sps  # noqa: E402
 
-__all__ = ["plot_ensemble"]
+__all__ = ["plot_ensemble", "axis_unit", "draw_envelope", "save_figure"]
 
 from .store import DIRECTIONS as _DIRS  # noqa: E402
 from .store import display_unit  # noqa: E402
 
 
-def _scale(q: str, d: str) -> tuple[float, str]:
+def axis_unit(q: str, d: str) -> tuple[float, str]:
     """Display factor and unit, with the square typeset for matplotlib."""
     f, unit = display_unit(q, d)
     return f, unit.replace("^2", "$^2$")
@@ -28,10 +28,17 @@ def _grid(title: str):
     return fig, axes.ravel()
 
 
-def _save(fig, path: Path) -> Path:
+def save_figure(fig, path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def draw_envelope(ax, t, e, band: str = "5-95 %", peak: str = "max |error|", **peak_style) -> None:
+    """The 5-95 % band over realisations of e (R, T) and the max |e| over them, against time t."""
+    lo, hi = np.nanquantile(e, [0.05, 0.95], axis=0)
+    ax.fill_between(t, lo, hi, color="C0", alpha=0.3, lw=0, label=band)
+    ax.plot(t, np.nanmax(np.abs(e), axis=0), label=peak, **peak_style)
 
 
 def _envelope(ds, q: str, out: Path, finished) -> Path:
@@ -40,27 +47,25 @@ def _envelope(ds, q: str, out: Path, finished) -> Path:
     fig, axes = _grid(f"{ds.attrs['model']} level, scene {ds.attrs['scene_name']}: {q} error "
                       f"envelope over {err.shape[0]} realisations")
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = _scale(q, d)
+        f, unit = axis_unit(q, d)
         e = err[..., k] * f
-        lo, med, hi = np.nanquantile(e, [0.05, 0.5, 0.95], axis=0)
-        ax.fill_between(t, lo, hi, alpha=0.3, label="5-95 %")
-        ax.plot(t, med, lw=1.2, label="median")
-        ax.plot(t, np.nanmax(np.abs(e), axis=0), "k--", lw=0.8, label="max |error|")
+        draw_envelope(ax, t, e, color="k", ls="--", lw=0.8)
+        ax.plot(t, np.nanmedian(e, axis=0), lw=1.2, label="median")
         ax.set(xlabel="time [s]", ylabel=f"{d} error [{unit}]", title=d)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
-    return _save(fig, out / f"envelope_{q}.png")
+    return save_figure(fig, out / f"envelope_{q}.png")
 
 
 def _histograms(ds, q: str, out: Path, finished) -> Path:
     peak = ds["max_abs_error"].sel(quantity=q).values[finished]    # (R, 6)
     fig, axes = _grid(f"per-realisation max |{q} error| over {peak.shape[0]} realisations")
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = _scale(q, d)
+        f, unit = axis_unit(q, d)
         ax.hist(peak[:, k] * f, bins=min(30, max(5, peak.shape[0] // 4)), color="C0", alpha=0.8)
         ax.set(xlabel=f"max |{d} error| [{unit}]", ylabel="realisations", title=d)
         ax.grid(alpha=0.3)
-    return _save(fig, out / f"hist_max_{q}.png")
+    return save_figure(fig, out / f"hist_max_{q}.png")
 
 
 def _convergence(ds, q: str, out: Path, finished) -> Path:
@@ -68,7 +73,7 @@ def _convergence(ds, q: str, out: Path, finished) -> Path:
     n = np.arange(1, peak.shape[0] + 1)
     fig, axes = _grid(f"Monte Carlo convergence: running mean of max |{q} error| with 95 % CI")
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = _scale(q, d)
+        f, unit = axis_unit(q, d)
         x = peak[:, k] * f
         mean = np.cumsum(x) / n
         var = np.array([np.var(x[:i], ddof=1) if i > 1 else np.nan for i in n])
@@ -78,7 +83,7 @@ def _convergence(ds, q: str, out: Path, finished) -> Path:
         ax.set(xlabel="realisations", ylabel=f"mean max |{d} error| [{unit}]", title=d)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
-    return _save(fig, out / f"convergence_{q}.png")
+    return save_figure(fig, out / f"convergence_{q}.png")
 
 
 def plot_ensemble(ds, out_dir) -> list[Path]:

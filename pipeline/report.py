@@ -22,8 +22,10 @@ from rss6core.kinematics import rigid_motion
 from rss6core.models import default_integrator, default_time_step
 
 from .run import EnsembleSpec, run_ensemble
+from .plots import axis_unit, draw_envelope, plt, save_figure
 from .stats import summarize
-from .store import DIRECTIONS, EnsembleFileError, load_netcdf, open_ensemble, run_dataset, write_netcdf
+from .store import (DIRECTIONS, EnsembleFileError, display_unit, load_netcdf, open_ensemble, run_dataset,
+                    write_netcdf)
 
 __all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "PAPER_VALUES", "OFF"]
 
@@ -51,8 +53,6 @@ PAPER_VALUES = {
     ("max", "acceleration", "ry"): {0.25: 2.889},
     ("max", "acceleration", "rz"): {0.25: 23.0},
 }
-_DISPLAY = {"displacement": (1e3, "mm", "rad"), "velocity": (1e3, "mm/s", "rad/s"),
-            "acceleration": (1e3, "mm/s^2", "rad/s^2")}
 
 
 @dataclass(frozen=True)
@@ -141,9 +141,9 @@ def _summary(ds, stat, quantity, direction) -> dict:
     return summarize(_sample(ds, stat, quantity, direction))
 
 
-def _unit(quantity: str, direction: str) -> tuple[float, str]:
-    f, lin, ang = _DISPLAY[quantity]
-    return (f, lin) if direction in ("x", "y", "z") else (1.0, ang)
+def _median(ds, stat, quantity, direction) -> float:
+    """The median that _summary reports as q50, without its confidence intervals' bootstrap."""
+    return float(np.median(_sample(ds, stat, quantity, direction)))
 
 
 def _fmt(value: float, f: float) -> str:
@@ -162,13 +162,7 @@ def _clearance_mm(scene) -> float:
 
 # --- figures ------------------------------------------------------------------
 
-def _plt():
-    from .plots import plt
-    return plt
-
-
 def _rigid_figure(scene, t, out: Path) -> Path:
-    plt = _plt()
     pm = rigid_motion(scene, t).platform
     fig, axes = plt.subplots(3, 6, figsize=(17, 7.5), constrained_layout=True, sharex=True)
     fig.suptitle(f"scene {scene.name}: ideal rigid platform motion (eq. 35), the reference of every error")
@@ -176,53 +170,44 @@ def _rigid_figure(scene, t, out: Path) -> Path:
     for row, (q, values) in enumerate((("displacement", pm.pose), ("velocity", pm.pose_rate),
                                        ("acceleration", pm.pose_acc))):
         for k in range(6):
-            f, unit = _unit(q, DIRECTIONS[k])
+            f, unit = axis_unit(q, DIRECTIONS[k])
             ax = axes[row, k]
             ax.plot(t, values[:, k] * f, color="0.3", lw=1.2)
-            ax.set(title=f"{labels[k]} {q}", ylabel=f"[{unit.replace('^2', '$^2$')}]")
+            ax.set(title=f"{labels[k]} {q}", ylabel=f"[{unit}]")
             ax.grid(alpha=0.3)
             if row == 2:
                 ax.set_xlabel("time [s]")
-    path = out / f"{scene.name}_rigid.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, out / f"{scene.name}_rigid.png")
 
 
-def _error_figure(scene, quantity: str, files: dict, out: Path) -> Path:
+def _error_figure(scene, quantity: str, runs: dict, out: Path) -> Path:
     """Like the paper's figs. 11-16: the platform error (actual minus rigid) of the elastic level
-    (ideal joints) and, per clearance level, one realisation and the ensemble envelope."""
-    plt = _plt()
-    elastic = _open_run(files["elastic"])
+    (ideal joints) and, per clearance level, one realisation and the ensemble envelope.
+    ``runs``: the scene's opened files by role, as write_report holds them."""
+    elastic = runs["elastic"]
     fig, axes = plt.subplots(len(LEVELS), 6, figsize=(18, 3.3 * len(LEVELS) + 0.6),
                              constrained_layout=True, sharex=True)
     fig.suptitle(f"scene {scene.name} ({_clearance_mm(scene)} mm clearances): platform {quantity} "
                  "error, actual minus ideal rigid motion")
     for row, level in enumerate(LEVELS):
-        ds = open_ensemble(files[level])
+        ds = runs[level]
         t = ds["time"].values
         err = ds["error"].sel(quantity=quantity).values[_finished(ds)]        # (R, T, 6)
         for k, d in enumerate(DIRECTIONS):
-            f, unit = _unit(quantity, d)
+            f, unit = axis_unit(quantity, d)
             ax = axes[row, k]
             e = err[..., k] * f
-            lo, hi = np.nanquantile(e, [0.05, 0.95], axis=0)
-            ax.fill_between(t, lo, hi, color="C0", alpha=0.3, lw=0,
-                            label=f"{level}: 5-95 % of {e.shape[0]} realisations")
-            ax.plot(t, np.nanmax(np.abs(e), axis=0), color="C0", ls="--", lw=0.7,
-                    label=f"{level}: max |error| over realisations")
+            draw_envelope(ax, t, e, f"{level}: 5-95 % of {e.shape[0]} realisations",
+                          f"{level}: max |error| over realisations", color="C0", ls="--", lw=0.7)
             ax.plot(t, e[0], color="C3", lw=0.8, label=f"{level}: realisation 0")
             ax.plot(elastic["time"].values, elastic["error"].sel(quantity=quantity).values[:, k] * f,
                     color="k", lw=1.0, label="elastic, ideal joints")
-            ax.set(title=f"{level} level: {d}", ylabel=f"{d} [{unit.replace('^2', '$^2$')}]")
+            ax.set(title=f"{level} level: {d}", ylabel=f"{d} [{unit}]")
             ax.grid(alpha=0.3)
             if row == len(LEVELS) - 1:
                 ax.set_xlabel("time [s]")
         axes[row, 0].legend(fontsize=7, loc="lower left")
-    path = out / f"{scene.name}_{quantity}.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, out / f"{scene.name}_{quantity}.png")
 
 
 def _open_run(path):
@@ -236,7 +221,7 @@ def _open_run(path):
 
 # --- the document ---------------------------------------------------------------
 
-_ROWS = [key for key in PAPER_VALUES]
+_ROWS = list(PAPER_VALUES)
 
 
 def _setting_line(ds) -> str:
@@ -253,7 +238,7 @@ def _comparison_table(scene, ens: dict) -> list[str]:
         head += [f"{level}: median [95 % CI]", f"{level}: 95 % quantile [95 % CI]"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for stat, q, d in _ROWS:
-        f, unit = _unit(q, d)
+        f, unit = display_unit(q, d)
         paper = PAPER_VALUES[(stat, q, d)].get(mm)
         cells = [_label(stat, q), d, unit, _fmt(paper, f) if paper is not None else "-"]
         for level in ("quasi-static", "paper", "contact"):
@@ -267,10 +252,6 @@ def _label(stat: str, quantity: str) -> str:
     """'max |displacement error|' with the bars escaped for a markdown table."""
     bar = "\\|"
     return f"{stat} {bar}{quantity} error{bar}"
-
-
-def _median(ds, stat, q, d) -> float:
-    return _summary(ds, stat, q, d)["q50"]
 
 
 def _growth_table(scenes: list, ens: dict) -> list[str]:
@@ -296,7 +277,7 @@ def _family_table(scene, ens: dict) -> list[str]:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     el = ens["elastic"]
     for stat, q, d in _ROWS:
-        f, unit = _unit(q, d)
+        f, unit = display_unit(q, d)
         cells = [_label(stat, q), d, unit]
         cells += [_fmt(_median(ds, stat, q, d), f) for _, ds in runs]
         cells.append(_fmt(float(el[f"{stat}_abs_error"].sel(quantity=q, direction=d)), f))
@@ -331,7 +312,7 @@ def _explanations(scene, ens: dict) -> list[str]:
             f"(quasi-static level, {how}) gives {qs * 1e3:.3g} mm "
             f"({qs / paper_dx:.3g} times). A joint with a {mm} mm clearance lets the platform move by the "
             "clearance's order through the leg closure (MODEL.md section 9), so an error of hundredths "
-            "of a millimetre at {0} mm clearance cannot come from the clearances: the paper's eq. 33 "
+            f"of a millimetre at {mm} mm clearance cannot come from the clearances: the paper's eq. 33 "
             "keeps only the part of each clearance vector along the link axes (virtual lengths) and "
             "redraws it every step, which averages the kinematic error instead of letting the joints "
             "rest on their walls. The elastic (ideal-joint) error alone is "
@@ -339,7 +320,7 @@ def _explanations(scene, ens: dict) -> list[str]:
             f"|z error| is {sag * 1e3:.3g} mm against a median maximum of "
             f"{_median(ens['contact'], 'max', 'displacement', 'z') * 1e3:.3g} mm, because under "
             "gravity every joint rests on the wall of its clearance, and each leg's closure adds up "
-            "the offsets of its three joints (A, C, B).".format(mm))
+            "the offsets of its three joints (A, C, B).")
     pv = PAPER_VALUES[("mean", "velocity", "z")].get(mm)
     if pv is not None:
         lv = _median(ens["paper"], "mean", "velocity", "z")
@@ -379,14 +360,13 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
     data = Path(data) if data is not None else out / "results-data"
     figs = out / "results"
     figs.mkdir(parents=True, exist_ok=True)
-    scenes, ens, files = [], {}, {}
+    scenes, ens = [], {}
     for config in configs:
         scene = load_scene(config)
         if scene.name in ens:
             raise ValueError(f"{config}: scene name {scene.name!r} given twice")
-        files[scene.name] = run_scene(config, data, plan)
         ens[scene.name] = {k: (_open_run(p) if k == "elastic" else open_ensemble(p))
-                           for k, p in files[scene.name].items()}
+                           for k, p in run_scene(config, data, plan).items()}
         scenes.append(scene)
     rel = lambda p: Path(p).relative_to(out).as_posix() if Path(p).is_relative_to(out) else str(p)  # noqa: E731
     md = ["# Results: the seed paper's section 6 with rss6", "",
@@ -405,7 +385,7 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
         t = e["contact"]["time"].values
         md += [f"![rigid motion]({rel(_rigid_figure(scene, t, figs))})", ""]
         for q in ("displacement", "velocity", "acceleration"):
-            md += [f"![{q} error]({rel(_error_figure(scene, q, files[scene.name], figs))})", ""]
+            md += [f"![{q} error]({rel(_error_figure(scene, q, e, figs))})", ""]
         md += ["### Beside the paper's numbers (MODEL.md section 9)", ""] + _comparison_table(scene, e)
         md += ["", "### Which joint family contributes most (contact level)", "",
                "Medians over the finished realisations of each run (finished of run in the header); a "
