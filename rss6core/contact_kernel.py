@@ -22,8 +22,10 @@ from numba import njit
 
 __all__ = ["newton_step", "ball"]
 
-# non-zero 3x3 blocks of a leg's joint map G: relative displacement j <- joint-node block c
+# reassociation and fused multiply-add, but no finite-math assumption: a diverging
+# realisation's inf and nan must survive to be reported
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
+# non-zero 3x3 blocks of a leg's joint map G: relative displacement j <- joint-node block c
 _PATTERN = np.array([[0, 0], [1, 1], [1, 2], [2, 3]], np.int64)
 
 
@@ -81,12 +83,12 @@ def ball(e, de, size, k, impact, law, omega, radius, f, De, Dv):
         scale = -mu * F
         slope = scale * cd / ss
         turn = scale * dcd
+        tn = t[0] * n0 + t[1] * n1 + t[2] * n2
         for a in range(3):
             f[a] += scale * cd * t[a]
-            # dF_t/dv_t = scale (cd/|v_t| (I - t t^T) + dcd t t^T), times (I - n n^T): friction
-            # turns with the tangential part of de only; t is normal to n, so (I - t t^T) n = n
-            jn = slope * (n[a] - t[a] * (t[0] * n0 + t[1] * n1 + t[2] * n2)) + turn * t[a] * (
-                t[0] * n0 + t[1] * n1 + t[2] * n2)
+            # jac = dF_t/dv_t = scale (cd/|v_t| (I - t t^T) + dcd t t^T), taken times (I - n n^T)
+            # (friction turns with the tangential part of de only): jac - (jac n) n^T
+            jn = slope * (n[a] - t[a] * tn) + turn * t[a] * tn
             dft = -mu * cd * t[a]
             for b in range(3):
                 tt = t[a] * t[b]
@@ -175,8 +177,9 @@ def _evaluate(G, J, w, omega, radius, params, law, impact, xb, xp, ub, up,
 
 
 @njit(cache=True, fastmath=_FAST)
-def _lu(A, piv, n):
-    """In-place LU with partial pivoting of A[:n, :n]."""
+def _lu(A, piv):
+    """In-place LU with partial pivoting of the square A."""
+    n = A.shape[0]
     for k in range(n):
         p = k
         big = abs(A[k, k])
@@ -198,8 +201,9 @@ def _lu(A, piv, n):
 
 
 @njit(cache=True, fastmath=_FAST)
-def _lu_solve(A, piv, n, X, m):
-    """Solve A X = X in place for the m columns of X (rows :n), A as left by _lu."""
+def _lu_solve(A, piv, X, m):
+    """Solve A X = X in place for the first m columns of X, A as left by _lu."""
+    n = A.shape[0]
     for k in range(n):
         p = piv[k]
         if p != k:
@@ -275,12 +279,12 @@ def _newton_update(G, J, Rr, Sl, Sp, D, res_l, res_p, dl, dp, L, X, piv, schur, 
                 lower[a, b] = J[leg, 0, a] * DR[0, b] + J[leg, 1, a] * DR[1, b] + J[leg, 2, a] * DR[2, b]
             for b in range(6):
                 schur[a, b] -= J[leg, 0, a] * DJ[0, b] + J[leg, 1, a] * DJ[1, b] + J[leg, 2, a] * DJ[2, b]
-        _lu(L, piv[leg], 12)
+        _lu(L, piv[leg])
         for a in range(12):
             X[leg, a, 0] = res_l[leg, a]
             for c in range(3):
                 X[leg, a, 1 + c] = 1.0 if a == 9 + c else 0.0
-        _lu_solve(L, piv[leg], 12, X[leg], 4)
+        _lu_solve(L, piv[leg], X[leg], 4)
         # Schur complement: P - sum C L^-1 B, right-hand side rp - sum C L^-1 res
         for a in range(6):
             for b in range(6):
@@ -295,17 +299,17 @@ def _newton_update(G, J, Rr, Sl, Sp, D, res_l, res_p, dl, dp, L, X, piv, schur, 
             for u in range(3):
                 s += lower[a, u] * X[leg, 9 + u, 0]
             y[a] -= s
-        # keep C-independent pieces for the back substitution: L^-1 B = (L^-1 E) border
+        # L^-1 B = (L^-1 E) border, for the back substitution once the platform update is known
         for a in range(12):
             for b in range(6):
                 s = 0.0
                 for v in range(3):
                     s += X[leg, a, 1 + v] * border[v, b]
                 X[leg, a, 4 + b] = s
-    _lu(schur, ypiv, 6)
+    _lu(schur, ypiv)
     for a in range(6):
         dp[a] = y[a]
-    _lu_solve(schur, ypiv, 6, dp.reshape((6, 1)), 1)
+    _lu_solve(schur, ypiv, dp.reshape((6, 1)), 1)
     for leg in range(6):
         for a in range(12):
             s = X[leg, a, 0]
