@@ -31,16 +31,22 @@ RELATIVE_FLOOR = 1e-3
 
 @dataclass(frozen=True)
 class Setting:
-    """One way to compute the ensemble: model level, integrator, time step (s), elements per link."""
+    """One way to compute the ensemble: model level, integrator, time step (s), elements per link;
+    for the contact level also the adaptive step's tolerance (m, 0: fixed step) and refinements."""
     model: str
     integrator: str
     dt: float
     elements: int
     stiffness_scale: float = 1.0
+    tolerance: float = 0.0
+    refinements: int = 0
 
     @property
     def label(self) -> str:
         extra = f", K x{self.stiffness_scale:g}" if self.stiffness_scale != 1.0 else ""
+        if self.refinements:
+            extra += (f", adaptive {self.tolerance:g} m down to "
+                      f"{self.dt / 2 ** self.refinements * 1e6:g} us")
         if self.model in ("rigid", "quasi-static"):
             return f"{self.model} {self.dt * 1e3:g} ms"
         return f"{self.model} {self.integrator} {self.dt * 1e3:g} ms {self.elements} el{extra}"
@@ -58,7 +64,7 @@ def measure(scene, setting: Setting, n: int, seed: int = 0) -> dict:
     statistics (quantity, direction, statistic) in SI units, failures and their first message."""
     start = time.perf_counter()
     results = simulate_batch(_scene_for(scene, setting), setting.model, setting.integrator, setting.dt,
-                             setting.elements, seed, range(n))
+                             setting.elements, seed, range(n), setting.tolerance, setting.refinements)
     wall = (time.perf_counter() - start) / n
     peaks = np.stack([error_summaries(r, scene.simulation.settle_time)[0] for r in results])  # (n, 3, 6)
     failed = [r for r in results if r.status != "finished"]
@@ -89,14 +95,24 @@ def _contact_step(scene, h: float) -> float:
 
 
 def _refine(setting: Setting) -> Setting:
-    return dataclasses.replace(setting, dt=setting.dt / 2, elements=2 * setting.elements)
+    """Step halved and mesh doubled; an adaptive step's tolerance / 8 as well, since the local
+    error estimate it bounds scales as h^3 where the acceleration is smooth."""
+    return dataclasses.replace(setting, dt=setting.dt / 2, elements=2 * setting.elements,
+                               tolerance=setting.tolerance / 8)
+
+
+ADAPTIVE_TOLERANCE = 1e-8   # m, the adaptive rows' tolerance for scenes that set none
+ADAPTIVE_REFINEMENTS = 4
 
 
 def default_settings(scene) -> tuple[list[Setting], Setting]:
-    """The settings compared by default, and the reference (the finest contact setting)."""
+    """The settings compared by default, and the reference: the contact level's adaptive step at a
+    hundredth of the tolerance, down to a quarter of the finest adaptive row's smallest step."""
     sim = scene.simulation
     dt, dtc, el = sim.time_step, sim.contact_time_step, sim.elements_per_link
     ig, igc = sim.integrator, sim.contact_integrator
+    tol = sim.contact_tolerance or ADAPTIVE_TOLERANCE
+    levels = sim.contact_refinements or ADAPTIVE_REFINEMENTS
     half = max(1, el // 2)
     out = [Setting("quasi-static", "newmark", dt, el)]
     out += [Setting("elastic", i, dt, el) for i in ("newmark", "hht", "generalized-alpha")]
@@ -104,7 +120,9 @@ def default_settings(scene) -> tuple[list[Setting], Setting]:
     out += [Setting("paper", ig, dt, el), Setting("paper", ig, dt / 2, el)]
     out += [Setting("contact", igc, _contact_step(scene, f * dtc), el) for f in (2.0, 1.0, 0.5, 0.25)]
     out += [Setting("contact", igc, dtc, half), Setting("contact", "newmark", dtc, el)]
-    reference = Setting("contact", igc, _contact_step(scene, dtc / 8), el)
+    out += [Setting("contact", igc, dtc, el, 1.0, f * tol, levels) for f in (4.0, 1.0, 0.25)]
+    out += [Setting("contact", igc, dtc, half, 1.0, tol, levels)]
+    reference = Setting("contact", igc, _contact_step(scene, dtc / 2), el, 1.0, tol / 100, levels + 2)
     return out + [reference], reference
 
 
@@ -134,6 +152,11 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
          "dt": ("setting", [s.dt for s in settings], {"units": "s", "long_name": "time step"}),
          "elements_per_link": ("setting", [s.elements for s in settings]),
          "stiffness_scale": ("setting", [s.stiffness_scale for s in settings]),
+         "tolerance": ("setting", [s.tolerance for s in settings],
+                       {"units": "m", "long_name": "adaptive contact step's local error bound "
+                                                    "(0: fixed step)"}),
+         "refinements": ("setting", [s.refinements for s in settings],
+                         {"units": "1", "long_name": "halvings of the contact step allowed"}),
          "seconds_per_realization": ("setting", [runs[s]["seconds_per_realization"] for s in settings],
                                      {"units": "s", "long_name": "wall time per realisation, batched"}),
          "failed": ("setting", [runs[s]["failed"] for s in settings]),
@@ -206,7 +229,7 @@ def write_tradeoff(ds: xr.Dataset, outdir, tolerance: float) -> dict:
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     header = ["setting", "model", "integrator", "dt_s", "elements_per_link", "modes", "stiffness_scale",
-              "seconds_per_realization", "failed", "max_rel_error"] + _columns()
+              "tolerance_m", "refinements", "seconds_per_realization", "failed", "max_rel_error"] + _columns()
     rows = []
     for i in range(ds.sizes["setting"]):
         rel = ds["relative_error"].values[i].reshape(-1)
@@ -214,6 +237,7 @@ def write_tradeoff(ds: xr.Dataset, outdir, tolerance: float) -> dict:
                      str(ds["integrator"].values[i]), f"{float(ds['dt'].values[i]):.6g}",
                      str(int(ds["elements_per_link"].values[i])), str(int(ds["modes"].values[i])),
                      f"{float(ds['stiffness_scale'].values[i]):g}",
+                     f"{float(ds['tolerance'].values[i]):g}", str(int(ds["refinements"].values[i])),
                      f"{float(ds['seconds_per_realization'].values[i]):.6g}",
                      str(int(ds["failed"].values[i])), f"{float(ds['max_relative_error'].values[i]):.6g}"]
                     + [f"{x:.6g}" for x in rel])

@@ -28,6 +28,7 @@ after another, with the vectorised numpy functions below as its reference.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +50,7 @@ __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactBatch"
 TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
 TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
 MAX_ITERATIONS = 60
+MAX_REFINEMENTS = 10       # halvings of the contact step at most (1/1024)
 ENGINES = ("compiled", "numpy")
 
 
@@ -237,6 +239,7 @@ class ContactBatch:
     message: list
     steps: np.ndarray             # (R,) internal steps completed
     iterations: np.ndarray        # (R,) Newton iterations in all
+    refined: np.ndarray           # (R,) steps retried as two half steps
 
     def result(self, k: int) -> SimulationResult:
         return SimulationResult(self.t, self.displacement[k], self.velocity[k], self.acceleration[k],
@@ -250,6 +253,7 @@ class _Chunk:
     (and the joint radii [journal, sphere, sphere] (3, 1), m, that the contact evaluation needs)."""
 
     def __init__(self, scene, jm: JointModel, t: np.ndarray):
+        self.t = t
         motion = rigid_motion(scene, t)
         Rc, Rr = link_frames(motion, scene.geometry)
         self.Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
@@ -311,13 +315,14 @@ class _Contacts:
         self.in_contact = np.zeros(shape + (6, 4), bool)
         self.rate = np.zeros(shape + (6, 4))
 
-    def impact(self):
-        """Impact speeds delta_dot_c1 for this step: stored, or the approach speed of a new contact."""
-        return np.where(self.in_contact, self.stored, np.maximum(self.rate, self.floor))
+    def impact(self, idx):
+        """Impact speeds delta_dot_c1 for a step of realisations ``idx``: stored, or the approach
+        speed of a new contact."""
+        return np.where(self.in_contact[idx], self.stored[idx], np.maximum(self.rate[idx], self.floor))
 
-    def update(self, delta, rate, used):
-        self.stored = np.where((delta > 0) & ~self.in_contact, used, self.stored)
-        self.in_contact, self.rate = delta > 0, rate
+    def update(self, idx, delta, rate, used):
+        self.stored[idx] = np.where((delta > 0) & ~self.in_contact[idx], used, self.stored[idx])
+        self.in_contact[idx], self.rate[idx] = delta > 0, rate
 
 
 def _evaluate(scene, ch: _Chunk, k, joints, impact, xb, xp, vb, vp):
@@ -475,7 +480,8 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
                      dt: float | None = None, output_step: float | None = None,
                      model: JointModel | None = None, chunk: int = 200,
                      divergence_limit: float = 1.0, settle: float | None = None,
-                     engine: str = "compiled") -> ContactBatch:
+                     engine: str = "compiled", tolerance: float | None = None,
+                     refinements: int | None = None) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (see :func:`_simulate_contact`).
 
     Overflow in a diverging realisation is detected and reported as its failure, not warned about.
@@ -484,21 +490,59 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
     """
     if engine not in ENGINES:
         raise ValueError(f"contact engine must be one of {', '.join(ENGINES)}, not {engine!r}")
+    sim = scene.simulation
+    tolerance = sim.contact_tolerance if tolerance is None else tolerance
+    refinements = sim.contact_refinements if refinements is None else refinements
+    if not tolerance >= 0.0:
+        raise ValueError(f"contact error tolerance must be >= 0 m, got {tolerance!r}")
+    if refinements not in range(MAX_REFINEMENTS + 1):
+        raise ValueError(f"contact step refinements must be an integer in [0, {MAX_REFINEMENTS}], "
+                         f"got {refinements!r}")
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         return _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
-                                 divergence_limit, settle, engine)
+                                 divergence_limit, settle, engine, tolerance, refinements)
+
+
+@dataclass(frozen=True)
+class _StepSize:
+    """What one step length h needs: the condensed step matrix and the integrator's weights."""
+    h: float
+    span: int          # fine-grid intervals per step
+    cond: _Condensed
+    coef_p: float      # weight of the platform mass in the step matrix
+    bh2: float         # beta h^2
+    gh: float          # gamma h
+    error: float       # |beta - 1/6| h^2: Zienkiewicz-Xie local error per unit acceleration jump
+
+
+class _Workspace:
+    """The batch's state between steps (every array has the realisation axis first) and its records."""
+
+    def __init__(self, R, n_out, floor):
+        self.contacts = _Contacts((R,), floor)
+        self.hist = np.full((3, R, n_out, 6), np.nan)
+        self.peak = np.zeros((R, 3, 6))
+        self.cpeak = np.zeros((R, 18))
+        self.alive = np.ones(R, bool)
+        self.status, self.message = ["finished"] * R, [""] * R
+        self.steps, self.iters = np.zeros(R, np.int64), np.zeros(R, np.int64)
+        self.refined = np.zeros(R, np.int64)
 
 
 def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
-                      divergence_limit, settle, engine) -> ContactBatch:
+                      divergence_limit, settle, engine, tolerance, refinements) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (one realisation each).
 
-    ``dt`` is the internal step and ``integrator`` the method (default: the scene's
-    contact time step and contact integrator);
-    histories are kept every ``output_step`` (default: the scene's time step);
+    ``dt`` is the base step and ``integrator`` the method (default: the scene's
+    contact time step and contact integrator).  With ``refinements`` > 0 a step
+    is retried as two half steps, down to dt / 2**refinements, where Newton fails
+    or the Zienkiewicz-Xie estimate |beta - 1/6| h^2 |delta a| of the local error
+    of a joint's relative displacement exceeds ``tolerance`` m (0: only where Newton
+    fails): impacts are resolved where they happen, each realisation on its own.
+    Histories are kept every ``output_step`` (default: the scene's time step);
     peaks are taken over every internal step from ``settle`` s on (default: the
     scene's settle time, the start-up transient left out).  A realisation whose Newton
-    iteration fails or whose state diverges is marked failed; the others go on.
+    iteration fails at the finest step or whose state diverges is marked failed; the others go on.
     """
     sim = scene.simulation
     integrator = integrator or make_integrator(sim.contact_integrator, sim.newmark_beta,
@@ -510,24 +554,22 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     if abs(every * h - out) > 1e-9 * out:
         raise ValueError(f"output step {out!r} s is not a multiple of the time step {h!r} s")
     t = time_grid(scene.trajectory.duration, h)
-    t_out = t[::every]
-    first_peak = int(np.ceil((sim.settle_time if settle is None else settle) / h - 1e-9))
+    fine = 2 ** refinements
+    settle_at = (sim.settle_time if settle is None else settle) - 1e-9 * h
     joints = _joints(scene, draws)
     R = len(draws)
-    contacts = _Contacts((R,), scene.contact.impact_speed_floor)
+    ws = _Workspace(R, len(t[::every]), scene.contact.impact_speed_floor)
     beta, gamma, am, af = integrator.beta, integrator.gamma, integrator.alpha_m, integrator.alpha_f
-    cM, cC, cK = integrator.step_coefficients(h)
     lam1, lam2 = jm.mass_damping, jm.stiffness_damping
-    step = _Condensed(jm, cM + cC * lam1, cC * lam2 + cK)
+    sizes = []
+    for level in range(refinements + 1):
+        hl = h / 2 ** level
+        cM, cC, cK = integrator.step_coefficients(hl)
+        sizes.append(_StepSize(hl, fine >> level, _Condensed(jm, cM + cC * lam1, cC * lam2 + cK),
+                               cM + cC * lam1, beta * hl * hl, gamma * hl, abs(beta - 1.0 / 6.0) * hl * hl))
     start = _Condensed(jm, 1.0, 0.0)
-    wf, bh2, gh = 1.0 - af, beta * h * h, gamma * h
-
-    hist = np.full((3, R, len(t_out), 6), np.nan)
-    peak = np.zeros((R, 3, 6))
-    cpeak = np.zeros((R, 18))
-    alive = np.ones(R, bool)
-    status, message = ["finished"] * R, [""] * R
-    steps, iters = np.zeros(R, np.int64), np.zeros(R, np.int64)
+    wf = 1.0 - af
+    weighted = am != 0.0 or af != 0.0
 
     params = np.ascontiguousarray(np.stack([joints.radial, joints.axial, joints.size_C, joints.size_B,
                                             joints.k_A, joints.k_C, joints.k_B], -1))
@@ -537,65 +579,120 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     w_axes = np.ascontiguousarray(scene.geometry.w, dtype=float)
     solve = _newton_numpy if engine == "numpy" else _newton_compiled
 
-    def newton(ch, j, cond, coef_p, rhs, dp, vp, a_guess, bh2, gh, w):
-        """Accelerations for a step; returns a, contact forces, generalised contact forces,
-        converged flags, iteration counts, penetrations, their rates and the impact speeds used."""
+    def newton(idx, ch, j, cond, coef_p, rhs, dp, vp, a_guess, bh2, gh, w):
+        """Accelerations for a step of realisations ``idx``; returns a, contact forces, generalised
+        contact forces, converged flags, iteration counts, penetrations, their rates and the
+        impact speeds used."""
         Mp = _platform_mass(jm, ch.Ip[j])
         rc, rr, rp = split(jm, rhs)
         rb, keep = cond.condense(rc, rr)
         db, dpp = _joint_nodes(jm, dp)
         vb, vpp = _joint_nodes(jm, vp)
         ab, ap = _joint_nodes(jm, a_guess)
-        impact = contacts.impact()
+        impact = ws.contacts.impact(idx)
+        sub = _subset(joints, idx) if engine == "numpy" else None   # the kernel reads params
         ab, ap, f, gl, gp, done, count, delta, rate = solve(
-            scene, ch, j, params, law_v, w_axes, joints, cond.legs, coef_p * Mp, impact,
-            rb, np.ascontiguousarray(rp), db, np.ascontiguousarray(dpp), vb,
+            scene, ch, j, params[idx], law_v, w_axes, sub, cond.legs, coef_p * Mp,
+            impact, rb, np.ascontiguousarray(rp), db, np.ascontiguousarray(dpp), vb,
             np.ascontiguousarray(vpp), ab, ap.copy(), bh2, gh, w)   # ab, ap: updated in place
         ac, ar = cond.recover(ab, keep, rc.shape, rr.shape)
         a = join(ac, ar, ap)
         return a, f, join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count, delta, rate, impact
 
+    def peaks(idx, d, v, a, f, time):
+        if time >= settle_at:
+            p = np.stack([d[..., -6:], v[..., -6:], a[..., -6:]], 1)     # (R, 3, 6)
+            ws.peak[idx] = np.maximum(ws.peak[idx], np.abs(p))
+            mags = np.swapaxes(np.linalg.norm(f, axis=-1), -1, -2).reshape(len(idx), 18)
+            ws.cpeak[idx] = np.maximum(ws.cpeak[idx], mags)
+
+    def advance(idx, ch, k0, level):
+        """Step realisations ``idx`` from fine instant k0 of the chunk by sizes[level], halving where
+        needed; their state moves to k0 + sizes[level].span."""
+        sz = sizes[level]
+        k1 = k0 + sz.span
+        d, v, a = D[idx], V[idx], A[idx]
+        dp = d + sz.h * v + (0.5 - beta) * sz.h * sz.h * a
+        vp = v + (1.0 - gamma) * sz.h * a
+        Mp = _platform_mass(jm, ch.Ip[k1])
+        r = wf * (ch.F[k1] - _internal(jm, Mp, dp, vp))
+        if weighted:
+            r += af * (ch.F[k0] + GN[idx] - REST[idx]) - am * MA[idx]
+        a_new, f, g, ok, count, delta, rate, used = newton(idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp,
+                                                           a, sz.bh2, sz.gh, wf)
+        ws.iters[idx] += count
+        d_new, v_new = dp + sz.bh2 * a_new, vp + sz.gh * a_new
+        sound = ok & np.isfinite(d_new).all(-1) & (np.abs(d_new).max(-1) < divergence_limit)
+        accept = np.ones(len(idx), bool)
+        if level < refinements:
+            accept = sound
+            if tolerance > 0.0:
+                jb, jp = _joint_nodes(jm, a_new - a)
+                jump = np.linalg.norm(_relative(ch, k1, jb, jp), axis=-1).max((-1, -2))
+                accept &= sz.error * jump <= tolerance
+        for i in np.flatnonzero(accept & ~sound):
+            r_ = idx[i]
+            ws.alive[r_] = False
+            ws.status[r_] = "failed"
+            ws.message[r_] = (f"Newton on the contact forces did not converge in {MAX_ITERATIONS} "
+                              f"iterations at t = {ch.t[k1]:.6g} s with a {sz.h:.3g} s step" if not ok[i] else
+                              f"diverged at t = {ch.t[k1]:.6g} s: displacement "
+                              f"{np.abs(d_new[i]).max():.3g} exceeds {divergence_limit:g} or is not finite")
+        keep = accept & sound
+        if keep.any():
+            kept = idx[keep]
+            D[kept], V[kept], A[kept] = d_new[keep], v_new[keep], a_new[keep]
+            ws.contacts.update(kept, delta[keep], rate[keep], used[keep])
+            ws.steps[kept] += 1
+            if weighted:
+                MA[kept] = _mass(jm, Mp, a_new[keep])
+                REST[kept] = _internal(jm, Mp, d_new[keep], v_new[keep])
+                GN[kept] = g[keep]
+            peaks(kept, d_new[keep], v_new[keep], a_new[keep], f[keep], ch.t[k1])
+        retry = idx[~accept]
+        if len(retry):
+            ws.refined[retry] += 1
+            advance(retry, ch, k0, level + 1)
+            retry = retry[ws.alive[retry]]
+            if len(retry):
+                advance(retry, ch, k0 + sz.span // 2, level + 1)
+
     ch = _Chunk(scene, jm, t[:1])
-    d, v = initial_state(scene, jm, joints)
+    D, V = initial_state(scene, jm, joints)
+    everyone = np.arange(R)
     Mp0 = _platform_mass(jm, ch.Ip[0])
-    rhs0 = ch.F[0] - _internal(jm, Mp0, d, v)
-    a, f, g, ok, _, delta, rate, used = newton(ch, 0, start, 1.0, rhs0, d, v, np.zeros_like(d), 0.0, 0.0, 1.0)
-    contacts.update(delta, rate, used)
-    weighted = am != 0.0 or af != 0.0
-    Ma, rest, Fn, gn = _mass(jm, Mp0, a), _internal(jm, Mp0, d, v), ch.F[0], g
-    _record(hist, peak, cpeak, 0, d, v, a, f, every, alive, first_peak)
+    rhs0 = ch.F[0] - _internal(jm, Mp0, D, V)
+    A, f, GN, ok, _, delta, rate, used = newton(everyone, ch, 0, start, 1.0, rhs0, D, V, np.zeros_like(D),
+                                                0.0, 0.0, 1.0)
+    ws.contacts.update(everyone, delta, rate, used)
+    MA, REST = _mass(jm, Mp0, A), _internal(jm, Mp0, D, V)
+    peaks(everyone, D, V, A, f, 0.0)
+    _history(ws, 0, D, V, A)
     for s0 in range(1, len(t), chunk):
         s1 = min(s0 + chunk, len(t))
-        ch = _Chunk(scene, jm, t[s0:s1])
+        # the chunk's instants on the finest grid, from the start of its first step
+        ch = _Chunk(scene, jm, ((s0 - 1) * fine + np.arange((s1 - s0) * fine + 1)) * (h / fine))
         for j in range(s1 - s0):
-            k = s0 + j
-            dp = d + h * v + (0.5 - beta) * h * h * a
-            vp = v + (1.0 - gamma) * h * a
-            Mp = _platform_mass(jm, ch.Ip[j])
-            r = wf * (ch.F[j] - _internal(jm, Mp, dp, vp))
-            if weighted:
-                r += af * (Fn + gn - rest) - am * Ma
-            a_new, f, g, ok, count, delta, rate, used = newton(ch, j, step, cM + cC * lam1, r, dp, vp,
-                                                               a, bh2, gh, wf)
-            d_new, v_new = dp + bh2 * a_new, vp + gh * a_new
-            bad = alive & ~(ok & np.isfinite(d_new).all(-1) & (np.abs(d_new).max(-1) < divergence_limit))
-            for i in np.flatnonzero(bad):
-                alive[i] = False
-                status[i] = "failed"
-                message[i] = (f"Newton on the contact forces did not converge in {MAX_ITERATIONS} "
-                              f"iterations at t = {t[k]:.6g} s (step {k})" if not ok[i] else
-                              f"diverged at t = {t[k]:.6g} s (step {k}): displacement "
-                              f"{np.abs(d_new[i]).max():.3g} exceeds {divergence_limit:g} or is not finite")
-            d, v, a = (np.where(alive[:, None], x, 0.0) for x in (d_new, v_new, a_new))
-            contacts.update(delta, rate, used)
-            iters += np.where(alive, count, 0)
-            steps[alive] = k
-            if weighted:
-                Ma, rest, Fn, gn = _mass(jm, Mp, a), _internal(jm, Mp, d, v), ch.F[j], g
-            _record(hist, peak, cpeak, k, d, v, a, f, every, alive, first_peak)
-        if not alive.any():
+            live = np.flatnonzero(ws.alive)
+            if not len(live):
+                break
+            advance(live, ch, j * fine, 0)
+            if (s0 + j) % every == 0:
+                _history(ws, (s0 + j) // every, D, V, A)
+        if not ws.alive.any():
             break
-    return ContactBatch(t_out, hist[0], hist[1], hist[2], peak, cpeak, status, message, steps, iters)
+    return ContactBatch(t[::every], ws.hist[0], ws.hist[1], ws.hist[2], ws.peak, ws.cpeak, ws.status,
+                        ws.message, ws.steps, ws.iters, ws.refined)
+
+
+def _subset(joints: _Joints, idx) -> _Joints:
+    return _Joints(*(getattr(joints, f.name)[idx] for f in dataclasses.fields(joints)))
+
+
+def _history(ws: _Workspace, k, d, v, a):
+    """Keep the platform's error at output instant k for the realisations still alive."""
+    live = ws.alive
+    ws.hist[:, live, k] = np.stack([d[live, -6:], v[live, -6:], a[live, -6:]])
 
 
 def _full_contact(jm: JointModel, gl, shape_c, shape_r):
@@ -604,13 +701,3 @@ def _full_contact(jm: JointModel, gl, shape_c, shape_r):
     gc[..., jm.crank_boundary] = gl[..., :6]
     gr[..., -6:] = gl[..., 6:]
     return gc, gr
-
-
-def _record(hist, peak, cpeak, k, d, v, a, f, every, alive, first_peak):
-    p = np.stack([d[..., -6:], v[..., -6:], a[..., -6:]], 1)     # (R, 3, 6)
-    if k >= first_peak:
-        np.maximum(peak, np.where(alive[:, None, None], np.abs(p), 0.0), out=peak)
-        mags = np.swapaxes(np.linalg.norm(f, axis=-1), -1, -2).reshape(f.shape[0], 18)
-        np.maximum(cpeak, np.where(alive[:, None], mags, 0.0), out=cpeak)
-    if k % every == 0:
-        hist[:, alive, k // every] = np.moveaxis(p, 1, 0)[:, alive]

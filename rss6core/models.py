@@ -67,8 +67,13 @@ def simulate(scene, model: str | None = None, integrator: str | None = None,
 
 def simulate_batch(scene, model: str | None = None, integrator: str | None = None,
                    dt: float | None = None, elements: int | None = None, seed: int = 0,
-                   realizations=(0,)) -> list[SimulationResult]:
-    """Realisations ``realizations`` of the run seeded ``seed``, one result each, in order."""
+                   realizations=(0,), tolerance: float | None = None,
+                   refinements: int | None = None) -> list[SimulationResult]:
+    """Realisations ``realizations`` of the run seeded ``seed``, one result each, in order.
+
+    ``tolerance`` (m) and ``refinements`` set the contact level's adaptive step
+    (default: the scene's; see :func:`.contact_dynamics.simulate_contact`).
+    """
     sim = scene.simulation
     model = model or sim.model
     if model not in MODELS:
@@ -92,7 +97,7 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
                              sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
     if model == "contact":
         batch = simulate_contact(scene, [draw_clearances(scene, seed, r) for r in realizations],
-                                 elements, method, dt)
+                                 elements, method, dt, tolerance=tolerance, refinements=refinements)
         return [batch.result(k) for k in range(len(realizations))]
     elastic = simulate_elastic(scene, elements, method, dt)
     if model == "elastic":

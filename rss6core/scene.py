@@ -165,6 +165,8 @@ class Simulation:
     contact_time_step: float = 1e-4  # s, internal step of the contact level (L4)
     contact_integrator: str = "generalized-alpha"  # its integrator: damps unresolved contact chatter
     settle_time: float = 0.0  # s, start-up transient left out of the error summaries (maxima, means)
+    contact_tolerance: float = 0.0   # m, local error bound of the adaptive contact step (0: none)
+    contact_refinements: int = 0     # halvings of contact_time_step the adaptive step may take
 
 
 @dataclass(frozen=True)
@@ -266,6 +268,8 @@ _SCHEMA: dict = {
         "contact_time_step_s": _Key(float, default=1e-4, check=_POS),
         "contact_integrator": _Key(str, default="generalized-alpha", choices=INTEGRATORS),
         "settle_time_s": _Key(float, default=0.0, check=_NONNEG),
+        "contact_tolerance_m": _Key(float, default=0.0, check=_NONNEG),
+        "contact_refinements": _Key(int, default=0, bounds=(0, 10)),
     },
     "sampling": {  # MODEL.md section 4; mean and std as fractions of the clearance size
         "radial_mean": _Key(float, default=0.5, bounds=(0.0, 1.0)),
@@ -399,7 +403,8 @@ def _build(v: dict, text: str, source: str) -> Scene:
             _frozen(tr["position_offset_m"] + list(deg(tr["angle_offset_deg"]))),
             _frozen(tr["position_amplitude_m"] + list(deg(tr["angle_amplitude_deg"]))),
             duration),
-        simulation=Simulation(**{k.removesuffix("_s"): val for k, val in v["simulation"].items()}),
+        simulation=Simulation(**{k.removesuffix("_s").removesuffix("_m"): val
+                                 for k, val in v["simulation"].items()}),
         damping=Damping(v["damping"]["mass_coefficient_per_s"],
                         v["damping"]["stiffness_coefficient_s"]),
         clearance=Clearances(**{k: v["clearance"][f"{k}_m"] for k in

@@ -98,11 +98,10 @@ def test_missing_file_is_named(tmp_path):
 
 
 def test_contact_time_step_must_divide_the_time_step(paper_text):
-    text = _edit(paper_text, "time_step_s = 1.0e-3", "time_step_s = 1.0e-3\ncontact_time_step_s = 3.0e-4")
+    text = _edit(paper_text, "contact_time_step_s = 2.0e-4", "contact_time_step_s = 3.0e-4")
     with pytest.raises(SceneError, match=r"\[simulation\] contact_time_step_s"):
         parse_scene(text)
-    fine = parse_scene(_edit(paper_text, "time_step_s = 1.0e-3",
-                             "time_step_s = 1.0e-3\ncontact_time_step_s = 2.5e-4"))
+    fine = parse_scene(_edit(paper_text, "contact_time_step_s = 2.0e-4", "contact_time_step_s = 2.5e-4"))
     assert fine.simulation.contact_time_step == pytest.approx(2.5e-4)
     assert fine.contact.impact_speed_floor == pytest.approx(1e-3)
 
@@ -122,6 +121,17 @@ def test_contact_stiffness_scale_defaults_to_one_and_must_be_positive(paper_text
     assert scaled.contact.stiffness_scale == 10.0
     with pytest.raises(SceneError, match=r"\[contact\] stiffness_scale"):
         parse_scene(_edit(paper_text, line, line + "\nstiffness_scale = -1.0"))
+
+
+def test_adaptive_contact_step_keys_are_read_and_checked(paper_text):
+    sim = parse_scene(paper_text).simulation
+    assert (sim.contact_time_step, sim.contact_refinements, sim.contact_tolerance) == (2e-4, 4, 1e-8)
+    with pytest.raises(SceneError, match=r"\[simulation\] contact_tolerance_m"):
+        parse_scene(_edit(paper_text, "contact_tolerance_m = 1.0e-8", "contact_tolerance_m = -1.0e-8"))
+    with pytest.raises(SceneError, match=r"\[simulation\] contact_refinements"):
+        parse_scene(_edit(paper_text, "contact_refinements = 4", "contact_refinements = 11"))
+    with pytest.raises(SceneError, match=r"\[simulation\] contact_refinements"):
+        parse_scene(_edit(paper_text, "contact_refinements = 4", "contact_refinements = 2.5"))
 
 
 def test_settle_time_must_be_shorter_than_the_trajectory(paper_text):
