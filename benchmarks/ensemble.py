@@ -39,7 +39,7 @@ from rss6core.models import default_integrator, default_time_step, simulate_batc
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 # counts per model: loop (one at a time), batched (one batch), workers (per throughput run)
-FULL = {"config": "paper.toml", "paper": (10, 200, 400), "contact": (2, 64, 64), "memory": (100, 1000)}
+FULL = {"config": "paper.toml", "paper": (10, 200, 400), "contact": (2, 64, 128), "memory": (100, 1000)}
 QUICK = {"config": "smoke.toml", "paper": (3, 50, 100), "contact": (1, 6, 4), "memory": (100, 1000)}
 
 
@@ -68,10 +68,11 @@ def _profile(scene, model, n, top=8):
 
 
 def _throughput(scene, config, model, n, workers, tmp):
-    """Realisations per second of run_ensemble on a local cluster of ``workers`` workers."""
+    """Realisations per second of run_ensemble on a local cluster of ``workers`` workers, in the
+    chunks ``rss6 run -n N`` makes for two workers (the same batches for 1 and 2 workers)."""
     from dask.distributed import Client, LocalCluster
 
-    from pipeline.run import BLAS_ENV, EnsembleSpec, run_ensemble
+    from pipeline.run import BLAS_ENV, EnsembleSpec, default_chunk, run_ensemble
     os.environ.update(BLAS_ENV)
     spec = EnsembleSpec(scene.source_text, str(config), model, default_integrator(scene, model),
                         default_time_step(scene, model), scene.simulation.elements_per_link, 0)
@@ -80,7 +81,7 @@ def _throughput(scene, config, model, n, workers, tmp):
         client.run(lambda: __import__("rss6core.models"))     # imports off the clock
         start = time.perf_counter()
         run_ensemble(spec, n, Path(tmp) / f"{model}-{workers}.nc", scheduler=cluster.scheduler_address,
-                     chunk=max(1, n // 4), progress=False)
+                     chunk=default_chunk(n, 2), progress=False)
         return n / (time.perf_counter() - start)
 
 

@@ -334,9 +334,11 @@ def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon
     limit = _explicit_limit(scene)
     rows = []
 
-    def sweep(sc, level, integrator, steps, scale=1.0, n_real=n):
-        runs = {h: measure(sc, Setting(level, integrator, h, el, scale), n_real, seed) for h in steps}
-        rows.extend(_rows(runs, level, integrator, scale, sc.trajectory.duration, tolerance, log,
+    def sweep(sc, level, integrator, steps, scale=1.0, n_real=n, adaptive=(0.0, 0)):
+        runs = {h: measure(sc, Setting(level, integrator, h, el, scale, *adaptive), n_real, seed)
+                for h in steps}
+        name = integrator + (f" adaptive {adaptive[0]:g} m, {adaptive[1]} halvings" if adaptive[1] else "")
+        rows.extend(_rows(runs, level, name, scale, sc.trajectory.duration, tolerance, log,
                           lambda h: f"dt {h:.3g} s K x{scale:g}"))
 
     T = scene.trajectory.duration
@@ -352,6 +354,10 @@ def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon
     for ig in (sim.contact_integrator, "newmark"):
         for scale in (1.0, 10.0):
             sweep(short, "contact", ig, contact_steps, scale)
+    # the adaptive step from the same base steps: where Newton fails it halves the step instead
+    adaptive = (sim.contact_tolerance or ADAPTIVE_TOLERANCE, sim.contact_refinements or ADAPTIVE_REFINEMENTS)
+    for scale in (1.0, 10.0):
+        sweep(short, "contact", sim.contact_integrator, contact_steps, scale, adaptive=adaptive)
     limits = _limits(rows)
     limits["central-difference 2/omega_max_s"] = limit
     return rows, limits

@@ -516,9 +516,14 @@ class _StepSize:
 
 
 class _Workspace:
-    """The batch's state between steps (every array has the realisation axis first) and its records."""
+    """The batch's state between steps (every array has the realisation axis first) and its records.
+
+    d, v, a: displacements, velocities, accelerations (R, N); for the alpha-weighted integrators
+    also M a, C v + K d and the generalised contact forces at the last instant (R, N).
+    """
 
     def __init__(self, R, n_out, floor):
+        self.d = self.v = self.a = self.Ma = self.rest = self.g = None
         self.contacts = _Contacts((R,), floor)
         self.hist = np.full((3, R, n_out, 6), np.nan)
         self.peak = np.zeros((R, 3, 6))
@@ -611,13 +616,13 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
         needed; their state moves to k0 + sizes[level].span."""
         sz = sizes[level]
         k1 = k0 + sz.span
-        d, v, a = D[idx], V[idx], A[idx]
+        d, v, a = ws.d[idx], ws.v[idx], ws.a[idx]
         dp = d + sz.h * v + (0.5 - beta) * sz.h * sz.h * a
         vp = v + (1.0 - gamma) * sz.h * a
         Mp = _platform_mass(jm, ch.Ip[k1])
         r = wf * (ch.F[k1] - _internal(jm, Mp, dp, vp))
         if weighted:
-            r += af * (ch.F[k0] + GN[idx] - REST[idx]) - am * MA[idx]
+            r += af * (ch.F[k0] + ws.g[idx] - ws.rest[idx]) - am * ws.Ma[idx]
         a_new, f, g, ok, count, delta, rate, used = newton(idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp,
                                                            a, sz.bh2, sz.gh, wf)
         ws.iters[idx] += count
@@ -641,13 +646,13 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
         keep = accept & sound
         if keep.any():
             kept = idx[keep]
-            D[kept], V[kept], A[kept] = d_new[keep], v_new[keep], a_new[keep]
+            ws.d[kept], ws.v[kept], ws.a[kept] = d_new[keep], v_new[keep], a_new[keep]
             ws.contacts.update(kept, delta[keep], rate[keep], used[keep])
             ws.steps[kept] += 1
             if weighted:
-                MA[kept] = _mass(jm, Mp, a_new[keep])
-                REST[kept] = _internal(jm, Mp, d_new[keep], v_new[keep])
-                GN[kept] = g[keep]
+                ws.Ma[kept] = _mass(jm, Mp, a_new[keep])
+                ws.rest[kept] = _internal(jm, Mp, d_new[keep], v_new[keep])
+                ws.g[kept] = g[keep]
             peaks(kept, d_new[keep], v_new[keep], a_new[keep], f[keep], ch.t[k1])
         retry = idx[~accept]
         if len(retry):
@@ -658,16 +663,16 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
                 advance(retry, ch, k0 + sz.span // 2, level + 1)
 
     ch = _Chunk(scene, jm, t[:1])
-    D, V = initial_state(scene, jm, joints)
+    ws.d, ws.v = initial_state(scene, jm, joints)
     everyone = np.arange(R)
     Mp0 = _platform_mass(jm, ch.Ip[0])
-    rhs0 = ch.F[0] - _internal(jm, Mp0, D, V)
-    A, f, GN, ok, _, delta, rate, used = newton(everyone, ch, 0, start, 1.0, rhs0, D, V, np.zeros_like(D),
-                                                0.0, 0.0, 1.0)
+    rest = _internal(jm, Mp0, ws.d, ws.v)
+    ws.a, f, ws.g, _, _, delta, rate, used = newton(everyone, ch, 0, start, 1.0, ch.F[0] - rest, ws.d,
+                                                    ws.v, np.zeros_like(ws.d), 0.0, 0.0, 1.0)
     ws.contacts.update(everyone, delta, rate, used)
-    MA, REST = _mass(jm, Mp0, A), _internal(jm, Mp0, D, V)
-    peaks(everyone, D, V, A, f, 0.0)
-    _history(ws, 0, D, V, A)
+    ws.Ma, ws.rest = _mass(jm, Mp0, ws.a), rest
+    peaks(everyone, ws.d, ws.v, ws.a, f, 0.0)
+    _history(ws, 0)
     for s0 in range(1, len(t), chunk):
         s1 = min(s0 + chunk, len(t))
         # the chunk's instants on the finest grid, from the start of its first step
@@ -678,7 +683,7 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
                 break
             advance(live, ch, j * fine, 0)
             if (s0 + j) % every == 0:
-                _history(ws, (s0 + j) // every, D, V, A)
+                _history(ws, (s0 + j) // every)
         if not ws.alive.any():
             break
     return ContactBatch(t[::every], ws.hist[0], ws.hist[1], ws.hist[2], ws.peak, ws.cpeak, ws.status,
@@ -689,10 +694,10 @@ def _subset(joints: _Joints, idx) -> _Joints:
     return _Joints(*(getattr(joints, f.name)[idx] for f in dataclasses.fields(joints)))
 
 
-def _history(ws: _Workspace, k, d, v, a):
+def _history(ws: _Workspace, k):
     """Keep the platform's error at output instant k for the realisations still alive."""
     live = ws.alive
-    ws.hist[:, live, k] = np.stack([d[live, -6:], v[live, -6:], a[live, -6:]])
+    ws.hist[:, live, k] = np.stack([ws.d[live, -6:], ws.v[live, -6:], ws.a[live, -6:]])
 
 
 def _full_contact(jm: JointModel, gl, shape_c, shape_r):
