@@ -1,12 +1,13 @@
 """Benchmark: ensemble throughput of the `paper` and `contact` levels on configs/paper.toml.
 
-Run on demand: ``python benchmarks/ensemble.py [--quick] [--json] [--profile]``.
+Run on demand: ``python benchmarks/ensemble.py [--quick] [--json] [--profile] [--repeat R]``.
 Measures, in one run and on this machine:
 - seconds per realisation one at a time (a batch of one) and batched (one
   batch of many), and their ratio;
 - realisations per second through ``run_ensemble`` on a local dask cluster of
   1 and 2 single-threaded workers (cluster start-up and worker imports not
-  counted), and the parallel efficiency (throughput of 2 / twice that of 1);
+  counted; the median of ``--repeat`` runs each), and the parallel efficiency
+  (throughput of 2 / twice that of 1);
 - peak resident memory of a whole ``rss6 run`` (main process and its workers,
   sampled every 0.05 s) for N = 100 and N = 1000 with ``--store summary``
   (`paper` level), and that run's wall time.
@@ -80,7 +81,8 @@ def _throughput(scene, config, model, n, workers, tmp):
                       dashboard_address=None, host="127.0.0.1") as cluster, Client(cluster) as client:
         client.run(lambda: __import__("rss6core.models"))     # imports off the clock
         start = time.perf_counter()
-        run_ensemble(spec, n, Path(tmp) / f"{model}-{workers}.nc", scheduler=cluster.scheduler_address,
+        fresh = Path(tempfile.mkdtemp(dir=tmp)) / f"{model}-{workers}.nc"   # nothing stored to resume
+        run_ensemble(spec, n, fresh, scheduler=cluster.scheduler_address,
                      chunk=default_chunk(n, 2), progress=False)
         return n / (time.perf_counter() - start)
 
@@ -131,7 +133,7 @@ def _peak_rss(config, n, tmp):
     return peak / 2 ** 20, time.perf_counter() - start
 
 
-def measure(quick: bool, profile: bool) -> dict:
+def measure(quick: bool, profile: bool, repeat: int = 1) -> dict:
     plan = QUICK if quick else FULL
     config = CONFIGS / plan["config"]
     scene = load_scene(config)
@@ -144,7 +146,9 @@ def measure(quick: bool, profile: bool) -> dict:
             out["per_realization_s"][model] = {"loop": loop, "batched": batched}
             out["batched_speedup"][model] = loop / batched
             n = plan[model][2]
-            rate = {str(w): _throughput(scene, config, model, n, w, tmp) for w in (1, 2)}
+            rates = [{str(w): _throughput(scene, config, model, n, w, tmp) for w in (1, 2)}
+                     for _ in range(repeat)]   # 1 and 2 workers alternate: drifting load hits both
+            rate = {w: statistics.median(r[w] for r in rates) for w in ("1", "2")}
             out["realizations_per_s"][model] = rate
             out["parallel_efficiency"][model] = rate["2"] / (2 * rate["1"])
             if profile:
@@ -167,8 +171,12 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="configs/smoke.toml, small counts (< 1 min)")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     parser.add_argument("--profile", action="store_true", help="add each batched run's top profile entries")
+    parser.add_argument("--repeat", type=int, default=1, metavar="R",
+                        help="throughput runs per worker count; their median is reported")
     args = parser.parse_args(argv)
-    out = measure(args.quick, args.profile)
+    if args.repeat < 1:
+        parser.error("--repeat must be at least 1")
+    out = measure(args.quick, args.profile, args.repeat)
     if args.json:
         print(json.dumps(out, indent=2))
         return 0

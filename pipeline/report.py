@@ -352,8 +352,8 @@ def _explanations(scene, ens: dict) -> list[str]:
             "clearance strikes the far wall under the Lankarani-Nikravesh law, in well under a "
             "millisecond, and the platform acceleration follows the impact force. Its size depends "
             "on the contact stiffness and on resolving it in time, which is why the contact level "
-            "halves its step where an impact needs it (README, 'Speed and accuracy': fixed steps "
-            "need 25 us for these peaks, against 0.1 ms for displacements). Of the "
+            "halves its step where an impact needs it (README, 'Speed and accuracy': a fixed step "
+            "fine enough for these peaks would have to be fine for the whole run). Of the "
             "three joint families "
             f"switched on one at a time, {fam} gives the largest median peak ({100 * share:.0f} % "
             "of the three runs' sum).")
