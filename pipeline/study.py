@@ -105,6 +105,12 @@ ADAPTIVE_TOLERANCE = 1e-8   # m, the adaptive rows' tolerance for scenes that se
 ADAPTIVE_REFINEMENTS = 4
 
 
+def _adaptive(scene) -> tuple[float, int]:
+    """The scene's adaptive contact step (tolerance m, refinements), or the defaults where it sets none."""
+    sim = scene.simulation
+    return sim.contact_tolerance or ADAPTIVE_TOLERANCE, sim.contact_refinements or ADAPTIVE_REFINEMENTS
+
+
 def default_settings(scene) -> tuple[list[Setting], Setting]:
     """The settings compared by default, and the reference: the contact level's adaptive step at a
     hundredth of the tolerance, down to a quarter of the finest adaptive row's smallest step, on a
@@ -112,8 +118,7 @@ def default_settings(scene) -> tuple[list[Setting], Setting]:
     sim = scene.simulation
     dt, dtc, el = sim.time_step, sim.contact_time_step, sim.elements_per_link
     ig, igc = sim.integrator, sim.contact_integrator
-    tol = sim.contact_tolerance or ADAPTIVE_TOLERANCE
-    levels = sim.contact_refinements or ADAPTIVE_REFINEMENTS
+    tol, levels = _adaptive(scene)
     half = max(1, el // 2)
     out = [Setting("quasi-static", "newmark", dt, el)]
     out += [Setting("elastic", i, dt, el) for i in ("newmark", "hht", "generalized-alpha")]
@@ -357,7 +362,7 @@ def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon
         for scale in (1.0, 10.0):
             sweep(short, "contact", ig, contact_steps, scale)
     # the adaptive step from the same base steps: where Newton fails it halves the step instead
-    adaptive = (sim.contact_tolerance or ADAPTIVE_TOLERANCE, sim.contact_refinements or ADAPTIVE_REFINEMENTS)
+    adaptive = _adaptive(scene)
     for scale in (1.0, 10.0):
         sweep(short, "contact", sim.contact_integrator, contact_steps, scale, adaptive=adaptive)
     limits = _limits(rows)

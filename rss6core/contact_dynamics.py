@@ -43,6 +43,7 @@ from .elastic import SimulationResult, quasi_static_state, time_grid
 from .integrators import Integrator, make_integrator
 from .kinematics import crank_axes, rigid_motion
 from .quasi_static import closure_matrix
+from .scene import MAX_CONTACT_REFINEMENTS
 from .sections import section_properties
 
 __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactBatch"]
@@ -50,7 +51,6 @@ __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactBatch"
 TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
 TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
 MAX_ITERATIONS = 60
-MAX_REFINEMENTS = 10       # halvings of the contact step at most (1/1024)
 ENGINES = ("compiled", "numpy")
 
 
@@ -495,8 +495,8 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
     refinements = sim.contact_refinements if refinements is None else refinements
     if not tolerance >= 0.0:
         raise ValueError(f"contact error tolerance must be >= 0 m, got {tolerance!r}")
-    if refinements not in range(MAX_REFINEMENTS + 1):
-        raise ValueError(f"contact step refinements must be an integer in [0, {MAX_REFINEMENTS}], "
+    if refinements not in range(MAX_CONTACT_REFINEMENTS + 1):
+        raise ValueError(f"contact step refinements must be an integer in [0, {MAX_CONTACT_REFINEMENTS}], "
                          f"got {refinements!r}")
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         return _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,

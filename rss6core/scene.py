@@ -148,6 +148,7 @@ class ContactLaw:
 
 MODELS = ("rigid", "quasi-static", "elastic", "paper", "contact")
 INTEGRATORS = ("newmark", "hht", "generalized-alpha", "central-difference")
+MAX_CONTACT_REFINEMENTS = 10   # halvings of the contact step the adaptive step may take (1/1024)
 
 
 @dataclass(frozen=True)
@@ -269,7 +270,7 @@ _SCHEMA: dict = {
         "contact_integrator": _Key(str, default="generalized-alpha", choices=INTEGRATORS),
         "settle_time_s": _Key(float, default=0.0, check=_NONNEG),
         "contact_tolerance_m": _Key(float, default=0.0, check=_NONNEG),
-        "contact_refinements": _Key(int, default=0, bounds=(0, 10)),
+        "contact_refinements": _Key(int, default=0, bounds=(0, MAX_CONTACT_REFINEMENTS)),
     },
     "sampling": {  # MODEL.md section 4; mean and std as fractions of the clearance size
         "radial_mean": _Key(float, default=0.5, bounds=(0.0, 1.0)),
