@@ -36,7 +36,7 @@ import numpy as np
 from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
                        platform_point_map, split)
 from .beam import link_matrices
-from .contact_kernel import newton_step
+from .contact_kernel import DIVERGED, NEWTON_FAILED, advance_chunk, newton_step
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
 from .elastic import SimulationResult, quasi_static_state, time_grid
@@ -109,6 +109,19 @@ class _Condensed:
         S = np.zeros((12, 12))
         S[:6, :6], S[6:, 6:] = self.crank[5], self.rod[5]
         self.legs = S   # (12, 12): crank node 0, crank tip, rod C end, rod B end (link frames)
+
+    def maps(self):
+        """Condensation and recovery as matrices per link [crank, rod]: r (n,) -> [r_i inv, r_b - r_i P]
+        (n, n_i + 6), and [y, x_b] -> x with x_i = y - P x_b (n_i + 6, n)."""
+        out = []
+        for i, b, inv, _, P, _ in (self.crank, self.rod):
+            ni, n = len(i), len(i) + len(b)
+            T, U = np.zeros((n, ni + 6)), np.zeros((ni + 6, n))
+            T[i, :ni], T[i, ni:], T[b, ni + np.arange(6)] = inv, -P, 1.0
+            U[np.arange(ni), i] = 1.0
+            U[ni:, i], U[ni + np.arange(6), b] = -P.T, 1.0
+            out.append((T, U))
+        return out
 
     def condense(self, rc, rr):
         """Right-hand sides (..., 6, 12) on the joint nodes, and the interior parts for recovery."""
@@ -257,9 +270,10 @@ class _Chunk:
         motion = rigid_motion(scene, t)
         Rc, Rr = link_frames(motion, scene.geometry)
         self.Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
+        self.Mp = _platform_mass(jm, self.Ip)                  # (T, 6, 6)
         fc, fr, fp = link_loads(jm.elastic, motion, scene, Rc, Rr, self.Ip)
         self.F = join(fc[..., np.r_[0:3, 6:fc.shape[-1]]], fr, fp)
-        self.J = platform_point_map(motion.r)                  # (T, 6, 3, 6)
+        self.J = np.ascontiguousarray(platform_point_map(motion.r))   # (T, 6, 3, 6)
         G = np.zeros(Rc.shape[:2] + (9, 12))                   # joint nodes -> [e_A, e_C, e_B]
         G[..., 0:3, 0:3], G[..., 3:6, 3:6], G[..., 3:6, 6:9], G[..., 6:9, 9:12] = Rc, -Rc, Rr, Rr
         self.G, self.Gt = G, np.ascontiguousarray(np.swapaxes(G, -1, -2))
@@ -269,6 +283,10 @@ class _Chunk:
         self.omega = np.stack([w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :]], -2)
         law = scene.contact
         self.radius = np.array([[law.journal_radius], [law.sphere_radius], [law.sphere_radius]])
+
+    def arrays(self):
+        """What :func:`.contact_kernel.advance_chunk` reads: F, Mp, G, J, Rr, omega, t."""
+        return self.F, self.Mp, self.G, self.J, self.Rr, self.omega, self.t
 
 
 def _platform_mass(jm: JointModel, Ip: np.ndarray) -> np.ndarray:
@@ -532,6 +550,17 @@ class _Workspace:
         self.status, self.message = ["finished"] * R, [""] * R
         self.steps, self.iters = np.zeros(R, np.int64), np.zeros(R, np.int64)
         self.refined = np.zeros(R, np.int64)
+        self.fail = np.zeros(R, np.int64)          # NEWTON_FAILED, DIVERGED (contact_kernel)
+        self.fail_at = np.zeros((R, 3))            # t (s), step (s), largest |d| (m)
+
+    def failed(self, r, code, t, h, size, limit):
+        """Mark realisation r failed at t (s) with an h (s) step, saying why."""
+        self.alive[r] = False
+        self.status[r] = "failed"
+        self.message[r] = (f"Newton on the contact forces did not converge in {MAX_ITERATIONS} "
+                           f"iterations at t = {t:.6g} s with a {h:.3g} s step" if code == NEWTON_FAILED
+                           else f"diverged at t = {t:.6g} s: displacement {size:.3g} exceeds "
+                                f"{limit:g} or is not finite")
 
 
 def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
@@ -636,13 +665,8 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
                 jump = np.linalg.norm(_relative(ch, k1, jb, jp), axis=-1).max((-1, -2))
                 accept &= sz.error * jump <= tolerance
         for i in np.flatnonzero(accept & ~sound):
-            r_ = idx[i]
-            ws.alive[r_] = False
-            ws.status[r_] = "failed"
-            ws.message[r_] = (f"Newton on the contact forces did not converge in {MAX_ITERATIONS} "
-                              f"iterations at t = {ch.t[k1]:.6g} s with a {sz.h:.3g} s step" if not ok[i] else
-                              f"diverged at t = {ch.t[k1]:.6g} s: displacement "
-                              f"{np.abs(d_new[i]).max():.3g} exceeds {divergence_limit:g} or is not finite")
+            ws.failed(idx[i], DIVERGED if ok[i] else NEWTON_FAILED, ch.t[k1], sz.h, np.abs(d_new[i]).max(),
+                      divergence_limit)
         keep = accept & sound
         if keep.any():
             kept = idx[keep]
@@ -673,17 +697,40 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     ws.Ma, ws.rest = _mass(jm, Mp0, ws.a), rest
     peaks(everyone, ws.d, ws.v, ws.a, f, 0.0)
     _history(ws, 0)
+    if engine == "compiled":
+        maps = [sz.cond.maps() for sz in sizes]
+        levels = (np.array([sz.span for sz in sizes], np.int64), *(np.array([getattr(sz, q) for sz in sizes])
+                  for q in ("h", "coef_p", "bh2", "gh", "error")),
+                  np.stack([sz.cond.legs for sz in sizes]),
+                  *(np.stack([m[link][q] for m in maps]) for link in (0, 1) for q in (0, 1)))
+        layout = (jm.crank_dofs, np.concatenate([jm.crank_M, jm.crank_K]),
+                  np.concatenate([jm.rod_M, jm.rod_K]), np.ascontiguousarray(jm.crank_M),
+                  np.ascontiguousarray(jm.rod_M), jm.crank_boundary.astype(np.int64))
+        coef = np.array([lam1, lam2, beta, gamma, am, af, settle_at, ws.contacts.floor, tolerance,
+                         divergence_limit])
+        state = tuple(np.ascontiguousarray(x) for x in (ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g))
+        ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g = state
     for s0 in range(1, len(t), chunk):
         s1 = min(s0 + chunk, len(t))
         # the chunk's instants on the finest grid, from the start of its first step
         ch = _Chunk(scene, jm, ((s0 - 1) * fine + np.arange((s1 - s0) * fine + 1)) * (h / fine))
-        for j in range(s1 - s0):
-            live = np.flatnonzero(ws.alive)
-            if not len(live):
-                break
-            advance(live, ch, j * fine, 0)
-            if (s0 + j) % every == 0:
-                _history(ws, (s0 + j) // every)
+        if engine == "compiled":
+            before = ws.alive.copy()
+            advance_chunk(np.flatnonzero(ws.alive), s0, s1 - s0, every, levels, layout, coef, *ch.arrays(),
+                          w_axes, np.ascontiguousarray(ch.radius[:, 0]), params, law_v,
+                          np.array([TOL_DISPLACEMENT, TOL_VELOCITY, MAX_ITERATIONS]), refinements,
+                          *state, ws.contacts.stored, ws.contacts.in_contact, ws.contacts.rate, ws.peak,
+                          ws.cpeak, ws.hist, ws.alive, ws.fail, ws.fail_at, ws.steps, ws.iters, ws.refined)
+            for r in np.flatnonzero(before & ~ws.alive):
+                ws.failed(r, ws.fail[r], *ws.fail_at[r], divergence_limit)
+        else:
+            for j in range(s1 - s0):
+                live = np.flatnonzero(ws.alive)
+                if not len(live):
+                    break
+                advance(live, ch, j * fine, 0)
+                if (s0 + j) % every == 0:
+                    _history(ws, (s0 + j) // every)
         if not ws.alive.any():
             break
     return ContactBatch(t[::every], ws.hist[0], ws.hist[1], ws.hist[2], ws.peak, ws.cpeak, ws.status,

@@ -264,22 +264,46 @@ def test_refinement_rescues_a_step_where_newton_fails(smoke):
             < np.abs(half.displacement - fine.displacement)[..., :3].max())
 
 
-def test_compiled_and_numpy_contact_engines_agree(smoke):
-    """The compiled Newton kernel against the vectorised numpy iteration: same arithmetic in
-    another order, so equal to round-off (1e-9 of each history's largest value) with the same
-    Newton iteration counts, on a run whose joints are in contact and sliding."""
+@pytest.mark.parametrize("integrator, adaptive", [("generalized-alpha", {}),
+                                                   ("newmark", dict(tolerance=1e-8, refinements=3))])
+def test_compiled_and_numpy_contact_engines_agree(smoke, integrator, adaptive):
+    """The compiled steps (contact_stepper, contact_kernel: BLAS products, a block-tridiagonal
+    elimination per leg) against the numpy ones (vectorised over the batch, dense solves): the
+    same arithmetic in another order, so equal to round-off (1e-9 of each history's largest value)
+    with the same Newton iteration counts and the same adaptive steps, on a run whose joints are
+    in contact and sliding; with the alpha-weighted integrator at a fixed step and with Newmark
+    (no weighted terms) refining its step."""
+    from rss6core.integrators import make_integrator
     scene = _with(smoke, trajectory=dict(duration=0.02))
     draws = [draw_clearances(scene, 2, r) for r in range(2)]
-    compiled = simulate_contact(scene, draws)
-    reference = simulate_contact(scene, draws, engine="numpy")
+    method = make_integrator(integrator)
+    compiled = simulate_contact(scene, draws, integrator=method, **adaptive)
+    reference = simulate_contact(scene, draws, integrator=method, engine="numpy", **adaptive)
     assert compiled.status == reference.status == ["finished"] * 2
     assert np.array_equal(compiled.iterations, reference.iterations)
+    assert np.array_equal(compiled.steps, reference.steps)
+    assert np.array_equal(compiled.refined, reference.refined)
+    assert np.all(compiled.refined > 0) == bool(adaptive)
     assert np.all(reference.contact_peak > 0)
-    for q in ("displacement", "velocity", "acceleration", "contact_peak"):
+    for q in ("displacement", "velocity", "acceleration", "peak", "contact_peak"):
         a, b = getattr(compiled, q), getattr(reference, q)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * np.abs(b).max())
     with pytest.raises(ValueError, match="engine"):
         simulate_contact(scene, draws, engine="fortran")
+
+
+@pytest.mark.parametrize("engine", ["compiled", "numpy"])
+def test_a_diverging_realisation_is_stopped_and_reported(smoke, engine):
+    """A displacement beyond the divergence limit ends the realisation at that step, with a message
+    naming the time, the size and the limit; its history stops there, and nothing is kept after."""
+    scene = _with(smoke, trajectory=dict(duration=0.01))
+    draws = [draw_clearances(scene, 0, r) for r in range(2)]
+    run = simulate_contact(scene, draws, divergence_limit=1e-9, engine=engine)
+    assert run.status == ["failed"] * 2
+    assert all(m.startswith("diverged at t = 0.0001 s: displacement ") and "exceeds 1e-09" in m
+               for m in run.message)
+    assert np.all(run.steps == 0)
+    assert np.all(np.isfinite(run.displacement[:, 0])) and np.all(np.isnan(run.displacement[:, 1:]))
 
 
 @pytest.mark.parametrize("model", ["paper", "contact", "quasi-static"])
