@@ -23,8 +23,9 @@ links onto their joint nodes once for the whole batch; Newton iterations on the
 contact forces then solve, per realisation, a block-arrow system of 12 joint DOFs
 per leg bordered by the 6 platform DOFs.  Realisations are an array axis: the
 per-step matrices, factorizations and rigid loads are shared by the batch; the
-Newton iteration itself runs compiled (:mod:`.contact_kernel`), one realisation
-after another, with the vectorised numpy functions below as its reference.
+steps themselves run compiled (:mod:`.contact_kernel`), one realisation after
+another, with the vectorised numpy functions below (``engine="numpy"``) as their
+reference.
 """
 from __future__ import annotations
 
@@ -503,8 +504,8 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
     """Integrate the contact level for a batch of clearance draws (see :func:`_simulate_contact`).
 
     Overflow in a diverging realisation is detected and reported as its failure, not warned about.
-    ``engine`` runs each step's Newton iteration "compiled" (numba, :mod:`.contact_kernel`) or
-    with "numpy" (vectorised over the batch; about 5x slower, kept as the kernel's reference).
+    ``engine`` runs the steps "compiled" (numba, :mod:`.contact_kernel`) or
+    with "numpy" (vectorised over the batch; about 10x slower, kept as the reference).
     """
     if engine not in ENGINES:
         raise ValueError(f"contact engine must be one of {', '.join(ENGINES)}, not {engine!r}")
@@ -561,6 +562,43 @@ class _Workspace:
                            f"iterations at t = {t:.6g} s with a {h:.3g} s step" if code == NEWTON_FAILED
                            else f"diverged at t = {t:.6g} s: displacement {size:.3g} exceeds "
                                 f"{limit:g} or is not finite")
+
+
+class _CompiledSteps:
+    """What :func:`.contact_kernel.advance_chunk` needs besides the batch's state and the chunk:
+    the step levels, the links' layout, the integrator's and the contact's constants."""
+
+    def __init__(self, jm: JointModel, sizes, integrator, ws: _Workspace, settle_at, tolerance,
+                 divergence_limit, refinements, params, law_v, w_axes, law):
+        maps = [sz.cond.maps() for sz in sizes]
+        self.levels = (np.array([sz.span for sz in sizes], np.int64),
+                       *(np.array([getattr(sz, q) for sz in sizes])
+                         for q in ("h", "coef_p", "bh2", "gh", "error")),
+                       np.stack([sz.cond.legs for sz in sizes]),
+                       *(np.stack([m[link][q] for m in maps]) for link in (0, 1) for q in (0, 1)))
+        self.layout = (jm.crank_dofs, np.concatenate([jm.crank_M, jm.crank_K]),
+                       np.concatenate([jm.rod_M, jm.rod_K]), np.ascontiguousarray(jm.crank_M),
+                       np.ascontiguousarray(jm.rod_M), jm.crank_boundary.astype(np.int64))
+        self.coef = np.array([jm.mass_damping, jm.stiffness_damping, integrator.beta, integrator.gamma,
+                              integrator.alpha_m, integrator.alpha_f, settle_at, ws.contacts.floor, tolerance,
+                              divergence_limit])
+        self.limit, self.refinements = divergence_limit, refinements
+        self.params, self.law, self.w = params, law_v, w_axes
+        self.radius = np.array([law.journal_radius, law.sphere_radius, law.sphere_radius])
+        ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g = (np.ascontiguousarray(x) for x in
+                                                  (ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g))
+
+    def advance(self, ws: _Workspace, ch: _Chunk, first, n_base, every):
+        """Base steps first .. first + n_base - 1 of every live realisation (see advance_chunk)."""
+        before = ws.alive.copy()
+        advance_chunk(np.flatnonzero(ws.alive), first, n_base, every, self.levels, self.layout, self.coef,
+                      *ch.arrays(), self.w, self.radius, self.params, self.law,
+                      np.array([TOL_DISPLACEMENT, TOL_VELOCITY, MAX_ITERATIONS]), self.refinements,
+                      ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g, ws.contacts.stored, ws.contacts.in_contact,
+                      ws.contacts.rate, ws.peak, ws.cpeak, ws.hist, ws.alive, ws.fail, ws.fail_at, ws.steps,
+                      ws.iters, ws.refined)
+        for r in np.flatnonzero(before & ~ws.alive):
+            ws.failed(r, ws.fail[r], *ws.fail_at[r], self.limit)
 
 
 def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
@@ -697,32 +735,14 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     ws.Ma, ws.rest = _mass(jm, Mp0, ws.a), rest
     peaks(everyone, ws.d, ws.v, ws.a, f, 0.0)
     _history(ws, 0)
-    if engine == "compiled":
-        maps = [sz.cond.maps() for sz in sizes]
-        levels = (np.array([sz.span for sz in sizes], np.int64), *(np.array([getattr(sz, q) for sz in sizes])
-                  for q in ("h", "coef_p", "bh2", "gh", "error")),
-                  np.stack([sz.cond.legs for sz in sizes]),
-                  *(np.stack([m[link][q] for m in maps]) for link in (0, 1) for q in (0, 1)))
-        layout = (jm.crank_dofs, np.concatenate([jm.crank_M, jm.crank_K]),
-                  np.concatenate([jm.rod_M, jm.rod_K]), np.ascontiguousarray(jm.crank_M),
-                  np.ascontiguousarray(jm.rod_M), jm.crank_boundary.astype(np.int64))
-        coef = np.array([lam1, lam2, beta, gamma, am, af, settle_at, ws.contacts.floor, tolerance,
-                         divergence_limit])
-        state = tuple(np.ascontiguousarray(x) for x in (ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g))
-        ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g = state
+    compiled = (_CompiledSteps(jm, sizes, integrator, ws, settle_at, tolerance, divergence_limit, refinements,
+                               params, law_v, w_axes, scene.contact) if engine == "compiled" else None)
     for s0 in range(1, len(t), chunk):
         s1 = min(s0 + chunk, len(t))
         # the chunk's instants on the finest grid, from the start of its first step
         ch = _Chunk(scene, jm, ((s0 - 1) * fine + np.arange((s1 - s0) * fine + 1)) * (h / fine))
-        if engine == "compiled":
-            before = ws.alive.copy()
-            advance_chunk(np.flatnonzero(ws.alive), s0, s1 - s0, every, levels, layout, coef, *ch.arrays(),
-                          w_axes, np.ascontiguousarray(ch.radius[:, 0]), params, law_v,
-                          np.array([TOL_DISPLACEMENT, TOL_VELOCITY, MAX_ITERATIONS]), refinements,
-                          *state, ws.contacts.stored, ws.contacts.in_contact, ws.contacts.rate, ws.peak,
-                          ws.cpeak, ws.hist, ws.alive, ws.fail, ws.fail_at, ws.steps, ws.iters, ws.refined)
-            for r in np.flatnonzero(before & ~ws.alive):
-                ws.failed(r, ws.fail[r], *ws.fail_at[r], divergence_limit)
+        if compiled:
+            compiled.advance(ws, ch, s0, s1 - s0, every)
         else:
             for j in range(s1 - s0):
                 live = np.flatnonzero(ws.alive)
