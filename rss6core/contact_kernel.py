@@ -555,6 +555,18 @@ def _gather(x, o, n, X, col):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _scatter(Xc, Xr, out):
+    """The six legs' crank rows Xc (6, n_c) and rod rows Xr (6, n_r) into out (N,); :func:`_gather` undone."""
+    nc, nr = Xc.shape[1], Xr.shape[1]
+    for leg in range(6):
+        base = leg * (nc + nr)
+        for c in range(nc):
+            out[base + c] = Xc[leg, c]
+        for c in range(nr):
+            out[base + nc + c] = Xr[leg, c]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _internal(x, u, layout, coef, Mp, work, out):
     """C u + K x (Rayleigh C = l1 M + l2 K) into out (N,): per link type one product
     [l1 u, x + l2 u] (6, 2n) @ [M; K] (2n, n); the platform has mass only (l1 Mp u)."""
@@ -574,12 +586,7 @@ def _internal(x, u, layout, coef, Mp, work, out):
             Zr[leg, nr + c] = x[base + nc + c] + l2 * u[base + nc + c]
     np.dot(Zc, Wc, Ic)
     np.dot(Zr, Wr, Ir)
-    for leg in range(6):
-        base = leg * step
-        for c in range(nc):
-            out[base + c] = Ic[leg, c]
-        for c in range(nr):
-            out[base + nc + c] = Ir[leg, c]
+    _scatter(Ic, Ir, out)
     for a in range(6):
         s = 0.0
         for b in range(6):
@@ -599,12 +606,7 @@ def _mass(acc, layout, Mp, work, out):
     _gather(acc, nc, nr, Ar, 0)
     np.dot(Ac, Mc, Ic)
     np.dot(Ar, Mr, Ir)
-    for leg in range(6):
-        base = leg * step
-        for c in range(nc):
-            out[base + c] = Ic[leg, c]
-        for c in range(nr):
-            out[base + nc + c] = Ir[leg, c]
+    _scatter(Ic, Ir, out)
     for a in range(6):
         s = 0.0
         for b in range(6):
@@ -683,12 +685,7 @@ def _attempt(r, level, k0, k1, lv, layout, coef, F, Mp, G, J, Rr, omega, w, radi
             Yr[leg, ni_r + q] = ab[leg, 6 + q]
     np.dot(Yc, Uc[level], Ac)
     np.dot(Yr, Ur[level], Ar)
-    for leg in range(6):
-        base = leg * step
-        for c in range(nc):
-            a_new[base + c] = Ac[leg, c]
-        for c in range(nr):
-            a_new[base + nc + c] = Ar[leg, c]
+    _scatter(Ac, Ar, a_new)
     for b in range(6):
         a_new[N - 6 + b] = ap[b]
     bh2, gh = bh2s[level], ghs[level]
