@@ -231,8 +231,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="local dask workers, one thread each (default 2)")
     run.add_argument("--scheduler", help="address of an existing dask.distributed scheduler")
     run.add_argument("--chunk", type=_positive_int,
-                     help="realisations per task (default: n / workers, at most 64; each task "
-                          "integrates its realisations as one batch)")
+                     help="realisations per task (default: n cut into a multiple of the workers "
+                          "nearly equal chunks of at most 64; each task integrates its realisations "
+                          "as one batch)")
     run.add_argument("--store", choices=("summary", "full"), default="summary",
                      help="summary: per-realisation maxima and means; full: also time histories")
     run.set_defaults(func=_run)

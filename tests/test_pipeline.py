@@ -13,7 +13,7 @@ import pytest
 from scipy import stats as sps
 
 from pipeline.cli import main
-from pipeline.run import EnsembleSpec, run_ensemble
+from pipeline.run import MAX_AUTO_CHUNK, EnsembleSpec, default_chunk, run_ensemble
 from pipeline.stats import ensemble_stats, summarize
 from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
 from tests.conftest import CONFIGS
@@ -28,6 +28,20 @@ def _spec(seed=3, model="quasi-static", store="summary", text=None):
 def error_summaries(ds):
     return np.concatenate([ds["max_abs_error"].values.ravel(), ds["mean_abs_error"].values.ravel(),
                            ds["eccentricity"].values.ravel()])
+
+
+@pytest.mark.parametrize("n, workers", [(1, 2), (5, 4), (10, 2), (128, 2), (129, 2), (400, 2),
+                                        (1000, 2), (1000, 3), (65, 1)])
+def test_default_chunks_are_equal_and_a_multiple_of_the_workers(n, workers):
+    """At most MAX_AUTO_CHUNK per chunk, as few rounds of one chunk per worker as that allows, and
+    the chunks of one size but the last, which is short by less than one realisation per chunk."""
+    size = default_chunk(n, workers)
+    chunks = -(-n // size)
+    rounds = -(-n // (workers * MAX_AUTO_CHUNK))
+    assert 1 <= size <= MAX_AUTO_CHUNK
+    assert chunks <= rounds * workers and (chunks == rounds * workers or n < rounds * workers * size)
+    assert n - (chunks - 1) * size > size - chunks     # the short last chunk
+    assert default_chunk(400, 2) == 50 and default_chunk(1000, 2) == 63 and default_chunk(128, 2) == 64
 
 
 @pytest.fixture(scope="module")
