@@ -567,6 +567,17 @@ def _scatter(Xc, Xr, out):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _platform(Mp, x, scale, out):
+    """The platform's part of out (N,): scale Mp x over the last six entries."""
+    N = out.shape[0]
+    for a in range(6):
+        s = 0.0
+        for b in range(6):
+            s += Mp[a, b] * x[N - 6 + b]
+        out[N - 6 + a] = scale * s
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _internal(x, u, layout, coef, Mp, work, out):
     """C u + K x (Rayleigh C = l1 M + l2 K) into out (N,): per link type one product
     [l1 u, x + l2 u] (6, 2n) @ [M; K] (2n, n); the platform has mass only (l1 Mp u)."""
@@ -587,11 +598,7 @@ def _internal(x, u, layout, coef, Mp, work, out):
     np.dot(Zc, Wc, Ic)
     np.dot(Zr, Wr, Ir)
     _scatter(Ic, Ir, out)
-    for a in range(6):
-        s = 0.0
-        for b in range(6):
-            s += Mp[a, b] * u[N - 6 + b]
-        out[N - 6 + a] = l1 * s
+    _platform(Mp, u, l1, out)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -607,11 +614,7 @@ def _mass(acc, layout, Mp, work, out):
     np.dot(Ac, Mc, Ic)
     np.dot(Ar, Mr, Ir)
     _scatter(Ic, Ir, out)
-    for a in range(6):
-        s = 0.0
-        for b in range(6):
-            s += Mp[a, b] * acc[N - 6 + b]
-        out[N - 6 + a] = s
+    _platform(Mp, acc, 1.0, out)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
