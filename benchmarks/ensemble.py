@@ -12,7 +12,8 @@ Measures, in one run and on this machine:
   sampled every 0.05 s) for N = 100 and N = 1000 with ``--store summary``
   (`paper` level), and that run's wall time.
 ``--quick`` uses configs/smoke.toml (0.2 s) and small counts, and finishes in
-under a minute; ``--profile`` adds the top entries of a profile of each batched run.
+under a minute once the contact steps are compiled (the first run on a machine compiles for
+about a minute); ``--profile`` adds the top entries of a profile of each batched run.
 """
 from __future__ import annotations
 
