@@ -802,9 +802,9 @@ def advance_chunk(live, first, n_base, every, lv, layout, coef, F, Mp, G, J, Rr,
                                      in_contact, crate, work, scratch)
                 iters[r] += count
                 d_new = work[13]
-                big = 0.0
+                big = 0.0                           # largest |d|; inf if any is inf or nan
                 for n in range(N):
-                    big = max(big, abs(d_new[n]))   # nan propagates as not < limit below
+                    big = max(big, abs(d_new[n]))
                     if not np.isfinite(d_new[n]):
                         big = np.inf
                 sound = ok and big < limit
