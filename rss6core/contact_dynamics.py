@@ -270,14 +270,14 @@ class _Chunk:
         self.t = t
         motion = rigid_motion(scene, t)
         Rc, Rr = link_frames(motion, scene.geometry)
-        self.Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
-        self.Mp = _platform_mass(jm, self.Ip)                  # (T, 6, 6)
-        fc, fr, fp = link_loads(jm.elastic, motion, scene, Rc, Rr, self.Ip)
+        Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
+        self.Mp = _platform_mass(jm, Ip)                       # (T, 6, 6)
+        fc, fr, fp = link_loads(jm.elastic, motion, scene, Rc, Rr, Ip)
         self.F = join(fc[..., np.r_[0:3, 6:fc.shape[-1]]], fr, fp)
         self.J = np.ascontiguousarray(platform_point_map(motion.r))   # (T, 6, 3, 6)
         G = np.zeros(Rc.shape[:2] + (9, 12))                   # joint nodes -> [e_A, e_C, e_B]
         G[..., 0:3, 0:3], G[..., 3:6, 3:6], G[..., 3:6, 6:9], G[..., 6:9, 9:12] = Rc, -Rc, Rr, Rr
-        self.G, self.Gt = G, np.ascontiguousarray(np.swapaxes(G, -1, -2))
+        self.G = G
         self.Rr = np.ascontiguousarray(Rr)
         w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
         w_rod = rod_angular_motion(motion)[1]
@@ -351,7 +351,7 @@ def _evaluate(scene, ch: _Chunk, k, joints, impact, xb, xp, vb, vp):
 
 def _generalized(ch: _Chunk, k, f):
     """Contact forces on the joint nodes (..., 6, 12) (link frames) and on the platform (..., 6)."""
-    loc = (ch.Gt[k] @ f.reshape(f.shape[:-2] + (9, 1)))[..., 0]
+    loc = (np.swapaxes(ch.G[k], -1, -2) @ f.reshape(f.shape[:-2] + (9, 1)))[..., 0]
     return loc, -(np.swapaxes(ch.J[k], -1, -2) @ f[..., 2, :, None])[..., 0].sum(-2)
 
 
@@ -361,7 +361,7 @@ def _tangent(ch: _Chunk, k, D, Sl, Sp):
     full = np.zeros(D.shape[:-3] + (9, 9))
     for j in range(3):
         full[..., 3 * j:3 * j + 3, 3 * j:3 * j + 3] = D[..., j, :, :]
-    L = Sl - ch.Gt[k] @ full @ ch.G[k]
+    L = Sl - np.swapaxes(ch.G[k], -1, -2) @ full @ ch.G[k]
     J, Rr = ch.J[k], ch.Rr[k]
     DB = D[..., 2, :, :]
     DBJ = DB @ J
@@ -569,7 +569,7 @@ class _CompiledSteps:
     the step levels, the links' layout, the integrator's and the contact's constants."""
 
     def __init__(self, jm: JointModel, sizes, integrator, ws: _Workspace, settle_at, tolerance,
-                 divergence_limit, refinements, params, law_v, w_axes, law):
+                 divergence_limit, refinements, params, law_v, w_axes, radius):
         maps = [sz.cond.maps() for sz in sizes]
         self.levels = (np.array([sz.span for sz in sizes], np.int64),
                        *(np.array([getattr(sz, q) for sz in sizes])
@@ -584,9 +584,7 @@ class _CompiledSteps:
                               divergence_limit])
         self.limit, self.refinements = divergence_limit, refinements
         self.params, self.law, self.w = params, law_v, w_axes
-        self.radius = np.array([law.journal_radius, law.sphere_radius, law.sphere_radius])
-        ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g = (np.ascontiguousarray(x) for x in
-                                                  (ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g))
+        self.radius = radius
 
     def advance(self, ws: _Workspace, ch: _Chunk, first, n_base, every):
         """Base steps first .. first + n_base - 1 of every live realisation (see advance_chunk)."""
@@ -655,7 +653,7 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
         """Accelerations for a step of realisations ``idx``; returns a, contact forces, generalised
         contact forces, converged flags, iteration counts, penetrations, their rates and the
         impact speeds used."""
-        Mp = _platform_mass(jm, ch.Ip[j])
+        Mp = ch.Mp[j]
         rc, rr, rp = split(jm, rhs)
         rb, keep = cond.condense(rc, rr)
         db, dpp = _joint_nodes(jm, dp)
@@ -686,7 +684,7 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
         d, v, a = ws.d[idx], ws.v[idx], ws.a[idx]
         dp = d + sz.h * v + (0.5 - beta) * sz.h * sz.h * a
         vp = v + (1.0 - gamma) * sz.h * a
-        Mp = _platform_mass(jm, ch.Ip[k1])
+        Mp = ch.Mp[k1]
         r = wf * (ch.F[k1] - _internal(jm, Mp, dp, vp))
         if weighted:
             r += af * (ch.F[k0] + ws.g[idx] - ws.rest[idx]) - am * ws.Ma[idx]
@@ -727,7 +725,7 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     ch = _Chunk(scene, jm, t[:1])
     ws.d, ws.v = initial_state(scene, jm, joints)
     everyone = np.arange(R)
-    Mp0 = _platform_mass(jm, ch.Ip[0])
+    Mp0 = ch.Mp[0]
     rest = _internal(jm, Mp0, ws.d, ws.v)
     ws.a, f, ws.g, _, _, delta, rate, used = newton(everyone, ch, 0, start, 1.0, ch.F[0] - rest, ws.d,
                                                     ws.v, np.zeros_like(ws.d), 0.0, 0.0, 1.0)
@@ -736,7 +734,8 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     peaks(everyone, ws.d, ws.v, ws.a, f, 0.0)
     _history(ws, 0)
     compiled = (_CompiledSteps(jm, sizes, integrator, ws, settle_at, tolerance, divergence_limit, refinements,
-                               params, law_v, w_axes, scene.contact) if engine == "compiled" else None)
+                               params, law_v, w_axes, np.ascontiguousarray(ch.radius[:, 0]))
+                if engine == "compiled" else None)
     for s0 in range(1, len(t), chunk):
         s1 = min(s0 + chunk, len(t))
         # the chunk's instants on the finest grid, from the start of its first step
