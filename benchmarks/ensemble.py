@@ -72,15 +72,13 @@ def _profile(scene, model, n, top=8):
 def _throughput(scene, config, model, n, workers, tmp):
     """Realisations per second of run_ensemble on a local cluster of ``workers`` workers, in the
     chunks ``rss6 run -n N`` makes for two workers (the same batches for 1 and 2 workers)."""
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client
 
-    from pipeline.run import BLAS_ENV, EnsembleSpec, default_chunk, run_ensemble
-    os.environ.update(BLAS_ENV)
+    from pipeline.run import EnsembleSpec, default_chunk, local_cluster, run_ensemble
     spec = EnsembleSpec(scene.source_text, str(config), model, default_integrator(scene, model),
                         default_time_step(scene, model), scene.simulation.elements_per_link, 0)
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None, host="127.0.0.1") as cluster, Client(cluster) as client:
-        client.run(lambda: __import__("rss6core.models"))     # imports off the clock
+    with local_cluster(workers) as cluster, Client(cluster) as client:
+        client.run(lambda: __import__("pipeline.run"))     # imports off the clock (solver, xarray)
         start = time.perf_counter()
         fresh = Path(tempfile.mkdtemp(dir=tmp)) / f"{model}-{workers}.nc"   # nothing stored to resume
         run_ensemble(spec, n, fresh, scheduler=cluster.scheduler_address,

@@ -180,6 +180,29 @@ def test_scheduler_address_runs_on_an_existing_cluster(reference, tmp_path):
     assert np.array_equal(error_summaries(ds), error_summaries(ref))
 
 
+def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(reference, tmp_path,
+                                                                         monkeypatch):
+    """rss6's own workers start without dask's MALLOC_TRIM_THRESHOLD_ (with it glibc maps and
+    faults in every array over 128 KiB afresh) and with one BLAS thread; with a client open, a
+    netCDF write takes no distributed lock (a scheduler round trip per variable)."""
+    from dask.distributed import Client, Lock
+
+    from pipeline.run import local_cluster
+    ref, _ = reference
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    taken = []
+    monkeypatch.setattr(Lock, "acquire", lambda self, *a, **k: taken.append(self.name) or True)
+    monkeypatch.setattr(Lock, "release", lambda self: None)
+    keys = ("MALLOC_TRIM_THRESHOLD_", "OPENBLAS_NUM_THREADS")
+    with local_cluster(1) as cluster, Client(cluster) as client:
+        env = list(client.run(lambda: {k: os.environ.get(k) for k in keys}).values())
+        write_netcdf(ref, tmp_path / "with-client.nc")
+    assert env == [{"MALLOC_TRIM_THRESHOLD_": None, "OPENBLAS_NUM_THREADS": "1"}]
+    assert taken == []
+    assert np.array_equal(error_summaries(open_ensemble(tmp_path / "with-client.nc")),
+                          error_summaries(ref))
+
+
 def test_smoke_ensemble_through_the_cli(tmp_path, capsys):
     """What CI runs: 8 realisations, 2 workers, then stats and plot."""
     out = tmp_path / "smoke.nc"
