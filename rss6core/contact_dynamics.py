@@ -37,7 +37,8 @@ import numpy as np
 from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
                        platform_point_map, split)
 from .beam import link_matrices
-from .contact_kernel import DIVERGED, NEWTON_FAILED, advance_chunk, newton_step
+from .contact_kernel import (DIVERGED, NEWTON_FAILED, advance_chunk, newton_scratch, newton_step,
+                             work_arrays)
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
 from .elastic import SimulationResult, quasi_static_state, time_grid
@@ -585,6 +586,10 @@ class _CompiledSteps:
         self.limit, self.refinements = divergence_limit, refinements
         self.params, self.law, self.w = params, law_v, w_axes
         self.radius = radius
+        N, nc = ws.d.shape[1], jm.crank_dofs
+        self.work = work_arrays(N, nc, (N - 6) // 6 - nc, self.levels[7].shape[2] - 6,
+                                self.levels[9].shape[2] - 6)
+        self.scratch = newton_scratch()
 
     def advance(self, ws: _Workspace, ch: _Chunk, first, n_base, every):
         """Base steps first .. first + n_base - 1 of every live realisation (see advance_chunk)."""
@@ -594,7 +599,7 @@ class _CompiledSteps:
                       np.array([TOL_DISPLACEMENT, TOL_VELOCITY, MAX_ITERATIONS]), self.refinements,
                       ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g, ws.contacts.stored, ws.contacts.in_contact,
                       ws.contacts.rate, ws.peak, ws.cpeak, ws.hist, ws.alive, ws.fail, ws.fail_at, ws.steps,
-                      ws.iters, ws.refined)
+                      ws.iters, ws.refined, self.work, self.scratch)
         for r in np.flatnonzero(before & ~ws.alive):
             ws.failed(r, ws.fail[r], *ws.fail_at[r], self.limit)
 

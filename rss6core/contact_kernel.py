@@ -69,7 +69,8 @@ def _normal_law(delta, rate, impact, k, exponent, restitution):
     """Lankarani-Nikravesh F_N (eq. 17), dF/d delta and dF/d delta_dot; zero apart or pulling."""
     if delta <= 0.0:
         return 0.0, 0.0, 0.0
-    spring = k * delta ** exponent
+    # Hertz's 3/2 (the scene default) as delta sqrt(delta): pow was a twentieth of the run
+    spring = k * delta * np.sqrt(delta) if exponent == 1.5 else k * delta ** exponent
     c = 0.75 * (1.0 - restitution * restitution) / impact
     factor = 1.0 + c * rate
     force = spring * factor
@@ -435,7 +436,7 @@ def newton_scratch():
             np.empty((_PATTERN.shape[0], 3, 3)), np.empty((3, 6)), np.empty((3, 3)))
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, fastmath=_FAST, _nrt=False)   # no reference counts: a third of them were here
 def newton_one(G, J, Rr, omega, w, radius, Sl, Sp, params, law, impact, rb, rp, db, dpp, vb, vpp,
                a_l, a_p, bh2, gh, wf, tol_d, tol_v, max_iterations, f, gl, gp, delta, rate, scratch):
     """Joint-node accelerations a_l (6, 12) and platform accelerations a_p (6,) of one realisation's
@@ -773,7 +774,7 @@ def work_arrays(N, nc, nr, ni_c, ni_r):
 @njit(cache=True, fastmath=_FAST)
 def advance_chunk(live, first, n_base, every, lv, layout, coef, F, Mp, G, J, Rr, omega, t, w, radius,
                   params, law, newton_limits, refinements, d, v, a, Ma, rest, g, stored, in_contact,
-                  crate, peak, cpeak, hist, alive, fail, fail_at, steps, iters, refined):
+                  crate, peak, cpeak, hist, alive, fail, fail_at, steps, iters, refined, work, scratch):
     """Carry realisations ``live`` through base steps first .. first + n_base - 1 (the chunk's
     instants on the finest grid start at the first one's start), in place.
 
@@ -786,10 +787,6 @@ def advance_chunk(live, first, n_base, every, lv, layout, coef, F, Mp, G, J, Rr,
     spans, errs = lv[0], lv[5]
     tolerance, limit = coef[8], coef[9]
     N = d.shape[1]
-    nc = layout[0]
-    nr = (N - 6) // 6 - nc
-    work = work_arrays(N, nc, nr, lv[7].shape[2] - 6, lv[9].shape[2] - 6)
-    scratch = newton_scratch()
     fine = spans[0]
     for r in live:
         for s in range(n_base):
