@@ -36,10 +36,15 @@ __all__ = ["simulate", "simulate_batch", "default_time_step", "default_integrato
 def stored_draw(scene, model: str, seed: int, realization: int, dt: float):
     """The draw an ensemble file records for a realisation: the paper level's first step, else the draw."""
     if model == "paper":
-        draw = paper_draw(scene, seed, realization, len(time_grid(scene.trajectory.duration, dt)))
-        return type(draw)(draw.radial_size, draw.axial_size, draw.size_C, draw.size_B,
-                          draw.e_A[0], draw.e_C[0], draw.e_B[0])
+        steps = len(time_grid(scene.trajectory.duration, dt))
+        return _first_step(paper_draw(scene, seed, realization, steps))
     return draw_clearances(scene, seed, realization)
+
+
+def _first_step(draw):
+    """A per-step draw's sizes with its first step's eccentricities."""
+    return type(draw)(draw.radial_size, draw.axial_size, draw.size_C, draw.size_B,
+                      draw.e_A[0], draw.e_C[0], draw.e_B[0])
 
 
 def default_time_step(scene, model: str) -> float:
@@ -110,7 +115,8 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
         force = paper_contact_forces(scene, draw, dt)
         out.append(SimulationResult(elastic.t, elastic.displacement + d, elastic.velocity + v,
                                     elastic.acceleration + a, elastic.status, elastic.message,
-                                    elastic.steps, contact_force_peak=force.max(0)))
+                                    elastic.steps, contact_force_peak=force.max(0),
+                                    draw=_first_step(draw)))
     return out
 
 

@@ -307,6 +307,19 @@ def test_a_diverging_realisation_is_stopped_and_reported(smoke, engine):
     assert np.all(np.isfinite(run.displacement[:, 0])) and np.all(np.isnan(run.displacement[:, 1:]))
 
 
+def test_paper_results_carry_the_draw_an_ensemble_file_records(smoke):
+    """The paper level hands back its realisation's sizes and first-step eccentricities, so that
+    an ensemble chunk need not redraw them: the same as drawing them again, per realisation."""
+    from rss6core.models import default_time_step, stored_draw
+    scene = _with(smoke, trajectory=dict(duration=0.05))
+    results = simulate_batch(scene, "paper", seed=5, realizations=[2, 7])
+    for r, result in zip((2, 7), results):
+        again = stored_draw(scene, "paper", 5, r, default_time_step(scene, "paper"))
+        for field in dataclasses.fields(again):
+            assert np.array_equal(getattr(result.draw, field.name), getattr(again, field.name))
+    assert not np.array_equal(results[0].draw.e_C, results[1].draw.e_C)
+
+
 @pytest.mark.parametrize("model", ["paper", "contact", "quasi-static"])
 def test_same_seed_and_realization_give_identical_output(smoke, model):
     scene = _with(smoke, trajectory=dict(duration=0.05))
