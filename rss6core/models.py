@@ -42,9 +42,10 @@ def stored_draw(scene, model: str, seed: int, realization: int, dt: float):
 
 
 def _first_step(draw):
-    """A per-step draw's sizes with its first step's eccentricities."""
+    """A per-step draw's sizes with its first step's eccentricities, copied: a view would keep
+    every step's draw (0.9 MB per realisation at 2001 steps) alive with the result."""
     return type(draw)(draw.radial_size, draw.axial_size, draw.size_C, draw.size_B,
-                      draw.e_A[0], draw.e_C[0], draw.e_B[0])
+                      draw.e_A[0].copy(), draw.e_C[0].copy(), draw.e_B[0].copy())
 
 
 def default_time_step(scene, model: str) -> float:

@@ -317,6 +317,8 @@ def test_paper_results_carry_the_draw_an_ensemble_file_records(smoke):
         again = stored_draw(scene, "paper", 5, r, default_time_step(scene, "paper"))
         for field in dataclasses.fields(again):
             assert np.array_equal(getattr(result.draw, field.name), getattr(again, field.name))
+        # own copies: a view of the first step would keep every step's draw alive with the result
+        assert all(getattr(result.draw, e).base is None for e in ("e_A", "e_C", "e_B"))
     assert not np.array_equal(results[0].draw.e_C, results[1].draw.e_C)
 
 
