@@ -67,7 +67,8 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
         nan = np.full((len(t), 6), np.nan)
         results = [SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
                    ] * len(realizations)
-    parts = [realization_dataset(result, result.draw if result.draw is not None  # paper: not redrawn
+    # the clearance levels hand back their draws; drawn here only without clearances or on failure
+    parts = [realization_dataset(result, result.draw if result.draw is not None
                                  else stored_draw(scene, spec.model, spec.seed, r, spec.dt), r,
                                  spec.store, scene.simulation.settle_time)
              for r, result in zip(realizations, results)]

@@ -34,7 +34,7 @@ class SimulationResult:
     peak_abs_error: np.ndarray | None = None      # (3, 6) max |error| over internal steps, if finer
     contact_force_peak: np.ndarray | None = None  # (18,) N, joints A1..A6, C1..C6, B1..B6
     iterations: int = 0                           # Newton iterations (contact level)
-    draw: object | None = None  # the ClearanceDraw an ensemble file records, where the level made it
+    draw: object | None = None  # the ClearanceDraw an ensemble file records (clearance levels)
 
 
 def time_grid(duration: float, dt: float) -> np.ndarray:

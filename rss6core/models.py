@@ -16,6 +16,8 @@ the batch as one array.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import scipy.linalg
 
@@ -95,16 +97,17 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
         motion = rigid_motion(scene, t)
         out = []
         for r in realizations:
-            d, v, a = quasi_static_error(scene, motion, draw_clearances(scene, seed, r),
-                                         sim.quasi_static_eccentricity)
-            out.append(SimulationResult(t, d, v, a, "finished", "", len(t) - 1))
+            draw = draw_clearances(scene, seed, r)
+            d, v, a = quasi_static_error(scene, motion, draw, sim.quasi_static_eccentricity)
+            out.append(SimulationResult(t, d, v, a, "finished", "", len(t) - 1, draw=draw))
         return out
     method = make_integrator(integrator or default_integrator(scene, model), sim.newmark_beta,
                              sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
     if model == "contact":
-        batch = simulate_contact(scene, [draw_clearances(scene, seed, r) for r in realizations],
-                                 elements, method, dt, tolerance=tolerance, refinements=refinements)
-        return [batch.result(k) for k in range(len(realizations))]
+        draws = [draw_clearances(scene, seed, r) for r in realizations]
+        batch = simulate_contact(scene, draws, elements, method, dt, tolerance=tolerance,
+                                 refinements=refinements)
+        return [dataclasses.replace(batch.result(k), draw=draw) for k, draw in enumerate(draws)]
     elastic = simulate_elastic(scene, elements, method, dt)
     if model == "elastic":
         return [elastic] * len(realizations)

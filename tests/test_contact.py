@@ -307,14 +307,16 @@ def test_a_diverging_realisation_is_stopped_and_reported(smoke, engine):
     assert np.all(np.isfinite(run.displacement[:, 0])) and np.all(np.isnan(run.displacement[:, 1:]))
 
 
-def test_paper_results_carry_the_draw_an_ensemble_file_records(smoke):
-    """The paper level hands back its realisation's sizes and first-step eccentricities, so that
-    an ensemble chunk need not redraw them: the same as drawing them again, per realisation."""
+@pytest.mark.parametrize("model", ["paper", "contact", "quasi-static"])
+def test_results_carry_the_draw_an_ensemble_file_records(smoke, model):
+    """The clearance levels hand back each realisation's draw (the paper level: its sizes and
+    first-step eccentricities), so that an ensemble chunk need not redraw it: the same as drawing
+    it again, per realisation."""
     from rss6core.models import default_time_step, stored_draw
     scene = _with(smoke, trajectory=dict(duration=0.05))
-    results = simulate_batch(scene, "paper", seed=5, realizations=[2, 7])
+    results = simulate_batch(scene, model, seed=5, realizations=[2, 7])
     for r, result in zip((2, 7), results):
-        again = stored_draw(scene, "paper", 5, r, default_time_step(scene, "paper"))
+        again = stored_draw(scene, model, 5, r, default_time_step(scene, model))
         for field in dataclasses.fields(again):
             assert np.array_equal(getattr(result.draw, field.name), getattr(again, field.name))
         # own copies: a view of the first step would keep every step's draw alive with the result
