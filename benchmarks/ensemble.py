@@ -7,7 +7,11 @@ Measures, in one run and on this machine:
 - realisations per second through ``run_ensemble`` on a local dask cluster of
   1 and 2 single-threaded workers (cluster start-up and worker imports not
   counted; the median of ``--repeat`` runs each), and the parallel efficiency
-  (throughput of 2 / twice that of 1);
+  (throughput of 2 / twice that of 1); after each pair of runs, the same ratio for two
+  processes of a fixed single-threaded BLAS load, what the machine itself gives
+  compute-bound work on two cores at that time; and, from dask's task stream,
+  how busy the workers were kept (task seconds / workers x wall) and how much
+  longer the same tasks took with 2 workers than with 1;
 - peak resident memory of a whole ``rss6 run`` (main process and its workers,
   sampled every 0.05 s) for N = 100 and N = 1000 with ``--store summary``
   (`paper` level), and that run's wall time.
@@ -43,8 +47,10 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 # counts per model: loop (one at a time), batched (one batch), workers (per throughput run); paper's
 # throughput is that of the 1000-realisation ensemble its time target names (16 chunks of 63): a
 # run's fixed costs (the first task's start, the final merge) are then amortised as in real runs
-FULL = {"config": "paper.toml", "paper": (10, 200, 1000), "contact": (2, 64, 128), "memory": (100, 1000)}
-QUICK = {"config": "smoke.toml", "paper": (3, 50, 100), "contact": (1, 6, 4), "memory": (100, 1000)}
+FULL = {"config": "paper.toml", "paper": (10, 200, 1000), "contact": (2, 64, 128), "memory": (100, 1000),
+        "reference": 6000}
+QUICK = {"config": "smoke.toml", "paper": (3, 50, 100), "contact": (1, 6, 4), "memory": (100, 1000),
+         "reference": 1500}
 
 
 def _per_realization(scene, model, counts):
@@ -73,19 +79,55 @@ def _profile(scene, model, n, top=8):
 
 def _throughput(scene, config, model, n, workers, tmp):
     """Realisations per second of run_ensemble on a local cluster of ``workers`` workers, in the
-    chunks ``rss6 run -n N`` makes for two workers (the same batches for 1 and 2 workers)."""
-    from dask.distributed import Client
+    chunks ``rss6 run -n N`` makes for two workers (the same batches for 1 and 2 workers), and the
+    seconds its tasks computed (dask's task stream): how busy the pipeline kept the workers."""
+    from dask.distributed import Client, get_task_stream
 
     from pipeline.run import EnsembleSpec, default_chunk, local_cluster, run_ensemble
     spec = EnsembleSpec(scene.source_text, str(config), model, default_integrator(scene, model),
                         default_time_step(scene, model), scene.simulation.elements_per_link, 0)
     with local_cluster(workers) as cluster, Client(cluster) as client:
         client.run(lambda: __import__("pipeline.run"))     # imports off the clock (solver, xarray)
-        start = time.perf_counter()
         fresh = Path(tempfile.mkdtemp(dir=tmp)) / f"{model}-{workers}.nc"   # nothing stored to resume
-        run_ensemble(spec, n, fresh, scheduler=cluster.scheduler_address,
-                     chunk=default_chunk(n, 2), progress=False)
-        return n / (time.perf_counter() - start)
+        with get_task_stream(client) as stream:
+            start = time.perf_counter()
+            run_ensemble(spec, n, fresh, scheduler=cluster.scheduler_address,
+                         chunk=default_chunk(n, 2), progress=False)
+            elapsed = time.perf_counter() - start
+        task_s = sum(s["stop"] - s["start"] for task in stream.data for s in task["startstops"]
+                     if s["action"] == "compute")
+        return n / elapsed, task_s, task_s / (workers * elapsed)
+
+
+# a fixed single-threaded compute load (products of 256 x 256 matrices, 0.6 ms each here); prints
+# its own seconds, start-up excluded
+_REFERENCE = ("import sys, time\nimport numpy as np\na = np.random.default_rng(0).random((256, 256))\n"
+              "a @ a\nstart = time.perf_counter()\nfor _ in range(int(sys.argv[1])):\n    a @ a\n"
+              "print(time.perf_counter() - start)")
+
+
+def _machine_ratio(products: int) -> float:
+    """Throughput of two single-threaded BLAS processes at once over that of one alone: what the
+    machine gives compute-bound work on two cores at the time, the ceiling of the 2 / 1 worker ratio."""
+    def run(k):
+        procs = [subprocess.Popen([sys.executable, "-c", _REFERENCE, str(products)], stdout=subprocess.PIPE,
+                                  text=True)
+                 for _ in range(k)]
+        return max(float(p.communicate()[0]) for p in procs)   # two are done when the slower is
+    alone = run(1)
+    return 2.0 * alone / run(2)
+
+
+def _pairs(scene, config, model, n, repeat, products, tmp) -> list[dict]:
+    """``repeat`` throughput runs with 1 and 2 workers, alternating and in turn first so that a
+    drifting load hits both, each pair followed by the machine's own ratio (:func:`_machine_ratio`)."""
+    runs = []
+    for i in range(repeat):
+        pair = {str(w): _throughput(scene, config, model, n, w, tmp) for w in ((1, 2), (2, 1))[i % 2]}
+        runs.append({"1": pair["1"][0], "2": pair["2"][0], "machine": _machine_ratio(products),
+                     "task_s": {w: m[1] for w, m in pair.items()},
+                     "busy": {w: m[2] for w, m in pair.items()}})
+    return runs
 
 
 def _tree_rss(pid: int) -> int:
@@ -140,19 +182,22 @@ def measure(quick: bool, profile: bool, repeat: int = 1) -> dict:
     scene = load_scene(config)
     out = {"config": f"configs/{plan['config']}", "per_realization_s": {}, "batched_speedup": {},
            "realizations_per_s": {}, "parallel_efficiency": {}, "peak_rss_MiB": {}, "run_wall_s": {},
-           "runs": {}, "profile": {}}
+           "runs": {}, "machine_ratio": {}, "workers_busy": {}, "task_time_ratio": {}, "profile": {}}
     with tempfile.TemporaryDirectory() as tmp:
         for model in ("paper", "contact"):
             loop, batched = _per_realization(scene, model, plan[model])
             out["per_realization_s"][model] = {"loop": loop, "batched": batched}
             out["batched_speedup"][model] = loop / batched
-            n = plan[model][2]
-            rates = [{str(w): _throughput(scene, config, model, n, w, tmp) for w in (1, 2)}
-                     for _ in range(repeat)]   # 1 and 2 workers alternate: drifting load hits both
+            rates = _pairs(scene, config, model, plan[model][2], repeat, plan["reference"], tmp)
             rate = {w: statistics.median(r[w] for r in rates) for w in ("1", "2")}
             out["realizations_per_s"][model] = rate
             out["runs"][model] = rates            # each repeat's pair, to show the machine's spread
             out["parallel_efficiency"][model] = rate["2"] / (2 * rate["1"])
+            out["machine_ratio"][model] = statistics.median(r["machine"] for r in rates)
+            out["workers_busy"][model] = {w: statistics.median(r["busy"][w] for r in rates)
+                                          for w in ("1", "2")}
+            out["task_time_ratio"][model] = statistics.median(r["task_s"]["2"] / r["task_s"]["1"]
+                                                              for r in rates)
             if profile:
                 out["profile"][model] = _profile(scene, model, plan[model][1])
         for n in plan["memory"]:
@@ -190,9 +235,13 @@ def main(argv=None) -> int:
         print(f"{m:8s} {p['loop']:12.4f} {p['batched']:15.4f} {out['batched_speedup'][m]:8.1f} "
               f"{r['1']:16.3f} {r['2']:17.3f} {out['parallel_efficiency'][m]:10.2f} "
               f"{out['projected_1000_s_2_workers'][m]:16.1f}")
-        if len(out["runs"][m]) > 1:
-            print(f"{'':8s} each repeat's 2 / 1 worker ratio: "
-                  + ", ".join(f"{r['2'] / r['1']:.2f}" for r in out["runs"][m]))
+        print(f"{'':8s} each repeat's 2 / 1 worker ratio: "
+              + ", ".join(f"{r['2'] / r['1']:.2f}" for r in out["runs"][m])
+              + "; two BLAS processes / one, right after each: "
+              + ", ".join(f"{r['machine']:.2f}" for r in out["runs"][m]))
+        busy = out["workers_busy"][m]
+        print(f"{'':8s} workers busy (task seconds / workers x wall): {busy['1']:.3f} with 1, "
+              f"{busy['2']:.3f} with 2; the same tasks took {out['task_time_ratio'][m]:.2f}x as long with 2")
     print("rss6 run --model paper --store summary: " + ", ".join(
         f"N = {n}: peak {out['peak_rss_MiB'][n]:.0f} MiB, {out['run_wall_s'][n]:.1f} s"
         for n in out["peak_rss_MiB"]) + f"; growth {100 * out['memory_growth']:.1f} %")
