@@ -108,7 +108,8 @@ _REFERENCE = ("import sys, time\nimport numpy as np\na = np.random.default_rng(0
 
 def _machine_ratio(products: int) -> float:
     """Throughput of two single-threaded BLAS processes at once over that of one alone: what the
-    machine gives compute-bound work on two cores at the time, the ceiling of the 2 / 1 worker ratio."""
+    machine gives compute-bound work on two cores at the time: a reference for the 2 / 1 worker ratio,
+    which it bounds but for the machine's drift between the measurements."""
     def run(k):
         procs = [subprocess.Popen([sys.executable, "-c", _REFERENCE, str(products)], stdout=subprocess.PIPE,
                                   text=True)
