@@ -9,6 +9,8 @@ import argparse
 import json
 import sys
 
+import numpy as np
+
 from rss6core import SceneError, __version__, load_scene
 from rss6core.scene import INTEGRATORS, MODELS
 
@@ -22,6 +24,16 @@ def _positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not value > 0:
         raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+    return value
+
+
+def _fraction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"must lie strictly between 0 and 1, got {text}")
     return value
 
 
@@ -105,7 +117,7 @@ def _run(args) -> int:
         return 130
     print(f"wrote {output}: {ds.sizes['realization']} realisations of the {model} level "
           f"({ds.attrs['n_failed']} failed)")
-    print(format_stats(ensemble_stats(ds, quantity="displacement")))
+    print(format_stats(ensemble_stats(ds).sel(quantity=["displacement"])))
     return 0
 
 
@@ -122,14 +134,29 @@ def _report(args) -> int:
     return 0
 
 
+def _selection(sds, args):
+    """The statistics of the quantity and direction asked for; SceneError names an unknown one."""
+    for dim in ("quantity", "direction"):
+        given = getattr(args, dim)
+        allowed = [str(v) for v in sds[dim].values]
+        if given is not None and given not in allowed:
+            raise SceneError(f"--{dim}: unknown {dim} {given!r}; choose one of {', '.join(allowed)}")
+        if given is not None:
+            sds = sds.sel({dim: [given]})
+    return sds
+
+
 def _stats(args) -> int:
-    from .stats import ensemble_stats, format_stats
-    from .store import open_ensemble
-    try:
-        result = ensemble_stats(open_ensemble(args.file), args.quantity, args.direction)
-    except ValueError as exc:  # unknown quantity or direction
-        raise SceneError(str(exc)) from None
-    print(json.dumps(result, indent=2) if args.json else format_stats(result))
+    from .filecheck import open_results
+    from .stats import ensemble_stats, format_stats, to_json
+    from .store import write_netcdf
+    sds = _selection(ensemble_stats(open_results(args.file), args.confidence), args)
+    if args.output:
+        write_netcdf(sds, args.output)
+    if args.json:
+        print(json.dumps(to_json(sds), indent=2, allow_nan=False))
+    else:
+        print(format_stats(sds))
     return 0
 
 
@@ -171,15 +198,15 @@ def _stability(args) -> int:
     from .study import stability, write_stability
     scene = load_scene(args.config)
     print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
-    rows, limits = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
-    write_stability(rows, limits, args.output)
-    print(f"wrote {args.output}/stability.csv, stability.png")
-    for name, lim in limits.items():
-        if isinstance(lim, dict):
-            print(f"{name}: " + ", ".join(f"{k.removesuffix('_s').replace('_', ' ')} "
-                                        + ("-" if v is None else f"{v:.3g} s") for k, v in lim.items()))
-        else:
-            print(f"{name.replace('_s', '')}: {lim:.3g} s")
+    ds = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
+    write_stability(ds, args.output)
+    print(f"wrote {args.output}/stability.csv, stability.nc, stability.png")
+    for name in ds["sweep"].values:
+        print(f"{name}: " + ", ".join(
+            f"{lim.removesuffix('_s').replace('_', ' ')} "
+            + (f"{v:.3g} s" if np.isfinite(v := float(ds[lim].sel(sweep=name))) else "-")
+            for lim in ("largest_not_failed_s", "smallest_failed_s", "largest_accurate_s")))
+    print(f"central-difference 2/omega_max: {ds.attrs['central_difference_limit_s']:.3g} s")
     return 0
 
 
@@ -252,11 +279,16 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--scheduler", help="address of an existing dask.distributed scheduler")
     rp.set_defaults(func=_report)
 
-    st = sub.add_parser("stats", help="error statistics of an ensemble file")
-    st.add_argument("file")
+    st = sub.add_parser("stats", help="error statistics of an ensemble file (or a simulate -o file)")
+    st.add_argument("file", help="netCDF file of rss6 run, or of rss6 simulate -o (one realisation: "
+                                 "estimates only)")
     st.add_argument("--quantity", help="displacement, velocity or acceleration (default: all)")
     st.add_argument("--direction", help="x, y, z, rx, ry or rz (default: all)")
-    st.add_argument("--json", action="store_true", help="print one JSON object (SI units)")
+    st.add_argument("--json", action="store_true",
+                    help="print one strict JSON object (SI units; null where no number)")
+    st.add_argument("-o", "--output", help="also write the statistics Dataset to this netCDF file")
+    st.add_argument("--confidence", type=_fraction, default=0.95,
+                    help="confidence of the two-sided intervals, in (0, 1) (default 0.95)")
     st.set_defaults(func=_stats)
 
     pl = sub.add_parser("plot", help="PNG figures of an ensemble file")

@@ -8,11 +8,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from scipy import stats as sps  # noqa: E402
 
 __all__ = ["plot_ensemble", "axis_unit", "draw_envelope", "save_figure"]
 
 from .store import DIRECTIONS as _DIRS  # noqa: E402
+from .stats import quantile_estimates, running_mean_interval  # noqa: E402
 from .store import display_unit  # noqa: E402
 
 
@@ -36,7 +36,7 @@ def save_figure(fig, path: Path) -> Path:
 
 def draw_envelope(ax, t, e, band: str = "5-95 %", peak: str = "max |error|", **peak_style) -> None:
     """The 5-95 % band over realisations of e (R, T) and the max |e| over them, against time t."""
-    lo, hi = np.nanquantile(e, [0.05, 0.95], axis=0)
+    lo, hi = quantile_estimates(e, [0.05, 0.95], axis=0)
     ax.fill_between(t, lo, hi, color="C0", alpha=0.3, lw=0, label=band)
     ax.plot(t, np.nanmax(np.abs(e), axis=0), label=peak, **peak_style)
 
@@ -50,7 +50,7 @@ def _envelope(ds, q: str, out: Path, finished) -> Path:
         f, unit = axis_unit(q, d)
         e = err[..., k] * f
         draw_envelope(ax, t, e, color="k", ls="--", lw=0.8)
-        ax.plot(t, np.nanmedian(e, axis=0), lw=1.2, label="median")
+        ax.plot(t, quantile_estimates(e, 0.5, axis=0), lw=1.2, label="median")
         ax.set(xlabel="time [s]", ylabel=f"{d} error [{unit}]", title=d)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
@@ -71,14 +71,13 @@ def _histograms(ds, q: str, out: Path, finished) -> Path:
 def _convergence(ds, q: str, out: Path, finished) -> Path:
     peak = ds["max_abs_error"].sel(quantity=q).values[finished]
     n = np.arange(1, peak.shape[0] + 1)
-    fig, axes = _grid(f"Monte Carlo convergence: running mean of max |{q} error| with 95 % CI")
+    fig, axes = _grid(f"Monte Carlo convergence: running mean of max |{q} error| with 95 % CI "
+                      "(pipeline.stats: none below 8 realisations)")
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
         f, unit = axis_unit(q, d)
         x = peak[:, k] * f
-        mean = np.cumsum(x) / n
-        var = np.array([np.var(x[:i], ddof=1) if i > 1 else np.nan for i in n])
-        half = sps.t.ppf(0.975, np.maximum(n - 1, 1)) * np.sqrt(var / n)
-        ax.fill_between(n, mean - half, mean + half, alpha=0.3, label="95 % CI")
+        mean, (lo, hi) = running_mean_interval(x, 0.95)
+        ax.fill_between(n, lo, hi, alpha=0.3, label="95 % CI")
         ax.plot(n, mean, lw=1.2, label="running mean")
         ax.set(xlabel="realisations", ylabel=f"mean max |{d} error| [{unit}]", title=d)
         ax.grid(alpha=0.3)

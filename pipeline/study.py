@@ -3,7 +3,7 @@
 Both run the same realisations (same seed) for many settings (model level,
 integrator, time step, elements per link) and compare the ensemble statistics
 users query, per quantity and direction: the mean and the 95 % quantile over
-realisations of each realisation's max |error| (as stored in ensemble files:
+realisations (the point estimates of pipeline.stats) of each realisation's max |error| (as stored in ensemble files:
 after the scene's settle time, over every internal step for the contact
 level).  Relative errors are taken against a reference setting, with a floor
 of 0.1 % of the largest translation (rotation) statistic of that quantity so
@@ -20,6 +20,7 @@ import xarray as xr
 
 from rss6core.models import simulate_batch
 
+from .stats import estimates
 from .store import DIRECTIONS, QUANTITIES, error_summaries
 
 __all__ = ["Setting", "STATISTICS", "measure", "relative_errors", "default_settings", "tradeoff",
@@ -68,8 +69,7 @@ def measure(scene, setting: Setting, n: int, seed: int = 0) -> dict:
     wall = (time.perf_counter() - start) / n
     peaks = np.stack([error_summaries(r, scene.simulation.settle_time)[0] for r in results])  # (n, 3, 6)
     failed = [r for r in results if r.status != "finished"]
-    with np.errstate(all="ignore"):
-        stats = np.stack([np.nanmean(peaks, 0), np.nanquantile(peaks, 0.95, 0)], -1)
+    stats = estimates(peaks, STATISTICS)            # (3, 6, statistic), failed runs left out
     return {"seconds_per_realization": wall, "statistics": stats, "failed": len(failed),
             "message": failed[0].message if failed else ""}
 
@@ -331,9 +331,9 @@ def _classify(run: dict, ref: dict, tolerance: float, growth: float = 10.0) -> t
 
 
 def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon: float = 0.2,
-              explicit_steps: int = 400, log=print) -> tuple[list[dict], dict]:
-    """Time-step sweeps per level and integrator (and contact stiffness): rows of the stability map
-    and the measured limits.  Implicit sweeps cover min(duration, horizon) for the contact level and
+              explicit_steps: int = 400, log=print) -> xr.Dataset:
+    """Time-step sweeps per level and integrator (and contact stiffness): the stability map (dimension
+    ``run``) and the measured limits per sweep (dimension ``sweep``), like :func:`tradeoff`.  Implicit sweeps cover min(duration, horizon) for the contact level and
     the whole trajectory otherwise; the explicit sweep ``explicit_steps`` steps around 2/omega_max."""
     sim = scene.simulation
     dt, dtc, el = sim.time_step, sim.contact_time_step, sim.elements_per_link
@@ -365,9 +365,7 @@ def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon
     adaptive = _adaptive(scene)
     for scale in (1.0, 10.0):
         sweep(short, "contact", sim.contact_integrator, contact_steps, scale, adaptive=adaptive)
-    limits = _limits(rows)
-    limits["central-difference 2/omega_max_s"] = limit
-    return rows, limits
+    return _stability_dataset(rows, limit, tolerance, n, seed, scene)
 
 
 def _explicit_sweep(scene, limit, steps, tolerance, seed, log):
@@ -415,61 +413,95 @@ def _rows(runs: dict, level, integrator, scale, horizon, tolerance, log, describ
     return rows
 
 
-def _limits(rows) -> dict:
-    """Per (level, integrator, stiffness): the largest step not failed and the largest accurate one."""
-    out = {}
-    for key in dict.fromkeys((r["level"], r["integrator"], r["stiffness_scale"]) for r in rows):
-        sel = [r for r in rows if (r["level"], r["integrator"], r["stiffness_scale"]) == key]
-        ok = [r["dt_s"] for r in sel if r["status"] != "failed"]
-        bad = [r["dt_s"] for r in sel if r["status"] == "failed"]
-        good = [r["dt_s"] for r in sel if r["status"] == "stable"]
-        name = f"{key[0]} {key[1]}" + (f" K x{key[2]:g}" if key[2] != 1.0 else "")
-        out[name] = {"largest_not_failed_s": max(ok) if ok else None,
-                     "smallest_failed_s": min(bad) if bad else None,
-                     "largest_accurate_s": max(good) if good else None}
-    return out
+_RUN_VARIABLES = {   # name: (CSV column, attributes)
+    "level": ("level", {"long_name": "model level"}),
+    "integrator": ("integrator", {"long_name": "time integrator (and adaptive step)"}),
+    "dt_s": ("dt_s", {"units": "s", "long_name": "time step"}),
+    "stiffness_scale": ("stiffness_scale", {"units": "1", "long_name": "contact stiffness factor"}),
+    "horizon_s": ("horizon_s", {"units": "s", "long_name": "simulated time"}),
+    "status": ("status", {"long_name": "stable, inaccurate or failed"}),
+    "max_rel_change": ("max_rel_change", {"units": "1", "long_name": "largest relative change of "
+                                          "the statistics vs the sweep's finest step"}),
+    "seconds_per_realization": ("seconds_per_realization", {"units": "s"}),
+    "velocity_mean_peak": ("velocity_mean_peak_m_s", {
+        "units": "m s-1", "long_name": "mean over realisations of max |velocity error|, largest "
+                                       "of x, y, z"}),
+    "reason": ("reason", {"long_name": "why not stable"}),
+}
+_LIMITS = ("largest_not_failed", "smallest_failed", "largest_accurate")
 
 
-def write_stability(rows, limits, outdir) -> None:
-    """DIR/stability.csv and DIR/stability.png."""
+def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene) -> xr.Dataset:
+    """The sweeps' rows as variables along ``run`` and each sweep's limits (s, NaN: none) along
+    ``sweep``."""
+    ds = xr.Dataset({k: ("run", [r[k] for r in rows], attrs) for k, (_, attrs) in _RUN_VARIABLES.items()})
+    ds["sweep_name"] = ("run", [_sweep_name(r["level"], r["integrator"], r["stiffness_scale"])
+                                for r in rows])
+    names = list(dict.fromkeys(ds["sweep_name"].values))
+    for lim in _LIMITS:
+        ds[f"{lim}_s"] = ("sweep", [_limit(ds, name, lim) for name in names],
+                          {"units": "s", "long_name": lim.replace("_", " ") + " time step (NaN: none)"})
+    ds = ds.assign_coords(sweep=names)
+    ds.attrs = {"central_difference_limit_s": limit, "tolerance": tolerance, "realizations": n,
+                "seed": seed, "scene_toml": scene.source_text}
+    return ds
+
+
+def _sweep_name(level, integrator, scale) -> str:
+    return f"{level} {integrator}" + (f" K x{scale:g}" if scale != 1.0 else "")
+
+
+def _limit(ds, name: str, which: str) -> float:
+    """Per sweep: the largest step not failed, the smallest failed one, the largest stable one."""
+    sel = ds["sweep_name"].values == name
+    status, dt = ds["status"].values[sel], ds["dt_s"].values[sel]
+    pick = {"largest_not_failed": (status != "failed", np.max),
+            "smallest_failed": (status == "failed", np.min),
+            "largest_accurate": (status == "stable", np.max)}[which]
+    return float(pick[1](dt[pick[0]])) if pick[0].any() else np.nan
+
+
+def write_stability(ds: xr.Dataset, outdir) -> None:
+    """DIR/stability.csv (one line per run, from the Dataset), DIR/stability.nc, DIR/stability.png."""
     from pathlib import Path
+
+    from .store import write_netcdf
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
-    header = ["level", "integrator", "dt_s", "stiffness_scale", "horizon_s", "status", "stable",
-              "max_rel_change", "seconds_per_realization", "velocity_mean_peak_m_s", "reason"]
-    _write_csv(out / "stability.csv", header, [
-        [r["level"], r["integrator"], f"{r['dt_s']:.6g}", f"{r['stiffness_scale']:g}",
-         f"{r['horizon_s']:.6g}", r["status"], str(int(r["status"] != "failed")),
-         f"{r['max_rel_change']:.6g}", f"{r['seconds_per_realization']:.6g}",
-         f"{r['velocity_mean_peak']:.6g}", r["reason"]] for r in rows])
-    _plot_stability(rows, limits, out / "stability.png")
+    table = ds[list(_RUN_VARIABLES)].to_dataframe()
+    table.insert(table.columns.get_loc("status") + 1, "stable",
+                 (table["status"] != "failed").astype(int))
+    table = table.rename(columns={k: col for k, (col, _) in _RUN_VARIABLES.items()})
+    table.to_csv(out / "stability.csv", index=False, float_format="%.6g")
+    write_netcdf(ds, out / "stability.nc")
+    _plot_stability(ds, out / "stability.png")
 
 
-def _plot_stability(rows, limits, path) -> None:
+def _plot_stability(ds, path) -> None:
     from .plots import plt   # the Agg backend, set once there
     colour = {"stable": "tab:green", "inaccurate": "tab:orange", "failed": "tab:red"}
+    level, status, dt = ds["level"].values, ds["status"].values, ds["dt_s"].values
+    names = ds["sweep_name"].values
     fig, axes = plt.subplots(1, 3, figsize=(15, 5), gridspec_kw={"width_ratios": [1.2, 1.2, 1]})
-    for ax, level in zip(axes[:2], ("elastic", "contact")):
-        keys = list(dict.fromkeys((r["integrator"], r["stiffness_scale"]) for r in rows
-                                  if r["level"] == level))
+    for ax, lv in zip(axes[:2], ("elastic", "contact")):
+        keys = list(dict.fromkeys(names[level == lv]))
         for y, key in enumerate(keys):
-            for r in rows:
-                if r["level"] == level and (r["integrator"], r["stiffness_scale"]) == key:
-                    ax.scatter(r["dt_s"], y, color=colour[r["status"]], s=60)
+            sel = names == key
+            ax.scatter(dt[sel], np.full(sel.sum(), y), c=[colour[s] for s in status[sel]], s=60)
         ax.set_yticks(range(len(keys)))
-        ax.set_yticklabels([f"{i}" + (f" K x{s:g}" if s != 1.0 else "") for i, s in keys], fontsize=8)
+        ax.set_yticklabels([k.removeprefix(f"{lv} ") for k in keys], fontsize=8)
         ax.set_xscale("log")
         ax.set_xlabel("time step (s)")
-        ax.set_title(f"{level} level", fontsize=10)
+        ax.set_title(f"{lv} level", fontsize=10)
         ax.grid(True, which="both", lw=0.3)
-    axes[0].axvline(limits["central-difference 2/omega_max_s"], color="k", ls="--", lw=0.8,
+    axes[0].axvline(ds.attrs["central_difference_limit_s"], color="k", ls="--", lw=0.8,
                     label="2/omega_max")
-    for status, c in colour.items():
-        axes[0].scatter([], [], color=c, label=status)
+    for st, c in colour.items():
+        axes[0].scatter([], [], color=c, label=st)
     axes[0].legend(fontsize=7, loc="center left")
-    paper = sorted((r for r in rows if r["level"] == "paper"), key=lambda r: r["dt_s"])
-    h = np.array([r["dt_s"] for r in paper])
-    v = np.array([r["velocity_mean_peak"] for r in paper])
+    paper = level == "paper"
+    order = np.argsort(dt[paper])
+    h, v = dt[paper][order], ds["velocity_mean_peak"].values[paper][order]
     axes[2].loglog(h, v * 1e3, "o-", color="tab:orange", label="paper level")
     if len(h):
         axes[2].loglog(h, v[0] * 1e3 * h[0] / h, "k:", lw=0.8, label="proportional to 1/dt")
@@ -483,4 +515,3 @@ def _plot_stability(rows, limits, path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
-

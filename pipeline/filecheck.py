@@ -1,0 +1,108 @@
+"""Checks that a readable netCDF file holds what rss6 wrote: dimensions, labels, units, values.
+
+A tampered or foreign file that opens fine must not be summarised silently: each
+check raises store.EnsembleFileError naming the file and the first problem.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, EnsembleFileError, load_netcdf
+
+__all__ = ["check_ensemble", "check_run", "open_results"]
+
+SUMMARIES = ("max_abs_error", "mean_abs_error")
+STATUSES = ("finished", "failed")
+
+
+def _labels(ds, path) -> None:
+    for dim, expected in (("quantity", QUANTITIES), ("direction", DIRECTIONS)):
+        if dim not in ds.coords:
+            raise EnsembleFileError(f"{path}: no '{dim}' coordinate")
+        got = [str(v) for v in ds[dim].values]
+        if got != list(expected):
+            raise EnsembleFileError(f"{path}: '{dim}' labels are {', '.join(got)}; expected "
+                                    f"{', '.join(expected)}")
+
+
+def _units(ds, path) -> None:
+    for name in SUMMARIES:
+        got = ds[name].attrs.get("units")
+        if got != MIXED_UNITS:
+            raise EnsembleFileError(f"{path}: {name} has units {got!r}; rss6 writes {MIXED_UNITS!r}")
+    if "unit" not in ds.coords:
+        raise EnsembleFileError(f"{path}: no 'unit' coordinate (the SI unit of each element)")
+    for q in QUANTITIES:
+        for d in DIRECTIONS:
+            want = UNITS[q][0 if d in ("x", "y", "z") else 1]
+            got = str(ds["unit"].sel(quantity=q, direction=d).item())
+            if got != want:
+                raise EnsembleFileError(f"{path}: unit of {q} {d} is {got!r}; expected {want!r}")
+
+
+def _dims(ds, path, expected: set) -> None:
+    for name in SUMMARIES:
+        if name not in ds:
+            raise EnsembleFileError(f"{path}: no variable {name}")
+        if set(ds[name].dims) != expected:
+            raise EnsembleFileError(f"{path}: {name} has dimensions ({', '.join(ds[name].dims)}); "
+                                    f"expected {', '.join(sorted(expected))}")
+
+
+def _values(ds, path, finished: np.ndarray) -> None:
+    """No negative or infinite value anywhere; finite values in every finished realisation."""
+    for name in SUMMARIES:
+        x = ds[name].transpose("realization", ...).values
+        with np.errstate(invalid="ignore"):
+            if np.any(x < 0):
+                raise EnsembleFileError(f"{path}: {name} has negative values (it is an |error|)")
+        if np.any(np.isinf(x)):
+            raise EnsembleFileError(f"{path}: {name} has infinite values")
+        bad = ~np.isfinite(x[finished]).all(axis=tuple(range(1, x.ndim)))
+        if bad.any():
+            first = ds["realization"].values[finished][bad][0]
+            raise EnsembleFileError(f"{path}: {name} is not finite in finished realisation {first}")
+
+
+def check_ensemble(ds, path) -> None:
+    """EnsembleFileError unless ``ds`` is a well-formed rss6 ensemble (MODEL.md section 7)."""
+    _dims(ds, path, {"quantity", "realization", "direction"})
+    _labels(ds, path)
+    _units(ds, path)
+    index = ds["realization"].values
+    uniq, counts = np.unique(index, return_counts=True)
+    if (counts > 1).any():
+        raise EnsembleFileError(f"{path}: realisation index {uniq[counts > 1][0]} appears "
+                                f"{counts[counts > 1][0]} times")
+    status = ds["status"]
+    if status.dims != ("realization",):
+        raise EnsembleFileError(f"{path}: status has dimensions ({', '.join(status.dims)}); "
+                                "expected (realization)")
+    unknown = set(map(str, status.values)) - set(STATUSES)
+    if unknown:
+        raise EnsembleFileError(f"{path}: unknown status {sorted(unknown)[0]!r}; expected "
+                                f"{' or '.join(STATUSES)}")
+    _values(ds, path, status.values == "finished")
+
+
+def check_run(ds, path) -> None:
+    """EnsembleFileError unless ``ds`` is a well-formed single-run file (``rss6 simulate -o``)."""
+    _dims(ds, path, {"quantity", "direction"})
+    _labels(ds, path)
+    _units(ds, path)
+    status = ds.attrs.get("status")
+    if status not in STATUSES:
+        raise EnsembleFileError(f"{path}: status attribute {status!r}; expected "
+                                f"{' or '.join(STATUSES)}")
+    one = ds[list(SUMMARIES)].expand_dims(realization=[0], axis=1)
+    _values(one, path, np.array([status == "finished"]))
+
+
+def open_results(path):
+    """An ensemble file (``rss6 run``) or a single-run file (``rss6 simulate -o``), checked."""
+    from .store import open_ensemble
+    ds = load_netcdf(path)
+    if "realization" not in ds.dims and "rss6_version" in ds.attrs and "error" in ds:
+        check_run(ds, path)
+        return ds
+    return open_ensemble(path)
