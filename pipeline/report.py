@@ -11,7 +11,6 @@ then writes OUT/results.md and OUT/results/*.png from those files alone.
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,7 +22,9 @@ from rss6core.models import default_integrator, default_time_step
 
 from .run import EnsembleSpec, run_ensemble
 from .plots import axis_unit, draw_envelope, plt, save_figure
-from .stats import summarize
+from . import report_text as text
+from .scene_variant import scene_variant
+from .stats import ensemble_stats, min_n_for_quantile
 from .store import (DIRECTIONS, EnsembleFileError, display_unit, load_netcdf, open_ensemble, run_dataset,
                     write_netcdf)
 
@@ -66,26 +67,9 @@ class ReportPlan:
 
 
 def with_clearance(text: str, values: dict[str, float], source: str = "<report>") -> str:
-    """Scene TOML text with keys of its [clearance] table set to ``values`` (m), checked by re-parsing."""
-    lines, table, seen = text.splitlines(), None, set()
-    for i, line in enumerate(lines):
-        head = re.match(r"\s*\[([^\]]+)\]", line)
-        if head:
-            table = head.group(1).strip()
-            continue
-        key = re.match(r"\s*([A-Za-z_]+)\s*=", line)
-        if table == "clearance" and key and key.group(1) in values:
-            lines[i] = f"{key.group(1)} = {values[key.group(1)]!r}"
-            seen.add(key.group(1))
-    missing = set(values) - seen
-    if missing:
-        raise ValueError(f"{source}: [clearance] has no {', '.join(sorted(missing))} to set")
-    out = "\n".join(lines) + "\n"
-    scene = parse_scene(out, source)
-    wrong = [k for k, v in values.items() if getattr(scene.clearance, k.removesuffix("_m")) != v]
-    if wrong:   # e.g. the key set twice in the table
-        raise ValueError(f"{source}: [clearance] {', '.join(wrong)} did not take the value set")
-    return out
+    """Scene TOML text with keys of its [clearance] table set to ``values`` (m), made on the parsed
+    data; its first line records the override (see pipeline.scene_variant)."""
+    return scene_variant(text, {"clearance": values}, source)
 
 
 def _only(text: str, family: str, source: str) -> str:
@@ -126,33 +110,23 @@ def run_scene(config, data: Path, plan: ReportPlan) -> dict[str, Path]:
     return paths
 
 
-# --- statistics ---------------------------------------------------------------
+# --- statistics: every number from pipeline.stats.ensemble_stats ---------------------------
 
-def _finished(ds):
-    return ds["status"].values == "finished"
-
-
-def _sample(ds, stat: str, quantity: str, direction: str) -> np.ndarray:
-    return ds[f"{stat}_abs_error"].sel(quantity=quantity, direction=direction).values[_finished(ds)]
-
-
-def _summary(ds, stat, quantity, direction) -> dict:
-    return summarize(_sample(ds, stat, quantity, direction))
-
-
-def _median(ds, stat, quantity, direction) -> float:
-    """The median that _summary reports as q50, without its confidence intervals' bootstrap."""
-    return float(np.median(_sample(ds, stat, quantity, direction)))
+def _stat(sds, stat: str, quantity: str, direction: str, statistic: str = "q50",
+          bound: str = "estimate") -> float:
+    """One number of a statistics Dataset: ``statistic`` of the per-realisation ``stat`` |error|."""
+    return float(sds[f"{stat}_abs_error"].sel(statistic=statistic, bound=bound, quantity=quantity,
+                                              direction=direction))
 
 
 def _fmt(value: float, f: float) -> str:
-    v = value * f
-    return "nan" if not np.isfinite(v) else f"{v:.3g}" if abs(v) >= 1e-3 else f"{v:.2e}"
+    v = value * f if value is not None else np.nan
+    return "-" if not np.isfinite(v) else f"{v:.3g}" if abs(v) >= 1e-3 else f"{v:.2e}"
 
 
-def _cell(s: dict, key: str, f: float) -> str:
-    lo, hi = s["ci95"].get(key, [np.nan, np.nan])
-    return f"{_fmt(s[key], f)} [{_fmt(lo, f)}, {_fmt(hi, f)}]"
+def _cell(sds, stat, q, d, statistic: str, f: float) -> str:
+    lo, est, hi = (_fmt(_stat(sds, stat, q, d, statistic, b), f) for b in ("lower", "estimate", "upper"))
+    return f"{est} [{lo}, {hi}]"
 
 
 def _clearance_mm(scene) -> float:
@@ -191,7 +165,7 @@ def _error_figure(scene, quantity: str, runs: dict, out: Path) -> Path:
     for row, level in enumerate(LEVELS):
         ds = runs[level]
         t = ds["time"].values
-        err = ds["error"].sel(quantity=quantity).values[_finished(ds)]        # (R, T, 6)
+        err = ds["error"].sel(quantity=quantity).values[ds["status"].values == "finished"]  # (R, T, 6)
         for k, d in enumerate(DIRECTIONS):
             f, unit = axis_unit(quantity, d)
             ax = axes[row, k]
@@ -221,9 +195,10 @@ def _open_run(path):
 # --- the document ---------------------------------------------------------------
 
 _ROWS = list(PAPER_VALUES)
+_LEVELS = ("quasi-static", "paper", "contact")
 
 
-def _setting_line(ds) -> str:
+def _setting_line(ds, sds) -> str:
     a = ds.attrs
     dt, sim = float(a["time_step_s"]), parse_scene(a["scene_toml"]).simulation
     step = f"step {dt * 1e3:g} ms"
@@ -232,25 +207,32 @@ def _setting_line(ds) -> str:
         step = (f"adaptive step {dt * 1e3:g} ms, halved down to {finest * 1e6:g} us where"
                 f" the local error estimate exceeds {sim.contact_tolerance:g} m")
     return (f"{a['model']}: {a['integrator']}, {step}, "
-            f"{a['elements_per_link']} elements per link, {int(_finished(ds).sum())} finished / "
-            f"{ds.sizes['realization']} realisations, seed {a['seed']}")
+            f"{a['elements_per_link']} elements per link, {_count(sds)} realisations, seed {a['seed']}")
 
 
-def _comparison_table(scene, ens: dict) -> list[str]:
+def _count(sds) -> str:
+    """'F finished / N' of a statistics Dataset."""
+    return f"{sds.attrs['n_finished']} finished / {sds.attrs['n_finished'] + sds.attrs['n_failed']}"
+
+
+def _table(head: list[str], rows: list[list[str]]) -> list[str]:
+    return ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + [
+        "| " + " | ".join(r) + " |" for r in rows]
+
+
+def _comparison_table(scene, st: dict) -> list[str]:
     mm = _clearance_mm(scene)
     head = ["statistic (per realisation)", "dir", "unit", f"paper, {mm} mm"]
-    for level in ("quasi-static", "paper", "contact"):
+    for level in _LEVELS:
         head += [f"{level}: median [95 % CI]", f"{level}: 95 % quantile [95 % CI]"]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    rows = []
     for stat, q, d in _ROWS:
         f, unit = display_unit(q, d)
-        paper = PAPER_VALUES[(stat, q, d)].get(mm)
-        cells = [_label(stat, q), d, unit, _fmt(paper, f) if paper is not None else "-"]
-        for level in ("quasi-static", "paper", "contact"):
-            s = _summary(ens[level], stat, q, d)
-            cells += [_cell(s, "q50", f), _cell(s, "q95", f)]
-        lines.append("| " + " | ".join(cells) + " |")
-    return lines
+        cells = [_label(stat, q), d, unit, _fmt(PAPER_VALUES[(stat, q, d)].get(mm), f)]
+        for level in _LEVELS:
+            cells += [_cell(st[level], stat, q, d, "q50", f), _cell(st[level], stat, q, d, "q95", f)]
+        rows.append(cells)
+    return _table(head, rows)
 
 
 def _label(stat: str, quantity: str) -> str:
@@ -259,105 +241,87 @@ def _label(stat: str, quantity: str) -> str:
     return f"{stat} {bar}{quantity} error{bar}"
 
 
-def _growth_table(scenes: list, ens: dict) -> list[str]:
-    (s1, e1), (s2, e2) = sorted(((s, ens[s.name]) for s in scenes), key=lambda p: _clearance_mm(p[0]))[:2]
+def _growth_table(scenes: list, st: dict) -> list[str]:
+    (s1, e1), (s2, e2) = sorted(((s, st[s.name]) for s in scenes), key=lambda p: _clearance_mm(p[0]))[:2]
     m1, m2 = _clearance_mm(s1), _clearance_mm(s2)
-    head = ["statistic", "dir", f"paper {m2}/{m1} mm"] + [f"{lv} median {m2}/{m1} mm"
-                                                         for lv in ("quasi-static", "paper", "contact")]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    head = ["statistic", "dir", f"paper {m2}/{m1} mm"] + [f"{lv} median {m2}/{m1} mm" for lv in _LEVELS]
+    rows = []
     for stat, q, d in _ROWS:
         pv = PAPER_VALUES[(stat, q, d)]
-        cells = [_label(stat, q), d,
-                 f"{pv[m2] / pv[m1]:.2f}" if m1 in pv and m2 in pv else "-"]
-        for level in ("quasi-static", "paper", "contact"):
-            cells.append(f"{_median(e2[level], stat, q, d) / _median(e1[level], stat, q, d):.2f}")
-        lines.append("| " + " | ".join(cells) + " |")
-    return lines
+        rows.append([_label(stat, q), d, f"{pv[m2] / pv[m1]:.2f}" if m1 in pv and m2 in pv else "-"]
+                    + [f"{_stat(e2[lv], stat, q, d) / _stat(e1[lv], stat, q, d):.2f}" for lv in _LEVELS])
+    return _table(head, rows)
 
 
-def _family_table(scene, ens: dict) -> list[str]:
-    runs = [("all joints", ens["contact"])] + [(f"only {f}", ens[f"only{f}"]) for f in FAMILY_KEYS]
-    head = ["statistic", "dir", "unit"] + [f"{name} ({int(_finished(ds).sum())} of {ds.sizes['realization']})"
-                                           for name, ds in runs] + ["elastic (no clearance)"]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    el = ens["elastic"]
+def _family_table(st: dict) -> list[str]:
+    runs = [("all joints", st["contact"])] + [(f"only {f}", st[f"only{f}"]) for f in FAMILY_KEYS]
+    head = ["statistic", "dir", "unit"] + [f"{name} ({_count(sds)})" for name, sds in runs]
+    rows = []
     for stat, q, d in _ROWS:
         f, unit = display_unit(q, d)
-        cells = [_label(stat, q), d, unit]
-        cells += [_fmt(_median(ds, stat, q, d), f) for _, ds in runs]
-        cells.append(_fmt(float(el[f"{stat}_abs_error"].sel(quantity=q, direction=d)), f))
-        lines.append("| " + " | ".join(cells) + " |")
-    return lines
+        rows.append([_label(stat, q), d, unit] + [_fmt(_stat(sds, stat, q, d), f) for _, sds in runs]
+                    + [_fmt(_stat(st["elastic"], stat, q, d, "max"), f)])
+    return _table(head + ["elastic (no clearance)"], rows)
 
 
-def _largest_family(ens: dict, stat, q, d) -> tuple[str, float]:
-    values = {f: _median(ens[f"only{f}"], stat, q, d) for f in FAMILY_KEYS}
+def _largest_family(st: dict, stat, q, d) -> tuple[str, float]:
+    values = {f: _stat(st[f"only{f}"], stat, q, d) for f in FAMILY_KEYS}
     best = max(values, key=values.get)
     return best, values[best] / max(sum(values.values()), 1e-300)
 
 
-def _explanations(scene, ens: dict) -> list[str]:
-    """The physical reasons for the large differences from the paper, with this run's numbers."""
+def _displacement_fields(scene, st: dict, paper_dx: float) -> dict:
+    """The numbers of text.DISPLACEMENT (mm) from the statistics Datasets."""
+    qs = max(_stat(st["quasi-static"], "max", "displacement", d) for d in "xyz")
+    ct = max(_stat(st["contact"], "max", "displacement", d) for d in "xyz")
+    el = max(_stat(st["elastic"], "max", "displacement", d, "max") for d in "xyz")
+    return {"scene": scene.name, "mm": _clearance_mm(scene), "paper_dx": paper_dx * 1e3,
+            "contact_dx": ct * 1e3, "contact_ratio": ct / paper_dx, "qs_dx": qs * 1e3,
+            "qs_ratio": qs / paper_dx, "how": text.HOW[scene.simulation.quasi_static_eccentricity],
+            "elastic_dx": el * 1e3, "sag": _stat(st["contact"], "mean", "displacement", "z") * 1e3,
+            "contact_z": _stat(st["contact"], "max", "displacement", "z") * 1e3}
+
+
+def _explanations(scene, st: dict, dt: float) -> list[str]:
+    """The physical reasons for the large differences from the paper, filled from this run's
+    statistics (templates in pipeline.report_text); ``dt``: the paper level's step, s."""
     mm = _clearance_mm(scene)
     out = []
-    paper_dx = max(v.get(mm, np.nan) for (st, q, d), v in PAPER_VALUES.items()
-                   if q == "displacement")
-    qs = max(_median(ens["quasi-static"], "max", "displacement", d) for d in "xyz")
-    ct = max(_median(ens["contact"], "max", "displacement", d) for d in "xyz")
-    el = max(float(ens["elastic"]["max_abs_error"].sel(quantity="displacement", direction=d)) for d in "xyz")
-    sag = _median(ens["contact"], "mean", "displacement", "z")
-    how = ("eccentricities at the clearance boundary along the rigid joint reactions"
-           if scene.simulation.quasi_static_eccentricity == "reaction" else
-           "the drawn eccentricities through the linearised leg closure")
+    paper_dx = max(v.get(mm, np.nan) for (_, q, _), v in PAPER_VALUES.items() if q == "displacement")
     if np.isfinite(paper_dx):
-        out.append(
-            f"- **Displacement ({scene.name}).** The paper's largest displacement error is "
-            f"{paper_dx * 1e3:.4g} mm; our contact level's median per-realisation maximum is "
-            f"{ct * 1e3:.3g} mm ({ct / paper_dx:.3g} times), and the rigid-link clearance kinematics alone "
-            f"(quasi-static level, {how}) gives {qs * 1e3:.3g} mm "
-            f"({qs / paper_dx:.3g} times). A joint with a {mm} mm clearance lets the platform move by the "
-            "clearance's order through the leg closure (MODEL.md section 9), so an error of hundredths "
-            f"of a millimetre at {mm} mm clearance cannot come from the clearances: the paper's eq. 33 "
-            "keeps only the part of each clearance vector along the link axes (virtual lengths) and "
-            "redraws it every step, which averages the kinematic error instead of letting the joints "
-            "rest on their walls. The elastic (ideal-joint) error alone is "
-            f"{el * 1e3:.3g} mm. Most of the contact level's z error is a steady sag: its median mean "
-            f"|z error| is {sag * 1e3:.3g} mm against a median maximum of "
-            f"{_median(ens['contact'], 'max', 'displacement', 'z') * 1e3:.3g} mm, because under "
-            "gravity every joint rests on the wall of its clearance, and each leg's closure adds up "
-            "the offsets of its three joints (A, C, B).")
+        out.append(text.DISPLACEMENT.format(**_displacement_fields(scene, st, paper_dx)))
     pv = PAPER_VALUES[("mean", "velocity", "z")].get(mm)
     if pv is not None:
-        lv = _median(ens["paper"], "mean", "velocity", "z")
-        cv = _median(ens["contact"], "mean", "velocity", "z")
-        dt = float(ens["paper"].attrs["time_step_s"])
-        out.append(
-            f"- **Mean velocity (z).** Paper {pv * 1e3:.4g} mm/s; our `paper` level (the seed's "
-            f"method) {lv * 1e3:.3g} mm/s, our contact level {cv * 1e3:.3g} mm/s. Redrawing the "
-            f"eccentricities every {dt * 1e3:g} ms step makes the joint offsets white noise: their "
-            "difference quotient is of order clearance / step (the stability study shows this "
-            "statistic doubling with every halving of the step), so the paper's velocity errors "
-            "measure its time step, not the robot. The contact level's joints move only when the "
-            "loads push them across the clearance and the joints strike; its mean velocity error is "
-            f"{cv / pv:.3g} times the paper's.")
+        lv, cv = (_stat(st[lv], "mean", "velocity", "z") for lv in ("paper", "contact"))
+        out.append(text.VELOCITY.format(paper_v=pv * 1e3, paper_level_v=lv * 1e3, contact_v=cv * 1e3,
+                                        dt_ms=dt * 1e3, contact_v_ratio=cv / pv))
     pa = PAPER_VALUES[("max", "acceleration", "z")].get(mm)
     if pa is not None:
-        la = _median(ens["paper"], "max", "acceleration", "z")
-        ca = _median(ens["contact"], "max", "acceleration", "z")
-        fam, share = _largest_family(ens, "max", "acceleration", "z")
-        out.append(
-            f"- **Maximum acceleration (z).** Paper {pa * 1e3:.4g} mm/s^2; our `paper` level "
-            f"{la * 1e3:.3g} mm/s^2 (white-noise offsets over a step squared), our contact level "
-            f"{ca * 1e3:.3g} mm/s^2. The contact level's peaks are impacts: a joint crossing its "
-            "clearance strikes the far wall under the Lankarani-Nikravesh law, in well under a "
-            "millisecond, and the platform acceleration follows the impact force. Its size depends "
-            "on the contact stiffness and on resolving it in time, which is why the contact level "
-            "halves its step where an impact needs it (README, 'Speed and accuracy': a fixed step "
-            "fine enough for these peaks would have to be fine for the whole run). Of the "
-            "three joint families "
-            f"switched on one at a time, {fam} gives the largest median peak ({100 * share:.0f} % "
-            "of the three runs' sum).")
+        la, ca = (_stat(st[lv], "max", "acceleration", "z") for lv in ("paper", "contact"))
+        fam, share = _largest_family(st, "max", "acceleration", "z")
+        out.append(text.ACCELERATION.format(paper_a=pa * 1e3, paper_level_a=la * 1e3,
+                                            contact_a=ca * 1e3, family=fam, share=100 * share))
     return out
+
+
+def _open_scene(config, data: Path, plan: ReportPlan) -> dict:
+    """The scene's files by role, run where missing and opened into memory."""
+    return {k: (_open_run(p) if k == "elastic" else open_ensemble(p))
+            for k, p in run_scene(config, data, plan).items()}
+
+
+def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
+    md = [f"## Scene `{scene.name}` ({_clearance_mm(scene)} mm clearances)", "",
+          "Runs: " + "; ".join(_setting_line(e[k], st[k]) for k in _LEVELS) + ".", ""]
+    md += [f"![rigid motion]({rel(_rigid_figure(scene, e['contact']['time'].values, figs))})", ""]
+    for q in ("displacement", "velocity", "acceleration"):
+        md += [f"![{q} error]({rel(_error_figure(scene, q, e, figs))})", ""]
+    md += ["### Beside the paper's numbers (MODEL.md section 9)", ""] + _comparison_table(scene, st)
+    md += ["", "### Which joint family contributes most (contact level)", "",
+           text.FAMILY.format(off_um=OFF * 1e6, off_percent=OFF / scene.clearance.spherical_B * 100),
+           ""] + _family_table(st)
+    md += ["", "### Where we differ from the paper, and why", ""]
+    return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"])) + [""]
 
 
 def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None = None) -> Path:
@@ -366,44 +330,25 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
     data = Path(data) if data is not None else out / "results-data"
     figs = out / "results"
     figs.mkdir(parents=True, exist_ok=True)
-    scenes, ens = [], {}
+    scenes, ens, st = [], {}, {}
     for config in configs:
         scene = load_scene(config)
         if scene.name in ens:
             raise ValueError(f"{config}: scene name {scene.name!r} given twice")
-        ens[scene.name] = {k: (_open_run(p) if k == "elastic" else open_ensemble(p))
-                           for k, p in run_scene(config, data, plan).items()}
+        ens[scene.name] = _open_scene(config, data, plan)
+        st[scene.name] = {k: ensemble_stats(ds) for k, ds in ens[scene.name].items()}
         scenes.append(scene)
     rel = lambda p: Path(p).relative_to(out).as_posix() if Path(p).is_relative_to(out) else str(p)  # noqa: E731
+    command = ("rss6 report " + " ".join(map(str, configs)) + f" -o {out} -n {plan.n} "
+               f"--family-n {plan.family_n}")
     md = ["# Results: the seed paper's section 6 with rss6", "",
-          "Generated by `rss6 report " + " ".join(map(str, configs)) + f" -o {out} -n {plan.n} "
-          f"--family-n {plan.family_n}`; every number and figure below comes from the netCDF files "
-          f"that command wrote to `{rel(data)}/` (rerunning it reuses them). Errors are actual minus "
-          "ideal rigid platform pose (MODEL.md section 6); 'max' and 'mean' are each realisation's "
-          "maximum and mean over time of |error|, summarised over the realisations as a median and a "
-          "95 % quantile, each with its distribution-free 95 % confidence interval. Units: mm, mm/s, "
-          "mm/s^2 for x, y, z; rad, rad/s, rad/s^2 for rx, ry, rz.", ""]
+          text.INTRO.format(command=command, data=rel(data), confidence=95,
+                            min_n_q95=min_n_for_quantile(0.95, 0.95)), ""]
     for scene in scenes:
-        e = ens[scene.name]
-        md += [f"## Scene `{scene.name}` ({_clearance_mm(scene)} mm clearances)", "",
-               "Runs: " + "; ".join(_setting_line(e[k]) for k in ("quasi-static", "paper", "contact"))
-               + ".", ""]
-        t = e["contact"]["time"].values
-        md += [f"![rigid motion]({rel(_rigid_figure(scene, t, figs))})", ""]
-        for q in ("displacement", "velocity", "acceleration"):
-            md += [f"![{q} error]({rel(_error_figure(scene, q, e, figs))})", ""]
-        md += ["### Beside the paper's numbers (MODEL.md section 9)", ""] + _comparison_table(scene, e)
-        md += ["", "### Which joint family contributes most (contact level)", "",
-               "Medians over the finished realisations of each run (finished of run in the header); a "
-               f"switched-off family keeps a {OFF * 1e6:g} um clearance: the contact level needs one, "
-               "and its error is about proportional to the clearance, so such a family adds about "
-               f"{OFF / scene.clearance.spherical_B * 100:.0f} % of what it adds at the scene's "
-               "clearance.", ""] + _family_table(scene, e)
-        md += ["", "### Where we differ from the paper, and why", ""] + _explanations(scene, e) + [""]
+        md += _scene_section(scene, ens[scene.name], st[scene.name], figs, rel)
     if len(scenes) >= 2:
-        md += ["## How the errors grow with the clearance", "",
-               "Ratio of the medians of the larger-clearance scene to the smaller one (the paper "
-               "reports displacement at both sizes only).", ""] + _growth_table(scenes, ens) + [""]
+        md += ["## How the errors grow with the clearance", "", text.GROWTH, ""]
+        md += _growth_table(scenes, st) + [""]
     path = out / "results.md"
     path.write_text("\n".join(md) + "\n", encoding="utf-8")
     return path

@@ -248,7 +248,7 @@ def ensemble_stats(ds: xr.Dataset, confidence: float = 0.95) -> xr.Dataset:
     for name in VARIABLES:
         var = ens[name].transpose("realization", "quantity", "direction")
         x = var.values[finished]                                          # (n, Q, D)
-        flat = _summaries(x.reshape(x.shape[0], -1), confidence)
+        flat = _summaries(x.reshape(x.shape[0], x.shape[1] * x.shape[2]), confidence)
         attrs = {"long_name": f"statistics over finished realisations of {name}",
                  "units": var.attrs.get("units", "")}
         data[name] = (("statistic", "bound", "quantity", "direction"),
