@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .spec import Spec
-from .stats import min_n_for_quantile
+from .stats import MIN_N_MEAN, MIN_N_STD, min_n_for_quantile
 
 __all__ = ["OUTCOMES", "Verdict", "exit_code", "format_verdicts", "judge", "judge_all",
            "verdicts_json"]
@@ -56,7 +56,8 @@ def _quantile_p(statistic: str) -> float | None:
 def _n_needed(spec: Spec, est: float, lo: float, hi: float, n: int, confidence: float):
     """(n, reason) that would likely decide an undecided spec (see module doc)."""
     p = _quantile_p(spec.statistic)
-    floor = min_n_for_quantile(p, confidence) if p is not None else n + 1
+    floor = (min_n_for_quantile(p, confidence) if p is not None
+             else {"mean": MIN_N_MEAN, "std": MIN_N_STD}[spec.statistic])
     if not (np.isfinite(lo) and np.isfinite(hi)):
         return max(floor, n + 1), f"no {100 * confidence:g} % interval exists at n = {n}"
     margin = abs(est - spec.limit)

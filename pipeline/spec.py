@@ -11,8 +11,8 @@ One grammar serves every command that states a limit (``rss6 run --require``,
 - VALUE UNIT: a number and a unit of the quantity: lengths m, cm, mm, um;
   angles rad, mrad, urad, deg; per second ``/s`` (or UDUNITS ``m s-1``),
   per second squared ``/s^2`` (``/s2``, ``m s-2``), and ``g`` (9.80665 m/s^2);
-- STATISTIC: one of the statistics Dataset's labels (mean, std, q05, q50, q95,
-  q99, max), of the per-realisation maximum |error| by default or of the
+- STATISTIC: one of the statistics Dataset's labels that carry an interval
+  (mean, std, q05, q50, q95, q99; not max, which has none), of the per-realisation maximum |error| by default or of the
   per-realisation mean |error| with ``:mean`` (``@q50:mean``), and optionally
   an analysis window of the file (``@q95/steady``).
 
@@ -30,7 +30,7 @@ __all__ = ["OPERATORS", "STATISTICS", "Spec", "SpecError", "parse_spec", "parse_
 QUANTITIES = ("displacement", "velocity", "acceleration")
 TRANSLATIONS = ("x", "y", "z")
 ROTATIONS = ("rx", "ry", "rz")
-STATISTICS = ("mean", "std", "q05", "q50", "q95", "q99", "max")
+STATISTICS = ("mean", "std", "q05", "q50", "q95", "q99")
 MEASURES = {"max": "max_abs_error", "mean": "mean_abs_error"}
 OPERATORS = ("<=", "<", ">=", ">")
 STANDARD_GRAVITY = 9.80665  # m/s^2
@@ -129,6 +129,9 @@ def _statistic(text: str, token: str) -> tuple[str, str, str | None]:
     stat, _, window = token.strip().partition("/")
     stat, _, measure = stat.partition(":")
     stat, measure, window = stat.strip(), (measure.strip() or "max"), window.strip() or None
+    if stat == "max":
+        raise _fail(text, "statistic 'max' has no confidence interval (the sample maximum estimates "
+                          "no population parameter); bound a quantile such as q99 instead")
     if stat not in STATISTICS:
         raise _fail(text, f"unknown statistic {stat!r} (choose from {', '.join(STATISTICS)})")
     if measure not in MEASURES:

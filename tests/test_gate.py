@@ -7,7 +7,7 @@ import xarray as xr
 
 from pipeline.gate import exit_code, format_verdicts, judge, judge_all
 from pipeline.spec import STANDARD_GRAVITY, SpecError, parse_spec
-from pipeline.stats import min_n_for_quantile
+from pipeline.stats import MIN_N_STD, min_n_for_quantile
 
 DIRECTIONS = ["x", "y", "z", "rx", "ry", "rz"]
 
@@ -17,7 +17,7 @@ DIRECTIONS = ["x", "y", "z", "rx", "ry", "rz"]
     ("acceleration:z<=50m/s^2@q50", "acceleration", ("z",), "<=", 50.0, "q50", "max"),
     (" velocity : rx , ry < 2 mrad/s @ mean:mean ", "velocity", ("rx", "ry"), "<", 2e-3, "mean",
      "mean"),
-    ("acceleration:x>=0.5g@max", "acceleration", ("x",), ">=", 0.5 * STANDARD_GRAVITY, "max", "max"),
+    ("acceleration:x>=0.5g@q50", "acceleration", ("x",), ">=", 0.5 * STANDARD_GRAVITY, "q50", "max"),
     ("velocity:z=<3 m s-1@q05", "velocity", ("z",), "<=", 3.0, "q05", "max"),
     ("displacement:rz<1deg@std", "displacement", ("rz",), "<", math.pi / 180, "std", "max"),
     ("acceleration:y<2e3mm/s2@q99", "acceleration", ("y",), "<", 2.0, "q99", "max"),
@@ -58,6 +58,7 @@ def test_window_is_parsed():
     ("displacement:x,rx<=0.05mm@q95", "mix translations and rotations"),
     ("displacement:x<=0.05mm@q95:median", "unknown measure 'median'"),
     ("displacement:x<=0.05mm@q95/", "missing window name"),
+    ("displacement:x<=0.05mm@max", "statistic 'max' has no confidence interval"),
 ])
 def test_malformed_specs_name_the_bad_token(text, token):
     with pytest.raises(SpecError) as err:
@@ -106,6 +107,8 @@ def test_missing_interval_is_undecided_with_the_smallest_n_that_has_one():
     (v,) = judge(parse_spec("displacement:x<=10mm@q95"), stats)
     assert v.outcome == "undecided" and v.lower is None
     assert v.n_needed == min_n_for_quantile(0.95, 0.95) == 59
+    (m,) = judge(parse_spec("displacement:x<=10mm@std"), _stats(1.0e-4, np.nan, np.nan, n=32))
+    assert m.n_needed == MIN_N_STD
 
 
 def test_spec_verdicts_cover_every_direction_and_exit_codes():
