@@ -1,0 +1,150 @@
+"""Pass, fail or undecided: requirement specs judged from the statistics Dataset's intervals.
+
+A spec holds with the file's confidence when the statistic's whole confidence
+interval meets the limit (pass), is refuted when the whole interval violates it
+(fail), and is undecided when the interval straddles the limit or no interval
+exists at this sample size. Each direction of a spec is judged on its own
+interval; the spec's verdict is the worst of them. For an undecided verdict the
+sample size that would likely decide is estimated from the interval's 1/sqrt(n)
+shrinkage about an unchanged estimate (and, for quantiles, never below the
+smallest n at which a distribution-free interval exists).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .spec import Spec
+from .stats import MIN_N_MEAN, MIN_N_STD, min_n_for_quantile
+
+__all__ = ["OUTCOMES", "Verdict", "exit_code", "format_verdicts", "judge", "judge_all",
+           "verdicts_json"]
+
+OUTCOMES = ("pass", "undecided", "fail")
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One direction of one spec: the interval (SI), its outcome, and the n that would likely decide."""
+
+    spec: str
+    quantity: str
+    direction: str
+    statistic: str
+    measure: str
+    window: str | None
+    op: str
+    limit: float
+    unit: str
+    factor: float
+    estimate: float
+    lower: float | None
+    upper: float | None
+    confidence: float
+    n: int
+    outcome: str
+    n_needed: int | None
+    reason: str
+
+
+def _quantile_p(statistic: str) -> float | None:
+    return int(statistic[1:]) / 100 if statistic.startswith("q") else None
+
+
+def _n_needed(spec: Spec, est: float, lo: float, hi: float, n: int, confidence: float):
+    """(n, reason) that would likely decide an undecided spec (see module doc)."""
+    p = _quantile_p(spec.statistic)
+    floor = (min_n_for_quantile(p, confidence) if p is not None
+             else {"mean": MIN_N_MEAN, "std": MIN_N_STD}[spec.statistic])
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return max(floor, n + 1), f"no {100 * confidence:g} % interval exists at n = {n}"
+    margin = abs(est - spec.limit)
+    if margin == 0:
+        return None, "the estimate equals the limit: no sample size is expected to decide"
+    side = hi - est if est < spec.limit else est - lo
+    return max(floor, n + 1, math.ceil(n * (side / margin) ** 2)), "the interval straddles the limit"
+
+
+def _outcome(spec: Spec, lo: float, hi: float) -> str:
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return "undecided"
+    if spec.holds(lo) and spec.holds(hi):
+        return "pass"
+    if not spec.holds(lo) and not spec.holds(hi):
+        return "fail"
+    return "undecided"
+
+
+def _select(stats, spec: Spec):
+    """The spec's (bound,) slice per direction; EnsembleFileError-style ValueError if a window is absent."""
+    da = stats[spec.variable].sel(statistic=spec.statistic, quantity=spec.quantity)
+    if spec.window is not None:
+        if "window" not in da.dims:
+            raise ValueError(f"--require {spec.text!r}: the statistics have no analysis windows "
+                             f"(no 'window' dimension); drop '/{spec.window}'")
+        windows = [str(w) for w in da["window"].values]
+        if spec.window not in windows:
+            raise ValueError(f"--require {spec.text!r}: unknown window {spec.window!r} "
+                             f"(the file has {', '.join(windows)})")
+        da = da.sel(window=spec.window)
+    return da
+
+
+def judge(spec: Spec, stats) -> list[Verdict]:
+    """Verdicts of one spec, one per direction, from a statistics Dataset (``pipeline.stats``)."""
+    da = _select(spec=spec, stats=stats)
+    n, confidence = int(stats.attrs["n_finished"]), float(stats.attrs["confidence"])
+    out = []
+    for d in spec.directions:
+        est, lo, hi = (float(da.sel(direction=d, bound=b)) for b in ("estimate", "lower", "upper"))
+        outcome = _outcome(spec, lo, hi)
+        need, reason = (_n_needed(spec, est, lo, hi, n, confidence) if outcome == "undecided"
+                        else (None, "the whole interval " + ("meets" if outcome == "pass"
+                                                             else "violates") + " the limit"))
+        out.append(Verdict(spec.text, spec.quantity, d, spec.statistic, spec.measure, spec.window,
+                           spec.op, spec.limit, spec.unit, spec.factor, est,
+                           lo if np.isfinite(lo) else None, hi if np.isfinite(hi) else None,
+                           confidence, n, outcome, need, reason))
+    return out
+
+
+def judge_all(specs: list[Spec], stats) -> list[Verdict]:
+    """Every spec's verdicts, in the order given."""
+    return [v for s in specs for v in judge(s, stats)]
+
+
+def exit_code(verdicts: list[Verdict], undecided: str = "fail") -> int:
+    """0 when every verdict passes (undecided ones too with ``undecided='pass'``), else 1."""
+    allowed = ("pass", "undecided") if undecided == "pass" else ("pass",)
+    return 0 if all(v.outcome in allowed for v in verdicts) else 1
+
+
+def _num(value: float | None, factor: float) -> str:
+    return "-" if value is None else f"{value / factor:.4g}"
+
+
+def format_verdicts(verdicts: list[Verdict]) -> str:
+    """A table in each spec's own unit: spec, direction, interval, limit, verdict, n to decide."""
+    if not verdicts:
+        return ""
+    conf = f"{100 * verdicts[0].confidence:g} %"
+    lines = [f"requirements ({conf} intervals, n = {verdicts[0].n} finished realisations)",
+             f"{'spec':<40s}{'dir':<4s}{'estimate':>11s}{'interval':>24s}{'limit':>14s}  "
+             f"{'verdict':<10s}n to decide"]
+    for v in verdicts:
+        interval = f"[{_num(v.lower, v.factor)}, {_num(v.upper, v.factor)}]"
+        need = "" if v.outcome != "undecided" else (str(v.n_needed) if v.n_needed else "-")
+        lines.append(f"{v.spec:<40.40s}{v.direction:<4s}{_num(v.estimate, v.factor):>11s}"
+                     f"{interval:>24s}{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  "
+                     f"{v.outcome:<10s}{need}")
+    worst = max((v.outcome for v in verdicts), key=OUTCOMES.index)
+    counts = ", ".join(f"{sum(v.outcome == o for v in verdicts)} {o}" for o in OUTCOMES)
+    lines.append(f"verdict: {worst} ({counts})")
+    return "\n".join(lines)
+
+
+def verdicts_json(verdicts: list[Verdict]) -> list[dict]:
+    """Plain dicts (SI values; None where a bound does not exist) for ``--json`` and file attributes."""
+    return [asdict(v) for v in verdicts]
