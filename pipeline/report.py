@@ -17,11 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import load_scene, parse_scene
+from rss6core import parse_scene
 from rss6core.kinematics import rigid_motion
 from rss6core.models import default_integrator, default_time_step
 
 from .run import EnsembleSpec, run_ensemble
+from .scenes import find_scene
 from .plots import axis_unit, draw_envelope, plt, save_figure
 from .stats import summarize
 from .store import (DIRECTIONS, EnsembleFileError, display_unit, load_netcdf, open_ensemble, run_dataset,
@@ -104,7 +105,7 @@ def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store):
 def run_scene(config, data: Path, plan: ReportPlan) -> dict[str, Path]:
     """Run (or resume) every file the report needs for one scene; returns their paths by role."""
     from rss6core.models import simulate
-    scene = load_scene(config)
+    scene = find_scene(config)
     data.mkdir(parents=True, exist_ok=True)
     paths = {}
     path = data / f"{scene.name}_elastic.nc"
@@ -368,7 +369,7 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
     figs.mkdir(parents=True, exist_ok=True)
     scenes, ens = [], {}
     for config in configs:
-        scene = load_scene(config)
+        scene = find_scene(config)
         if scene.name in ens:
             raise ValueError(f"{config}: scene name {scene.name!r} given twice")
         ens[scene.name] = {k: (_open_run(p) if k == "elastic" else open_ensemble(p))

@@ -13,7 +13,6 @@ import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +20,7 @@ import numpy as np
 __all__ = [
     "SceneError", "Scene", "Geometry", "RectangleSection", "TubeSection",
     "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping", "Clearances", "ContactLaw",
-    "load_scene", "parse_scene", "embedded_scene_names", "resolve_scene_path",
+    "load_scene", "parse_scene",
 ]
 
 
@@ -433,24 +432,15 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
     return scene
 
 
-def embedded_scene_names() -> list[str]:
-    """Names of the scenes shipped with the package (``paper``, ``smoke``, ...)."""
-    return sorted(p.name[:-5] for p in resources.files("rss6_configs").iterdir()
-                  if p.name.endswith(".toml"))
+def load_scene(path: str | Path) -> Scene:
+    """Load and check a scene from a TOML file; SceneError naming the file if it cannot be read.
 
-
-def resolve_scene_path(config: str | Path):
-    """A file path, or the name of an embedded scene; SceneError if neither exists."""
-    path = Path(config)
-    if path.is_file():
-        return path
-    if str(config) in embedded_scene_names():
-        return resources.files("rss6_configs") / f"{config}.toml"
-    raise SceneError(f"{config}: no such scene file (embedded scenes: "
-                     f"{', '.join(embedded_scene_names())})")
-
-
-def load_scene(config: str | Path) -> Scene:
-    """Load and check a scene from a TOML file path or an embedded scene name."""
-    path = resolve_scene_path(config)
-    return parse_scene(path.read_text(encoding="utf-8"), str(config))
+    Shipped scenes are found by name in ``pipeline.scenes``, not here: the core reads files only.
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(f"{path}: no such scene file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{path}: cannot read the scene file: {exc}") from None
+    return parse_scene(text, str(path))

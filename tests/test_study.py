@@ -11,9 +11,8 @@ from pipeline.study import STATISTICS, pareto_front, recommend, relative_errors
 from pipeline.store import DIRECTIONS, QUANTITIES
 from rss6core.contact_dynamics import simulate_contact
 from rss6core.clearance import draw_clearances
-from tests.conftest import CONFIGS
 
-SMOKE = str(CONFIGS / "smoke.toml")
+SMOKE = "smoke"                    # the shipped scene, by name
 
 
 def _rows(path):
@@ -60,9 +59,9 @@ def test_stability_map_and_the_explicit_limit(stability_dir):
     assert all(np.isfinite(float(r[c])) for r in rows for c in ("dt_s", "max_rel_change",
                                                                  "seconds_per_realization"))
     explicit = [r for r in rows if r["integrator"].startswith("central-difference")]
-    from rss6core import load_scene
+    from pipeline.scenes import find_scene
     from rss6core.models import natural_frequencies
-    limit = 2.0 / natural_frequencies(load_scene(SMOKE))[-1]
+    limit = 2.0 / natural_frequencies(find_scene(SMOKE))[-1]
     for r in explicit:      # stable below 2/omega_max, diverging above it (within 3 %)
         h = float(r["dt_s"])
         if h < 0.97 * limit:
