@@ -70,7 +70,7 @@ def test_jacobian_matches_finite_differences(paper):
         dt = np.zeros(6)
         dt[k] = h
 
-        def alpha(sign):
+        def alpha(sign, dt=dt):
             o = m.platform.o + sign * dt[:3]
             rot = np.einsum("ij,tjk->tik", _axis_angle(sign * dt[3:]), m.platform.R)
             return inverse_kinematics(geo, platform_joints(geo, o, rot)[0])
