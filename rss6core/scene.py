@@ -171,7 +171,7 @@ class Simulation:
 
 @dataclass(frozen=True)
 class Sampling:
-    """Clearance sampling laws (MODEL.md section 4); means and stds as fractions of the size."""
+    """Clearance sampling laws (docs/model.md section 4); means and stds as fractions of the size."""
     radial_mean: float
     radial_std: float
     axial_mean: float
@@ -271,7 +271,7 @@ _SCHEMA: dict = {
         "contact_tolerance_m": _Key(float, default=0.0, check=_NONNEG),
         "contact_refinements": _Key(int, default=0, bounds=(0, MAX_CONTACT_REFINEMENTS)),
     },
-    "sampling": {  # MODEL.md section 4; mean and std as fractions of the clearance size
+    "sampling": {  # docs/model.md section 4; mean and std as fractions of the clearance size
         "radial_mean": _Key(float, default=0.5, bounds=(0.0, 1.0)),
         "radial_std": _Key(float, default=0.25, check=_NONNEG),
         "axial_mean": _Key(float, default=0.0, bounds=(-1.0, 1.0)),
