@@ -1,1 +1,1 @@
-"""Scene files shipped with rss6 (installed as the package ``rss6_configs``)."""
+"""Scene files shipped with rss6, installed as the data package ``pipeline.scene_files``."""

@@ -11,9 +11,10 @@ import sys
 
 import numpy as np
 
-from rss6core import SceneError, __version__, load_scene
+from rss6core import SceneError, __version__
 from rss6core.scene import INTEGRATORS, MODELS
 
+from .scenes import find_scene
 from .summary import contact_peaks, error_summary, format_errors, format_summary, scene_summary
 
 
@@ -48,7 +49,7 @@ def _positive_int(text: str) -> int:
 
 
 def _check(args) -> int:
-    summary = scene_summary(load_scene(args.config))
+    summary = scene_summary(find_scene(args.config))
     print(json.dumps(summary, indent=2) if args.json else format_summary(summary))
     return 0
 
@@ -68,7 +69,7 @@ def _simulate(args) -> int:
     from rss6core.models import simulate
 
     from .store import run_dataset, write_netcdf
-    scene = load_scene(args.config)
+    scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
     start = time.perf_counter()
     try:
@@ -103,7 +104,7 @@ def _simulate(args) -> int:
 def _run(args) -> int:
     from .run import EnsembleSpec, run_ensemble
     from .stats import ensemble_stats, format_stats
-    scene = load_scene(args.config)
+    scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements,
                         args.seed, args.store)
@@ -175,7 +176,7 @@ def _plot(args) -> int:
 
 def _tradeoff(args) -> int:
     from .study import tradeoff, write_tradeoff
-    scene = load_scene(args.config)
+    scene = find_scene(args.config)
     print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")
     ds = tradeoff(scene, args.n, args.seed)
     ref = ds.attrs["reference"]
@@ -196,7 +197,7 @@ def _tradeoff(args) -> int:
 
 def _stability(args) -> int:
     from .study import stability, write_stability
-    scene = load_scene(args.config)
+    scene = find_scene(args.config)
     print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
     ds = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
     write_stability(ds, args.output)

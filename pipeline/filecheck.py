@@ -65,7 +65,7 @@ def _values(ds, path, finished: np.ndarray) -> None:
 
 
 def check_ensemble(ds, path) -> None:
-    """EnsembleFileError unless ``ds`` is a well-formed rss6 ensemble (MODEL.md section 7)."""
+    """EnsembleFileError unless ``ds`` is a well-formed rss6 ensemble (docs/model.md section 7)."""
     _dims(ds, path, {"quantity", "realization", "direction"})
     _labels(ds, path)
     _units(ds, path)

@@ -16,11 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import load_scene, parse_scene
+from rss6core import parse_scene
 from rss6core.kinematics import rigid_motion
 from rss6core.models import default_integrator, default_time_step
 
 from .run import EnsembleSpec, run_ensemble
+from .scenes import find_scene
 from .plots import axis_unit, draw_envelope, plt, save_figure
 from . import report_text as text
 from .scene_variant import scene_variant
@@ -39,7 +40,7 @@ FAMILY_KEYS = {"A": ("revolute_radial_m", "revolute_axial_m"), "C": ("spherical_
                "B": ("spherical_B_m",)}
 LEVELS = ("paper", "contact")
 
-# MODEL.md section 9 (paper sec. 6), SI: (statistic, quantity, direction) -> {clearance mm: value}
+# docs/model.md section 9 (paper sec. 6), SI: (statistic, quantity, direction) -> {clearance mm: value}
 PAPER_VALUES = {
     ("max", "displacement", "x"): {0.25: 0.0104e-3, 0.50: 0.0204e-3},
     ("max", "displacement", "y"): {0.25: 0.0129e-3, 0.50: 0.0172e-3},
@@ -88,7 +89,7 @@ def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store):
 def run_scene(config, data: Path, plan: ReportPlan) -> dict[str, Path]:
     """Run (or resume) every file the report needs for one scene; returns their paths by role."""
     from rss6core.models import simulate
-    scene = load_scene(config)
+    scene = find_scene(config)
     data.mkdir(parents=True, exist_ok=True)
     paths = {}
     path = data / f"{scene.name}_elastic.nc"
@@ -316,7 +317,7 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
     md += [f"![rigid motion]({rel(_rigid_figure(scene, e['contact']['time'].values, figs))})", ""]
     for q in ("displacement", "velocity", "acceleration"):
         md += [f"![{q} error]({rel(_error_figure(scene, q, e, figs))})", ""]
-    md += ["### Beside the paper's numbers (MODEL.md section 9)", ""] + _comparison_table(scene, st)
+    md += ["### Beside the paper's numbers (docs/model.md section 9)", ""] + _comparison_table(scene, st)
     md += ["", "### Which joint family contributes most (contact level)", "",
            text.FAMILY.format(off_um=OFF * 1e6, off_percent=OFF / scene.clearance.spherical_B * 100),
            ""] + _family_table(st)
@@ -332,7 +333,7 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
     figs.mkdir(parents=True, exist_ok=True)
     scenes, ens, st = [], {}, {}
     for config in configs:
-        scene = load_scene(config)
+        scene = find_scene(config)
         if scene.name in ens:
             raise ValueError(f"{config}: scene name {scene.name!r} given twice")
         ens[scene.name] = _open_scene(config, data, plan)

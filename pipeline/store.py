@@ -132,7 +132,7 @@ class EnsembleFileError(ValueError):
 
 
 def realization_dataset(result, draw, realization: int, store: str, settle: float = 0.0) -> xr.Dataset:
-    """One realisation as a length-1 slice of the ensemble file (MODEL.md section 7); its summaries
+    """One realisation as a length-1 slice of the ensemble file (docs/model.md section 7); its summaries
     leave out t < ``settle`` (s)."""
     peak, mean = error_summaries(result, settle)
     size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])

@@ -1,4 +1,4 @@
-"""Clearance realisations: the sampling laws of MODEL.md section 4 (paper sec. 2.2-2.4).
+"""Clearance realisations: the sampling laws of docs/model.md section 4 (paper sec. 2.2-2.4).
 
 One realisation fixes, per leg i, the clearance sizes and eccentricities of the
 revolute A_i (radial, in the plane normal to w_i, and axial along w_i) and of

@@ -12,7 +12,7 @@ __all__ = ["poisson_ratio", "hertz_stiffness", "lankarani_nikravesh", "friction_
 
 
 def poisson_ratio(youngs_modulus: float, shear_modulus: float) -> float:
-    """nu = E / (2 G) - 1 of an isotropic material (MODEL.md section 2)."""
+    """nu = E / (2 G) - 1 of an isotropic material (docs/model.md section 2)."""
     return youngs_modulus / (2.0 * shear_modulus) - 1.0
 
 

@@ -37,7 +37,7 @@ def _reach(geometry, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 def inverse_kinematics(geometry, b: np.ndarray) -> np.ndarray:
     """Crank angles alpha_i = atan2(d_z, d_x) + acos(K / hypot(d_x, d_z)) (T, 6), rad.
 
-    The closed form of eq. 4 on the branch of MODEL.md section 2; NaN where the
+    The closed form of eq. 4 on the branch of docs/model.md section 2; NaN where the
     joint b_i is out of reach (use :func:`check_workspace` for a clear error).
     """
     phi, _, ratio = _reach(geometry, b)

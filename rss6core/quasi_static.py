@@ -1,7 +1,7 @@
 """Quasi-static clearance level (L1): rigid links, platform error from the linearised leg closure.
 
 For each leg, with n_i the unit rod vector (c_i - b_i)/|c_i - b_i| and r_i = b_i - o_p,
-    n_i . (dp + dtheta x r_i) = n_i . (e_A,i + e_C,i - e_B,i)      (MODEL.md section 3)
+    n_i . (dp + dtheta x r_i) = n_i . (e_A,i + e_C,i - e_B,i)      (docs/model.md section 3)
 is six linear equations in the platform error (dp, dtheta).  The eccentricities
 are the realisation's draw, or sit at the clearance boundary along the rigid
 joint reaction force (a loaded joint pushed to its wall).  Velocity and

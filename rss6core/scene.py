@@ -13,7 +13,6 @@ import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +20,7 @@ import numpy as np
 __all__ = [
     "SceneError", "Scene", "Geometry", "RectangleSection", "TubeSection",
     "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping", "Clearances", "ContactLaw",
-    "load_scene", "parse_scene", "embedded_scene_names", "resolve_scene_path",
+    "load_scene", "parse_scene",
 ]
 
 
@@ -172,7 +171,7 @@ class Simulation:
 
 @dataclass(frozen=True)
 class Sampling:
-    """Clearance sampling laws (MODEL.md section 4); means and stds as fractions of the size."""
+    """Clearance sampling laws (docs/model.md section 4); means and stds as fractions of the size."""
     radial_mean: float
     radial_std: float
     axial_mean: float
@@ -272,7 +271,7 @@ _SCHEMA: dict = {
         "contact_tolerance_m": _Key(float, default=0.0, check=_NONNEG),
         "contact_refinements": _Key(int, default=0, bounds=(0, MAX_CONTACT_REFINEMENTS)),
     },
-    "sampling": {  # MODEL.md section 4; mean and std as fractions of the clearance size
+    "sampling": {  # docs/model.md section 4; mean and std as fractions of the clearance size
         "radial_mean": _Key(float, default=0.5, bounds=(0.0, 1.0)),
         "radial_std": _Key(float, default=0.25, check=_NONNEG),
         "axial_mean": _Key(float, default=0.0, bounds=(-1.0, 1.0)),
@@ -433,24 +432,15 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
     return scene
 
 
-def embedded_scene_names() -> list[str]:
-    """Names of the scenes shipped with the package (``paper``, ``smoke``, ...)."""
-    return sorted(p.name[:-5] for p in resources.files("rss6_configs").iterdir()
-                  if p.name.endswith(".toml"))
+def load_scene(path: str | Path) -> Scene:
+    """Load and check a scene from a TOML file; SceneError naming the file if it cannot be read.
 
-
-def resolve_scene_path(config: str | Path):
-    """A file path, or the name of an embedded scene; SceneError if neither exists."""
-    path = Path(config)
-    if path.is_file():
-        return path
-    if str(config) in embedded_scene_names():
-        return resources.files("rss6_configs") / f"{config}.toml"
-    raise SceneError(f"{config}: no such scene file (embedded scenes: "
-                     f"{', '.join(embedded_scene_names())})")
-
-
-def load_scene(config: str | Path) -> Scene:
-    """Load and check a scene from a TOML file path or an embedded scene name."""
-    path = resolve_scene_path(config)
-    return parse_scene(path.read_text(encoding="utf-8"), str(config))
+    Shipped scenes are found by name in ``pipeline.scenes``, not here: the core reads files only.
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(f"{path}: no such scene file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{path}: cannot read the scene file: {exc}") from None
+    return parse_scene(text, str(path))

@@ -1,7 +1,7 @@
 """Cross-section properties of the links and the rigid-link masses and inertias they imply.
 
 Table 1 of the paper lists link inertias that disagree with its stated geometry,
-so rss6 derives them from density, section and length (MODEL.md section 2).
+so rss6 derives them from density, section and length (docs/model.md section 2).
 Local beam axes: x along the link; for the crank y is the revolute axis w_i
 (the ``axial_width`` side) and z lies in the crank's plane of motion.
 """

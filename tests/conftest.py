@@ -1,23 +1,38 @@
-"""Shared fixtures: the reference scenes, loaded once."""
+"""Shared fixtures: the shipped scenes, found in the installed package (not the checkout), loaded once."""
+from importlib import resources
 from pathlib import Path
 
 import pytest
 
+import pipeline
+import rss6core
+from pipeline.scenes import PACKAGE
 from rss6core import load_scene
 
-CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+
+def pytest_report_header(config):
+    return [f"rss6core from {Path(rss6core.__file__).parent}",
+            f"pipeline from {Path(pipeline.__file__).parent}"]
 
 
 @pytest.fixture(scope="session")
-def paper():
-    return load_scene(CONFIGS / "paper.toml")
+def configs() -> Path:
+    """The folder holding the shipped scene files (configs/ in a checkout)."""
+    folder = Path(str(resources.files(PACKAGE)))
+    assert (folder / "paper.toml").is_file(), f"no shipped scenes in {folder}"
+    return folder
 
 
 @pytest.fixture(scope="session")
-def smoke():
-    return load_scene(CONFIGS / "smoke.toml")
+def paper(configs):
+    return load_scene(configs / "paper.toml")
 
 
 @pytest.fixture(scope="session")
-def paper_text():
-    return (CONFIGS / "paper.toml").read_text()
+def smoke(configs):
+    return load_scene(configs / "smoke.toml")
+
+
+@pytest.fixture(scope="session")
+def paper_text(configs):
+    return (configs / "paper.toml").read_text()

@@ -1,5 +1,7 @@
 """End-to-end: the rss6 command line as a user calls it."""
 import json
+import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -8,17 +10,20 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from tests.conftest import CONFIGS
 
 
-def test_check_json_paper(capsys):
-    assert main(["check", str(CONFIGS / "paper.toml"), "--json"]) == 0
+def test_check_json_paper(configs, capsys):
+    assert main(["check", str(configs / "paper.toml"), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["home_crank_angles_deg"] == pytest.approx([-5.02] * 6, abs=0.01)
+    # golden values (README): home angle -5.024 deg, max torque 3.17 N m on leg 4, link masses
+    assert out["home_crank_angles_deg"] == pytest.approx([-5.024] * 6, rel=1e-3)
     assert len(out["crank_angle_range_deg"]) == 6
-    assert all(lo < -5.02 < hi for lo, hi in out["crank_angle_range_deg"])
-    assert len(out["max_actuator_torque_Nm"]) == 6 and min(out["max_actuator_torque_Nm"]) > 0
-    assert set(out["link_masses_kg"]) == {"crank", "rod", "platform"}
+    assert all(lo < -5.024 < hi for lo, hi in out["crank_angle_range_deg"])
+    torque = out["max_actuator_torque_Nm"]
+    assert len(torque) == 6 and max(torque) == pytest.approx(3.17, rel=1e-2)
+    assert int(np.argmax(torque)) + 1 == 4
+    assert out["link_masses_kg"] == pytest.approx({"crank": 0.467, "rod": 0.557, "platform": 1.366},
+                                                  rel=1e-2)
 
 
 def test_check_text_names_the_scene(capsys):
@@ -26,18 +31,19 @@ def test_check_text_names_the_scene(capsys):
     assert "scene 'smoke'" in capsys.readouterr().out
 
 
-def test_bad_config_is_a_usage_error(tmp_path, capsys):
+def test_bad_config_is_a_usage_error(configs, tmp_path, capsys):
     bad = tmp_path / "typo.toml"
-    bad.write_text((CONFIGS / "paper.toml").read_text().replace("mass_kg", "mas_kg"))
+    bad.write_text((configs / "paper.toml").read_text().replace("mass_kg", "mas_kg"))
     assert main(["check", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "typo.toml" in err and "mas_kg" in err and "Traceback" not in err
 
 
 def test_console_script_is_installed():
-    script = Path(sys.executable).parent / "rss6"
-    assert script.exists(), f"no rss6 console script beside {sys.executable}; pip install -e ."
-    proc = subprocess.run([str(script), "check", "paper", "--json"],
+    script = shutil.which("rss6", path=os.pathsep.join([str(Path(sys.executable).parent),
+                                                       os.environ.get("PATH", "")]))
+    assert script, "no rss6 console script on PATH or beside the interpreter; pip install ."
+    proc = subprocess.run([script, "check", "paper", "--json"],
                           capture_output=True, text=True, check=True)
     assert json.loads(proc.stdout)["scene"] == "paper"
 
@@ -50,10 +56,10 @@ def test_check_json_reports_modal_data(capsys):
     assert 0 < out["critical_time_step_s"] < 1e-4
 
 
-def test_simulate_json_and_netcdf(tmp_path, capsys):
+def test_simulate_json_and_netcdf(configs, tmp_path, capsys):
     import netCDF4
     out_file = tmp_path / "run.nc"
-    assert main(["simulate", str(CONFIGS / "smoke.toml"), "--model", "elastic",
+    assert main(["simulate", str(configs / "smoke.toml"), "--model", "elastic",
                  "-o", str(out_file), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     for stat in ("max_abs_error", "mean_abs_error"):
@@ -81,16 +87,16 @@ def test_simulate_bad_time_step_is_a_usage_error(capsys):
     assert "does not divide" in capsys.readouterr().err
 
 
-def _short_scene(tmp_path, duration="0.02"):
+def _short_scene(configs, tmp_path, duration="0.02"):
     path = tmp_path / "short.toml"
-    text = (CONFIGS / "smoke.toml").read_text()
+    text = (configs / "smoke.toml").read_text()
     path.write_text(text.replace("duration_s = 0.2", f"duration_s = {duration}"))
     return path
 
 
 @pytest.mark.parametrize("model", ["paper", "contact"])
-def test_simulate_clearance_levels_report_contact_forces_per_family(tmp_path, capsys, model):
-    path = _short_scene(tmp_path)
+def test_simulate_clearance_levels_report_contact_forces_per_family(configs, tmp_path, capsys, model):
+    path = _short_scene(configs, tmp_path)
     assert main(["simulate", str(path), "--model", model, "--json", "--realization", "1"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["model"] == model and out["status"] == "finished"
@@ -104,9 +110,9 @@ def test_simulate_clearance_levels_report_contact_forces_per_family(tmp_path, ca
     assert set(out["max_abs_error"]) == {"displacement", "velocity", "acceleration"}
 
 
-def test_contact_ensemble_stores_contact_force_peaks(tmp_path):
+def test_contact_ensemble_stores_contact_force_peaks(configs, tmp_path):
     import xarray as xr
-    path = _short_scene(tmp_path)
+    path = _short_scene(configs, tmp_path)
     out = tmp_path / "c.nc"
     assert main(["run", str(path), "--model", "contact", "-n", "3", "--workers", "1",
                  "--chunk", "2", "-o", str(out)]) == 0

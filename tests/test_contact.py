@@ -99,6 +99,90 @@ def test_contact_jacobians_match_finite_differences():
     np.testing.assert_allclose(normal @ De @ normal, normal @ num_e @ normal, rtol=1e-4)
 
 
+def _frozen_normal_force(e, de, n0, size, stiffness, impact, law, omega, radius):
+    """The ball's force with its penetration rate and slip taken along the fixed normal n0: the
+    function the contact Newton differentiates in e (the normal's turn in them is left out)."""
+    rho = np.linalg.norm(e)
+    F = lankarani_nikravesh(rho - size, n0 @ de, impact, stiffness, law.exponent, law.restitution)[0]
+    v = de + radius * np.cross(omega, n0)
+    ft = coulomb_friction(F, v - (n0 @ v) * n0, law.friction_coefficient, law.stick_velocity,
+                          law.slip_velocity)[0]
+    return -F * e / rho + ft
+
+
+def _central_jacobian(f, x, h):
+    return np.stack([(f(x + h * u) - f(x - h * u)) / (2 * h) for u in np.eye(len(x))], -1)
+
+
+def test_modified_newton_jacobian_is_exact_for_the_frozen_normal():
+    """d force/d e, all nine entries (normal and tangential, spring, damping and friction), is
+    exactly the derivative of the force with the rate and slip along a frozen normal."""
+    law = dataclasses.replace(_law(), impact_speed_floor=1e-3)
+    rng = np.random.default_rng(5)
+    e = rng.normal(size=3)
+    e *= 2.5003e-4 / np.linalg.norm(e)                   # 0.3 um into a 0.25 mm clearance
+    de, omega = 0.02 * rng.normal(size=3), rng.normal(size=3)
+    args = (2.5e-4, 3e10, 0.05, law, omega, 0.01)
+    f, De, *_ = _ball(e, de, *args)
+    n0 = e / np.linalg.norm(e)
+    assert np.abs(_frozen_normal_force(e, de, n0, *args)).max() == pytest.approx(np.abs(f).max())
+    num = _central_jacobian(lambda x: _frozen_normal_force(x, de, n0, *args), e, 1e-12)
+    tangential = num - np.outer(n0, n0) @ num @ np.outer(n0, n0)
+    assert np.abs(tangential).max() > 1e-3 * np.abs(num).max()   # more than the normal-normal part
+    np.testing.assert_allclose(De, num, rtol=1e-5, atol=1e-5 * np.abs(num).max())
+
+
+def test_full_jacobian_of_the_normal_force_is_the_modified_one_plus_the_rate_turn():
+    """Without friction the full finite-difference d force/d e is De plus the one term the
+    modified Newton leaves out, -dF/d(rate) n [(I - n n) de / rho]^T (the rate's turn)."""
+    law = _law()
+    rng = np.random.default_rng(6)
+    e = rng.normal(size=3)
+    e *= 2.5003e-4 / np.linalg.norm(e)
+    rho = np.linalg.norm(e)
+    n = e / rho
+    slide = np.cross(n, rng.normal(size=3))
+    de = slide / np.linalg.norm(slide) + 1e-3 * n        # sliding at 1 m/s, closing at 1 mm/s
+    args = (2.5e-4, 3e10, 1e-3, law, rng.normal(size=3), 0.01)
+    _, De, *_ = _ball(e, de, *args, friction=False)
+    dF_rate = lankarani_nikravesh(rho - 2.5e-4, n @ de, 1e-3, 3e10, law.exponent, law.restitution)[2]
+    turn = -dF_rate * np.outer(n, (de - (n @ de) * n) / rho)
+    num = _central_jacobian(lambda x: _ball(x, de, *args, friction=False)[0], e, 1e-12)
+    assert np.abs(turn).max() > 1e-2 * np.abs(num).max()      # the term is not negligible here
+    np.testing.assert_allclose(De + turn, num, rtol=1e-5, atol=1e-5 * np.abs(num).max())
+
+
+def test_joint_jacobians_of_all_legs_match_finite_differences(smoke):
+    """Every joint of every leg in contact, frictionless and at rest (where the modified Newton
+    is exact): d force/d e of the revolute (radial in the plane normal to w_i, axial along w_i)
+    and of both spheres, all 27 entries per leg, against central differences."""
+    from rss6core.contact_dynamics import _contacts, _joints
+    joints = _joints(smoke, [draw_clearances(smoke, 0, 0)])
+    law = dataclasses.replace(smoke.contact, friction_coefficient=0.0)
+    w = smoke.geometry.w
+    rng = np.random.default_rng(7)
+    e = np.empty((1, 6, 3, 3))
+    radial = np.cross(w, rng.normal(size=(6, 3)))
+    e[0, :, 0] = (radial / np.linalg.norm(radial, axis=-1, keepdims=True)
+                  * (joints.radial[0, :, None] + 2e-7)
+                  + w * (joints.axial[0, :, None] + 1e-7) * rng.choice([-1, 1], size=(6, 1)))
+    for j, size in ((1, joints.size_C), (2, joints.size_B)):
+        u = rng.normal(size=(6, 3))
+        e[0, :, j] = u / np.linalg.norm(u, axis=-1, keepdims=True) * (size[0, :, None] + 3e-7)
+    de, impact = np.zeros_like(e), np.full((1, 6, 4), 0.05)
+    omega, radius = np.zeros((6, 3, 3)), np.array([[0.01], [0.01], [0.01]])
+
+    def force(x):
+        return _contacts(x.reshape(e.shape), de, w, joints, impact, law, omega, radius)[0].ravel()
+    f, De, _, delta, _ = _contacts(e, de, w, joints, impact, law, omega, radius)
+    assert np.all(delta > 0)                                   # all four contacts of every leg
+    num = _central_jacobian(force, e.ravel(), 1e-13).reshape(6, 3, 3, 6, 3, 3)
+    for leg in range(6):
+        for j in range(3):
+            block = num[leg, j, :, leg, j, :]
+            np.testing.assert_allclose(De[0, leg, j], block, rtol=1e-5, atol=1e-6 * np.abs(block).max())
+
+
 def _law(exponent=1.5):
     from rss6core.scene import ContactLaw
     return ContactLaw(0.01, 0.01, 0.9, exponent, 0.1, 1e-4, 1e-2)

@@ -70,7 +70,7 @@ def test_jacobian_matches_finite_differences(paper):
         dt = np.zeros(6)
         dt[k] = h
 
-        def alpha(sign):
+        def alpha(sign, dt=dt):
             o = m.platform.o + sign * dt[:3]
             rot = np.einsum("ij,tjk->tik", _axis_angle(sign * dt[3:]), m.platform.R)
             return inverse_kinematics(geo, platform_joints(geo, o, rot)[0])
@@ -96,3 +96,49 @@ def test_crank_rates_and_accelerations_match_finite_differences(paper):
     assert np.abs(_central(rate, t, h) - m.alpha_ddot).max() < 1e-7 * np.abs(m.alpha_ddot).max()
     cdot = lambda s: rigid_motion(paper, s).c_dot  # noqa: E731
     assert np.abs(_central(cdot, t, h) - m.c_ddot).max() < 1e-7 * np.abs(m.c_ddot).max()
+
+
+def _static(paper_text, z=-0.387, **geometry):
+    """The paper scene held still at height z (m), with geometry keys replaced."""
+    text = paper_text.replace("position_amplitude_m = [0.0, 0.050, 0.080]",
+                              "position_amplitude_m = [0.0, 0.0, 0.0]")
+    text = text.replace("angle_amplitude_deg = [20.0, 20.0, 0.0]", "angle_amplitude_deg = [0.0, 0.0, 0.0]")
+    text = text.replace("position_offset_m = [0.0, 0.0, -0.387]", f"position_offset_m = [0.0, 0.0, {z!r}]")
+    for key, (old, new) in geometry.items():
+        assert f"{key} = {old}" in text, key
+        text = text.replace(f"{key} = {old}", f"{key} = {new}")
+    return text
+
+
+def test_check_workspace_names_a_leg_at_its_crank_rod_singularity(paper, paper_text):
+    """Lowered until crank and rod line up (|K/rho| = 1 - 1e-10, just inside reach): the
+    transmission n . dc vanishes and the scene is refused; at |K/rho| = 0.99 it is accepted."""
+    from scipy.optimize import brentq
+
+    from rss6core import SceneError, parse_scene
+    from rss6core.kinematics import _reach
+
+    def reach(z):
+        b, _ = platform_joints(paper.geometry, np.array([[0.0, 0.0, z]]), np.eye(3)[None])
+        return np.abs(_reach(paper.geometry, b)[2]).max()
+    z_near = brentq(lambda z: reach(z) - 0.99, -0.72, -0.6)
+    z_sing = brentq(lambda z: reach(z) - (1 - 1e-10), z_near, -0.75, xtol=1e-15)
+    parse_scene(_static(paper_text, z_near))
+    with pytest.raises(SceneError, match=r"workspace: leg \d is at its crank-rod singularity "
+                                         r"at t = 0\.0000 s"):
+        parse_scene(_static(paper_text, z_sing))
+
+
+def test_check_workspace_refuses_a_singular_and_an_ill_conditioned_platform(paper_text):
+    """All six rods meeting in one platform point cannot resist a moment about it (singular);
+    shrinking the platform radius to r scales the moment rows by r: condition ~ 1/r, refused
+    above 1e8 (r = 1 nm), accepted at r = 0.1 um (condition ~ 1e7)."""
+    from rss6core import SceneError, parse_scene
+    one_point = {"platform_angles_deg": ("[-80.0, 80.0, 40.0, 200.0, 160.0, 320.0]",
+                                         "[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]")}
+    with pytest.raises(SceneError, match=r"the platform is singular \(condition number \d\.\d+e\+(\d\d)\)"):
+        parse_scene(_static(paper_text, **one_point))
+    tiny = {"platform_radius_m": ("0.064", "1e-9")}
+    with pytest.raises(SceneError, match=r"platform is singular \(condition number 1\.\d+e\+09\) at t = 0"):
+        parse_scene(_static(paper_text, **tiny))
+    parse_scene(_static(paper_text, platform_radius_m=("0.064", "1e-7")))

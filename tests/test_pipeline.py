@@ -16,13 +16,14 @@ from pipeline.cli import main
 from pipeline.run import MAX_AUTO_CHUNK, EnsembleSpec, default_chunk, run_ensemble
 from pipeline.stats import ensemble_stats
 from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
-from tests.conftest import CONFIGS
+from pipeline.scenes import scene_text
 
-SMOKE = CONFIGS / "smoke.toml"
+SMOKE = "smoke"                    # the shipped scene, by name
+SMOKE_TEXT = scene_text(SMOKE)
 
 
 def _spec(seed=3, model="quasi-static", store="summary", text=None):
-    return EnsembleSpec(text or SMOKE.read_text(), str(SMOKE), model, "newmark", 1e-3, 4, seed, store)
+    return EnsembleSpec(text or SMOKE_TEXT, SMOKE, model, "newmark", 1e-3, 4, seed, store)
 
 
 def error_summaries(ds):
@@ -96,7 +97,7 @@ def test_different_seed_or_config_is_refused(reference, tmp_path):
     _, path = reference
     with pytest.raises(EnsembleFileError, match=r"refusing to mix ensembles.*seed"):
         run_ensemble(_spec(seed=99), 12, path, progress=False)
-    other = SMOKE.read_text().replace("mass_kg = 1.366", "mass_kg = 1.5")
+    other = SMOKE_TEXT.replace("mass_kg = 1.366", "mass_kg = 1.5")
     with pytest.raises(EnsembleFileError, match=r"refusing to mix.*different scene file"):
         run_ensemble(_spec(text=other), 12, path, progress=False)
 
@@ -144,7 +145,7 @@ def _cli(*args):
 @pytest.mark.slow
 def test_killed_run_resumes_to_the_same_file(tmp_path):
     """Kill -9 the whole run after some chunks are stored; the rerun ends identical."""
-    args = ["run", str(SMOKE), "-n", "12", "--chunk", "1", "--workers", "1", "--model", "elastic",
+    args = ["run", SMOKE, "-n", "12", "--chunk", "1", "--workers", "1", "--model", "elastic",
             "--seed", "5"]
     killed = tmp_path / "killed.nc"
     proc = subprocess.Popen(_cli(*args, "-o", str(killed)), start_new_session=True,
@@ -200,7 +201,7 @@ def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(referen
 def test_smoke_ensemble_through_the_cli(tmp_path, capsys):
     """What CI runs: 8 realisations, 2 workers, then stats and plot."""
     out = tmp_path / "smoke.nc"
-    assert main(["run", str(SMOKE), "-n", "8", "--workers", "2", "--model", "quasi-static",
+    assert main(["run", SMOKE, "-n", "8", "--workers", "2", "--model", "quasi-static",
                  "--store", "full", "-o", str(out)]) == 0
     capsys.readouterr()
     assert main(["stats", str(out), "--json"]) == 0
@@ -218,7 +219,7 @@ def test_smoke_ensemble_through_the_cli(tmp_path, capsys):
 
 def test_failed_realisations_are_recorded_and_the_ensemble_goes_on(tmp_path):
     """Central difference at 1 ms (500x its critical step) diverges: stored as failed, with its message."""
-    spec = EnsembleSpec(SMOKE.read_text(), str(SMOKE), "elastic", "central-difference", 1e-3, 1, 0)
+    spec = EnsembleSpec(SMOKE_TEXT, SMOKE, "elastic", "central-difference", 1e-3, 1, 0)
     ds = run_ensemble(spec, 2, tmp_path / "fail.nc", workers=1, chunk=2, progress=False)
     assert list(ds["status"].values) == ["failed", "failed"]
     assert all("diverged at t =" in m for m in ds["status_message"].values)

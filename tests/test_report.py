@@ -1,7 +1,6 @@
 """`rss6 report`: results.md and its figures from the files it wrote, on the smoke scene."""
 import re
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,8 +9,6 @@ from pipeline.cli import main
 from pipeline.report import OFF, PAPER_VALUES, with_clearance
 from pipeline.store import EnsembleFileError, open_ensemble
 from rss6core import parse_scene
-
-CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
 
 def test_with_clearance_sets_only_the_clearance_keys(smoke):
@@ -32,9 +29,9 @@ def test_with_clearance_sets_only_the_clearance_keys(smoke):
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
+def report(configs, tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
-    assert main(["report", str(CONFIGS / "smoke.toml"), "-o", str(out), "-n", "3",
+    assert main(["report", str(configs / "smoke.toml"), "-o", str(out), "-n", "3",
                  "--family-n", "2"]) == 0
     return out
 
@@ -66,12 +63,12 @@ def test_report_numbers_come_from_its_files(report):
     assert len(PAPER_VALUES) == 12 and md.count("| max \\|acceleration error\\|") >= 6
 
 
-def test_report_reuses_its_files_and_names_a_corrupt_one(report, tmp_path):
+def test_report_reuses_its_files_and_names_a_corrupt_one(configs, report, tmp_path):
     copy = tmp_path / "again"
     shutil.copytree(report, copy)
     (copy / "results.md").unlink()
     before = {p.name: p.stat().st_mtime_ns for p in (copy / "results-data").iterdir()}
-    assert main(["report", str(CONFIGS / "smoke.toml"), "-o", str(copy), "-n", "3",
+    assert main(["report", str(configs / "smoke.toml"), "-o", str(copy), "-n", "3",
                  "--family-n", "2"]) == 0
     after = {p.name: p.stat().st_mtime_ns for p in (copy / "results-data").iterdir()}
     assert after == before                                        # nothing rerun
@@ -81,4 +78,4 @@ def test_report_reuses_its_files_and_names_a_corrupt_one(report, tmp_path):
     elastic.write_bytes(elastic.read_bytes()[:500])
     with pytest.raises(EnsembleFileError, match="smoke_elastic.nc"):
         from pipeline.report import ReportPlan, write_report
-        write_report([str(CONFIGS / "smoke.toml")], copy, ReportPlan(3, 2))
+        write_report([str(configs / "smoke.toml")], copy, ReportPlan(3, 2))

@@ -1,11 +1,14 @@
 """Scene loading: the reference values, and one named error per kind of bad input."""
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from rss6core import SceneError, parse_scene
-from rss6core.scene import embedded_scene_names, load_scene
+from pipeline.scenes import find_scene, scene_names
+from rss6core import load_scene
 
 
 def _edit(text, old, new):
@@ -21,9 +24,23 @@ def test_paper_values_in_si(paper):
     assert paper.material.poisson_ratio == pytest.approx(70 / 53 - 1)
 
 
-def test_embedded_scenes_ship_with_the_package():
-    assert {"paper", "paper_050", "smoke"} <= set(embedded_scene_names())
-    assert load_scene("paper_050").clearance.spherical_B == pytest.approx(0.5e-3)
+def test_shipped_scenes_are_found_by_name():
+    assert {"paper", "paper_050", "smoke"} <= set(scene_names())
+    assert find_scene("paper_050").clearance.spherical_B == pytest.approx(0.5e-3)
+    with pytest.raises(SceneError, match=r"^papr: no such scene file or shipped scene "
+                                         r"\(shipped scenes: paper, paper_050, "):
+        find_scene("papr")
+
+
+def test_the_core_reads_files_only_and_never_imports_the_pipeline(tmp_path):
+    """load_scene takes a path, wherever it runs; the shipped-scene names live in pipeline."""
+    code = ("import sys, rss6core, rss6core.models\n"
+            "try:\n    rss6core.load_scene('nope.toml')\n"
+            "except rss6core.SceneError as exc:\n    print(exc)\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'pipeline'))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                         text=True, check=True).stdout.splitlines()
+    assert out == ["nope.toml: no such scene file", "[]"]
 
 
 def test_scene_is_immutable(paper):

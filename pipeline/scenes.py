@@ -1,0 +1,31 @@
+"""Scene names: the TOML files shipped with rss6 (the repository's ``configs/``, installed as
+the data package ``pipeline.scene_files``) and how a command-line argument finds one."""
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+from rss6core import Scene, SceneError, load_scene, parse_scene
+
+PACKAGE = "pipeline.scene_files"
+
+
+def scene_names() -> list[str]:
+    """Names of the shipped scenes (``paper``, ``smoke``, ...), sorted."""
+    return sorted(p.name.removesuffix(".toml") for p in resources.files(PACKAGE).iterdir()
+                  if p.name.endswith(".toml"))
+
+
+def scene_text(name: str) -> str:
+    """The TOML text of the shipped scene NAME; SceneError listing the names if there is none."""
+    if name not in scene_names():
+        raise SceneError(f"{name}: no such scene file or shipped scene "
+                         f"(shipped scenes: {', '.join(scene_names())})")
+    return (resources.files(PACKAGE) / f"{name}.toml").read_text(encoding="utf-8")
+
+
+def find_scene(config: str | Path) -> Scene:
+    """The scene of a TOML file path, else of the shipped scene of that name."""
+    if Path(config).is_file() or str(config).endswith(".toml"):
+        return load_scene(config)
+    return parse_scene(scene_text(str(config)), str(config))
