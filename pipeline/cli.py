@@ -147,18 +147,60 @@ def _selection(sds, args):
     return sds
 
 
+def _requirements(args) -> list:
+    """The --require specs, parsed before any work; a malformed one is a one-line error."""
+    from .spec import SpecError, parse_specs
+    try:
+        return parse_specs(args.require)
+    except SpecError as exc:
+        raise SceneError(str(exc)) from None
+
+
+def _judge(sds, specs: list) -> list:
+    """Verdicts of the specs on a statistics Dataset; a window the file lacks is a one-line error."""
+    from .gate import judge_all
+    try:
+        return judge_all(specs, sds)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+
+
 def _stats(args) -> int:
     from .filecheck import open_results
+    from .gate import exit_code, format_verdicts, verdicts_json
     from .stats import ensemble_stats, format_stats, to_json
     from .store import write_netcdf
-    sds = _selection(ensemble_stats(open_results(args.file), args.confidence), args)
+    specs = _requirements(args)
+    full = ensemble_stats(open_results(args.file), args.confidence)
+    verdicts = _judge(full, specs)
+    sds = _selection(full, args)
     if args.output:
-        write_netcdf(sds, args.output)
+        write_netcdf(sds.assign_attrs(_verdict_attrs(verdicts)) if specs else sds, args.output)
     if args.json:
-        print(json.dumps(to_json(sds), indent=2, allow_nan=False))
+        out = to_json(sds) | ({"requirements": verdicts_json(verdicts)} if specs else {})
+        print(json.dumps(out, indent=2, allow_nan=False))
     else:
         print(format_stats(sds))
-    return 0
+        if specs:
+            print(format_verdicts(verdicts))
+    return exit_code(verdicts, args.undecided) if specs else 0
+
+
+def _verdict_attrs(verdicts: list) -> dict:
+    """File attributes of the verdicts: the overall one and each as strict JSON (SI values)."""
+    from .gate import OUTCOMES, verdicts_json
+    worst = max((v.outcome for v in verdicts), key=OUTCOMES.index)
+    return {"requirements_verdict": worst,
+            "requirements": json.dumps(verdicts_json(verdicts), allow_nan=False)}
+
+
+def _require_arguments(p) -> None:
+    p.add_argument("--require", action="append", metavar="SPEC",
+                   help="a requirement QUANTITY:DIRECTIONS OP VALUE UNIT@STATISTIC, e.g. "
+                        "'displacement:x,y<=0.05mm@q95' (repeatable): judged pass, fail or undecided "
+                        "from the statistic's confidence interval; exit 1 unless all pass")
+    p.add_argument("--undecided", choices=("fail", "pass"), default="fail",
+                   help="how an undecided requirement counts for the exit code (default: fail)")
 
 
 def _plot(args) -> int:
@@ -290,6 +332,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("-o", "--output", help="also write the statistics Dataset to this netCDF file")
     st.add_argument("--confidence", type=_fraction, default=0.95,
                     help="confidence of the two-sided intervals, in (0, 1) (default 0.95)")
+    _require_arguments(st)
     st.set_defaults(func=_stats)
 
     pl = sub.add_parser("plot", help="PNG figures of an ensemble file")
