@@ -263,6 +263,21 @@ def _study_arguments(p, output: str, n: int, tolerance_help: str) -> None:
                    help=f"{tolerance_help} (default 0.05)")
 
 
+def _stats_parser(sub) -> None:
+    st = sub.add_parser("stats", help="error statistics of an ensemble file (or a simulate -o file)")
+    st.add_argument("file", help="netCDF file of rss6 run, or of rss6 simulate -o (one realisation: "
+                                 "estimates only)")
+    st.add_argument("--quantity", help="displacement, velocity or acceleration (default: all)")
+    st.add_argument("--direction", help="x, y, z, rx, ry or rz (default: all)")
+    st.add_argument("--json", action="store_true",
+                    help="print one strict JSON object (SI units; null where no number)")
+    st.add_argument("-o", "--output", help="also write the statistics Dataset to this netCDF file")
+    st.add_argument("--confidence", type=_fraction, default=0.95,
+                    help="confidence of the two-sided intervals, in (0, 1) (default 0.95)")
+    _require_arguments(st)
+    st.set_defaults(func=_stats)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rss6", description="Joint clearance and link elasticity errors of a 6-RSS robot.")
@@ -322,18 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--scheduler", help="address of an existing dask.distributed scheduler")
     rp.set_defaults(func=_report)
 
-    st = sub.add_parser("stats", help="error statistics of an ensemble file (or a simulate -o file)")
-    st.add_argument("file", help="netCDF file of rss6 run, or of rss6 simulate -o (one realisation: "
-                                 "estimates only)")
-    st.add_argument("--quantity", help="displacement, velocity or acceleration (default: all)")
-    st.add_argument("--direction", help="x, y, z, rx, ry or rz (default: all)")
-    st.add_argument("--json", action="store_true",
-                    help="print one strict JSON object (SI units; null where no number)")
-    st.add_argument("-o", "--output", help="also write the statistics Dataset to this netCDF file")
-    st.add_argument("--confidence", type=_fraction, default=0.95,
-                    help="confidence of the two-sided intervals, in (0, 1) (default 0.95)")
-    _require_arguments(st)
-    st.set_defaults(func=_stats)
+    _stats_parser(sub)
 
     pl = sub.add_parser("plot", help="PNG figures of an ensemble file")
     pl.add_argument("file")

@@ -39,6 +39,7 @@ No bootstrap runs: none of the intervals above needs one.
 """
 from __future__ import annotations
 
+import warnings
 from functools import lru_cache
 
 import numpy as np
@@ -96,11 +97,9 @@ def min_n_for_quantile(p: float, confidence: float) -> int:
 def quantile_estimates(x: np.ndarray, probs, axis: int = 0) -> np.ndarray:
     """Quantile estimates (numpy's linear interpolation) along ``axis``, NaN values left out;
     the one quantile estimator of rss6 (statistics tables, studies, figures)."""
-    with np.errstate(all="ignore"):
-        import warnings
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            return np.nanquantile(np.asarray(x, float), probs, axis=axis)
+    with warnings.catch_warnings():                         # all-NaN slices give NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanquantile(np.asarray(x, float), probs, axis=axis)
 
 
 def quantile_interval(sorted_x: np.ndarray, p: float, confidence: float) -> np.ndarray:
@@ -190,7 +189,6 @@ def estimates(x: np.ndarray, names=STATISTICS) -> np.ndarray:
     """Point estimates ``names`` (of STATISTICS) along axis 0, NaN values left out; stacked on a
     new last axis.  The one implementation the tables, the studies and the figures use."""
     x = np.asarray(x, float)
-    import warnings
     out = []
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)

@@ -3,9 +3,9 @@
 Both run the same realisations (same seed) for many settings (model level,
 integrator, time step, elements per link) and compare the ensemble statistics
 users query, per quantity and direction: the mean and the 95 % quantile over
-realisations (the point estimates of pipeline.stats) of each realisation's max |error| (as stored in ensemble files:
-after the scene's settle time, over every internal step for the contact
-level).  Relative errors are taken against a reference setting, with a floor
+realisations (pipeline.stats.estimates) of each realisation's max |error| (as
+stored in ensemble files: after the scene's settle time, over every internal
+step for the contact level).  Relative errors are taken against a reference setting, with a floor
 of 0.1 % of the largest translation (rotation) statistic of that quantity so
 that a near-zero component cannot dominate.
 """
@@ -332,8 +332,9 @@ def _classify(run: dict, ref: dict, tolerance: float, growth: float = 10.0) -> t
 
 def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon: float = 0.2,
               explicit_steps: int = 400, log=print) -> xr.Dataset:
-    """Time-step sweeps per level and integrator (and contact stiffness): the stability map (dimension
-    ``run``) and the measured limits per sweep (dimension ``sweep``), like :func:`tradeoff`.  Implicit sweeps cover min(duration, horizon) for the contact level and
+    """Time-step sweeps per level and integrator (and contact stiffness) as a Dataset like
+    :func:`tradeoff`: the stability map (dimension ``run``) and each sweep's measured limits
+    (dimension ``sweep``).  Implicit sweeps cover min(duration, horizon) for the contact level and
     the whole trajectory otherwise; the explicit sweep ``explicit_steps`` steps around 2/omega_max."""
     sim = scene.simulation
     dt, dtc, el = sim.time_step, sim.contact_time_step, sim.elements_per_link

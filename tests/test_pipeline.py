@@ -10,7 +10,6 @@ from pathlib import Path
 import netCDF4
 import numpy as np
 import pytest
-from scipy import stats as sps
 
 from pipeline.cli import main
 from pipeline.run import MAX_AUTO_CHUNK, EnsembleSpec, default_chunk, run_ensemble
