@@ -36,6 +36,7 @@ def report(configs, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow   # the report's runs: 1.5-2 minutes on 2 shared cores
 def test_report_links_figures_it_wrote(report):
     md = (report / "results.md").read_text()
     links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
@@ -45,6 +46,7 @@ def test_report_links_figures_it_wrote(report):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
 
 
+@pytest.mark.slow   # the report's runs: 1.5-2 minutes on 2 shared cores
 def test_report_numbers_come_from_its_files(report):
     md = (report / "results.md").read_text()
     data = report / "results-data"
@@ -63,6 +65,7 @@ def test_report_numbers_come_from_its_files(report):
     assert len(PAPER_VALUES) == 12 and md.count("| max \\|acceleration error\\|") >= 6
 
 
+@pytest.mark.slow   # the report's runs: 1.5-2 minutes on 2 shared cores
 def test_report_reuses_its_files_and_names_a_corrupt_one(configs, report, tmp_path):
     copy = tmp_path / "again"
     shutil.copytree(report, copy)

@@ -19,8 +19,10 @@ def _interrupt_a_run(tmp_path, kill):
                              "-o", str(out)], cwd=tmp_path, start_new_session=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        first = proc.stderr.readline()          # the progress line after the first chunk
-        assert first.startswith("rss6 run: 2000/4000"), first
+        seen = []                              # until the progress line after the first chunk
+        while not (seen and seen[-1].startswith("rss6 run:")) and (line := proc.stderr.readline()):
+            seen.append(line)                  # (dask may warn first, e.g. of a busy port)
+        assert seen and seen[-1].startswith("rss6 run: 2000/4000"), seen
         time.sleep(0.5)
         assert proc.poll() is None, "the run ended before it could be interrupted"
         kill(proc.pid, signal.SIGINT)

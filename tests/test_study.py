@@ -34,6 +34,7 @@ def stability_dir(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow   # every level, integrator, step and mesh: 2-3 minutes on 2 shared cores
 def test_tradeoff_writes_every_setting_with_finite_columns(tradeoff_dir, capsys):
     rows = _rows(tradeoff_dir / "tradeoff.csv")
     stats = [f"rel_err_{q}_{d}_{s}" for q in QUANTITIES for d in DIRECTIONS for s in STATISTICS]
