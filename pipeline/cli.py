@@ -48,6 +48,16 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _nonnegative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {text}")
+    return value
+
+
 def _check(args) -> int:
     summary = scene_summary(find_scene(args.config))
     print(json.dumps(summary, indent=2) if args.json else format_summary(summary))
@@ -55,12 +65,33 @@ def _check(args) -> int:
 
 
 def _settings(args, scene) -> tuple[str, str, float, int]:
-    """Model, integrator, time step and mesh: the command line's, else the scene's."""
+    """Model, integrator, time step and mesh: the command line's, else the scene's; the step is
+    checked here, before any work, against the scene's duration."""
+    from rss6core.elastic import time_grid
     from rss6core.models import default_integrator, default_time_step
     sim = scene.simulation
     model = args.model or sim.model
-    return (model, args.integrator or default_integrator(scene, model),
-            args.dt or default_time_step(scene, model), args.elements or sim.elements_per_link)
+    dt = args.dt or default_time_step(scene, model)
+    try:
+        time_grid(scene.trajectory.duration, dt)
+    except ValueError as exc:
+        source = "--dt" if args.dt else f"{scene.source_path}: time step"
+        raise SceneError(f"{source}: {exc}") from None
+    return (model, args.integrator or default_integrator(scene, model), dt,
+            args.elements or sim.elements_per_link)
+
+
+CLEARANCE_LEVELS = ("quasi-static", "paper", "contact")
+
+
+def _refuse_clearance_free_default(args, scene, model: str) -> None:
+    """An ensemble of a level without clearances is N identical runs: only on explicit request."""
+    c = scene.clearance
+    sizes = (c.revolute_radial, c.revolute_axial, c.spherical_C, c.spherical_B)
+    if args.model is None and model not in CLEARANCE_LEVELS and any(sizes):
+        raise SceneError(f"scene {scene.name!r}: its model {model!r} has no clearances, so every "
+                         f"realisation would be the same; pass --model with a clearance level "
+                         f"({', '.join(CLEARANCE_LEVELS)}), or --model {model} to run it anyway")
 
 
 def _simulate(args) -> int:
@@ -69,8 +100,11 @@ def _simulate(args) -> int:
     from rss6core.models import simulate
 
     from .store import run_dataset, write_netcdf
+    from .outputs import check_output_path
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
+    if args.output:
+        check_output_path(args.output, args.parents)
     start = time.perf_counter()
     try:
         result = simulate(scene, model, integrator, dt, elements, args.seed, args.realization)
@@ -102,24 +136,54 @@ def _simulate(args) -> int:
 
 
 def _run(args) -> int:
-    from .run import EnsembleSpec, run_ensemble
+    from .outputs import check_output_path
+    from .run import EnsembleSpec, ensemble
     from .stats import ensemble_stats, format_stats
+    from .summary import failure_reasons
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
+    _refuse_clearance_free_default(args, scene, model)
+    output = check_output_path(args.output or f"{scene.name}_{model}.nc", args.parents)
+    _warn_oversubscription(args.workers, args.scheduler)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements,
                         args.seed, args.store)
-    output = args.output or f"{scene.name}_{model}.nc"
     try:
-        ds = run_ensemble(spec, args.n, output, workers=args.workers, scheduler=args.scheduler,
-                          chunk=args.chunk)
+        outcome = ensemble(spec, args.n, output, workers=args.workers, scheduler=args.scheduler,
+                           chunk=args.chunk)
     except KeyboardInterrupt:
         print(f"rss6: interrupted; finished chunks are kept in {output}.parts; rerun the same "
               "command to continue", file=sys.stderr)
         return 130
-    print(f"wrote {output}: {ds.sizes['realization']} realisations of the {model} level "
-          f"({ds.attrs['n_failed']} failed)")
+    ds = outcome.dataset
+    print(_outcome_line(outcome, output, args.n, model))
+    reasons = failure_reasons(ds)
+    for line in reasons:
+        print(line, file=sys.stderr)
+    if reasons and ds.attrs["n_failed"] == ds.sizes["realization"]:
+        print("rss6: every realisation failed; no statistics", file=sys.stderr)
+        return 1
     print(format_stats(ensemble_stats(ds).sel(quantity=["displacement"])))
     return 0
+
+
+def _outcome_line(outcome, output, n: int, model: str) -> str:
+    """What the run did to ``output``: written, extended, or nothing to do (and why)."""
+    ds, total = outcome.dataset, outcome.dataset.sizes["realization"]
+    failed = int(ds.attrs["n_failed"])
+    if not outcome.written:
+        extra = (f"; -n {n} is fewer than the {total} stored, the file is kept as it is "
+                 "(use another -o for a smaller ensemble)" if total > n else "")
+        return f"nothing to do: {output} already holds {total} realisations of the {model} level{extra}"
+    kept = f", {outcome.stored_before} of them stored before" if outcome.stored_before else ""
+    return f"wrote {output}: {total} realisations of the {model} level ({failed} failed{kept})"
+
+
+def _warn_oversubscription(workers: int, scheduler: str | None) -> None:
+    import os
+    cores = os.cpu_count() or 1
+    if not scheduler and workers > cores:
+        print(f"rss6: warning: --workers {workers} exceeds the {cores} cores of this machine; the "
+              "workers will share them and the run will not be faster", file=sys.stderr)
 
 
 def _report(args) -> int:
@@ -205,8 +269,12 @@ def _require_arguments(p) -> None:
 
 def _plot(args) -> int:
     from .plots import plot_ensemble
-    from .store import open_ensemble
+    from .store import EnsembleFileError, open_ensemble
     ds = open_ensemble(args.file)
+    if not (ds["status"].values.astype(str) == "finished").any():
+        message = str(ds["status_message"].values.astype(str)[0])
+        raise EnsembleFileError(f"{args.file}: nothing to plot, all {ds.sizes['realization']} "
+                                f"realisations failed (first reason: {message})")
     paths = plot_ensemble(ds, args.output)
     if "error" not in ds:
         print("no time histories in the file (run with --store full): envelope plots skipped",
@@ -278,8 +346,16 @@ def _stats_parser(sub) -> None:
     st.set_defaults(func=_stats)
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (the option and the problem; ``-h`` gives the usage)."""
+
+    def error(self, message: str):
+        print(f"{self.prog}: error: {message} (see {self.prog} -h)", file=sys.stderr)
+        sys.exit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="rss6", description="Joint clearance and link elasticity errors of a 6-RSS robot.")
     parser.add_argument("--version", action="version", version=f"rss6 {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -295,10 +371,13 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--integrator", choices=INTEGRATORS, help="time integrator (default: the scene's)")
     sim.add_argument("--dt", type=_positive_float, help="time step, s (default: the scene's)")
     sim.add_argument("--elements", type=_positive_int, help="beam elements per link")
-    sim.add_argument("--seed", type=int, default=0, help="random seed of the run (default 0)")
-    sim.add_argument("--realization", type=int, default=0,
+    sim.add_argument("--seed", type=_nonnegative_int, default=0,
+                     help="random seed of the run, 0 or more (default 0)")
+    sim.add_argument("--realization", type=_nonnegative_int, default=0,
                      help="which clearance realisation of the seeded run (default 0)")
-    sim.add_argument("-o", "--output", help="write the error histories to this netCDF file")
+    sim.add_argument("-o", "--output", help="write the error histories to this netCDF file "
+                     "(default: none); its folder must exist unless --parents is given")
+    sim.add_argument("--parents", action="store_true", help="create the output's missing folders")
     sim.add_argument("--json", action="store_true", help="print one JSON object (SI units)")
     sim.set_defaults(func=_simulate)
 
@@ -306,8 +385,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("config", nargs="?", default="paper",
                      help="scene TOML file or embedded scene name (default: paper)")
     run.add_argument("-n", type=_positive_int, default=32, help="realisations (default 32)")
-    run.add_argument("-o", "--output", help="ensemble netCDF file (default: SCENE_MODEL.nc)")
-    run.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    run.add_argument("-o", "--output", help="ensemble netCDF file (default: SCENE_MODEL.nc); its "
+                     "folder must exist unless --parents is given. Rerunning the same command "
+                     "resumes from the parts stored in OUTPUT.parts")
+    run.add_argument("--parents", action="store_true", help="create the output's missing folders")
+    run.add_argument("--seed", type=_nonnegative_int, default=0,
+                     help="random seed, 0 or more (default 0)")
     run.add_argument("--model", choices=MODELS, help="model level (default: the scene's)")
     run.add_argument("--integrator", choices=INTEGRATORS)
     run.add_argument("--dt", type=_positive_float, help="time step, s")
@@ -365,6 +448,11 @@ def main(argv: list[str] | None = None) -> int:
     except (SceneError, EnsembleFileError) as exc:
         print(f"rss6: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader went away (rss6 stats F | head): stop quietly
+        import os
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # Python's final flush must not fail again
+        return 141
 
 
 if __name__ == "__main__":

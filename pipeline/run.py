@@ -5,8 +5,10 @@ task, on a local cluster of W single-threaded workers (BLAS pinned to one
 thread) or on an existing dask.distributed scheduler.  Each finished chunk is
 written at once to ``OUT.nc.parts/`` (write to a temporary name, then rename),
 so an interrupted run (Ctrl-C, a killed process, a crashed worker) loses at
-most the chunks in flight; rerunning the same command skips what is stored and
-refuses pieces from a different scene, model or seed.  When all realisations
+most the chunks in flight; rerunning the same command skips what is stored, checks every stored part
+against the manifest written with it (checksum, provenance) and refuses pieces
+from a different scene, model or seed.  One process writes an output at a
+time (``OUT.nc.lock``).  When all realisations
 are stored they are merged into OUT.nc and the parts are removed.
 Realisation r draws from the stream (seed, r) only, so the file does not depend
 on the chunk size or the number of workers.
@@ -25,10 +27,11 @@ import numpy as np
 from rss6core import parse_scene
 from rss6core.models import simulate_batch, stored_draw
 
+from .outputs import OutputLock, PartsManifest
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
                     realization_dataset, write_netcdf)
 
-__all__ = ["EnsembleSpec", "run_chunk", "run_ensemble", "default_chunk", "local_cluster", "BLAS_ENV"]
+__all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk", "local_cluster", "BLAS_ENV"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -90,14 +93,16 @@ def _check_identity(path, attrs: dict, spec: EnsembleSpec) -> None:
                                 f"{what}; choose another output file or the same settings")
 
 
-def _stored(output: Path, spec: EnsembleSpec) -> tuple[list, set]:
-    """Datasets already stored for this ensemble (final file and parts) and their realisations.
+def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest) -> tuple[list, set]:
+    """Datasets already stored for this ensemble (final file and verified parts), their realisations.
 
     Each realisation is taken once: parts left beside a finished file (a run stopped
     between writing it and removing the parts) add only what the file lacks.
     """
     pieces, done = [], set()
-    candidates = ([output] if output.exists() else []) + sorted(_parts_dir(output).glob("*.nc"))
+    for path in manifest.parts():
+        manifest.verify(path)
+    candidates = ([output] if output.exists() else []) + manifest.parts()
     for path in candidates:
         ds = open_ensemble(path)
         _check_identity(path, ds.attrs, spec)
@@ -173,41 +178,65 @@ def default_chunk(n: int, workers: int) -> int:
     return max(1, -(-n // (rounds * workers)))
 
 
-def run_ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
-                 chunk: int | None = None, progress: bool = True):
-    """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset."""
+@dataclass(frozen=True)
+class EnsembleOutcome:
+    """What a call of :func:`ensemble` did: the ensemble, how many realisations it computed now,
+    how many were stored before, and whether it (re)wrote the output file."""
+    dataset: object
+    computed: int
+    stored_before: int
+    written: bool
+
+
+def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
+             chunk: int | None = None, progress: bool = True) -> EnsembleOutcome:
+    """Run realisations 0..n-1 not yet stored in ``output`` (one writer at a time: OUT.lock)."""
     if n < 1:
         raise ValueError(f"the number of realisations must be at least 1, got {n}")
     chunk = default_chunk(n, workers) if chunk is None else chunk
     if chunk < 1 or workers < 1:
         raise ValueError("--chunk and --workers must be at least 1")
     output = Path(output)
-    pieces, done = _stored(output, spec)
-    todo = [r for r in range(n) if r not in done]
-    chunks = [todo[i:i + chunk] for i in range(0, len(todo), chunk)]
-    parts = _parts_dir(output)
-    bar = _Progress(n, n - len(todo)) if progress else None
-    if chunks:
-        parts.mkdir(parents=True, exist_ok=True)
-        from dask.distributed import as_completed
-        client, cluster = _client(workers, scheduler)
-        try:
-            futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
-            for future in as_completed(futures):
-                ds = future.result()
-                first, last = int(ds.realization[0]), int(ds.realization[-1])
-                write_netcdf(ds, parts / f"chunk-{first:07d}-{last:07d}.nc")
-                pieces.append(ds)
-                if bar:
-                    bar.advance(ds.sizes["realization"])
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
-    up_to_date = not chunks and len(pieces) == 1 and output.exists()  # the file alone holds all
-    merged = pieces[0] if up_to_date else finish_ensemble(pieces, spec.scene(), **_kw(spec))
-    if not up_to_date:
-        write_netcdf(merged, output)
-    if parts.exists():
-        shutil.rmtree(parts)
-    return merged
+    with OutputLock(output):
+        manifest = PartsManifest(_parts_dir(output), spec.attrs())
+        pieces, done = _stored(output, spec, manifest)
+        todo = [r for r in range(n) if r not in done]
+        if todo:
+            bar = _Progress(n, n - len(todo)) if progress else None
+            pieces += _compute(spec, [todo[i:i + chunk] for i in range(0, len(todo), chunk)],
+                               manifest, workers, scheduler, bar)
+        up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
+        merged = pieces[0] if up_to_date else finish_ensemble(pieces, spec.scene(), **_kw(spec))
+        if not up_to_date:
+            write_netcdf(merged, output)
+        if manifest.folder.exists():
+            shutil.rmtree(manifest.folder)
+    return EnsembleOutcome(merged, len(todo), len(done), not up_to_date)
+
+
+def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
+             scheduler: str | None, bar) -> list:
+    """Run the chunks on dask; each finished chunk is stored as a part at once."""
+    from dask.distributed import as_completed
+    client, cluster = _client(workers, scheduler)
+    pieces = []
+    try:
+        futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
+        for future in as_completed(futures):
+            ds = future.result()
+            first, last = int(ds.realization[0]), int(ds.realization[-1])
+            manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
+            pieces.append(ds)
+            if bar:
+                bar.advance(ds.sizes["realization"])
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return pieces
+
+
+def run_ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
+                 chunk: int | None = None, progress: bool = True):
+    """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset."""
+    return ensemble(spec, n, output, workers, scheduler, chunk, progress).dataset

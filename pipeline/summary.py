@@ -10,7 +10,7 @@ from rss6core.sections import crank_inertia, rod_inertia
 
 from .store import DIRECTIONS, display_unit
 
-__all__ = ["scene_summary", "format_summary", "error_summary", "format_errors"]
+__all__ = ["scene_summary", "format_summary", "error_summary", "format_errors", "failure_reasons"]
 
 
 def scene_summary(scene) -> dict:
@@ -89,3 +89,20 @@ def format_errors(summary: dict) -> str:
             cells = [vals[d] * f for d, (f, _) in zip(DIRECTIONS, units)]
             lines.append(f"{label:<31s}" + "".join(f"{c:11.3e}" for c in cells))
     return "\n".join(lines)
+
+
+def failure_reasons(ds, shown: int = 5) -> list[str]:
+    """Lines naming how many realisations of an ensemble failed and why (distinct messages, most
+    frequent first, at most ``shown``); empty when none failed."""
+    status = ds["status"].values.astype(str)
+    failed = status != "finished"
+    if not failed.any():
+        return []
+    reasons, counts = np.unique(ds["status_message"].values.astype(str)[failed], return_counts=True)
+    order = np.argsort(-counts, kind="stable")
+    lines = [f"{int(failed.sum())} of {len(status)} realisations failed:"]
+    lines += [f"  {int(counts[i])} x {reasons[i] or '(no message)'}" for i in order[:shown]]
+    if len(order) > shown:
+        lines.append(f"  ... and {len(order) - shown} other reasons "
+                     f"({int(counts[order[shown:]].sum())} realisations)")
+    return lines

@@ -1,0 +1,178 @@
+"""Guards around the files rss6 writes: output paths checked before any work, one writer per
+output (a lock file beside it), and a manifest that vouches for every stored part of an ensemble.
+
+Every refusal is an ``EnsembleFileError`` whose message names the file and what to do.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import socket
+import sys
+import time
+from pathlib import Path
+
+from .store import EnsembleFileError, write_netcdf
+
+__all__ = ["check_output_path", "OutputLock", "PartsManifest"]
+
+
+def check_output_path(path, create_dirs: bool = False) -> Path:
+    """Refuse (before any work) an output whose folder is missing, not writable, or that is a folder.
+
+    The folder is created only when ``create_dirs`` is set (the ``--parents`` option).
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise EnsembleFileError(f"{path}: is a folder; give a file name for the output")
+    if not folder.exists():
+        if not create_dirs:
+            raise EnsembleFileError(f"{path}: folder {folder} does not exist; create it or pass "
+                                    "--parents")
+        folder.mkdir(parents=True)
+    if not folder.is_dir():
+        raise EnsembleFileError(f"{path}: {folder} is not a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise EnsembleFileError(f"{path}: folder {folder} is not writable")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise EnsembleFileError(f"{path}: exists and is not writable")
+    return path
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+class OutputLock:
+    """``OUT.lock``: created exclusively by the one process writing OUT, removed when it is done.
+
+    A lock whose process is gone (a killed run on this host) is taken over with a message.
+    """
+
+    def __init__(self, output, stream=None):
+        self.output = Path(output)
+        self.path = self.output.with_name(self.output.name + ".lock")
+        self.stream = stream  # None: sys.stderr at the time of the message
+
+    def _create(self) -> bool:
+        try:
+            fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            return False
+        with os.fdopen(fd, "w") as f:
+            json.dump({"pid": os.getpid(), "host": socket.gethostname(),
+                       "since": time.strftime("%Y-%m-%d %H:%M:%S")}, f)
+        return True
+
+    def _holder(self) -> dict:
+        try:
+            holder = json.loads(self.path.read_text())
+            return holder if isinstance(holder, dict) and isinstance(holder.get("pid"), int) else {}
+        except (OSError, ValueError):
+            return {}
+
+    def acquire(self) -> None:
+        for _ in range(3):
+            if self._create():
+                return
+            holder = self._holder()
+            local = holder.get("host") == socket.gethostname()
+            if holder and (not local or _alive(holder["pid"])):
+                where = "" if local else f" on host {holder.get('host')}"
+                raise EnsembleFileError(
+                    f"{self.output}: already being written by process {holder['pid']}{where} "
+                    f"since {holder.get('since')} (lock {self.path}); wait for it to finish or "
+                    "choose another -o")
+            what = f"process {holder['pid']} is gone" if holder else "it is unreadable"
+            print(f"rss6: taking over the stale lock {self.path} ({what})", file=self.stream or sys.stderr)
+            try:
+                self.path.unlink()
+            except FileNotFoundError:
+                pass
+        raise EnsembleFileError(f"{self.output}: could not take the lock {self.path}")
+
+    def release(self) -> None:
+        if self._holder().get("pid") == os.getpid():
+            self.path.unlink(missing_ok=True)
+
+    def __enter__(self):
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def sha256(path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+class PartsManifest:
+    """``OUT.nc.parts/manifest.json``: checksum, realisations and provenance of every stored part.
+
+    A part is recorded in the manifest before it is renamed into place, so a crash leaves at worst
+    an entry without a part (ignored), never a part without an entry.
+    """
+
+    def __init__(self, folder: Path, provenance: dict):
+        self.folder, self.provenance = Path(folder), provenance
+        self.path = self.folder / "manifest.json"
+        self.entries = self._read()
+
+    def _read(self) -> dict:
+        if not self.path.exists():
+            return {}
+        try:
+            data = json.loads(self.path.read_text())
+            entries = data["parts"]
+        except (OSError, ValueError, KeyError, TypeError):
+            raise EnsembleFileError(f"{self.path}: unreadable manifest; delete {self.folder} to "
+                                    "recompute its realisations") from None
+        if data.get("provenance") != self.provenance:
+            raise EnsembleFileError(f"{self.path}: the parts were made with different settings "
+                                    "(scene, model, integrator, step, mesh, seed or store); "
+                                    "choose another output file or the same settings")
+        return entries
+
+    def _save(self) -> None:
+        tmp = self.path.with_name("manifest.json.tmp")
+        tmp.write_text(json.dumps({"provenance": self.provenance, "parts": self.entries}, indent=1))
+        os.replace(tmp, self.path)
+
+    def write(self, ds, name: str) -> Path:
+        """Write ``ds`` as part ``name``: to a temporary file, into the manifest, then into place."""
+        self.folder.mkdir(parents=True, exist_ok=True)
+        final, incoming = self.folder / name, self.folder / (name + ".incoming")
+        write_netcdf(ds, incoming)
+        realizations = [int(r) for r in ds["realization"].values]
+        self.entries[name] = {"sha256": sha256(incoming), "realizations": realizations}
+        self._save()
+        os.replace(incoming, final)
+        return final
+
+    def verify(self, path: Path) -> None:
+        """Refuse a part the manifest does not list or whose bytes changed since it was written."""
+        entry = self.entries.get(path.name)
+        if entry is None:
+            raise EnsembleFileError(f"{path}: not listed in {self.path} (not written by this run); "
+                                    "delete it to recompute its realisations")
+        if sha256(path) != entry["sha256"]:
+            r = entry["realizations"]
+            raise EnsembleFileError(f"{path}: its checksum differs from the one recorded when it was "
+                                    f"written (changed since); delete it and rerun to recompute "
+                                    f"realisations {r[0]}-{r[-1]}")
+
+    def parts(self) -> list[Path]:
+        return sorted(self.folder.glob("*.nc"))

@@ -1,0 +1,237 @@
+"""The command line guards its user: options and output paths checked before work, one writer per
+output, failures shown, resumed parts verified, a quiet exit on Ctrl-C and on a closed pipe."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from pipeline.cli import _warn_oversubscription, main
+from pipeline.outputs import OutputLock, PartsManifest
+from pipeline.run import EnsembleSpec, ensemble, run_chunk
+from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
+from pipeline.summary import failure_reasons
+from tests.conftest import CONFIGS
+
+SMOKE = CONFIGS / "smoke.toml"
+QS = ["run", str(SMOKE), "--model", "quasi-static", "--workers", "1"]
+
+
+def _spec(n_seed=3):
+    return EnsembleSpec(SMOKE.read_text(), str(SMOKE), "quasi-static", "newmark", 1e-3, 4, n_seed)
+
+
+def _one_line_error(capsys, *words):
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for w in words:
+        assert w in err, err
+    return err
+
+
+def _exit_code(argv) -> int:
+    """main's return value, or argparse's exit code for a rejected option."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return exc.code
+
+
+@pytest.mark.parametrize("option, words", [(["--dt", "0.003"], ["--dt", "does not divide"]),
+                                           (["--seed", "-1"], ["--seed", "0 or more"]),
+                                           (["--workers", "0"], ["--workers"])])
+def test_bad_option_values_stop_before_any_work(option, words, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert _exit_code(["run", "paper", "--model", "paper", *option, "-o", "x.nc"]) == 2
+    _one_line_error(capsys, *words)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_missing_output_folder_is_refused_within_seconds(tmp_path, capsys):
+    start = time.perf_counter()
+    assert main(["simulate", "paper", "-o", "/nonexistent/x.nc"]) == 2
+    assert time.perf_counter() - start < 10
+    _one_line_error(capsys, "/nonexistent", "--parents")
+    assert main([*QS, "-n", "2", "-o", str(tmp_path / "a" / "typo" / "out.nc")]) == 2
+    _one_line_error(capsys, "does not exist")
+    assert not (tmp_path / "a").exists()
+
+
+def test_parents_creates_the_folder(tmp_path, capsys):
+    out = tmp_path / "new" / "sim.nc"
+    assert main(["simulate", "smoke", "--model", "rigid", "-o", str(out), "--parents"]) == 0
+    assert out.exists()
+
+
+def test_read_only_folder_is_refused(tmp_path, capsys):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o500)
+    try:
+        if os.access(folder, os.W_OK):
+            pytest.skip("running as a user who can write anywhere")
+        assert main(["simulate", "smoke", "--model", "rigid", "-o", str(folder / "x.nc")]) == 2
+        _one_line_error(capsys, "not writable")
+    finally:
+        folder.chmod(0o700)
+
+
+def test_elastic_default_without_clearances_is_refused(tmp_path, capsys):
+    assert main(["run", str(SMOKE), "-n", "2", "-o", str(tmp_path / "e.nc")]) == 2
+    _one_line_error(capsys, "'elastic'", "--model")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_workers_beyond_the_cores_are_warned_about(capsys):
+    _warn_oversubscription((os.cpu_count() or 1) + 1, None)
+    assert "exceeds" in capsys.readouterr().err
+    _warn_oversubscription(1, None)
+    _warn_oversubscription(1000, "tcp://elsewhere:8786")  # an external cluster has its own cores
+    assert capsys.readouterr().err == ""
+
+
+# --- one writer per output -------------------------------------------------------------------
+
+def test_a_live_lock_refuses_a_second_writer_and_a_stale_one_is_taken_over(tmp_path, capsys):
+    out = tmp_path / "locked.nc"
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        Path(str(out) + ".lock").write_text(
+            f'{{"pid": {holder.pid}, "host": "{os.uname().nodename}", "since": "now"}}')
+        assert main([*QS, "-n", "2", "-o", str(out)]) == 2
+        _one_line_error(capsys, f"process {holder.pid}", "being written")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert main([*QS, "-n", "2", "-o", str(out)]) == 0   # the holder is gone: its lock is stale
+    assert "taking over the stale lock" in capsys.readouterr().err
+    assert open_ensemble(out).sizes["realization"] == 2 and not Path(str(out) + ".lock").exists()
+
+
+def test_two_concurrent_runs_the_second_names_the_first(tmp_path, capsys):
+    out = tmp_path / "both.nc"
+    first = subprocess.Popen([sys.executable, "-m", "pipeline.cli", *QS, "-n", "6", "--chunk", "1",
+                              "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    lock = Path(str(out) + ".lock")
+    deadline = time.time() + 60
+    while not lock.exists() and time.time() < deadline:
+        time.sleep(0.02)
+    assert main([*QS, "-n", "6", "--chunk", "1", "-o", str(out)]) == 2
+    _one_line_error(capsys, f"process {first.pid}")
+    assert first.wait(120) == 0
+    assert open_ensemble(out).sizes["realization"] == 6 and not lock.exists()
+
+
+def test_lock_is_released_by_its_owner_only(tmp_path):
+    lock = OutputLock(tmp_path / "x.nc")
+    with lock:
+        assert lock.path.exists()
+        with pytest.raises(EnsembleFileError, match="already being written"):
+            OutputLock(tmp_path / "x.nc").acquire()
+    assert not lock.path.exists()
+
+
+# --- failures shown ---------------------------------------------------------------------------
+
+def test_failure_reasons_count_each_distinct_message():
+    status = np.array(["failed", "finished", "failed", "failed"], dtype=object)
+    message = np.array(["diverged at t = 0.002 s", "", "Newton did not converge",
+                        "diverged at t = 0.002 s"], dtype=object)
+    ds = xr.Dataset({"status": ("realization", status), "status_message": ("realization", message)})
+    assert failure_reasons(ds) == ["3 of 4 realisations failed:",
+                                   "  2 x diverged at t = 0.002 s", "  1 x Newton did not converge"]
+    assert failure_reasons(ds.isel(realization=[1])) == []
+
+
+def test_all_realisations_failing_exit_1_with_the_reason_and_plot_says_one_line(tmp_path, capsys):
+    """Central difference at 1 ms (500x its critical step) diverges at the elastic level."""
+    out = tmp_path / "fail.nc"
+    assert main(["run", str(SMOKE), "--model", "elastic", "--integrator", "central-difference",
+                 "-n", "2", "--workers", "1", "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "2 of 2 realisations failed" in err and "2 x " in err and "diverged" in err
+    assert "Traceback" not in err
+    assert main(["plot", str(out), "-o", str(tmp_path / "plots")]) == 2
+    _one_line_error(capsys, "nothing to plot", "diverged")
+
+
+# --- resume: manifest, -n, nothing to do ------------------------------------------------------
+
+def _parts_of(out: Path, spec, realizations):
+    manifest = PartsManifest(Path(str(out) + ".parts"), spec.attrs())
+    return manifest, manifest.write(run_chunk(spec, realizations),
+                                    f"chunk-{realizations[0]:07d}-{realizations[-1]:07d}.nc")
+
+
+def test_verified_parts_resume_to_the_same_file(tmp_path):
+    spec = _spec()
+    whole = ensemble(spec, 4, tmp_path / "whole.nc", workers=1, progress=False)
+    out = tmp_path / "resumed.nc"
+    _parts_of(out, spec, [0, 1])
+    resumed = ensemble(spec, 4, out, workers=1, progress=False)
+    assert resumed.stored_before == 2 and resumed.computed == 2
+    assert np.array_equal(resumed.dataset["max_abs_error"].values,
+                          whole.dataset["max_abs_error"].values)
+
+
+@pytest.mark.parametrize("tamper", ["scaled", "variable removed", "unlisted"])
+def test_a_tampered_part_is_refused_by_name(tamper, tmp_path):
+    spec, out = _spec(), tmp_path / "t.nc"
+    _, part = _parts_of(out, spec, [0, 1])
+    ds = open_ensemble(part)
+    if tamper == "scaled":
+        ds["max_abs_error"] = ds["max_abs_error"] * 1000
+    elif tamper == "variable removed":
+        ds = ds.drop_vars("eccentricity")
+    else:
+        part = part.with_name("chunk-0000002-0000003.nc")
+    write_netcdf(ds, part)
+    with pytest.raises(EnsembleFileError, match=part.name) as exc:
+        ensemble(spec, 4, out, workers=1, progress=False)
+    assert "delete it" in str(exc.value) and not out.exists()
+
+
+def test_fewer_or_as_many_realisations_as_stored_leave_the_file_alone(tmp_path, capsys):
+    out = tmp_path / "keep.nc"
+    assert main([*QS, "-n", "4", "-o", str(out)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    before = out.read_bytes()
+    assert main([*QS, "-n", "4", "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "nothing to do" in said and "wrote" not in said
+    assert main([*QS, "-n", "2", "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "-n 2 is fewer than the 4 stored" in said and "np." not in said
+    assert out.read_bytes() == before
+
+
+# --- terminal behaviour -----------------------------------------------------------------------
+
+def test_closed_pipe_ends_quietly():
+    proc = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "check", "smoke"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()   # like `| head` gone before rss6 writes
+    err = proc.stderr.read().decode()
+    assert proc.wait(120) == 141 and "Traceback" not in err and "BrokenPipe" not in err, err
+
+
+def test_ctrl_c_exits_130_without_traceback_and_keeps_the_parts(tmp_path):
+    out = tmp_path / "int.nc"
+    proc = subprocess.Popen([sys.executable, "-m", "pipeline.cli", *QS, "-n", "400", "--chunk",
+                             "1", "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    parts = Path(str(out) + ".parts")
+    deadline = time.time() + 90
+    while len(list(parts.glob("*.nc"))) < 2 and time.time() < deadline:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGINT)   # what a terminal's Ctrl-C does: the whole group
+    _, err = proc.communicate(timeout=60)
+    err = err.decode()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "interrupted" in err, err
+    assert len(list(parts.glob("*.nc"))) >= 2 and not Path(str(out) + ".lock").exists()
