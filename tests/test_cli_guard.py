@@ -16,7 +16,11 @@ from pipeline.outputs import OutputLock, PartsManifest
 from pipeline.run import EnsembleSpec, ensemble, run_chunk
 from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
 from pipeline.summary import failure_reasons
-from tests.conftest import CONFIGS
+from importlib import resources
+
+from pipeline.scenes import PACKAGE
+
+CONFIGS = Path(str(resources.files(PACKAGE)))
 
 SMOKE = CONFIGS / "smoke.toml"
 QS = ["run", str(SMOKE), "--model", "quasi-static", "--workers", "1"]

@@ -1,4 +1,6 @@
 """Files that are readable but wrong: one line naming the file and the problem, exit code 2."""
+from importlib import resources
+from pathlib import Path
 import json
 
 import numpy as np
@@ -7,7 +9,9 @@ import pytest
 from pipeline.cli import main
 from pipeline.run import EnsembleSpec, run_ensemble
 from pipeline.store import EnsembleFileError, load_netcdf, open_ensemble
-from tests.conftest import CONFIGS
+from pipeline.scenes import PACKAGE
+
+CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
 
 SMOKE = CONFIGS / "smoke.toml"
 

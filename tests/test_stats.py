@@ -1,5 +1,7 @@
 """pipeline.stats: rank choice against brute force, measured coverage of every interval type,
 rss6's own data, mixed files, strict JSON."""
+from importlib import resources
+from pathlib import Path
 import json
 from itertools import combinations
 
@@ -14,7 +16,9 @@ from pipeline.stats import (MIN_N_MEAN, MIN_N_STD, QUANTILES, STATISTICS, ensemb
                             mean_interval, min_n_for_quantile, quantile_interval, quantile_ranks,
                             std_interval, to_json)
 from pipeline.store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS
-from tests.conftest import CONFIGS
+from pipeline.scenes import PACKAGE
+
+CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
 
 CONF = 0.95
 TRIALS = 2000
