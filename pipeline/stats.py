@@ -8,7 +8,7 @@ sample maximum, and two-sided confidence intervals (``lower``, ``upper``; NaN
 where withheld).  Values are SI, in the source file's units.
 
 How each interval is chosen (coverage measured by simulation in
-tests/test_stats.py, >= 2000 trials per cell, n = 8, 16, 32, 100, 1000, on a
+tests/test_stats.py, 2000 trials per cell, n = 8, 16, 32, 100, 300, 1000, on a
 normal, a gamma(2) (skewness 1.4) and a Laplace (excess kurtosis 3) law;
 rss6's own quasi-static ensembles have skewness about 1 and excess kurtosis
 about 1):
