@@ -15,9 +15,12 @@ on the chunk size or the number of workers.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -151,9 +154,25 @@ def local_cluster(workers: int):
     import dask
     from dask.distributed import LocalCluster
     os.environ.update(BLAS_ENV)  # inherited by the worker processes
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
+            _workers_ignore_ctrl_c():
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                             dashboard_address=None, host="127.0.0.1")
+
+
+@contextlib.contextmanager
+def _workers_ignore_ctrl_c():
+    """Worker processes started in this block inherit an ignored SIGINT: a terminal's Ctrl-C reaches
+    the whole process group, and only this process should act on it (the cluster is closed from
+    here); otherwise each worker prints its own traceback."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _client(workers: int, scheduler: str | None):
