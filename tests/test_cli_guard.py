@@ -235,3 +235,18 @@ def test_ctrl_c_exits_130_without_traceback_and_keeps_the_parts(tmp_path):
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "interrupted" in err, err
     assert len(list(parts.glob("*.nc"))) >= 2 and not Path(str(out) + ".lock").exists()
+
+
+def test_report_refuses_to_overwrite_tracked_files(tmp_path, capsys):
+    repo = tmp_path / "repo"
+    (repo / "docs").mkdir(parents=True)
+    (repo / "docs" / "results.md").write_text("committed\n")
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-C", str(repo)]
+    subprocess.run(["git", "init", "-q", str(repo)], check=True)
+    subprocess.run([*git, "add", "docs/results.md"], check=True)
+    subprocess.run([*git, "commit", "-qm", "x"], check=True)
+    assert main(["report", "smoke", "-o", str(repo / "docs"), "-n", "2"]) == 2
+    _one_line_error(capsys, "results.md", "git tracks", "--overwrite-tracked")
+    assert (repo / "docs" / "results.md").read_text() == "committed\n"
+    from pipeline.cli import build_parser
+    assert build_parser().parse_args(["report", "smoke"]).output == "rss6-report"
