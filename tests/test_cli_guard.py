@@ -250,3 +250,17 @@ def test_report_refuses_to_overwrite_tracked_files(tmp_path, capsys):
     assert (repo / "docs" / "results.md").read_text() == "committed\n"
     from pipeline.cli import build_parser
     assert build_parser().parse_args(["report", "smoke"]).output == "rss6-report"
+
+
+def test_progress_starts_at_once_and_gives_an_eta():
+    import io
+
+    from pipeline.run import _Progress
+    stream = io.StringIO()
+    bar = _Progress(10, 2, stream)
+    bar.begin(4, "2 workers")
+    assert stream.getvalue().startswith("rss6 run: 8 realisations to compute in 4 chunks on 2 workers")
+    assert "(2 stored)" in stream.getvalue() and "compiles kernels" in stream.getvalue()
+    bar.start -= 4.0          # 4 s for the first 2 computed: 6 left take about 12 s
+    bar.advance(2)
+    assert "4/10" in stream.getvalue() and "about 12 s left" in stream.getvalue()
