@@ -68,14 +68,10 @@ def _settings(args, scene) -> tuple[str, str, float, int]:
             args.elements or sim.elements_per_link)
 
 
-CLEARANCE_LEVELS = ("quasi-static", "paper", "contact")
-
-
 def _refuse_clearance_free_default(args, scene, model: str) -> None:
     """An ensemble of a level without clearances is N identical runs: only on explicit request."""
-    c = scene.clearance
-    sizes = (c.revolute_radial, c.revolute_axial, c.spherical_C, c.spherical_B)
-    if args.model is None and model not in CLEARANCE_LEVELS and any(sizes):
+    from .summary import CLEARANCE_LEVELS, run_default_level
+    if args.model is None and run_default_level(scene) is None:
         raise SceneError(f"scene {scene.name!r}: its model {model!r} has no clearances, so every "
                          f"realisation would be the same; pass --model with a clearance level "
                          f"({', '.join(CLEARANCE_LEVELS)}), or --model {model} to run it anyway")

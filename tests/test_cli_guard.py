@@ -264,3 +264,17 @@ def test_progress_starts_at_once_and_gives_an_eta():
     bar.start -= 4.0          # 4 s for the first 2 computed: 6 left take about 12 s
     bar.advance(2)
     assert "4/10" in stream.getvalue() and "about 12 s left" in stream.getvalue()
+
+
+def test_check_shows_clearances_laws_contact_and_the_run_default(capsys):
+    import json
+    assert main(["check", "paper_050", "--json"]) == 0
+    wide = json.loads(capsys.readouterr().out)
+    assert main(["check", "paper", "--json"]) == 0
+    paper = json.loads(capsys.readouterr().out)
+    assert wide["clearances_m"]["spherical_B"] == pytest.approx(2 * paper["clearances_m"]["spherical_B"])
+    assert paper["sampling"]["direction"] in ("uniform", "paper")
+    assert paper["contact"]["restitution"] == 0.9 and paper["run_default_level"] is None
+    assert main(["check", "paper_050"]) == 0
+    text = capsys.readouterr().out
+    assert "clearances [mm]: revolute_radial 0.5" in text and "asks for --model" in text
