@@ -12,7 +12,7 @@ import xarray as xr
 from rss6core import __version__
 
 __all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "display_unit", "error_summaries", "run_dataset",
-           "write_netcdf", "cf_encode", "cf_decode"]
+           "write_netcdf", "cf_encode", "cf_decode", "check_free_space"]
 
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
 QUANTITIES = ("displacement", "velocity", "acceleration")
@@ -120,9 +120,29 @@ def write_netcdf(ds: xr.Dataset, path) -> None:
     # The data are in memory. While a dask.distributed client is open, xarray would otherwise
     # guard the file with a distributed lock: a scheduler round trip per variable, which made
     # each chunk's write 8x slower and kept the scheduler busy beside the workers.
-    with dask.config.set(scheduler="synchronous"):
-        encoded.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
+    check_free_space(path, ds.nbytes)
+    try:
+        with dask.config.set(scheduler="synchronous"):
+            encoded.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
+    except (OSError, RuntimeError):  # a full disk shows as "NetCDF: HDF error"
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        check_free_space(path, ds.nbytes)
+        raise
     os.replace(tmp, path)
+
+
+def check_free_space(path, needed: int) -> None:
+    """EnsembleFileError naming the folder when it has less than ``needed`` bytes (plus 1 MiB) free."""
+    import os
+    import shutil
+    folder = os.path.dirname(os.path.abspath(path))
+    free = shutil.disk_usage(folder).free
+    if free < needed + 2 ** 20:
+        raise EnsembleFileError(f"{path}: not enough disk space in {folder}: about "
+                                f"{(needed + 2 ** 20) / 2 ** 20:.1f} MiB needed, "
+                                f"{free / 2 ** 20:.1f} MiB free; free some space and rerun "
+                                "(finished parts are kept)")
 
 
 # --- CF mapping --------------------------------------------------------------

@@ -278,3 +278,29 @@ def test_check_shows_clearances_laws_contact_and_the_run_default(capsys):
     assert main(["check", "paper_050"]) == 0
     text = capsys.readouterr().out
     assert "clearances [mm]: revolute_radial 0.5" in text and "asks for --model" in text
+
+
+def test_full_disk_is_one_line_and_keeps_the_parts(tmp_path, monkeypatch, capsys):
+    """The merge needs the ensemble's size free; with less the run stops before writing, in one line."""
+    import shutil
+    from collections import namedtuple
+    spec, out = _spec(), tmp_path / "full.nc"
+    _parts_of(out, spec, [0, 1])
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10 ** 9, 10 ** 9, 1000))
+    assert main([*QS, "--seed", "3", "-n", "2", "-o", str(out)]) == 2
+    _one_line_error(capsys, "not enough disk space", "MiB free")
+    assert not out.exists() and len(list(Path(str(out) + ".parts").glob("*.nc"))) == 1
+
+
+def test_a_write_failing_on_a_full_disk_says_so(tmp_path, monkeypatch):
+    import shutil
+    from collections import namedtuple
+    ds = run_chunk(_spec(), [0])
+    free = iter([10 ** 9, 1000])   # room before the write, none after it failed
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: namedtuple("u", "total used free")(0, 0, next(free)))
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", lambda *a, **k: (_ for _ in ()).throw(
+        RuntimeError("NetCDF: HDF error")))
+    with pytest.raises(EnsembleFileError, match="not enough disk space"):
+        write_netcdf(ds, tmp_path / "x.nc")
+    assert list(tmp_path.iterdir()) == []
