@@ -81,14 +81,10 @@ def _settings(args, scene) -> tuple[str, str, float, int]:
             args.elements or sim.elements_per_link)
 
 
-CLEARANCE_LEVELS = ("quasi-static", "paper", "contact")
-
-
 def _refuse_clearance_free_default(args, scene, model: str) -> None:
     """An ensemble of a level without clearances is N identical runs: only on explicit request."""
-    c = scene.clearance
-    sizes = (c.revolute_radial, c.revolute_axial, c.spherical_C, c.spherical_B)
-    if args.model is None and model not in CLEARANCE_LEVELS and any(sizes):
+    from .summary import CLEARANCE_LEVELS, run_default_level
+    if args.model is None and run_default_level(scene) is None:
         raise SceneError(f"scene {scene.name!r}: its model {model!r} has no clearances, so every "
                          f"realisation would be the same; pass --model with a clearance level "
                          f"({', '.join(CLEARANCE_LEVELS)}), or --model {model} to run it anyway")
@@ -186,8 +182,34 @@ def _warn_oversubscription(workers: int, scheduler: str | None) -> None:
               "workers will share them and the run will not be faster", file=sys.stderr)
 
 
+def _tracked(paths: list) -> list[str]:
+    """Those of ``paths`` (files or folders) that hold files git tracks; none outside a repository."""
+    import subprocess
+    from pathlib import Path
+    tracked = []
+    for path in map(Path, paths):
+        folder = path if path.is_dir() else path.parent
+        if not path.exists():
+            continue
+        try:
+            out = subprocess.run(["git", "ls-files", "--", path.name if path.is_file() else "."],
+                                 cwd=folder, capture_output=True, text=True, timeout=20)
+        except (OSError, subprocess.TimeoutExpired):
+            continue
+        tracked += [str(folder / f) for f in out.stdout.split()] if out.returncode == 0 else []
+    return tracked
+
+
 def _report(args) -> int:
+    from pathlib import Path
+
     from .report import ReportPlan, write_report
+    out = Path(args.output)
+    tracked = [] if args.overwrite_tracked else _tracked([out / "results.md", out / "results"])
+    if tracked:
+        raise SceneError(f"{args.output}: would overwrite {tracked[0]}, which git tracks "
+                         f"({len(tracked)} tracked files); choose another -o or pass "
+                         "--overwrite-tracked")
     plan = ReportPlan(args.n, args.family_n, args.workers, args.scheduler, args.seed)
     try:
         path = write_report(args.configs, args.output, plan, args.data)
@@ -408,7 +430,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     rp = sub.add_parser("report", help="the paper's section 6 reproduced: OUT/results.md and figures")
     rp.add_argument("configs", nargs="+", help="scene TOML files or embedded scene names")
-    rp.add_argument("-o", "--output", default="docs", help="output folder (default: docs)")
+    rp.add_argument("-o", "--output", default="rss6-report",
+                    help="output folder (default: rss6-report); files git tracks there are not "
+                         "overwritten unless --overwrite-tracked is given")
+    rp.add_argument("--overwrite-tracked", action="store_true",
+                    help="allow overwriting results.md and figures that git tracks (e.g. -o docs)")
     rp.add_argument("--data", help="folder of the ensemble files (default: OUTPUT/results-data)")
     rp.add_argument("-n", type=_positive_int, default=1000,
                     help="realisations per level and scene (default 1000)")

@@ -15,9 +15,12 @@ on the chunk size or the number of workers.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -118,11 +121,26 @@ def _parts_dir(output: Path) -> Path:
 
 
 class _Progress:
-    """A bar on a terminal, plain lines otherwise."""
+    """A bar on a terminal, plain lines otherwise; a first line at once (starting workers, compiling
+    kernels on a cold cache), then done/total with the elapsed time and an ETA."""
 
-    def __init__(self, total: int, done: int, stream=sys.stderr):
-        self.total, self.done, self.stream = total, done, stream
-        self.tty, self.start, self.last = stream.isatty(), time.perf_counter(), 0.0
+    def __init__(self, total: int, done: int, stream=None):
+        self.total, self.done, self.stream = total, done, stream or sys.stderr
+        self.tty, self.start, self.last = self.stream.isatty(), time.perf_counter(), 0.0
+        self.first = done
+
+    def begin(self, chunks: int, where: str) -> None:
+        self.stream.write(f"rss6 run: {self.total - self.done} realisations to compute in {chunks} "
+                          f"chunks on {where}" + (f" ({self.done} stored)" if self.done else "")
+                          + "; starting workers (the first chunk also compiles kernels on a cold "
+                            "cache)\n")
+        self.stream.flush()
+
+    def _eta(self, elapsed: float) -> str:
+        computed = self.done - self.first
+        if computed <= 0 or self.done >= self.total:
+            return ""
+        return f", about {elapsed / computed * (self.total - self.done):.0f} s left"
 
     def advance(self, n: int) -> None:
         self.done += n
@@ -130,13 +148,14 @@ class _Progress:
         frac = self.done / max(self.total, 1)
         if self.tty:
             bar = "#" * int(30 * frac)
-            self.stream.write(f"\r[{bar:<30s}] {self.done}/{self.total} realisations, {elapsed:.1f} s")
+            self.stream.write(f"\r[{bar:<30s}] {self.done}/{self.total} realisations, "
+                              f"{elapsed:.1f} s{self._eta(elapsed)}   ")
             if self.done >= self.total:
                 self.stream.write("\n")
         elif elapsed - self.last >= 2.0 or self.done >= self.total:
             self.last = elapsed
             self.stream.write(f"rss6 run: {self.done}/{self.total} realisations "
-                              f"({100 * frac:.0f} %), {elapsed:.1f} s\n")
+                              f"({100 * frac:.0f} %), {elapsed:.1f} s{self._eta(elapsed)}\n")
         self.stream.flush()
 
 
@@ -151,9 +170,25 @@ def local_cluster(workers: int):
     import dask
     from dask.distributed import LocalCluster
     os.environ.update(BLAS_ENV)  # inherited by the worker processes
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
+            _workers_ignore_ctrl_c():
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                             dashboard_address=None, host="127.0.0.1")
+
+
+@contextlib.contextmanager
+def _workers_ignore_ctrl_c():
+    """Worker processes started in this block inherit an ignored SIGINT: a terminal's Ctrl-C reaches
+    the whole process group, and only this process should act on it (the cluster is closed from
+    here); otherwise each worker prints its own traceback."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _client(workers: int, scheduler: str | None):
@@ -202,9 +237,11 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
         pieces, done = _stored(output, spec, manifest)
         todo = [r for r in range(n) if r not in done]
         if todo:
+            chunks = [todo[i:i + chunk] for i in range(0, len(todo), chunk)]
             bar = _Progress(n, n - len(todo)) if progress else None
-            pieces += _compute(spec, [todo[i:i + chunk] for i in range(0, len(todo), chunk)],
-                               manifest, workers, scheduler, bar)
+            if bar:
+                bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
+            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
         merged = pieces[0] if up_to_date else finish_ensemble(pieces, spec.scene(), **_kw(spec))
         if not up_to_date:

@@ -12,7 +12,7 @@ import xarray as xr
 from rss6core import __version__
 
 __all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "display_unit", "error_summaries", "run_dataset",
-           "write_netcdf"]
+           "write_netcdf", "cf_encode", "cf_decode", "check_free_space"]
 
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
 QUANTITIES = ("displacement", "velocity", "acceleration")
@@ -108,17 +108,105 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
 
 
 def write_netcdf(ds: xr.Dataset, path) -> None:
-    """Write ``ds`` as netCDF4 to ``path`` via a temporary file, so a crash leaves no half file."""
+    """Write ``ds`` as CF-1.10 netCDF4 to ``path`` via a temporary file, so a crash leaves no half file.
+
+    The in-memory schema is mapped to CF here (:func:`cf_encode`) and back in :func:`load_netcdf`.
+    """
     import os
 
     import dask
     tmp = f"{path}.part"
+    encoded, encoding = cf_encode(ds)
     # The data are in memory. While a dask.distributed client is open, xarray would otherwise
     # guard the file with a distributed lock: a scheduler round trip per variable, which made
     # each chunk's write 8x slower and kept the scheduler busy beside the workers.
-    with dask.config.set(scheduler="synchronous"):
-        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+    check_free_space(path, ds.nbytes)
+    try:
+        with dask.config.set(scheduler="synchronous"):
+            encoded.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
+    except (OSError, RuntimeError):  # a full disk shows as "NetCDF: HDF error"
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        check_free_space(path, ds.nbytes)
+        raise
     os.replace(tmp, path)
+
+
+def check_free_space(path, needed: int) -> None:
+    """EnsembleFileError naming the folder when it has less than ``needed`` bytes (plus 1 MiB) free."""
+    import os
+    import shutil
+    folder = os.path.dirname(os.path.abspath(path))
+    free = shutil.disk_usage(folder).free
+    if free < needed + 2 ** 20:
+        raise EnsembleFileError(f"{path}: not enough disk space in {folder}: about "
+                                f"{(needed + 2 ** 20) / 2 ** 20:.1f} MiB needed, "
+                                f"{free / 2 ** 20:.1f} MiB free; free some space and rerun "
+                                "(finished parts are kept)")
+
+
+# --- CF mapping --------------------------------------------------------------
+# CF wants UDUNITS units, labels as auxiliary string variables (not string coordinate variables),
+# cell_methods naming dimensions the variable has, no axis "E" and no fill value on coordinates.
+# What CF cannot say is kept under an ``rss6_`` attribute and restored when the file is read.
+
+_LABEL = "_label"
+_ELAPSED = "elapsed_time"   # the file's name of ``time``: CF keeps "time" for calendar times
+_MOVED = ("units", "cell_methods", "axis", "standard_name", "long_name")
+
+
+def _cf_attrs(name: str, var: xr.DataArray) -> dict:
+    """A variable's attributes with the non-CF ones moved under ``rss6_``."""
+    attrs = dict(var.attrs)
+    names = set(var.dims)
+    moved = {}
+    if attrs.get("units") == MIXED_UNITS:
+        moved["units"] = attrs.pop("units")  # per-element SI units: the auxiliary 'unit' variable
+    if "cell_methods" in attrs and attrs["cell_methods"].split(":")[0].strip() not in names:
+        moved["cell_methods"] = attrs.pop("cell_methods")  # over time, which the file does not hold
+    if attrs.get("axis") == "E":
+        moved["axis"] = attrs.pop("axis")
+    if name == _ELAPSED:  # time since the start of the motion, not a CF calendar time
+        moved.update({k: attrs.pop(k) for k in ("standard_name", "axis", "long_name") if k in attrs})
+        attrs["long_name"] = "time since the start of the motion"
+    return {**attrs, **{f"rss6_{k}": v for k, v in moved.items()}}
+
+
+def cf_encode(ds: xr.Dataset) -> tuple[xr.Dataset, dict]:
+    """Any Dataset rss6 writes, as CF-1.10 allows it, and the netCDF encoding to write it with."""
+    out = ds.rename({"time": _ELAPSED}) if "time" in ds.variables else ds.copy()
+    for dim in [d for d in ds.dims if d in ds.coords and ds[d].dtype.kind in "OUS"]:
+        label = ds[dim]
+        out = out.drop_vars(dim).assign_coords(
+            {dim + _LABEL: ((dim,), label.values.astype(str).astype(object),
+                            {"long_name": label.attrs.get("long_name", dim)})})
+    for name in out.variables:
+        out[name].attrs = _cf_attrs(name, out[name])
+    encoding = {name: {"_FillValue": None} for name in out.coords
+                if out[name].dtype.kind == "f"}
+    return out, encoding
+
+
+def cf_decode(ds: xr.Dataset) -> xr.Dataset:
+    """Undo :func:`cf_encode`: string labels back as coordinates, ``rss6_`` attributes restored."""
+    for name in [n for n in ds.variables if str(n).endswith(_LABEL)]:
+        dim = str(name)[:-len(_LABEL)]
+        if ds[name].dims == (dim,):
+            label = ds[name]
+            ds = ds.drop_vars(name).assign_coords({dim: (dim, label.values.astype(str).astype(object),
+                                                          {k: v for k, v in label.attrs.items()
+                                                           if k != "long_name" or v != dim})})
+    if _ELAPSED in ds.variables:
+        ds = ds.rename({_ELAPSED: "time"})
+        ds["time"].attrs.pop("long_name", None)
+    for name in ds.variables:
+        attrs = ds[name].attrs
+        if any(k.startswith("rss6_") and k[5:] in _MOVED for k in attrs):
+            ds[name].attrs = {**{k: v for k, v in attrs.items()
+                                 if not (k.startswith("rss6_") and k[5:] in _MOVED)},
+                              **{k[5:]: v for k, v in attrs.items()
+                                 if k.startswith("rss6_") and k[5:] in _MOVED}}
+    return ds
 
 
 # --- ensembles -------------------------------------------------------------
@@ -208,8 +296,8 @@ def load_netcdf(path) -> xr.Dataset:
     if not os.path.exists(path):
         raise EnsembleFileError(f"{path}: no such file")
     try:
-        with xr.open_dataset(path, engine="netcdf4") as ds:
-            return ds.load()
+        with xr.open_dataset(path, engine="netcdf4", decode_times=False) as ds:
+            return cf_decode(ds.load())
     except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...
         raise EnsembleFileError(f"{path}: not a readable netCDF file "
                                 f"(truncated or corrupt?): {exc}") from None

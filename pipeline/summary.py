@@ -38,7 +38,31 @@ def scene_summary(scene) -> dict:
         "natural_frequencies_Hz": (omega[:12] / (2 * np.pi)).tolist(),
         # undamped explicit limit; Rayleigh stiffness damping lowers it further
         "critical_time_step_s": float(2.0 / omega[-1]),
+        **clearance_summary(scene),
     }
+
+
+def clearance_summary(scene) -> dict:
+    """Clearances (m), their sampling laws, the contact settings and what ``rss6 run`` runs by default."""
+    import dataclasses
+    return {"clearances_m": dataclasses.asdict(scene.clearance),
+            "sampling": dataclasses.asdict(scene.sampling),
+            "contact": {**dataclasses.asdict(scene.contact),
+                        "time_step_s": scene.simulation.contact_time_step,
+                        "integrator": scene.simulation.contact_integrator},
+            "run_default_level": run_default_level(scene)}
+
+
+CLEARANCE_LEVELS = ("quasi-static", "paper", "contact")
+
+
+def run_default_level(scene) -> str | None:
+    """The scene's level for ``rss6 run``, or None when it has no clearances while the scene has
+    some: an ensemble of it would be N identical runs."""
+    c = scene.clearance
+    sizes = (c.revolute_radial, c.revolute_axial, c.spherical_C, c.spherical_B)
+    model = scene.simulation.model
+    return None if model not in CLEARANCE_LEVELS and any(sizes) else model
 
 
 def format_summary(s: dict) -> str:
@@ -59,7 +83,19 @@ def format_summary(s: dict) -> str:
         f"elastic model: {s['elements_per_link']} elements per link, {s['dof']} DOFs; lowest "
         f"natural frequencies [Hz]: " + ", ".join(f"{f:.1f}" for f in s["natural_frequencies_Hz"][:6]),
         f"explicit critical time step 2/omega_max: {s['critical_time_step_s']:.3e} s"]
-    return "\n".join(lines)
+    return "\n".join(lines + _clearance_lines(s))
+
+
+def _clearance_lines(s: dict) -> list[str]:
+    join = lambda d: ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"  # noqa: E731
+                               for k, v in d.items())
+    level = s["run_default_level"]
+    return ["clearances [mm]: " + ", ".join(f"{k} {1e3 * v:g}" for k, v in s["clearances_m"].items()),
+            "sampling (fractions of the clearance): " + join(s["sampling"]),
+            "contact (SI): " + join(s["contact"]),
+            f"rss6 run default level: {level}" if level else
+            f"rss6 run default level: none (the scene's {s['model']!r} has no clearances; "
+            "rss6 run asks for --model)"]
 
 
 def error_summary(ds) -> dict:

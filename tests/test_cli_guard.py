@@ -239,3 +239,72 @@ def test_ctrl_c_exits_130_without_traceback_and_keeps_the_parts(tmp_path):
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "interrupted" in err, err
     assert len(list(parts.glob("*.nc"))) >= 2 and not Path(str(out) + ".lock").exists()
+
+
+def test_report_refuses_to_overwrite_tracked_files(tmp_path, capsys):
+    repo = tmp_path / "repo"
+    (repo / "docs").mkdir(parents=True)
+    (repo / "docs" / "results.md").write_text("committed\n")
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-C", str(repo)]
+    subprocess.run(["git", "init", "-q", str(repo)], check=True)
+    subprocess.run([*git, "add", "docs/results.md"], check=True)
+    subprocess.run([*git, "commit", "-qm", "x"], check=True)
+    assert main(["report", "smoke", "-o", str(repo / "docs"), "-n", "2"]) == 2
+    _one_line_error(capsys, "results.md", "git tracks", "--overwrite-tracked")
+    assert (repo / "docs" / "results.md").read_text() == "committed\n"
+    from pipeline.cli import build_parser
+    assert build_parser().parse_args(["report", "smoke"]).output == "rss6-report"
+
+
+def test_progress_starts_at_once_and_gives_an_eta():
+    import io
+
+    from pipeline.run import _Progress
+    stream = io.StringIO()
+    bar = _Progress(10, 2, stream)
+    bar.begin(4, "2 workers")
+    assert stream.getvalue().startswith("rss6 run: 8 realisations to compute in 4 chunks on 2 workers")
+    assert "(2 stored)" in stream.getvalue() and "compiles kernels" in stream.getvalue()
+    bar.start -= 4.0          # 4 s for the first 2 computed: 6 left take about 12 s
+    bar.advance(2)
+    assert "4/10" in stream.getvalue() and "about 12 s left" in stream.getvalue()
+
+
+def test_check_shows_clearances_laws_contact_and_the_run_default(capsys):
+    import json
+    assert main(["check", "paper_050", "--json"]) == 0
+    wide = json.loads(capsys.readouterr().out)
+    assert main(["check", "paper", "--json"]) == 0
+    paper = json.loads(capsys.readouterr().out)
+    assert wide["clearances_m"]["spherical_B"] == pytest.approx(2 * paper["clearances_m"]["spherical_B"])
+    assert paper["sampling"]["direction"] in ("uniform", "paper")
+    assert paper["contact"]["restitution"] == 0.9 and paper["run_default_level"] is None
+    assert main(["check", "paper_050"]) == 0
+    text = capsys.readouterr().out
+    assert "clearances [mm]: revolute_radial 0.5" in text and "asks for --model" in text
+
+
+def test_full_disk_is_one_line_and_keeps_the_parts(tmp_path, monkeypatch, capsys):
+    """The merge needs the ensemble's size free; with less the run stops before writing, in one line."""
+    import shutil
+    from collections import namedtuple
+    spec, out = _spec(), tmp_path / "full.nc"
+    _parts_of(out, spec, [0, 1])
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10 ** 9, 10 ** 9, 1000))
+    assert main([*QS, "--seed", "3", "-n", "2", "-o", str(out)]) == 2
+    _one_line_error(capsys, "not enough disk space", "MiB free")
+    assert not out.exists() and len(list(Path(str(out) + ".parts").glob("*.nc"))) == 1
+
+
+def test_a_write_failing_on_a_full_disk_says_so(tmp_path, monkeypatch):
+    import shutil
+    from collections import namedtuple
+    ds = run_chunk(_spec(), [0])
+    free = iter([10 ** 9, 1000])   # room before the write, none after it failed
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: namedtuple("u", "total used free")(0, 0, next(free)))
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", lambda *a, **k: (_ for _ in ()).throw(
+        RuntimeError("NetCDF: HDF error")))
+    with pytest.raises(EnsembleFileError, match="not enough disk space"):
+        write_netcdf(ds, tmp_path / "x.nc")
+    assert list(tmp_path.iterdir()) == []

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
+from pipeline.outputs import PartsManifest
 from pipeline.run import MAX_AUTO_CHUNK, EnsembleSpec, default_chunk, run_ensemble
 from pipeline.stats import ensemble_stats
 from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
@@ -130,8 +131,8 @@ def test_parts_left_beside_a_finished_file_add_no_duplicates(reference, tmp_path
     path = tmp_path / "left.nc"
     run_ensemble(_spec(), 10, path, workers=1, chunk=5, progress=False)
     parts = Path(str(path) + ".parts")
-    parts.mkdir()
-    write_netcdf(open_ensemble(path).isel(realization=[0, 1]), parts / "chunk-0000000-0000001.nc")
+    PartsManifest(parts, _spec().attrs()).write(open_ensemble(path).isel(realization=[0, 1]),
+                                                "chunk-0000000-0000001.nc")
     again = run_ensemble(_spec(), 10, path, workers=1, chunk=5, progress=False)
     assert list(again.realization.values) == list(range(10)) and not parts.exists()
     assert np.array_equal(error_summaries(open_ensemble(path)), error_summaries(ref))
