@@ -135,7 +135,13 @@ def _run(args) -> int:
     from .outputs import check_output_path
     from .run import EnsembleSpec, ensemble
     from .stats import ensemble_stats, format_stats
+    from .gate import exit_code, format_verdicts
     from .summary import failure_reasons
+    specs, verdicts = _requirements(args), []
+    for s in specs:
+        if s.window:
+            raise SceneError(f"--require {s.text!r}: rss6 run stores no analysis windows; drop "
+                             f"'/{s.window}'")
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
     _refuse_clearance_free_default(args, scene, model)
@@ -145,7 +151,7 @@ def _run(args) -> int:
                         args.seed, args.store)
     try:
         outcome = ensemble(spec, args.n, output, workers=args.workers, scheduler=args.scheduler,
-                           chunk=args.chunk)
+                           chunk=args.chunk, annotate=_annotate(specs, verdicts))
     except KeyboardInterrupt:
         print(f"rss6: interrupted; finished chunks are kept in {output}.parts; rerun the same "
               "command to continue", file=sys.stderr)
@@ -159,7 +165,23 @@ def _run(args) -> int:
         print("rss6: every realisation failed; no statistics", file=sys.stderr)
         return 1
     print(format_stats(ensemble_stats(ds).sel(quantity=["displacement"])))
-    return 0
+    if not specs:
+        return 0
+    print(format_verdicts(verdicts))
+    return exit_code(verdicts, args.undecided)
+
+
+def _annotate(specs: list, verdicts: list):
+    """The hook that judges the finished ensemble and puts the verdicts in its attributes; the
+    verdicts are also appended to ``verdicts`` for the caller."""
+    from .stats import ensemble_stats
+    if not specs:
+        return None
+
+    def annotate(ds) -> dict:
+        verdicts[:] = _judge(ensemble_stats(ds), specs)
+        return _verdict_attrs(verdicts)
+    return annotate
 
 
 def _outcome_line(outcome, output, n: int, model: str) -> str:
@@ -426,6 +448,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "as one batch)")
     run.add_argument("--store", choices=("summary", "full"), default="summary",
                      help="summary: per-realisation maxima and means; full: also time histories")
+    _require_arguments(run)
     run.set_defaults(func=_run)
 
     rp = sub.add_parser("report", help="the paper's section 6 reproduced: OUT/results.md and figures")

@@ -224,8 +224,12 @@ class EnsembleOutcome:
 
 
 def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
-             chunk: int | None = None, progress: bool = True) -> EnsembleOutcome:
-    """Run realisations 0..n-1 not yet stored in ``output`` (one writer at a time: OUT.lock)."""
+             chunk: int | None = None, progress: bool = True, annotate=None) -> EnsembleOutcome:
+    """Run realisations 0..n-1 not yet stored in ``output`` (one writer at a time: OUT.lock).
+
+    ``annotate(dataset) -> dict``, if given, adds global attributes (e.g. requirement verdicts)
+    computed from the finished ensemble before it is written; the file is rewritten only if they
+    change it."""
     if n < 1:
         raise ValueError(f"the number of realisations must be at least 1, got {n}")
     chunk = default_chunk(n, workers) if chunk is None else chunk
@@ -244,7 +248,10 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
             pieces += _compute(spec, chunks, manifest, workers, scheduler, bar)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
         merged = pieces[0] if up_to_date else finish_ensemble(pieces, spec.scene(), **_kw(spec))
-        if not up_to_date:
+        extra = annotate(merged) if annotate else {}
+        annotated = any(str(merged.attrs.get(k)) != str(v) for k, v in extra.items())
+        merged = merged.assign_attrs(extra)
+        if not up_to_date or annotated:
             write_netcdf(merged, output)
         if manifest.folder.exists():
             shutil.rmtree(manifest.folder)
