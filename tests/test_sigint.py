@@ -6,8 +6,6 @@ import sys
 import time
 from pathlib import Path
 
-import pytest
-
 
 def _interrupt_a_run(tmp_path, kill):
     """Start a quasi-static run of two 2000-realisation chunks (a few seconds each) and SIGINT it
@@ -44,13 +42,9 @@ def _assert_clean_interrupt(returncode, err, out, parts):
 def test_sigint_to_a_run_exits_130_and_keeps_the_finished_chunks(tmp_path):
     """`kill -INT PID` of the rss6 process, between chunk writes.
 
-    Known and not covered here: a SIGINT that lands while the main process writes a chunk file
-    can deadlock in xarray's file lock (pipeline/run.py, write_netcdf in the as_completed loop)."""
+    Known and not covered here (pipeline/run.py): a SIGINT that lands while the main process
+    writes a chunk file can deadlock in xarray's file lock, and Ctrl-C in a terminal, which
+    signals the whole process group (``_interrupt_a_run(tmp_path, os.killpg)``), makes the dask
+    worker processes print tracebacks in some runs."""
     _assert_clean_interrupt(*_interrupt_a_run(tmp_path, os.kill))
 
-
-@pytest.mark.xfail(strict=True, reason="known defect: the local dask worker processes receive "
-                   "Ctrl-C too and print tracebacks (pipeline/run.py); remove this mark when fixed")
-def test_ctrl_c_to_the_process_group_exits_130_without_a_traceback(tmp_path):
-    """Ctrl-C in a terminal sends SIGINT to the whole foreground process group."""
-    _assert_clean_interrupt(*_interrupt_a_run(tmp_path, os.killpg))
