@@ -58,7 +58,11 @@ from numba import njit
 __all__ = ["newton_step", "advance_chunk", "ball", "NEWTON_FAILED", "DIVERGED"]
 
 # reassociation and fused multiply-add, but no finite-math assumption: a diverging
-# realisation's inf and nan must survive to be reported
+# realisation's inf and nan must survive to be reported.  Every fastmath function is inlined
+# into the entry point that runs it (inline="always"): a compiled callee is also linked as a
+# copy into each caller and optimised again there, which with reassociation gives other
+# round-off, and which copy a call binds to depended on which was loaded first, so a process
+# that compiled the kernel and one that loaded it from numba's cache differed at 1e-11.
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
 # non-zero 3x3 blocks of a leg's joint map G: relative displacement j <- joint-node block c
 _PATTERN = np.array([[0, 0], [1, 1], [1, 2], [2, 3]], np.int64)
@@ -436,9 +440,9 @@ def newton_scratch():
             np.empty((_PATTERN.shape[0], 3, 3)), np.empty((3, 6)), np.empty((3, 3)))
 
 
-@njit(cache=True, fastmath=_FAST, _nrt=False)   # no reference counts: a third of them were here
+@njit(cache=True, fastmath=_FAST, inline="always")
 def newton_one(G, J, Rr, omega, w, radius, Sl, Sp, params, law, impact, rb, rp, db, dpp, vb, vpp,
-               a_l, a_p, bh2, gh, wf, tol_d, tol_v, max_iterations, f, gl, gp, delta, rate, scratch):
+               a_l, a_p, bh2, gh, wf, limits, f, gl, gp, delta, rate, scratch):
     """Joint-node accelerations a_l (6, 12) and platform accelerations a_p (6,) of one realisation's
     step, in place; returns (converged, iterations).
 
@@ -447,9 +451,12 @@ def newton_one(G, J, Rr, omega, w, radius, Sl, Sp, params, law, impact, rb, rp, 
     backtracking where a full step makes the residual worse (contact kinks).  Converged
     when the update the residual calls for (the last solve's gain times the residual)
     moves no joint by more than tol_d (m) and changes no velocity by more than tol_v
-    (m/s).  Writes the contact forces f (6, 3, 3), generalised forces gl, gp and the
-    penetrations and rates (6, 4) [A radial, A axial, C, B] at the accepted iterate.
+    (m/s), at most limits[2] iterations (limits = [tol_d, tol_v, max iterations]: an array, so
+    its calls have 29 arguments: Python passes 31 or more as *args, which numba cannot inline).
+    Writes the contact forces f (6, 3, 3), generalised forces gl, gp and the penetrations and
+    rates (6, 4) [A radial, A axial, C, B] at the accepted iterate.
     """
+    tol_d, tol_v, max_iterations = limits[0], limits[1], int(limits[2])
     (e, de, De, Dv, D, pair, xb, ub, xp, up, res_l, res_p, dl, dp, base_l, base_p,
      A, Ainv, Up, rhat, M, top, top0, tb, z, schur, ypiv, y, border, lower, DG, DJ, DR) = scratch
     ok = False
@@ -533,10 +540,11 @@ def newton_step(G, J, Rr, omega, w, radius, Sl, Sp, params, law, impact,
     """:func:`newton_one` for every realisation of a batch (leading axis R), one after another;
     ab (R, 6, 12) and ap (R, 6) are updated in place, done and count receive its returns."""
     scratch = newton_scratch()
+    limits = np.array([tol_d, tol_v, max_iterations])
     for r in range(ab.shape[0]):
         done[r], count[r] = newton_one(G, J, Rr, omega, w, radius, Sl, Sp, params[r], law, impact[r],
                                        rb[r], rp[r], db[r], dpp[r], vb[r], vpp[r], ab[r], ap[r],
-                                       bh2, gh, wf, tol_d, tol_v, max_iterations, f[r], gl[r], gp[r],
+                                       bh2, gh, wf, limits, f[r], gl[r], gp[r],
                                        delta[r], rate[r], scratch)
 
 
@@ -680,7 +688,7 @@ def _attempt(r, level, k0, k1, lv, layout, coef, F, Mp, G, J, Rr, omega, w, radi
             Sp[i, j] = coef_p[level] * Mp[k1, i, j]
     ok, count = newton_one(G[k1], J[k1], Rr[k1], omega[k1], w, radius, S[level], Sp, params[r], law,
                            impact, rb, rhs[N - 6:], db, dpp, vb, vpp, ab, ap, bh2s[level], ghs[level], wf,
-                           newton_limits[0], newton_limits[1], int(newton_limits[2]), f, gl, gp,
+                           newton_limits, f, gl, gp,
                            delta, rate, scratch)
     # recovery: [y, x_b] -> link vectors
     for leg in range(6):
