@@ -38,24 +38,21 @@ def _fraction(text: str) -> float:
     return value
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {text}")
-    return value
+def _int_at_least(minimum: int):
+    """An argparse type: an integer of at least ``minimum``."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be {minimum} or more, got {text}")
+        return value
+    return parse
 
 
-def _nonnegative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more, got {text}")
-    return value
+_positive_int = _int_at_least(1)
+_nonnegative_int = _int_at_least(0)
 
 
 def _check(args) -> int:
@@ -390,6 +387,19 @@ def _stats_parser(sub) -> None:
     st.set_defaults(func=_stats)
 
 
+LEVELS_HELP = ("Levels, cheapest first: rigid (no error, a check), quasi-static (clearances, no "
+               "dynamics), elastic (flexible links, no clearances), paper (elastic + the paper's "
+               "clearance closure), contact (clearance contact dynamics, by far the dearest)")
+INTEGRATOR_HELP = ("time integrator: newmark, hht, generalized-alpha or central-difference (explicit, "
+                   "diverges above the critical step `rss6 check` prints) (default: the scene's; "
+                   "the contact level has its own)")
+DT_HELP = ("time step, s; must divide the trajectory's duration (default: the scene's "
+           "time_step_s, contact_time_step_s at the contact level)")
+ELEMENTS_HELP = "beam elements per crank and per rod (default: the scene's elements_per_link)"
+SCHEDULER_HELP = ("address of a running dask.distributed scheduler, e.g. tcp://10.0.0.5:8786 "
+                  "(default: none, a local cluster of --workers processes)")
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with a one-line error (the option and the problem; ``-h`` gives the usage)."""
 
@@ -411,10 +421,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim = sub.add_parser("simulate", help="run one deterministic simulation")
     sim.add_argument("config", nargs="?", default="paper",
                      help="scene TOML file or embedded scene name (default: paper)")
-    sim.add_argument("--model", choices=MODELS, help="model level (default: the scene's)")
-    sim.add_argument("--integrator", choices=INTEGRATORS, help="time integrator (default: the scene's)")
-    sim.add_argument("--dt", type=_positive_float, help="time step, s (default: the scene's)")
-    sim.add_argument("--elements", type=_positive_int, help="beam elements per link")
+    sim.add_argument("--model", choices=MODELS, help=f"model level (default: the scene's). {LEVELS_HELP}")
+    sim.add_argument("--integrator", choices=INTEGRATORS, help=INTEGRATOR_HELP)
+    sim.add_argument("--dt", type=_positive_float, help=DT_HELP)
+    sim.add_argument("--elements", type=_positive_int, help=ELEMENTS_HELP)
     sim.add_argument("--seed", type=_nonnegative_int, default=0,
                      help="random seed of the run, 0 or more (default 0)")
     sim.add_argument("--realization", type=_nonnegative_int, default=0,
@@ -435,19 +445,22 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--parents", action="store_true", help="create the output's missing folders")
     run.add_argument("--seed", type=_nonnegative_int, default=0,
                      help="random seed, 0 or more (default 0)")
-    run.add_argument("--model", choices=MODELS, help="model level (default: the scene's)")
-    run.add_argument("--integrator", choices=INTEGRATORS)
-    run.add_argument("--dt", type=_positive_float, help="time step, s")
-    run.add_argument("--elements", type=_positive_int, help="beam elements per link")
+    run.add_argument("--model", choices=MODELS,
+                     help="model level (default: the scene's if it has clearances; a scene whose "
+                          f"level has none asks for --model). {LEVELS_HELP}")
+    run.add_argument("--integrator", choices=INTEGRATORS, help=INTEGRATOR_HELP)
+    run.add_argument("--dt", type=_positive_float, help=DT_HELP)
+    run.add_argument("--elements", type=_positive_int, help=ELEMENTS_HELP)
     run.add_argument("--workers", type=_positive_int, default=2,
                      help="local dask workers, one thread each (default 2)")
-    run.add_argument("--scheduler", help="address of an existing dask.distributed scheduler")
+    run.add_argument("--scheduler", help=SCHEDULER_HELP)
     run.add_argument("--chunk", type=_positive_int,
                      help="realisations per task (default: n cut into a multiple of the workers "
                           "nearly equal chunks of at most 64; each task integrates its realisations "
                           "as one batch)")
     run.add_argument("--store", choices=("summary", "full"), default="summary",
-                     help="summary: per-realisation maxima and means; full: also time histories")
+                     help="summary: per-realisation maxima and means; full: also time histories "
+                          "(default: summary)")
     _require_arguments(run)
     run.set_defaults(func=_run)
 
@@ -466,7 +479,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     rp.add_argument("--workers", type=_positive_int, default=2,
                     help="local dask workers, one thread each (default 2)")
-    rp.add_argument("--scheduler", help="address of an existing dask.distributed scheduler")
+    rp.add_argument("--scheduler", help=SCHEDULER_HELP)
     rp.set_defaults(func=_report)
 
     _stats_parser(sub)

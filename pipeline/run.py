@@ -5,10 +5,10 @@ task, on a local cluster of W single-threaded workers (BLAS pinned to one
 thread) or on an existing dask.distributed scheduler.  Each finished chunk is
 written at once to ``OUT.nc.parts/`` (write to a temporary name, then rename),
 so an interrupted run (Ctrl-C, a killed process, a crashed worker) loses at
-most the chunks in flight; rerunning the same command skips what is stored, checks every stored part
-against the manifest written with it (checksum, provenance) and refuses pieces
-from a different scene, model or seed.  One process writes an output at a
-time (``OUT.nc.lock``).  When all realisations
+most the chunks in flight; rerunning the same command skips what is stored,
+checks every stored part against the manifest written with it (checksum,
+provenance) and refuses pieces from a different scene, model or seed.  One
+process writes an output at a time (``OUT.nc.lock``).  When all realisations
 are stored they are merged into OUT.nc and the parts are removed.
 Realisation r draws from the stream (seed, r) only, so the file does not depend
 on the chunk size or the number of workers.
@@ -34,7 +34,8 @@ from .outputs import OutputLock, PartsManifest
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
                     realization_dataset, write_netcdf)
 
-__all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk", "local_cluster", "BLAS_ENV"]
+__all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
+           "local_cluster", "BLAS_ENV"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}

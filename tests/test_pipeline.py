@@ -67,8 +67,9 @@ def test_file_reads_correctly_with_netcdf4_directly(reference):
         assert "[simulation]" in nc.scene_toml
         var = nc.variables["max_abs_error"]
         assert var.dimensions == ("quantity", "realization", "direction")
-        assert "m or rad" in var.units
-        assert nc.variables["realization"].axis == "E"
+        assert "m or rad" in var.rss6_units  # CF units must be UDUNITS: per element in 'unit'
+        assert nc.variables["unit"][:].tolist()[0] == ["m"] * 3 + ["rad"] * 3
+        assert nc.variables["realization"].rss6_axis == "E"
         assert nc.variables["clearance_size"].units == "m"
         assert np.array_equal(var[:], ref["max_abs_error"].values)
         assert list(nc.variables["status"][:]) == ["finished"] * 10
