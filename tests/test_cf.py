@@ -13,7 +13,7 @@ from pipeline.scenes import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
 
-pytest.importorskip("compliance_checker")
+import compliance_checker  # noqa: F401,E402  (a declared test dependency: missing is an error, not a skip)
 SMOKE = CONFIGS / "smoke.toml"
 
 
@@ -60,3 +60,12 @@ def test_the_raw_schema_is_what_the_checker_rejects(tmp_path):
     raw = tmp_path / "raw.nc"
     _ensemble("full").to_netcdf(raw, engine="netcdf4")
     assert cf_errors(raw)
+
+
+def test_statistics_file_is_cf(tmp_path):
+    """The fourth kind of file: `rss6 stats F -o S.nc` (the statistics Dataset, with verdicts)."""
+    ens = tmp_path / "ens.nc"
+    write_netcdf(_ensemble("summary"), ens)
+    out = tmp_path / "stats.nc"
+    assert main(["stats", str(ens), "-o", str(out), "--require", "displacement:x<=1m@q50"]) in (0, 1)
+    assert cf_errors(out) == []
