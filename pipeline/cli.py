@@ -303,7 +303,7 @@ def _require_arguments(p) -> None:
     p.add_argument("--require", action="append", metavar="SPEC",
                    help="a requirement QUANTITY:DIRECTIONS OP VALUE UNIT@STATISTIC, e.g. "
                         "'displacement:x,y<=0.05mm@q95' (repeatable): judged pass, fail or undecided "
-                        "from the statistic's confidence interval; exit 1 unless all pass")
+                        "from the statistic's confidence interval; exit 1 unless all pass (default: none)")
     p.add_argument("--undecided", choices=("fail", "pass"), default="fail",
                    help="how an undecided requirement counts for the exit code (default: fail)")
 

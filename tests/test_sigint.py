@@ -18,8 +18,8 @@ def _interrupt_a_run(tmp_path, kill):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         seen = []                              # until the progress line after the first chunk
-        while not (seen and seen[-1].startswith("rss6 run:")) and (line := proc.stderr.readline()):
-            seen.append(line)                  # (dask may warn first, e.g. of a busy port)
+        while not (seen and seen[-1].startswith("rss6 run: 2000/")) and (line := proc.stderr.readline()):
+            seen.append(line)                  # (the start line, and dask may warn, e.g. of a busy port)
         assert seen and seen[-1].startswith("rss6 run: 2000/4000"), seen
         time.sleep(0.5)
         assert proc.poll() is None, "the run ended before it could be interrupted"
