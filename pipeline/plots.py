@@ -21,22 +21,19 @@ from .stats import MIN_N_MEAN, estimates, quantile_estimates, running_mean_inter
 from .store import DIRECTIONS as _DIRS  # noqa: E402
 
 QUANTITIES = ("displacement", "velocity", "acceleration")
-# SI unit per quantity for translations (factor from SI, label) and the rotation base unit
-_TRANSLATION = {"displacement": (1e3, "mm"), "velocity": (1e3, "mm/s"),
-                "acceleration": (1.0, "m/s$^2$")}
-_ROTATION = {"displacement": "rad", "velocity": "rad/s", "acceleration": "rad/s$^2$"}
+_BASE = {"displacement": ("m", "rad"), "velocity": ("m/s", "rad/s"),
+         "acceleration": ("m/s$^2$", "rad/s$^2$")}
 
 
 def figure_unit(quantity: str, direction: str, values=None) -> tuple[float, str]:
-    """Display factor from SI and unit of a figure axis: mm, mm/s and m/s^2 for translations;
-    rad, rad/s, rad/s^2 for rotations, or the milli- units when ``values`` (SI) stay below 0.1."""
-    if direction in ("x", "y", "z"):
-        return _TRANSLATION[quantity]
-    unit = _ROTATION[quantity]
+    """Display factor from SI and unit of a figure axis, suited to the magnitude of ``values``
+    (SI): the SI unit (m, m/s, m/s^2; rad, rad/s, rad/s^2) when they reach 1, else its milli-
+    unit (mm, mm/s, mm/s^2; mrad, ...).  Without values: the milli-unit."""
+    unit = _BASE[quantity][direction not in ("x", "y", "z")]
     peak = np.nanmax(np.abs(values)) if values is not None and np.size(values) else np.nan
-    if np.isfinite(peak) and peak < 0.1:
-        return 1e3, "m" + unit
-    return 1.0, unit
+    if np.isfinite(peak) and peak >= 1.0:
+        return 1.0, unit
+    return 1e3, "m" + unit
 
 
 def figure_title(what: str, ds, n: int | None = None, width: int = 110) -> str:
@@ -131,7 +128,7 @@ def _convergence(ds, q: str, finished, confidence: float = 0.95):
         ax.set_ylim(*_convergence_range(mean, lo, hi, has))
         ax.grid(alpha=0.3)
         plain_ticks(ax)
-    axes[0].legend(fontsize=8, loc="upper right")
+    axes[0].legend(fontsize=8, loc="best")
     return fig
 
 

@@ -193,7 +193,7 @@ def error_figure(scene, quantity: str, runs: dict):
             for ax in (signed, envelope):
                 ax.grid(alpha=0.3)
                 plain_ticks(ax)
-        axes[2 * i, 0].legend(fontsize=7, loc="lower left")
+        axes[2 * i, 0].legend(fontsize=7, loc="best")
         axes[2 * i + 1, 0].legend(fontsize=7, loc="upper left")
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")

@@ -301,7 +301,8 @@ def tradeoff_figure(ds, tolerance, rec):
     _number_points(fig, ax, cost[front], err[front])
     side.axis("off")
     side.text(0, 1, "Pareto front (every setting is in tradeoff.csv):\n" + "\n".join(
-        f"{n + 1}: {textwrap.shorten(str(labels[i]), 48)}" for n, i in enumerate(front)),
+        textwrap.fill(f"{n + 1}: {labels[i]}", 44, subsequent_indent="   ")
+        for n, i in enumerate(front)),
         va="top", fontsize=7, family="monospace", transform=side.transAxes)
     fig.suptitle("\n".join(textwrap.wrap(
         f"speed against accuracy: scene {ds.attrs.get('scene_name', '?')}, every level, "

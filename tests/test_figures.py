@@ -167,9 +167,10 @@ def test_the_check_finds_overlaps_and_text_outside():
 
 
 def test_figure_units_follow_the_magnitude():
-    assert figure_unit("acceleration", "z") == (1.0, "m/s$^2$")
-    assert figure_unit("displacement", "x") == (1e3, "mm")
-    assert figure_unit("velocity", "y") == (1e3, "mm/s")
+    assert figure_unit("acceleration", "z", np.array([3.0, -1300.0])) == (1.0, "m/s$^2$")
+    assert figure_unit("acceleration", "z", np.array([1e-3, 2e-3])) == (1e3, "mm/s$^2$")
+    assert figure_unit("displacement", "x", np.array([1e-4, 0.0])) == (1e3, "mm")
+    assert figure_unit("velocity", "y", np.array([0.02])) == (1e3, "mm/s")
     assert figure_unit("displacement", "rx", np.array([2e-4, -3e-3])) == (1e3, "mrad")
     assert figure_unit("acceleration", "rz", np.array([0.5, 40.0])) == (1.0, "rad/s$^2$")
 
@@ -180,10 +181,13 @@ def test_histogram_markers_and_convergence_interval_come_from_stats(full_ensembl
     ds = open_ensemble(full_ensemble)
     figs = ensemble_figures(ds)
     try:
-        peak = ds["max_abs_error"].sel(quantity="acceleration", direction="z").values
+        si = ds["max_abs_error"].sel(quantity="acceleration", direction="z").values
+        f, unit = figure_unit("acceleration", "z", si)
+        peak = si * f
         hist = figs["hist_max_acceleration.png"].axes[2]
         lines = [ln.get_xdata()[0] for ln in hist.get_lines()]
         np.testing.assert_allclose(lines, estimates(peak, ("mean", "q95")), rtol=1e-12)
+        assert f"[{unit}]" in hist.get_xlabel()
         conv = figs["convergence_acceleration.png"].axes[2]
         band = conv.collections[0].get_paths()[0].vertices[:, 0]
         assert band.min() == MIN_N_MEAN
