@@ -478,8 +478,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     _stats_parser(sub)
 
-    pl = sub.add_parser("plot", help="PNG figures of an ensemble file, or the error "
-                                            "histories of a simulate -o file")
+    pl = sub.add_parser("plot", help="PNG figures of an ensemble file, or the error histories of "
+                                     "a simulate -o file")
     pl.add_argument("file", help="netCDF file of rss6 run, or of rss6 simulate -o")
     pl.add_argument("-o", "--output", default="plots", help="output folder (default: plots)")
     pl.set_defaults(func=_plot)
