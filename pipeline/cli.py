@@ -309,17 +309,24 @@ def _require_arguments(p) -> None:
 
 
 def _plot(args) -> int:
-    from .plots import plot_ensemble
-    from .store import EnsembleFileError, open_ensemble
-    ds = open_ensemble(args.file)
-    if not (ds["status"].values.astype(str) == "finished").any():
-        message = str(ds["status_message"].values.astype(str)[0])
-        raise EnsembleFileError(f"{args.file}: nothing to plot, all {ds.sizes['realization']} "
-                                f"realisations failed (first reason: {message})")
-    paths = plot_ensemble(ds, args.output)
-    if "error" not in ds:
-        print("no time histories in the file (run with --store full): envelope plots skipped",
-              file=sys.stderr)
+    from .filecheck import open_results
+    from .plots import plot_ensemble, plot_run
+    from .store import EnsembleFileError
+    ds = open_results(args.file)
+    if "realization" not in ds.dims:                      # rss6 simulate -o: one run's histories
+        if str(ds.attrs.get("status", "finished")) != "finished":
+            raise EnsembleFileError(f"{args.file}: nothing to plot, the run failed "
+                                    f"({ds.attrs.get('status_message', 'no reason recorded')})")
+        paths = plot_run(ds, args.output)
+    else:
+        if not (ds["status"].values.astype(str) == "finished").any():
+            message = str(ds["status_message"].values.astype(str)[0])
+            raise EnsembleFileError(f"{args.file}: nothing to plot, all {ds.sizes['realization']} "
+                                    f"realisations failed (first reason: {message})")
+        paths = plot_ensemble(ds, args.output)
+        if "error" not in ds:
+            print("no time histories in the file (run with --store full): envelope plots skipped",
+                  file=sys.stderr)
     for p in paths:
         print(p)
     return 0
@@ -484,8 +491,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     _stats_parser(sub)
 
-    pl = sub.add_parser("plot", help="PNG figures of an ensemble file")
-    pl.add_argument("file")
+    pl = sub.add_parser("plot", help="PNG figures of an ensemble file, or the error histories of "
+                                     "a simulate -o file")
+    pl.add_argument("file", help="netCDF file of rss6 run, or of rss6 simulate -o")
     pl.add_argument("-o", "--output", default="plots", help="output folder (default: plots)")
     pl.set_defaults(func=_plot)
 

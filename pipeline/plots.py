@@ -1,6 +1,11 @@
-"""PNG figures of an ensemble file: error envelopes, histograms of maxima, Monte Carlo convergence."""
+"""PNG figures of rss6 files: error envelopes, histograms of maxima, Monte Carlo convergence of an
+ensemble, and the error histories of a single run (``rss6 simulate -o``).
+
+Every builder returns a matplotlib Figure (tests check its text for overlaps) and the ``plot_*``
+functions save them.  Statistics drawn come from :mod:`pipeline.stats`."""
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -9,21 +14,46 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["plot_ensemble", "axis_unit", "draw_envelope", "save_figure"]
+__all__ = ["plot_ensemble", "plot_run", "ensemble_figures", "run_figures", "figure_unit",
+           "draw_abs_envelope", "figure_title", "save_figure", "plain_ticks"]
 
+from .stats import MIN_N_MEAN, estimates, quantile_estimates, running_mean_interval  # noqa: E402
 from .store import DIRECTIONS as _DIRS  # noqa: E402
-from .stats import quantile_estimates, running_mean_interval  # noqa: E402
-from .store import display_unit  # noqa: E402
+
+QUANTITIES = ("displacement", "velocity", "acceleration")
+_BASE = {"displacement": ("m", "rad"), "velocity": ("m/s", "rad/s"),
+         "acceleration": ("m/s$^2$", "rad/s$^2$")}
 
 
-def axis_unit(q: str, d: str) -> tuple[float, str]:
-    """Display factor and unit, with the square typeset for matplotlib."""
-    f, unit = display_unit(q, d)
-    return f, unit.replace("^2", "$^2$")
+def figure_unit(quantity: str, direction: str, values=None) -> tuple[float, str]:
+    """Display factor from SI and unit of a figure axis, suited to the magnitude of ``values``
+    (SI): the SI unit (m, m/s, m/s^2; rad, rad/s, rad/s^2) when they reach 1, else its milli-
+    unit (mm, mm/s, mm/s^2; mrad, ...).  Without values: the milli-unit."""
+    unit = _BASE[quantity][direction not in ("x", "y", "z")]
+    peak = np.nanmax(np.abs(values)) if values is not None and np.size(values) else np.nan
+    if np.isfinite(peak) and peak >= 1.0:
+        return 1.0, unit
+    return 1e3, "m" + unit
+
+
+def figure_title(what: str, ds, n: int | None = None, width: int = 110) -> str:
+    """A title naming what is drawn, the scene, the level, n and the file, wrapped to ``width``."""
+    a = ds.attrs
+    source = Path(str(ds.encoding.get("source", "in-memory data"))).name
+    count = "" if n is None else f", n = {n}"
+    head = f"{what}: scene {a.get('scene_name', '?')}, {a.get('model', '?')} level{count}, {source}"
+    return "\n".join(textwrap.wrap(head, width))
+
+
+def plain_ticks(ax) -> None:
+    """Tick labels as plain numbers: no offset text or exponent to collide with titles."""
+    for axis in ("x", "y"):
+        if getattr(ax, f"get_{axis}scale")() == "linear":
+            ax.ticklabel_format(axis=axis, style="plain", useOffset=False)
 
 
 def _grid(title: str):
-    fig, axes = plt.subplots(2, 3, figsize=(12, 6.5), constrained_layout=True)
+    fig, axes = plt.subplots(2, 3, figsize=(13, 7), constrained_layout=True)
     fig.suptitle(title)
     return fig, axes.ravel()
 
@@ -34,68 +64,128 @@ def save_figure(fig, path: Path) -> Path:
     return path
 
 
-def draw_envelope(ax, t, e, band: str = "5-95 %", peak: str = "max |error|", **peak_style) -> None:
-    """The 5-95 % band over realisations of e (R, T) and the max |e| over them, against time t."""
-    lo, hi = quantile_estimates(e, [0.05, 0.95], axis=0)
-    ax.fill_between(t, lo, hi, color="C0", alpha=0.3, lw=0, label=band)
-    ax.plot(t, np.nanmax(np.abs(e), axis=0), label=peak, **peak_style)
+def draw_abs_envelope(ax, t, e, who: str = "", **peak_style) -> None:
+    """|e| of realisations e (R, T) against time t: its 5-95 % band, median and maximum."""
+    a = np.abs(e)
+    lo, mid, hi = quantile_estimates(a, [0.05, 0.5, 0.95], axis=0)
+    ax.fill_between(t, lo, hi, color="C0", alpha=0.3, lw=0, label=f"{who}5-95 % of |error|")
+    ax.plot(t, mid, color="C0", lw=1.0, label=f"{who}median |error|")
+    ax.plot(t, estimates(a, ("max",))[..., 0], label=f"{who}max |error|", **peak_style)
 
 
-def _envelope(ds, q: str, out: Path, finished) -> Path:
-    err = ds["error"].sel(quantity=q).values[finished]            # (R, T, 6)
+def _envelope(ds, q: str, finished):
+    err = ds["error"].sel(quantity=q).transpose("realization", "time", "direction").values[finished]
     t = ds["time"].values
-    fig, axes = _grid(f"{ds.attrs['model']} level, scene {ds.attrs['scene_name']}: {q} error "
-                      f"envelope over {err.shape[0]} realisations")
+    fig, axes = _grid(figure_title(f"|{q} error| envelope over realisations", ds, err.shape[0]))
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = axis_unit(q, d)
-        e = err[..., k] * f
-        draw_envelope(ax, t, e, color="k", ls="--", lw=0.8)
-        ax.plot(t, quantile_estimates(e, 0.5, axis=0), lw=1.2, label="median")
+        f, unit = figure_unit(q, d, err[..., k])
+        draw_abs_envelope(ax, t, err[..., k] * f, color="k", ls="--", lw=0.8)
+        ax.set(xlabel="time [s]", ylabel=f"|{d} error| [{unit}]", title=d)
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+        plain_ticks(ax)
+    axes[0].legend(fontsize=8, loc="upper left")
+    return fig
+
+
+def _peaks(ds, q: str, finished) -> np.ndarray:
+    return ds["max_abs_error"].sel(quantity=q).transpose("realization", "direction").values[finished]
+
+
+def _histograms(ds, q: str, finished):
+    peak = _peaks(ds, q, finished)                                     # (R, 6)
+    fig, axes = _grid(figure_title(f"per-realisation max |{q} error|", ds, peak.shape[0]))
+    for k, (ax, d) in enumerate(zip(axes, _DIRS)):
+        f, unit = figure_unit(q, d, peak[:, k])
+        x = peak[:, k] * f
+        mean, q95 = estimates(x, ("mean", "q95"))
+        ax.hist(x, bins=min(30, max(5, x.size // 4)), color="C0", alpha=0.7)
+        ax.axvline(mean, color="k", lw=1.2, label=f"mean {mean:.3g}")
+        ax.axvline(q95, color="C3", lw=1.2, ls="--", label=f"q95 {q95:.3g}")
+        ax.set(xlabel=f"max |{d} error| [{unit}]", ylabel="realisations", title=d)
+        ax.legend(fontsize=7, loc="upper right")
+        ax.grid(alpha=0.3)
+        plain_ticks(ax)
+        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
+    return fig
+
+
+def _convergence(ds, q: str, finished, confidence: float = 0.95):
+    peak = _peaks(ds, q, finished)
+    n = np.arange(1, peak.shape[0] + 1)
+    fig, axes = _grid(figure_title(f"running mean of max |{q} error| with its "
+                                   f"{100 * confidence:g} % interval (given from n = {MIN_N_MEAN})",
+                                   ds, peak.shape[0]))
+    for k, (ax, d) in enumerate(zip(axes, _DIRS)):
+        f, unit = figure_unit(q, d, peak[:, k])
+        mean, (lo, hi) = running_mean_interval(peak[:, k] * f, confidence)
+        has = np.isfinite(lo) & np.isfinite(hi)
+        if has.any():
+            ax.fill_between(n[has], lo[has], hi[has], alpha=0.3, lw=0,
+                            label=f"{100 * confidence:g} % interval")
+        ax.plot(n, mean, lw=1.2, label="running mean")
+        ax.set(xlabel="realisations n", ylabel=f"mean max |{d} error| [{unit}]", title=d)
+        ax.set_ylim(*_convergence_range(mean, lo, hi, has))
+        ax.grid(alpha=0.3)
+        plain_ticks(ax)
+    axes[0].legend(fontsize=8, loc="best")
+    return fig
+
+
+def _convergence_range(mean, lo, hi, has) -> tuple[float, float]:
+    """y range from where the interval exists (else the running mean), never below 0: the mean of
+    a maximum |error| is not negative."""
+    top = np.nanmax(hi[has]) if has.any() else np.nanmax(mean)
+    bottom = np.nanmin(lo[has]) if has.any() else np.nanmin(mean)
+    pad = 0.1 * (top - bottom) if top > bottom else 0.1 * abs(top) or 1.0
+    return max(0.0, bottom - pad), top + pad
+
+
+def ensemble_figures(ds):
+    """{file name: Figure} of an ensemble; envelopes only when the file holds full histories."""
+    finished = ds["status"].values.astype(str) == "finished"
+    if not finished.any():
+        raise ValueError("no finished realisation to plot")
+    figs = {}
+    for q in QUANTITIES:
+        if "error" in ds:
+            figs[f"envelope_{q}.png"] = _envelope(ds, q, finished)
+        figs[f"hist_max_{q}.png"] = _histograms(ds, q, finished)
+        figs[f"convergence_{q}.png"] = _convergence(ds, q, finished)
+    return figs
+
+
+def _history(ds, q: str):
+    err = ds["error"].sel(quantity=q).transpose("time", "direction").values       # (T, 6)
+    t = ds["time"].values
+    fig, axes = _grid(figure_title(f"{q} error history (actual minus ideal rigid motion)", ds))
+    for k, (ax, d) in enumerate(zip(axes, _DIRS)):
+        f, unit = figure_unit(q, d, err[:, k])
+        ax.plot(t, err[:, k] * f, color="C0", lw=1.0)
         ax.set(xlabel="time [s]", ylabel=f"{d} error [{unit}]", title=d)
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    return save_figure(fig, out / f"envelope_{q}.png")
+        plain_ticks(ax)
+    return fig
 
 
-def _histograms(ds, q: str, out: Path, finished) -> Path:
-    peak = ds["max_abs_error"].sel(quantity=q).values[finished]    # (R, 6)
-    fig, axes = _grid(f"per-realisation max |{q} error| over {peak.shape[0]} realisations")
-    for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = axis_unit(q, d)
-        ax.hist(peak[:, k] * f, bins=min(30, max(5, peak.shape[0] // 4)), color="C0", alpha=0.8)
-        ax.set(xlabel=f"max |{d} error| [{unit}]", ylabel="realisations", title=d)
-        ax.grid(alpha=0.3)
-    return save_figure(fig, out / f"hist_max_{q}.png")
+def run_figures(ds):
+    """{file name: Figure} of a single run (``rss6 simulate -o``): its error histories."""
+    if "error" not in ds:
+        raise ValueError("no error histories in the file")
+    return {f"history_{q}.png": _history(ds, q) for q in QUANTITIES}
 
 
-def _convergence(ds, q: str, out: Path, finished) -> Path:
-    peak = ds["max_abs_error"].sel(quantity=q).values[finished]
-    n = np.arange(1, peak.shape[0] + 1)
-    fig, axes = _grid(f"Monte Carlo convergence: running mean of max |{q} error| with 95 % CI "
-                      "(pipeline.stats: none below 8 realisations)")
-    for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = axis_unit(q, d)
-        x = peak[:, k] * f
-        mean, (lo, hi) = running_mean_interval(x, 0.95)
-        ax.fill_between(n, lo, hi, alpha=0.3, label="95 % CI")
-        ax.plot(n, mean, lw=1.2, label="running mean")
-        ax.set(xlabel="realisations", ylabel=f"mean max |{d} error| [{unit}]", title=d)
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    return save_figure(fig, out / f"convergence_{q}.png")
+def _save_all(figs: dict, out_dir) -> list[Path]:
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    return [save_figure(fig, out / name) for name, fig in figs.items()]
 
 
 def plot_ensemble(ds, out_dir) -> list[Path]:
-    """Write the figures to ``out_dir``; envelopes only when the file holds full histories."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    finished = ds["status"].values == "finished"
-    if not finished.any():
-        raise ValueError("no finished realisation to plot")
-    paths = []
-    for q in ("displacement", "velocity", "acceleration"):
-        if "error" in ds:
-            paths.append(_envelope(ds, q, out, finished))
-        paths.append(_histograms(ds, q, out, finished))
-        paths.append(_convergence(ds, q, out, finished))
-    return paths
+    """Write an ensemble's figures to ``out_dir``."""
+    return _save_all(ensemble_figures(ds), out_dir)
+
+
+def plot_run(ds, out_dir) -> list[Path]:
+    """Write a single run's error-history figures to ``out_dir``."""
+    return _save_all(run_figures(ds), out_dir)

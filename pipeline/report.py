@@ -22,7 +22,7 @@ from rss6core.models import default_integrator, default_time_step
 
 from .run import EnsembleSpec, run_ensemble
 from .scenes import find_scene
-from .plots import axis_unit, draw_envelope, plt, save_figure
+from .plots import draw_abs_envelope, figure_unit, plain_ticks, plt, save_figure
 from . import report_text as text
 from .scene_variant import scene_variant
 from .stats import ensemble_stats, min_n_for_quantile
@@ -137,51 +137,67 @@ def _clearance_mm(scene) -> float:
 # --- figures ------------------------------------------------------------------
 
 def _rigid_figure(scene, t, out: Path) -> Path:
+    return save_figure(rigid_figure(scene, t), out / f"{scene.name}_rigid.png")
+
+
+def rigid_figure(scene, t):
+    """The ideal rigid platform motion (pose, rate, acceleration per direction) of a scene."""
     pm = rigid_motion(scene, t).platform
-    fig, axes = plt.subplots(3, 6, figsize=(17, 7.5), constrained_layout=True, sharex=True)
-    fig.suptitle(f"scene {scene.name}: ideal rigid platform motion (eq. 35), the reference of every error")
+    fig, axes = plt.subplots(3, 6, figsize=(18, 8), constrained_layout=True, sharex=True)
+    fig.suptitle(f"scene {scene.name}: ideal rigid platform motion (eq. 35), the reference of "
+                 f"every error; {len(t)} instants over {t[-1] - t[0]:.3g} s")
     labels = ("x", "y", "z", "n1", "n2", "n3")
     for row, (q, values) in enumerate((("displacement", pm.pose), ("velocity", pm.pose_rate),
                                        ("acceleration", pm.pose_acc))):
         for k in range(6):
-            f, unit = axis_unit(q, DIRECTIONS[k])
+            f, unit = figure_unit(q, DIRECTIONS[k], values[:, k])
             ax = axes[row, k]
             ax.plot(t, values[:, k] * f, color="0.3", lw=1.2)
             ax.set(title=f"{labels[k]} {q}", ylabel=f"[{unit}]")
             ax.grid(alpha=0.3)
+            plain_ticks(ax)
             if row == 2:
                 ax.set_xlabel("time [s]")
-    return save_figure(fig, out / f"{scene.name}_rigid.png")
+    return fig
 
 
 def _error_figure(scene, quantity: str, runs: dict, out: Path) -> Path:
+    return save_figure(error_figure(scene, quantity, runs), out / f"{scene.name}_{quantity}.png")
+
+
+def error_figure(scene, quantity: str, runs: dict):
     """Like the paper's figs. 11-16: the platform error (actual minus rigid) of the elastic level
-    (ideal joints) and, per clearance level, one realisation and the ensemble envelope.
-    ``runs``: the scene's opened files by role, as write_report holds them."""
+    (ideal joints) and, per clearance level, one realisation (signed, left) and the envelope of
+    |error| over the ensemble (right) per direction.  ``runs``: the scene's opened files by role."""
     elastic = runs["elastic"]
-    fig, axes = plt.subplots(len(LEVELS), 6, figsize=(18, 3.3 * len(LEVELS) + 0.6),
+    el = elastic["error"].sel(quantity=quantity).transpose("time", "direction").values
+    fig, axes = plt.subplots(2 * len(LEVELS), 6, figsize=(19, 5.2 * len(LEVELS) + 0.8),
                              constrained_layout=True, sharex=True)
     fig.suptitle(f"scene {scene.name} ({_clearance_mm(scene)} mm clearances): platform {quantity} "
-                 "error, actual minus ideal rigid motion")
-    for row, level in enumerate(LEVELS):
+                 "error, actual minus ideal rigid motion; levels " + ", ".join(LEVELS))
+    for i, level in enumerate(LEVELS):
         ds = runs[level]
         t = ds["time"].values
-        err = ds["error"].sel(quantity=quantity).values[ds["status"].values == "finished"]  # (R, T, 6)
+        err = ds["error"].sel(quantity=quantity).transpose("realization", "time", "direction")
+        err = err.values[ds["status"].values.astype(str) == "finished"]        # (R, T, 6)
         for k, d in enumerate(DIRECTIONS):
-            f, unit = axis_unit(quantity, d)
-            ax = axes[row, k]
-            e = err[..., k] * f
-            draw_envelope(ax, t, e, f"{level}: 5-95 % of {e.shape[0]} realisations",
-                          f"{level}: max |error| over realisations", color="C0", ls="--", lw=0.7)
-            ax.plot(t, e[0], color="C3", lw=0.8, label=f"{level}: realisation 0")
-            ax.plot(elastic["time"].values, elastic["error"].sel(quantity=quantity).values[:, k] * f,
-                    color="k", lw=1.0, label="elastic, ideal joints")
-            ax.set(title=f"{level} level: {d}", ylabel=f"{d} [{unit}]")
-            ax.grid(alpha=0.3)
-            if row == len(LEVELS) - 1:
-                ax.set_xlabel("time [s]")
-        axes[row, 0].legend(fontsize=7, loc="lower left")
-    return save_figure(fig, out / f"{scene.name}_{quantity}.png")
+            f, unit = figure_unit(quantity, d, err[..., k])
+            signed, envelope = axes[2 * i, k], axes[2 * i + 1, k]
+            signed.plot(t, err[0, :, k] * f, color="C3", lw=0.8, label=f"{level}: realisation 0")
+            signed.plot(elastic["time"].values, el[:, k] * f, color="k", lw=1.0,
+                        label="elastic, ideal joints")
+            signed.set(title=f"{level}: {d} error", ylabel=f"[{unit}]")
+            draw_abs_envelope(envelope, t, err[..., k] * f, color="k", ls="--", lw=0.7)
+            envelope.set(title=f"{level}: |{d} error|, n = {err.shape[0]}", ylabel=f"[{unit}]")
+            envelope.set_ylim(bottom=0)
+            for ax in (signed, envelope):
+                ax.grid(alpha=0.3)
+                plain_ticks(ax)
+        axes[2 * i, 0].legend(fontsize=7, loc="best")
+        axes[2 * i + 1, 0].legend(fontsize=7, loc="upper left")
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    return fig
 
 
 def _open_run(path):

@@ -12,6 +12,7 @@ that a near-zero component cannot dominate.
 from __future__ import annotations
 
 import dataclasses
+import textwrap
 import time
 from dataclasses import dataclass
 
@@ -178,7 +179,7 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
                 "direction": list(DIRECTIONS), "statistic": list(STATISTICS)},
         attrs={"reference": reference.label, "reference_check": check.label,
                "reference_check_seconds_per_realization": fine["seconds_per_realization"],
-               "realizations": n, "seed": seed, "scene_toml": scene.source_text,
+               "realizations": n, "seed": seed, "scene_name": scene.name, "scene_toml": scene.source_text,
                "settle_time_s": scene.simulation.settle_time})
     ds["max_relative_error"] = ds["relative_error"].max(("quantity", "direction", "statistic"))
     ds["max_relative_error"].attrs["units"] = "1"
@@ -267,18 +268,22 @@ _COLOURS = {"rigid": "k", "quasi-static": "tab:green", "elastic": "tab:blue", "p
 
 
 def _plot_tradeoff(ds, path, tolerance, rec) -> None:
+    from .plots import save_figure
+    save_figure(tradeoff_figure(ds, tolerance, rec), path)
+
+
+def tradeoff_figure(ds, tolerance, rec):
+    """Cost against error of every setting; the Pareto front numbered and named in a side list."""
     from .plots import plt   # the Agg backend, set once there
     cost = ds["seconds_per_realization"].values
     err = np.maximum(ds["max_relative_error"].values, 1e-6)
     labels, models = ds["setting"].values, ds["model"].values
-    fig, ax = plt.subplots(figsize=(9, 6))
+    fig, (ax, side) = plt.subplots(1, 2, figsize=(13, 6.5), constrained_layout=True,
+                                   gridspec_kw={"width_ratios": [2.2, 1]})
     for m in dict.fromkeys(models):
         sel = models == m
         ax.scatter(cost[sel], err[sel], color=_COLOURS.get(m, "grey"), label=m, zorder=3)
     front = pareto_front(cost, err)
-    for n, i in enumerate(front):   # the others crowd each other; every setting is in tradeoff.csv
-        ax.annotate(labels[i], (cost[i], err[i]), fontsize=6, xytext=(6, 4 - 12 * (n % 2)),
-                    textcoords="offset points")
     ax.plot(cost[front], err[front], "k--", lw=1, label="Pareto front", zorder=2)
     ax.axhline(tolerance, color="grey", lw=0.8, ls=":", label=f"tolerance {100 * tolerance:g} %")
     ref = labels == ds.attrs["reference"]
@@ -289,17 +294,37 @@ def _plot_tradeoff(ds, path, tolerance, rec) -> None:
         ax.scatter(cost[i], err[i], s=160, facecolor="none", edgecolor="k", lw=1.5,
                    label=f"cheapest within tolerance ({rec['speedup_vs_reference']:.0f}x cheaper)",
                    zorder=5)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("wall time per realisation, batched (s)")
-    ax.set_ylabel("max relative error of the ensemble statistics (1)")
-    ax.set_title(f"speed against accuracy, {ds.attrs.get('realizations')} realisations (settings on the "
-                 f"Pareto front named)\nreference: {ds.attrs['reference']}", fontsize=9)
+    ax.set(xscale="log", yscale="log", xlabel="wall time per realisation, batched [s]",
+           ylabel="max relative error of the ensemble statistics [1]")
     ax.legend(fontsize=7, loc="lower left")
     ax.grid(True, which="both", lw=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130, bbox_inches="tight")
-    plt.close(fig)
+    _number_points(fig, ax, cost[front], err[front])
+    side.axis("off")
+    side.text(0, 1, "Pareto front (every setting is in tradeoff.csv):\n" + "\n".join(
+        textwrap.fill(f"{n + 1}: {labels[i]}", 44, subsequent_indent="   ")
+        for n, i in enumerate(front)),
+        va="top", fontsize=7, family="monospace", transform=side.transAxes)
+    fig.suptitle("\n".join(textwrap.wrap(
+        f"speed against accuracy: scene {ds.attrs.get('scene_name', '?')}, every level, "
+        f"n = {ds.attrs.get('realizations')} per setting; reference {ds.attrs['reference']}", 110)),
+        fontsize=10)
+    return fig
+
+
+def _number_points(fig, ax, x, y) -> None:
+    """Number the points 1, 2, ...; each label takes the first offset overlapping no earlier one
+    (a label that finds none is left out: the side list still names the point)."""
+    renderer = fig.canvas.get_renderer()
+    placed = []
+    for n, (xi, yi) in enumerate(zip(x, y)):
+        for dx, dy in ((5, 4), (5, -10), (-12, 4), (-12, -10), (5, 14), (-12, 14)):
+            a = ax.annotate(str(n + 1), (xi, yi), fontsize=7, xytext=(dx, dy),
+                            textcoords="offset points")
+            box = a.get_window_extent(renderer)
+            if not any(box.overlaps(b) for b in placed):
+                placed.append(box)
+                break
+            a.remove()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -444,7 +469,7 @@ def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene
                           {"units": "s", "long_name": lim.replace("_", " ") + " time step (NaN: none)"})
     ds = ds.assign_coords(sweep=names)
     ds.attrs = {"central_difference_limit_s": limit, "tolerance": tolerance, "realizations": n,
-                "seed": seed, "scene_toml": scene.source_text}
+                "seed": seed, "scene_name": scene.name, "scene_toml": scene.source_text}
     return ds
 
 
@@ -479,40 +504,51 @@ def write_stability(ds: xr.Dataset, outdir) -> None:
 
 
 def _plot_stability(ds, path) -> None:
+    from .plots import save_figure
+    save_figure(stability_figure(ds), path)
+
+
+def stability_figure(ds):
+    """Per sweep the status of every step, and the paper level's error against the step."""
+    from matplotlib.ticker import NullFormatter
+
     from .plots import plt   # the Agg backend, set once there
     colour = {"stable": "tab:green", "inaccurate": "tab:orange", "failed": "tab:red"}
     level, status, dt = ds["level"].values, ds["status"].values, ds["dt_s"].values
     names = ds["sweep_name"].values
-    fig, axes = plt.subplots(1, 3, figsize=(15, 5), gridspec_kw={"width_ratios": [1.2, 1.2, 1]})
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5.5), constrained_layout=True,
+                             gridspec_kw={"width_ratios": [1.2, 1.2, 1]})
     for ax, lv in zip(axes[:2], ("elastic", "contact")):
         keys = list(dict.fromkeys(names[level == lv]))
         for y, key in enumerate(keys):
             sel = names == key
             ax.scatter(dt[sel], np.full(sel.sum(), y), c=[colour[s] for s in status[sel]], s=60)
         ax.set_yticks(range(len(keys)))
-        ax.set_yticklabels([k.removeprefix(f"{lv} ") for k in keys], fontsize=8)
-        ax.set_xscale("log")
-        ax.set_xlabel("time step (s)")
-        ax.set_title(f"{lv} level", fontsize=10)
+        ax.set_yticklabels([textwrap.fill(k.removeprefix(f"{lv} "), 18) for k in keys], fontsize=8)
+        ax.set_ylim(-0.5, max(len(keys), 1) - 0.5)
+        ax.set(xscale="log", xlabel="time step [s]")
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_title(f"{lv} level: status per step", fontsize=10)
         ax.grid(True, which="both", lw=0.3)
     axes[0].axvline(ds.attrs["central_difference_limit_s"], color="k", ls="--", lw=0.8,
                     label="2/omega_max")
     for st, c in colour.items():
         axes[0].scatter([], [], color=c, label=st)
-    axes[0].legend(fontsize=7, loc="center left")
+    fig.legend(*axes[0].get_legend_handles_labels(), fontsize=8, loc="outside lower center",
+               ncol=4)
     paper = level == "paper"
     order = np.argsort(dt[paper])
     h, v = dt[paper][order], ds["velocity_mean_peak"].values[paper][order]
     axes[2].loglog(h, v * 1e3, "o-", color="tab:orange", label="paper level")
     if len(h):
         axes[2].loglog(h, v[0] * 1e3 * h[0] / h, "k:", lw=0.8, label="proportional to 1/dt")
-    from matplotlib.ticker import NullFormatter
     axes[2].xaxis.set_minor_formatter(NullFormatter())
-    axes[2].set_xlabel("time step (s)")
-    axes[2].set_ylabel("mean over realisations of max |velocity error|,\nlargest of x, y, z (mm/s)")
+    axes[2].set_xlabel("time step [s]")
+    axes[2].set_ylabel("mean over realisations of max |velocity error|,\nlargest of x, y, z [mm/s]")
     axes[2].set_title("paper level: error against time step", fontsize=10)
     axes[2].legend(fontsize=7)
     axes[2].grid(True, which="both", lw=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    fig.suptitle(f"time-step stability: scene {ds.attrs.get('scene_name', '?')}, elastic, contact "
+                 f"and paper levels, n = {ds.attrs.get('realizations')} per step, tolerance "
+                 f"{100 * ds.attrs.get('tolerance', float('nan')):g} %", fontsize=10)
+    return fig

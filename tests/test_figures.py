@@ -1,0 +1,218 @@
+"""Every figure rss6 writes is legible: no two texts overlap and none leaves the canvas.
+
+The figures are the real ones, built by the same functions the commands save from, on tiny
+inputs: a smoke quasi-static ensemble (``--store full``), a ``simulate -o`` file, and hand-made
+trade-off and stability Datasets shaped like the studies' output."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+import xarray as xr
+from matplotlib.text import Text
+
+from pipeline.cli import main
+from pipeline.filecheck import open_results
+from pipeline.plots import ensemble_figures, figure_unit, run_figures
+from pipeline.report import LEVELS, error_figure, rigid_figure
+from pipeline.stats import MIN_N_MEAN, estimates, running_mean_interval
+from pipeline.store import open_ensemble, write_netcdf
+from pipeline.study import recommend, stability_figure, tradeoff_figure
+
+SMOKE = str(Path(__file__).resolve().parent.parent / "configs" / "smoke.toml")
+SLACK = 0.5   # px: boxes that merely touch do not overlap
+
+
+def _tick_labels(fig) -> tuple[list[Text], set[int]]:
+    """The tick labels matplotlib draws (ticks inside the view limits of a shown axis, label
+    visible), and the ids of every tick label (the undrawn ones of the tick pool included)."""
+    drawn, every = [], set()
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            every |= {id(lb) for tick in axis.majorTicks + axis.minorTicks
+                      for lb in (tick.label1, tick.label2)}
+            if not (ax.axison and axis.get_visible()):
+                continue
+            for tick in axis._update_ticks():     # the ticks Axis.draw chooses
+                drawn += [lb for lb in (tick.label1, tick.label2) if lb.get_visible()]
+    return drawn, every
+
+
+def legibility_problems(fig) -> list[str]:
+    """Pairs of visible texts of ``fig`` whose rendered extents overlap, and texts outside the
+    canvas (titles, axis labels, tick labels, offset texts, legends, annotations)."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    ticks, every_tick = _tick_labels(fig)
+    others = [t for t in fig.findobj(Text) if id(t) not in every_tick and t.get_visible()]
+    texts = [t for t in ticks + others if t.get_text().strip()]
+    boxes = [t.get_window_extent(renderer) for t in texts]
+    canvas = fig.bbox
+    problems = [f"outside the canvas: {t.get_text()!r}" for t, b in zip(texts, boxes)
+                if b.x0 < canvas.x0 - SLACK or b.y0 < canvas.y0 - SLACK
+                or b.x1 > canvas.x1 + SLACK or b.y1 > canvas.y1 + SLACK]
+    x0, y0, x1, y1 = (np.array([getattr(b, k) for b in boxes]) for k in ("x0", "y0", "x1", "y1"))
+    over = ((np.minimum(x1[:, None], x1) - np.maximum(x0[:, None], x0) > SLACK)
+            & (np.minimum(y1[:, None], y1) - np.maximum(y0[:, None], y0) > SLACK))
+    for i, j in zip(*np.nonzero(np.triu(over, 1))):
+        problems.append(f"overlap: {texts[i].get_text()!r} and {texts[j].get_text()!r}")
+    return problems
+
+
+def assert_legible(figs: dict) -> None:
+    """Every figure of {name: Figure} legible; closes them."""
+    try:
+        bad = {name: legibility_problems(fig) for name, fig in figs.items()}
+    finally:
+        for fig in figs.values():
+            plt.close(fig)
+    bad = {k: v[:5] for k, v in bad.items() if v}
+    assert not bad, bad
+
+
+@pytest.fixture(scope="module")
+def full_ensemble(tmp_path_factory):
+    path = tmp_path_factory.mktemp("figs") / "smoke.nc"
+    assert main(["run", SMOKE, "-n", "12", "--workers", "2", "--model", "quasi-static",
+                 "--store", "full", "-o", str(path)]) == 0
+    return path
+
+
+@pytest.fixture(scope="module")
+def simulate_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("figs") / "sim.nc"
+    assert main(["simulate", SMOKE, "--model", "elastic", "-o", str(path)]) == 0
+    return path
+
+
+def test_ensemble_figures_are_legible(full_ensemble):
+    figs = ensemble_figures(open_ensemble(full_ensemble))
+    assert len(figs) == 9
+    for name, fig in figs.items():
+        title = fig._suptitle.get_text()
+        flat = " ".join(title.split())
+        assert "scene smoke" in flat and "quasi-static level" in flat and "smoke.nc" in flat
+        assert "n = 12" in flat, (name, title)
+    assert_legible(figs)
+
+
+def test_run_figures_are_legible(simulate_file):
+    figs = run_figures(open_results(simulate_file))
+    assert set(figs) == {f"history_{q}.png" for q in ("displacement", "velocity", "acceleration")}
+    assert all("elastic level" in " ".join(f._suptitle.get_text().split()) for f in figs.values())
+    assert_legible(figs)
+
+
+def test_report_figures_are_legible(smoke, full_ensemble, simulate_file):
+    ens = open_ensemble(full_ensemble)
+    runs = {"elastic": open_results(simulate_file)} | {level: ens for level in LEVELS}
+    figs = {"rigid": rigid_figure(smoke, ens["time"].values)}
+    figs |= {q: error_figure(smoke, q, runs) for q in ("displacement", "velocity", "acceleration")}
+    assert_legible(figs)
+
+
+def _tradeoff_dataset() -> xr.Dataset:
+    labels = ["rigid 1 ms", "quasi-static 1 ms", "elastic newmark 1 ms 4 el",
+              "elastic newmark 0.5 ms 8 el", "paper newmark 1 ms 4 el", "paper newmark 0.5 ms 4 el",
+              "contact generalized-alpha 0.1 ms 4 el, adaptive 1e-06 m down to 6.25 us",
+              "contact generalized-alpha 0.05 ms 4 el, adaptive 1e-06 m down to 3.125 us",
+              "contact generalized-alpha 0.05 ms 8 el, K x10"]
+    models = [s.split()[0] for s in labels]
+    cost = [0.01, 0.02, 0.5, 1.1, 0.6, 1.2, 30.0, 61.0, 70.0]
+    err = [0.9, 0.5, 0.3, 0.29, 0.12, 0.04, 0.011, 0.0, 0.009]
+    return xr.Dataset({"seconds_per_realization": ("setting", cost),
+                       "max_relative_error": ("setting", err), "model": ("setting", models),
+                       "failed": ("setting", np.zeros(len(labels), int))},
+                      coords={"setting": labels},
+                      attrs={"reference": labels[7], "realizations": 8, "scene_name": "smoke"})
+
+
+def _stability_dataset() -> xr.Dataset:
+    rows = []
+    for level, integ, scale, steps in (("elastic", "newmark", 1.0, [1e-4, 1e-3, 1e-2]),
+                                       ("elastic", "central-difference", 1.0, [1e-6, 1e-5, 1e-4]),
+                                       ("contact", "generalized-alpha", 1.0, [1e-5, 1e-4, 1e-3]),
+                                       ("contact", "generalized-alpha", 10.0, [1e-5, 1e-4, 1e-3]),
+                                       ("paper", "newmark", 1.0, [1e-4, 5e-4, 1e-3, 2e-3])):
+        for dt, status in zip(steps, ("stable", "inaccurate", "failed", "failed")):
+            name = f"{level} {integ}" + (f" K x{scale:g}" if scale != 1 else "")
+            rows.append((level, dt, status, name, 1e-3 / dt))
+    level, dt, status, name, v = zip(*rows)
+    return xr.Dataset({"level": ("run", list(level)), "dt_s": ("run", list(dt)),
+                       "status": ("run", list(status)), "sweep_name": ("run", list(name)),
+                       "velocity_mean_peak": ("run", list(v))},
+                      attrs={"central_difference_limit_s": 3e-6, "tolerance": 0.05,
+                             "realizations": 2, "scene_name": "smoke"})
+
+
+def test_study_figures_are_legible():
+    ds = _tradeoff_dataset()
+    figs = {"tradeoff": tradeoff_figure(ds, 0.05, recommend(ds, 0.05)),
+            "stability": stability_figure(_stability_dataset())}
+    assert_legible(figs)
+
+
+def test_the_check_finds_overlaps_and_text_outside():
+    """The helper itself: two texts on one spot, and a title far wider than the canvas."""
+    fig, ax = plt.subplots(figsize=(4, 3))
+    ax.text(0.5, 0.5, "one", transform=ax.transAxes)
+    ax.text(0.5, 0.5, "two", transform=ax.transAxes)
+    fig.suptitle("a title " * 20)
+    problems = legibility_problems(fig)
+    plt.close(fig)
+    assert any("'one' and 'two'" in p for p in problems)
+    assert any(p.startswith("outside the canvas: 'a title") for p in problems)
+
+
+def test_figure_units_follow_the_magnitude():
+    assert figure_unit("acceleration", "z", np.array([3.0, -1300.0])) == (1.0, "m/s$^2$")
+    assert figure_unit("acceleration", "z", np.array([1e-3, 2e-3])) == (1e3, "mm/s$^2$")
+    assert figure_unit("displacement", "x", np.array([1e-4, 0.0])) == (1e3, "mm")
+    assert figure_unit("velocity", "y", np.array([0.02])) == (1e3, "mm/s")
+    assert figure_unit("displacement", "rx", np.array([2e-4, -3e-3])) == (1e3, "mrad")
+    assert figure_unit("acceleration", "rz", np.array([0.5, 40.0])) == (1.0, "rad/s$^2$")
+
+
+def test_histogram_markers_and_convergence_interval_come_from_stats(full_ensemble):
+    """Mean and q95 lines sit at pipeline.stats' numbers; the interval starts at MIN_N_MEAN; the
+    y range is not below zero."""
+    ds = open_ensemble(full_ensemble)
+    figs = ensemble_figures(ds)
+    try:
+        si = ds["max_abs_error"].sel(quantity="acceleration", direction="z").values
+        f, unit = figure_unit("acceleration", "z", si)
+        peak = si * f
+        hist = figs["hist_max_acceleration.png"].axes[2]
+        lines = [ln.get_xdata()[0] for ln in hist.get_lines()]
+        np.testing.assert_allclose(lines, estimates(peak, ("mean", "q95")), rtol=1e-12)
+        assert f"[{unit}]" in hist.get_xlabel()
+        conv = figs["convergence_acceleration.png"].axes[2]
+        band = conv.collections[0].get_paths()[0].vertices[:, 0]
+        assert band.min() == MIN_N_MEAN
+        mean, (lo, _) = running_mean_interval(peak, 0.95)
+        np.testing.assert_allclose(conv.get_lines()[0].get_ydata(), mean)
+        assert conv.get_ylim()[0] >= 0.0
+    finally:
+        for fig in figs.values():
+            plt.close(fig)
+
+
+def test_plot_command_on_a_simulate_file(simulate_file, tmp_path, capsys):
+    out = tmp_path / "plots"
+    assert main(["plot", str(simulate_file), "-o", str(out)]) == 0
+    printed = capsys.readouterr().out.split()
+    names = sorted(Path(p).name for p in printed)
+    assert names == ["history_acceleration.png", "history_displacement.png",
+                     "history_velocity.png"]
+    assert all((out / n).stat().st_size > 10_000 for n in names)
+
+
+def test_plot_command_on_a_failed_simulate_file_gives_one_line(simulate_file, tmp_path, capsys):
+    ds = open_results(simulate_file).load()
+    bad = tmp_path / "failed.nc"
+    write_netcdf(ds.assign_attrs(status="failed", status_message="Newton did not converge"), bad)
+    assert main(["plot", str(bad), "-o", str(tmp_path / "p")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "the run failed" in err and "Newton" in err
