@@ -34,7 +34,8 @@ from .outputs import OutputLock, PartsManifest
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
                     realization_dataset, write_netcdf)
 
-__all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk", "local_cluster", "BLAS_ENV"]
+__all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk", "local_cluster", "BLAS_ENV",
+           "SchedulerUnavailable"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -191,12 +192,54 @@ def _workers_ignore_ctrl_c():
         signal.signal(signal.SIGINT, previous)
 
 
+CONNECT_TIMEOUT_S = 5.0   # an external scheduler that does not answer in this time is unreachable
+WORKER_TIMEOUT_S = 60.0   # default wait, s, for an external scheduler that has no workers
+POLL_S = 1.0              # how often, s, the workers of an external scheduler are counted
+
+
+class SchedulerUnavailable(RuntimeError):
+    """The external dask scheduler cannot be reached, or has had no workers for too long (an
+    environment problem: the finished chunks stay in OUT.nc.parts)."""
+
+
 def _client(workers: int, scheduler: str | None):
     from dask.distributed import Client
     if scheduler:
-        return Client(scheduler, timeout="20s"), None
+        try:
+            return Client(scheduler, timeout=CONNECT_TIMEOUT_S), None
+        except (OSError, ValueError) as exc:  # refused, timed out, or a malformed address
+            raise SchedulerUnavailable(
+                f"cannot reach the dask scheduler at {scheduler} within {CONNECT_TIMEOUT_S:g} s "
+                f"({type(exc).__name__}); check the address (e.g. tcp://HOST:8786) and that the "
+                "scheduler is running") from None
     cluster = local_cluster(workers)
     return Client(cluster), cluster
+
+
+def _finished(client, futures: list, scheduler: str | None, worker_timeout: float):
+    """The futures as they finish; on an external scheduler the workers are counted every POLL_S
+    and SchedulerUnavailable is raised once it has had none for ``worker_timeout`` s."""
+    from dask.distributed import as_completed
+    if not scheduler:
+        yield from as_completed(futures)
+        return
+    from dask.distributed import wait
+    pending, idle_since = set(futures), None
+    while pending:
+        try:
+            done = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED").done
+        except TimeoutError:
+            done = set()
+        pending -= done
+        yield from done
+        if done or client.nthreads():
+            idle_since = None
+            continue
+        idle_since = time.monotonic() if idle_since is None else idle_since
+        if time.monotonic() - idle_since >= worker_timeout:
+            raise SchedulerUnavailable(
+                f"the dask scheduler at {scheduler} has had no workers for "
+                f"{time.monotonic() - idle_since:.0f} s (--worker-timeout {worker_timeout:g})")
 
 
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
@@ -224,17 +267,21 @@ class EnsembleOutcome:
 
 
 def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
-             chunk: int | None = None, progress: bool = True, annotate=None) -> EnsembleOutcome:
+             chunk: int | None = None, progress: bool = True, annotate=None,
+             worker_timeout: float = WORKER_TIMEOUT_S) -> EnsembleOutcome:
     """Run realisations 0..n-1 not yet stored in ``output`` (one writer at a time: OUT.lock).
 
     ``annotate(dataset) -> dict``, if given, adds global attributes (e.g. requirement verdicts)
     computed from the finished ensemble before it is written; the file is rewritten only if they
-    change it."""
+    change it. ``worker_timeout`` (s): how long an external ``scheduler`` may have no workers
+    before SchedulerUnavailable is raised."""
     if n < 1:
         raise ValueError(f"the number of realisations must be at least 1, got {n}")
     chunk = default_chunk(n, workers) if chunk is None else chunk
     if chunk < 1 or workers < 1:
         raise ValueError("--chunk and --workers must be at least 1")
+    if not worker_timeout > 0:
+        raise ValueError(f"--worker-timeout must be positive, got {worker_timeout}")
     output = Path(output)
     with OutputLock(output):
         manifest = PartsManifest(_parts_dir(output), spec.attrs())
@@ -245,7 +292,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
             bar = _Progress(n, n - len(todo)) if progress else None
             if bar:
                 bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
-            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar)
+            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
         merged = pieces[0] if up_to_date else finish_ensemble(pieces, spec.scene(), **_kw(spec))
         extra = annotate(merged) if annotate else {}
@@ -259,14 +306,13 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
 
 
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
-             scheduler: str | None, bar) -> list:
+             scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S) -> list:
     """Run the chunks on dask; each finished chunk is stored as a part at once."""
-    from dask.distributed import as_completed
     client, cluster = _client(workers, scheduler)
     pieces = []
     try:
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
-        for future in as_completed(futures):
+        for future in _finished(client, futures, scheduler, worker_timeout):
             ds = future.result()
             first, last = int(ds.realization[0]), int(ds.realization[-1])
             manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
