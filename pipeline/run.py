@@ -217,22 +217,19 @@ def _client(workers: int, scheduler: str | None):
 
 
 def _finished(client, futures: list, scheduler: str | None, worker_timeout: float):
-    """The futures as they finish; on an external scheduler the workers are counted every POLL_S
-    and SchedulerUnavailable is raised once it has had none for ``worker_timeout`` s."""
+    """The chunk results as they finish; on an external scheduler the workers are counted every
+    POLL_S and SchedulerUnavailable is raised once it has had none for ``worker_timeout`` s."""
     from dask.distributed import as_completed
     if not scheduler:
-        yield from as_completed(futures)
+        for future in as_completed(futures):
+            yield future.result()
         return
-    from dask.distributed import wait
+    _quiet_lost_results()
     pending, idle_since = set(futures), None
     while pending:
-        try:
-            done = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED").done
-        except TimeoutError:
-            done = set()
-        pending -= done
-        yield from done
-        if done or client.nthreads():
+        got = list(_gathered(client, pending))
+        yield from got
+        if got or client.nthreads():
             idle_since = None
             continue
         idle_since = time.monotonic() if idle_since is None else idle_since
@@ -240,6 +237,44 @@ def _finished(client, futures: list, scheduler: str | None, worker_timeout: floa
             raise SchedulerUnavailable(
                 f"the dask scheduler at {scheduler} has had no workers for "
                 f"{time.monotonic() - idle_since:.0f} s (--worker-timeout {worker_timeout:g})")
+
+
+def _lost_result_record(record) -> bool:
+    """False for dask's log records about a result lost with its worker, which _gathered handles:
+    "Couldn't gather ... rescheduling", and the gather left waiting for it that ends with AllExit
+    when the client closes."""
+    text = record.getMessage()
+    return not ("Couldn't gather" in text or ("never retrieved" in text and "AllExit" in text))
+
+
+def _quiet_lost_results() -> None:
+    import logging
+    for name in ("distributed.client", "asyncio"):
+        logger = logging.getLogger(name)
+        if _lost_result_record not in logger.filters:
+            logger.addFilter(_lost_result_record)
+
+
+def _gathered(client, pending: set):
+    """Results of the futures in ``pending`` that finish within about POLL_S, removed from it.
+
+    A result held by a worker that has died cannot be gathered (dask computes it again, and
+    gathering would wait for that); such a future stays in ``pending``."""
+    from dask.distributed import wait
+    try:
+        done = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED").done
+    except TimeoutError:
+        return
+    held = client.who_has(list(done))
+    for future in done:
+        if future.status == "finished" and not held.get(future.key):
+            continue   # its worker is gone
+        try:
+            result = future.result(timeout=POLL_S)
+        except TimeoutError:   # the worker died just now
+            continue
+        pending.discard(future)
+        yield result
 
 
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
@@ -312,8 +347,7 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
     pieces = []
     try:
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
-        for future in _finished(client, futures, scheduler, worker_timeout):
-            ds = future.result()
+        for ds in _finished(client, futures, scheduler, worker_timeout):
             first, last = int(ds.realization[0]), int(ds.realization[-1])
             manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
             pieces.append(ds)
