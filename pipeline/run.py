@@ -271,8 +271,8 @@ def _gathered(client, pending: set):
             continue   # its worker is gone
         try:
             result = future.result(timeout=POLL_S)
-        except TimeoutError:   # the worker died just now
-            continue
+        except TimeoutError:   # the worker died just now: ask again who holds the others
+            return
         pending.discard(future)
         yield result
 
