@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from pipeline.cli import main
 from pipeline.store import open_ensemble
 
 DASK = str(Path(sys.executable).with_name("dask"))
@@ -49,6 +50,17 @@ def _error_line(err: str) -> str:
     lines = [ln for ln in err.strip().splitlines() if not ln.startswith("rss6 run:")]
     assert len(lines) == 1 and "Traceback" not in err, err
     return lines[0]
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "soon"])
+def test_worker_timeout_is_checked_before_work(tmp_path, capsys, value):
+    with pytest.raises(SystemExit) as exit_:
+        main(RUN[3:] + ["--scheduler", "tcp://127.0.0.1:1", "--worker-timeout", value,
+                        "-o", str(tmp_path / "out.nc")])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--worker-timeout" in err, err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_unreachable_scheduler_is_one_line_and_exit_2_within_seconds(tmp_path):
@@ -94,8 +106,8 @@ def test_scheduler_that_loses_every_worker_stops_and_keeps_the_parts(tmp_path):
         procs.append(_start(["worker", address, "--nworkers", "1", "--nthreads", "1", "--no-nanny",
                              "--no-dashboard", "--host", "127.0.0.1"], worker_log))
         _wait_for(lambda: "Registered to" in worker_log.read_text(), 30, "new worker registered")
-        rerun = subprocess.run(RUN + ["--scheduler", address, "--worker-timeout", "3", "-o", str(out)],
-                               cwd=tmp_path, capture_output=True, text=True, timeout=60)
+        rerun = subprocess.run(RUN + ["--scheduler", address, "--worker-timeout", "3",
+                                      "-o", str(out)], cwd=tmp_path, capture_output=True, text=True, timeout=60)
     finally:
         for proc in procs:
             _stop(proc)
