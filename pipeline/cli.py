@@ -155,9 +155,9 @@ def _run(args) -> int:
                            worker_timeout=args.worker_timeout)
     except SchedulerUnavailable as exc:
         parts = output.with_name(output.name + ".parts")
-        kept = (f"the finished chunks are kept in {parts}" if parts.exists()
-                else "no chunk had finished")
-        print(f"rss6: error: {exc}; {kept}; rerun the same command to resume", file=sys.stderr)
+        kept = (f"; the finished chunks are kept in {parts}; rerun the same command to resume"
+                if parts.exists() else "")
+        print(f"rss6: error: {exc}{kept}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"rss6: interrupted; finished chunks are kept in {output}.parts; rerun the same "

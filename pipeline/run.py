@@ -207,11 +207,14 @@ def _client(workers: int, scheduler: str | None):
     if scheduler:
         try:
             return Client(scheduler, timeout=CONNECT_TIMEOUT_S), None
-        except (OSError, ValueError) as exc:  # refused, timed out, or a malformed address
+        except ValueError as exc:  # a malformed address
+            raise SchedulerUnavailable(f"--scheduler {scheduler!r}: {exc}; the address reads e.g. "
+                                       "tcp://HOST:8786") from None
+        except OSError:  # refused or timed out
             raise SchedulerUnavailable(
-                f"cannot reach the dask scheduler at {scheduler} within {CONNECT_TIMEOUT_S:g} s "
-                f"({type(exc).__name__}); check the address (e.g. tcp://HOST:8786) and that the "
-                "scheduler is running") from None
+                f"cannot reach the dask scheduler at {scheduler} within {CONNECT_TIMEOUT_S:g} s; "
+                "check the address (e.g. tcp://HOST:8786) and that the scheduler is running"
+            ) from None
     cluster = local_cluster(workers)
     return Client(cluster), cluster
 
