@@ -125,3 +125,26 @@ def test_scheduler_that_loses_every_worker_stops_and_keeps_the_parts(tmp_path):
     assert f"wrote {out}: 40 realisations" in rerun.stdout, rerun.stdout
     assert f"{len(stored)} of them stored before" in rerun.stdout, rerun.stdout
     assert list(open_ensemble(out)["realization"].values) == list(range(40))
+
+
+def test_scheduler_without_any_worker_stops_after_the_timeout(tmp_path):
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    scheduler = _start(["scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                       tmp_path / "scheduler.log")
+    try:
+        _wait_for(lambda: "Scheduler at" in (tmp_path / "scheduler.log").read_text(), 30,
+                  "scheduler started")
+        start = time.monotonic()
+        proc = subprocess.run(RUN + ["--scheduler", address, "--worker-timeout", "3",
+                                     "-o", str(tmp_path / "out.nc")], cwd=tmp_path,
+                              capture_output=True, text=True, timeout=60)
+        elapsed = time.monotonic() - start
+    finally:
+        _stop(scheduler)
+    line = _error_line(proc.stderr)
+    assert proc.returncode == 2, proc.stderr
+    assert line == (f"rss6: error: the dask scheduler at {address} has had no workers for 3 s "
+                    "(--worker-timeout 3)"), line
+    assert 3 < elapsed < 15, elapsed
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scheduler.log"]   # no lock, no parts
