@@ -76,7 +76,7 @@ def test_unreachable_scheduler_is_one_line_and_exit_2_within_seconds(tmp_path, p
     line = _error_line(proc.stderr)
     assert proc.returncode == 2, proc.stderr
     assert address in line and all(w in line for w in words), line
-    assert elapsed < 15, elapsed   # 22 s and a 63-line traceback before
+    assert elapsed < 18, elapsed   # 22 s and a 63-line traceback before (a 20 s connect timeout)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -118,7 +118,7 @@ def test_scheduler_that_loses_every_worker_stops_and_keeps_the_parts(tmp_path):
     line = _error_line(err)
     assert rss6.returncode == 2, err
     assert address in line and "no workers for 3 s" in line and str(parts) in line, line
-    assert 3 <= waited < 10, waited
+    assert 3 <= waited < 15, waited
     assert not merged
     assert kept, "no part kept"
     assert rerun.returncode == 0, rerun.stderr
@@ -146,5 +146,5 @@ def test_scheduler_without_any_worker_stops_after_the_timeout(tmp_path):
     assert proc.returncode == 2, proc.stderr
     assert line == (f"rss6: error: the dask scheduler at {address} has had no workers for 3 s "
                     "(--worker-timeout 3)"), line
-    assert 3 < elapsed < 15, elapsed
+    assert 3 < elapsed < 20, elapsed
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scheduler.log"]   # no lock, no parts
