@@ -130,7 +130,7 @@ def _simulate(args) -> int:
 
 def _run(args) -> int:
     from .outputs import check_output_path
-    from .run import EnsembleSpec, ensemble
+    from .run import EnsembleSpec, SchedulerUnavailable, ensemble
     from .stats import ensemble_stats, format_stats
     from .gate import exit_code, format_verdicts
     from .summary import failure_reasons
@@ -148,7 +148,14 @@ def _run(args) -> int:
                         args.seed, args.store)
     try:
         outcome = ensemble(spec, args.n, output, workers=args.workers, scheduler=args.scheduler,
-                           chunk=args.chunk, annotate=_annotate(specs, verdicts))
+                           chunk=args.chunk, annotate=_annotate(specs, verdicts),
+                           worker_timeout=args.worker_timeout)
+    except SchedulerUnavailable as exc:
+        parts = output.with_name(output.name + ".parts")
+        kept = (f"; the finished chunks are kept in {parts}; rerun the same command to resume"
+                if parts.exists() else "")
+        print(f"rss6: error: {exc}{kept}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"rss6: interrupted; finished chunks are kept in {output}.parts; rerun the same "
               "command to continue", file=sys.stderr)
@@ -461,6 +468,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--workers", type=_positive_int, default=2,
                      help="local dask workers, one thread each (default 2)")
     run.add_argument("--scheduler", help=SCHEDULER_HELP)
+    run.add_argument("--worker-timeout", type=_positive_float, default=60.0, metavar="S",
+                     help="with --scheduler: stop (exit 2, finished chunks kept) once the scheduler "
+                          "has had no workers for S seconds (default 60)")
     run.add_argument("--chunk", type=_positive_int,
                      help="realisations per task (default: n cut into a multiple of the workers "
                           "nearly equal chunks of at most 64; each task integrates its realisations "

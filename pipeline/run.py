@@ -16,6 +16,7 @@ on the chunk size or the number of workers.
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import shutil
 import signal
@@ -35,7 +36,7 @@ from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
                     realization_dataset, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
-           "local_cluster", "BLAS_ENV"]
+           "local_cluster", "BLAS_ENV", "SchedulerUnavailable"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -166,7 +167,9 @@ def local_cluster(workers: int):
     dask starts its workers with MALLOC_TRIM_THRESHOLD_=65536, which also fixes glibc's mmap
     threshold at 128 KiB: every larger temporary array is then mapped and faulted in afresh,
     which costs the paper level 25-30 % more CPU time per realisation. These workers keep glibc's
-    default (a value set in the environment by the user still applies).
+    default (a value set in the environment by the user still applies). The cluster's own logs
+    are silenced below CRITICAL: closing it races with the workers' heartbeats, which then log a
+    traceback although nothing failed; rss6 reports every task's failure itself.
     """
     import dask
     from dask.distributed import LocalCluster
@@ -174,7 +177,7 @@ def local_cluster(workers: int):
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
             _workers_ignore_ctrl_c():
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                            dashboard_address=None, host="127.0.0.1")
+                            dashboard_address=None, host="127.0.0.1", silence_logs=logging.CRITICAL)
 
 
 @contextlib.contextmanager
@@ -192,12 +195,92 @@ def _workers_ignore_ctrl_c():
         signal.signal(signal.SIGINT, previous)
 
 
+CONNECT_TIMEOUT_S = 5.0   # an external scheduler that does not answer in this time is unreachable
+WORKER_TIMEOUT_S = 60.0   # default wait, s, for an external scheduler that has no workers
+POLL_S = 1.0              # how often, s, the workers of an external scheduler are counted
+
+
+class SchedulerUnavailable(RuntimeError):
+    """The external dask scheduler cannot be reached, or has had no workers for too long (an
+    environment problem: the finished chunks stay in OUT.nc.parts)."""
+
+
 def _client(workers: int, scheduler: str | None):
     from dask.distributed import Client
     if scheduler:
-        return Client(scheduler, timeout="20s"), None
+        try:
+            return Client(scheduler, timeout=CONNECT_TIMEOUT_S), None
+        except ValueError as exc:  # a malformed address
+            raise SchedulerUnavailable(f"--scheduler {scheduler!r}: {exc}; the address reads e.g. "
+                                       "tcp://HOST:8786") from None
+        except OSError:  # refused or timed out
+            raise SchedulerUnavailable(
+                f"cannot reach the dask scheduler at {scheduler} within {CONNECT_TIMEOUT_S:g} s; "
+                "check the address (e.g. tcp://HOST:8786) and that the scheduler is running"
+            ) from None
     cluster = local_cluster(workers)
     return Client(cluster), cluster
+
+
+def _finished(client, futures: list, scheduler: str | None, worker_timeout: float):
+    """The chunk results as they finish; on an external scheduler the workers are counted every
+    POLL_S and SchedulerUnavailable is raised once it has had none for ``worker_timeout`` s."""
+    from dask.distributed import as_completed
+    if not scheduler:
+        for future in as_completed(futures):
+            yield future.result()
+        return
+    _quiet_lost_results()
+    pending, idle_since = set(futures), None
+    while pending:
+        got = list(_gathered(client, pending))
+        yield from got
+        if got or client.nthreads():
+            idle_since = None
+            continue
+        idle_since = time.monotonic() if idle_since is None else idle_since
+        if time.monotonic() - idle_since >= worker_timeout:
+            raise SchedulerUnavailable(
+                f"the dask scheduler at {scheduler} has had no workers for "
+                f"{time.monotonic() - idle_since:.0f} s (--worker-timeout {worker_timeout:g})")
+
+
+def _lost_result_record(record) -> bool:
+    """False for dask's log records about a result lost with its worker, which _gathered handles:
+    "Couldn't gather ... rescheduling", and the gather left waiting for it that ends with AllExit
+    when the client closes."""
+    text = record.getMessage()
+    return not ("Couldn't gather" in text or ("never retrieved" in text and "AllExit" in text))
+
+
+def _quiet_lost_results() -> None:
+    import logging
+    for name in ("distributed.client", "asyncio"):
+        logger = logging.getLogger(name)
+        if _lost_result_record not in logger.filters:
+            logger.addFilter(_lost_result_record)
+
+
+def _gathered(client, pending: set):
+    """Results of the futures in ``pending`` that finish within about POLL_S, removed from it.
+
+    A result held by a worker that has died cannot be gathered (dask computes it again, and
+    gathering would wait for that); such a future stays in ``pending``."""
+    from dask.distributed import wait
+    try:
+        done = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED").done
+    except TimeoutError:
+        return
+    held = client.who_has(list(done))
+    for future in done:
+        if future.status == "finished" and not held.get(future.key):
+            continue   # its worker is gone
+        try:
+            result = future.result(timeout=POLL_S)
+        except TimeoutError:   # the worker died just now: ask again who holds the others
+            return
+        pending.discard(future)
+        yield result
 
 
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
@@ -225,17 +308,21 @@ class EnsembleOutcome:
 
 
 def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
-             chunk: int | None = None, progress: bool = True, annotate=None) -> EnsembleOutcome:
+             chunk: int | None = None, progress: bool = True, annotate=None,
+             worker_timeout: float = WORKER_TIMEOUT_S) -> EnsembleOutcome:
     """Run realisations 0..n-1 not yet stored in ``output`` (one writer at a time: OUT.lock).
 
     ``annotate(dataset) -> dict``, if given, adds global attributes (e.g. requirement verdicts)
     computed from the finished ensemble before it is written; the file is rewritten only if they
-    change it."""
+    change it. ``worker_timeout`` (s): how long an external ``scheduler`` may have no workers
+    before SchedulerUnavailable is raised."""
     if n < 1:
         raise ValueError(f"the number of realisations must be at least 1, got {n}")
     chunk = default_chunk(n, workers) if chunk is None else chunk
     if chunk < 1 or workers < 1:
         raise ValueError("--chunk and --workers must be at least 1")
+    if not worker_timeout > 0:
+        raise ValueError(f"--worker-timeout must be positive, got {worker_timeout}")
     output = Path(output)
     with OutputLock(output):
         manifest = PartsManifest(_parts_dir(output), spec.attrs())
@@ -246,7 +333,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
             bar = _Progress(n, n - len(todo)) if progress else None
             if bar:
                 bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
-            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar)
+            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
         merged = pieces[0] if up_to_date else finish_ensemble(pieces, spec.scene(), **_kw(spec))
         extra = annotate(merged) if annotate else {}
@@ -260,15 +347,13 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
 
 
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
-             scheduler: str | None, bar) -> list:
+             scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S) -> list:
     """Run the chunks on dask; each finished chunk is stored as a part at once."""
-    from dask.distributed import as_completed
     client, cluster = _client(workers, scheduler)
     pieces = []
     try:
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
-        for future in as_completed(futures):
-            ds = future.result()
+        for ds in _finished(client, futures, scheduler, worker_timeout):
             first, last = int(ds.realization[0]), int(ds.realization[-1])
             manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
             pieces.append(ds)
