@@ -422,16 +422,7 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(2)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="rss6", description="Joint clearance and link elasticity errors of a 6-RSS robot.")
-    parser.add_argument("--version", action="version", version=f"rss6 {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
-    check = sub.add_parser("check", help="validate a scene and print its summary")
-    check.add_argument("config", nargs="?", default="paper",
-                       help="scene TOML file or embedded scene name (default: paper)")
-    check.add_argument("--json", action="store_true", help="print one JSON object")
-    check.set_defaults(func=_check)
+def _simulate_parser(sub) -> None:
     sim = sub.add_parser("simulate", help="run one deterministic simulation")
     sim.add_argument("config", nargs="?", default="paper",
                      help="scene TOML file or embedded scene name (default: paper)")
@@ -449,6 +440,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--json", action="store_true", help="print one JSON object (SI units)")
     sim.set_defaults(func=_simulate)
 
+
+def _run_parser(sub) -> None:
     run = sub.add_parser("run", help="run a Monte Carlo ensemble of clearance realisations")
     run.add_argument("config", nargs="?", default="paper",
                      help="scene TOML file or embedded scene name (default: paper)")
@@ -480,6 +473,21 @@ def build_parser() -> argparse.ArgumentParser:
                           "(default: summary)")
     _require_arguments(run)
     run.set_defaults(func=_run)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="rss6", description="Joint clearance and link elasticity errors of a 6-RSS robot.")
+    parser.add_argument("--version", action="version", version=f"rss6 {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    check = sub.add_parser("check", help="validate a scene and print its summary")
+    check.add_argument("config", nargs="?", default="paper",
+                       help="scene TOML file or embedded scene name (default: paper)")
+    check.add_argument("--json", action="store_true", help="print one JSON object")
+    check.set_defaults(func=_check)
+    _simulate_parser(sub)
+
+    _run_parser(sub)
 
     rp = sub.add_parser("report", help="the paper's section 6 reproduced: OUT/results.md and figures")
     rp.add_argument("configs", nargs="+", help="scene TOML files or embedded scene names")
