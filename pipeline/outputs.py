@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from .store import EnsembleFileError, write_netcdf
+from .store import EnsembleFileError, sigint_deferred, write_netcdf
 
 __all__ = ["check_output_path", "OutputLock", "PartsManifest"]
 
@@ -155,11 +155,12 @@ class PartsManifest:
         """Write ``ds`` as part ``name``: to a temporary file, into the manifest, then into place."""
         self.folder.mkdir(parents=True, exist_ok=True)
         final, incoming = self.folder / name, self.folder / (name + ".incoming")
-        write_netcdf(ds, incoming)
-        realizations = [int(r) for r in ds["realization"].values]
-        self.entries[name] = {"sha256": sha256(incoming), "realizations": realizations}
-        self._save()
-        os.replace(incoming, final)
+        with sigint_deferred():   # part, manifest entry and rename: all or nothing on Ctrl-C
+            write_netcdf(ds, incoming)
+            realizations = [int(r) for r in ds["realization"].values]
+            self.entries[name] = {"sha256": sha256(incoming), "realizations": realizations}
+            self._save()
+            os.replace(incoming, final)
         return final
 
     def verify(self, path: Path) -> None:

@@ -6,6 +6,10 @@ coordinate ``unit`` (quantity, direction) gives each element's unit exactly.
 """
 from __future__ import annotations
 
+import contextlib
+import signal
+import threading
+
 import numpy as np
 import xarray as xr
 
@@ -107,6 +111,27 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
         })
 
 
+@contextlib.contextmanager
+def sigint_deferred():
+    """Ctrl-C during the block takes effect when it ends: a file write is never cut inside the
+    netCDF library or xarray's file lock (an interrupt landing there left the lock held and hung
+    the run). Python runs signal handlers in the main thread only, so elsewhere this does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if received:
+        if callable(previous) and previous is not signal.default_int_handler:
+            previous(signal.SIGINT, None)   # an enclosing block's recorder, or the caller's handler
+        elif previous is not signal.SIG_IGN:
+            raise KeyboardInterrupt
+
+
 def write_netcdf(ds: xr.Dataset, path) -> None:
     """Write ``ds`` as CF-1.10 netCDF4 to ``path`` via a temporary file, so a crash leaves no half file.
 
@@ -121,15 +146,16 @@ def write_netcdf(ds: xr.Dataset, path) -> None:
     # guard the file with a distributed lock: a scheduler round trip per variable, which made
     # each chunk's write 8x slower and kept the scheduler busy beside the workers.
     check_free_space(path, ds.nbytes)
-    try:
-        with dask.config.set(scheduler="synchronous"):
-            encoded.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
-    except (OSError, RuntimeError):  # a full disk shows as "NetCDF: HDF error"
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        check_free_space(path, ds.nbytes)
-        raise
-    os.replace(tmp, path)
+    with sigint_deferred():
+        try:
+            with dask.config.set(scheduler="synchronous"):
+                encoded.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
+        except (OSError, RuntimeError):  # a full disk shows as "NetCDF: HDF error"
+            if os.path.exists(tmp):
+                os.remove(tmp)
+            check_free_space(path, ds.nbytes)
+            raise
+        os.replace(tmp, path)
 
 
 def check_free_space(path, needed: int) -> None:
