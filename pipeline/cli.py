@@ -300,9 +300,8 @@ def _stats(args) -> int:
 
 def _verdict_attrs(verdicts: list) -> dict:
     """File attributes of the verdicts: the overall one and each as strict JSON (SI values)."""
-    from .gate import OUTCOMES, verdicts_json
-    worst = max((v.outcome for v in verdicts), key=OUTCOMES.index)
-    return {"requirements_verdict": worst,
+    from .gate import overall, verdicts_json
+    return {"requirements_verdict": overall(verdicts),
             "requirements": json.dumps(verdicts_json(verdicts), allow_nan=False)}
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from .spec import Spec
 from .stats import MIN_N_MEAN, MIN_N_STD, min_n_for_quantile
 
-__all__ = ["OUTCOMES", "Verdict", "exit_code", "format_verdicts", "judge", "judge_all",
+__all__ = ["OUTCOMES", "Verdict", "exit_code", "format_verdicts", "overall", "judge", "judge_all",
            "verdicts_json"]
 
 OUTCOMES = ("pass", "undecided", "fail")
@@ -139,10 +139,14 @@ def format_verdicts(verdicts: list[Verdict]) -> str:
         lines.append(f"{v.spec:<40.40s}{v.direction:<4s}{_num(v.estimate, v.factor):>11s}"
                      f"{interval:>24s}{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  "
                      f"{v.outcome:<10s}{need}")
-    worst = max((v.outcome for v in verdicts), key=OUTCOMES.index)
     counts = ", ".join(f"{sum(v.outcome == o for v in verdicts)} {o}" for o in OUTCOMES)
-    lines.append(f"verdict: {worst} ({counts})")
+    lines.append(f"verdict: {overall(verdicts)} ({counts})")
     return "\n".join(lines)
+
+
+def overall(verdicts: list[Verdict]) -> str:
+    """The worst outcome of all verdicts (fail over undecided over pass)."""
+    return max((v.outcome for v in verdicts), key=OUTCOMES.index)
 
 
 def verdicts_json(verdicts: list[Verdict]) -> list[dict]:
