@@ -359,6 +359,8 @@ def _multifidelity(args) -> int:
     if args.low_n < args.n:
         raise SceneError(f"--low-n {args.low_n}: must be at least -n ({args.n}); the first -n low "
                          "realisations are the pairs")
+    if args.width is not None and args.cost_ratio is None:
+        raise SceneError("--width: needs --cost-ratio (the cost of a high realisation over a low one)")
     scene = find_scene(args.config)
     output = check_output_path(args.output, args.parents)
     _warn_oversubscription(args.workers, args.scheduler)
@@ -378,7 +380,7 @@ def _multifidelity(args) -> int:
             return 130
         data.append(out.dataset.sel(realization=out.dataset["realization"].values < n))
     try:
-        mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio)
+        mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio, args.width)
     except ValueError as exc:   # too few finished pairs
         print(f"rss6: error: {files[0]}: {exc}", file=sys.stderr)
         return 1
@@ -386,7 +388,7 @@ def _multifidelity(args) -> int:
     if args.json:
         print(json.dumps(to_json(mds), indent=2, allow_nan=False))
     else:
-        print(f"wrote {output}")
+        print(f"wrote {output} (also the means of mean_abs_error; --json prints both)")
         print(format_multifidelity(mds))
     return 0
 
@@ -415,6 +417,9 @@ def _multifidelity_parser(sub) -> None:
     mf.add_argument("--cost-ratio", type=_positive_float, metavar="C",
                     help="cost of one high realisation over one low one (e.g. from rss6 tradeoff); "
                          "adds the cost-optimal M/N and the cost against plain MC (default: none)")
+    mf.add_argument("--width", type=_fraction, metavar="REL",
+                    help="with --cost-ratio: also the realisations plain MC and multi-fidelity need "
+                         "for a half-width of REL times the mean, e.g. 0.02 (default: none)")
     mf.add_argument("--workers", type=_positive_int, default=2,
                     help="local dask workers, one thread each (default 2)")
     mf.add_argument("--scheduler", help=SCHEDULER_HELP)

@@ -44,7 +44,7 @@ from scipy import stats as sps
 from .stats import MIN_N_MEAN, VARIABLES, mean_interval
 
 __all__ = ["MIN_N_MF", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
-           "variance_reduction", "estimated_variance_reduction", "optimal_low_ratio", "cost_ratio", "paired_values",
+           "variance_reduction", "estimated_variance_reduction", "adjusted_correlation", "optimal_low_ratio", "cost_ratio", "paired_values",
            "multifidelity_dataset", "format_multifidelity", "to_json", "level_paths"]
 
 MIN_N_MF = 32   # smallest N whose interval coverage was measured >= 93 % on all laws (module doc)
@@ -77,8 +77,14 @@ def estimated_variance_reduction(r, n_high: int, n_low: int):
     """The variance reduction estimated from the sample correlation ``r`` of n_high pairs: the
     closed form at the adjusted rho^2 = 1 - (1 - r^2)(N - 1)/(N - 2), times the (N - 3)/(N - 2)
     the fitted coefficient costs (about unbiased in the median; the plug-in r^2 overstates it)."""
-    rho2 = np.maximum(1 - (1 - np.asarray(r, float) ** 2) * (n_high - 1) / (n_high - 2), 0.0)
-    return (n_high - 3) / (n_high - 2) * variance_reduction(np.sqrt(rho2), n_high, n_low)
+    return (n_high - 3) / (n_high - 2) * variance_reduction(adjusted_correlation(r, n_high),
+                                                            n_high, n_low)
+
+
+def adjusted_correlation(r, n: int):
+    """sqrt of the adjusted rho^2 = max(0, 1 - (1 - r^2)(n - 1)/(n - 2)) of n pairs: the plug-in
+    r^2 overstates rho^2 by about (1 - rho^2)/n."""
+    return np.sqrt(np.maximum(1 - (1 - np.asarray(r, float) ** 2) * (n - 1) / (n - 2), 0.0))
 
 
 def optimal_low_ratio(rho, cost_high_over_low: float):
@@ -187,11 +193,13 @@ def _estimates(high: xr.Dataset, low: xr.Dataset, name: str, confidence: float) 
 
 
 def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float = 0.95,
-                          sources=("high", "low"), cost_high_over_low: float | None = None) -> xr.Dataset:
+                          sources=("high", "low"), cost_high_over_low: float | None = None,
+                          width: float | None = None) -> xr.Dataset:
     """Multi-fidelity and high-only means of every per-realisation summary (SI units, the source
-    files' layout), with correlation, variance reduction and equivalent plain-MC size per cell;
-    with a cost ratio (one high realisation over one low one) also the cost-optimal M/N and the
-    cost relative to plain MC for the same interval width."""
+    files' layout), with correlation, variance reduction and equivalent plain-MC size per cell.
+    With a cost ratio (one high realisation over one low one) also the cost-optimal M/N and the
+    cost relative to plain MC for the same interval width; with a relative half-width ``width``
+    too, the realisations each method needs to reach it."""
     _check_pairing(high, low, *sources)
     data = {}
     for name in VARIABLES:
@@ -204,18 +212,40 @@ def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float =
                                   "unit": high["unit"]})
     if cost_high_over_low is not None:
         for name in VARIABLES:
-            rho = ds[f"{name}_correlation"].values
-            ds[f"{name}_optimal_low_ratio"] = (("quantity", "direction"),
-                                               optimal_low_ratio(rho, cost_high_over_low),
-                                               {"units": "1", "long_name": "cost-optimal ratio of "
-                                                "low to high realisations"})
-            ds[f"{name}_cost_ratio"] = (("quantity", "direction"), cost_ratio(rho, cost_high_over_low),
-                                        {"units": "1", "long_name": "multi-fidelity cost over plain "
-                                         "MC cost for the same interval width, at the optimal ratio"})
-    return ds.assign_attrs(_attrs(high, low, confidence, sources, n_pairs, cost_high_over_low))
+            ds = ds.assign(_costs(ds, paired_values(high, low, name)[0], name, cost_high_over_low,
+                                  width, confidence))
+    return ds.assign_attrs(_attrs(high, low, confidence, sources, n_pairs, cost_high_over_low,
+                                  width))
 
 
-def _attrs(high, low, confidence, sources, n_pairs: int, cost) -> dict:
+def _costs(ds: xr.Dataset, y: np.ndarray, name: str, cost: float, width, confidence) -> dict:
+    """The cost variables of summary ``name``: optimal M/N, cost over plain MC, and with a relative
+    half-width the sample sizes reaching it (normal approximation, standard deviation of y), all
+    at the adjusted correlation."""
+    cells, one = ("quantity", "direction"), {"units": "1"}
+    rho = adjusted_correlation(ds[f"{name}_correlation"].values, y.shape[0])
+    ratio = optimal_low_ratio(rho, cost)
+    out = {f"{name}_optimal_low_ratio": (cells, ratio, {**one, "long_name": "cost-optimal ratio of "
+                                                        "low to high realisations"}),
+           f"{name}_cost_ratio": (cells, cost_ratio(rho, cost), {**one, "long_name": "multi-fidelity "
+                                  "cost over plain MC cost for the same interval width, at the "
+                                  "optimal ratio"})}
+    if width is None:
+        return out
+    mean = np.abs(ds[f"{name}_mean"].sel(estimator="multifidelity", bound="estimate").values)
+    z = sps.norm.ppf(0.5 + confidence / 2)
+    plain = np.ceil((z * y.std(axis=0, ddof=1) / (width * mean)) ** 2)
+    high = np.ceil(plain * (1 - (1 - 1 / ratio) * rho ** 2))
+    return out | {
+        f"{name}_plain_n_for_width": (cells, plain, {**one, "long_name": "plain MC high "
+                                      "realisations for the relative half-width"}),
+        f"{name}_high_n_for_width": (cells, high, {**one, "long_name": "multi-fidelity high "
+                                     "realisations for the relative half-width"}),
+        f"{name}_low_n_for_width": (cells, np.ceil(ratio * high), {**one, "long_name":
+                                    "multi-fidelity low realisations for the relative half-width"})}
+
+
+def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
     from rss6core import __version__
     a = high.attrs
     return {"Conventions": "CF-1.10", "source": f"rss6 {__version__}", "rss6_version": __version__,
@@ -235,7 +265,8 @@ def _attrs(high, low, confidence, sources, n_pairs: int, cost) -> dict:
             "min_n_multifidelity": MIN_N_MF,
             "statistics_offered": "mean only (quantiles and exceedance probabilities: see "
                                   "pipeline/multifidelity.py)",
-            **({"cost_high_over_low": cost} if cost is not None else {})}
+            **({"cost_high_over_low": cost} if cost is not None else {}),
+            **({"relative_half_width": width} if width is not None and cost is not None else {})}
 
 
 # --- output ------------------------------------------------------------------------
@@ -251,7 +282,8 @@ def to_json(mds: xr.Dataset) -> dict:
     out = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in mds.attrs.items()
            if k != "scene_toml"}
     fields = [f for f in ("correlation", "coefficient", "variance_reduction", "equivalent_n",
-                          "optimal_low_ratio", "cost_ratio") if f"max_abs_error_{f}" in mds]
+                          "optimal_low_ratio", "cost_ratio", "plain_n_for_width", "high_n_for_width",
+                          "low_n_for_width") if f"max_abs_error_{f}" in mds]
     for name in VARIABLES:
         out[name] = {str(q): {str(d): {
             **{f"{e}_{b}": _number(mds[f"{name}_mean"].sel(estimator=e, bound=b, quantity=q,
@@ -266,37 +298,50 @@ def _cell(value: float, factor: float = 1.0, width: int = 10) -> str:
     return f"{value * factor:{width}.4g}" if np.isfinite(value) else f"{'-':>{width}s}"
 
 
+_WIDTH_COLUMNS = {"plain_n_for_width": "n MC", "high_n_for_width": "N MF", "low_n_for_width": "M MF"}
+
+
+def _extra_columns(mds: xr.Dataset, name: str) -> dict:
+    """The optional columns present in ``mds``: {variable suffix: header}."""
+    return {k: v for k, v in {"cost_ratio": "cost MF/MC", **_WIDTH_COLUMNS}.items()
+            if f"{name}_{k}" in mds}
+
+
+def _row(mds: xr.Dataset, name: str, q, d) -> str:
+    from .store import display_unit
+    f, unit = display_unit(str(q), str(d))
+    m = mds[f"{name}_mean"].sel(quantity=q, direction=d)
+
+    def at(field):
+        return float(mds[f"{name}_{field}"].sel(quantity=q, direction=d))
+    cells = "".join(_cell(float(m.sel(estimator=e, bound=b)), f) for e in ESTIMATORS for b in BOUNDS)
+    extra = "".join(_cell(at(k), 1, 11) for k in _extra_columns(mds, name))
+    return (f"{q:<13s}{d:<4s}{unit:<8s}{cells}{at('correlation'):7.2f}"
+            f"{at('variance_reduction'):7.2f}{at('equivalent_n'):8.0f}{extra}")
+
+
 def format_multifidelity(mds: xr.Dataset, name: str = "max_abs_error") -> str:
     """A table of the means of ``name`` in display units (mm, mm/s, mm/s^2; rad, rad/s, rad/s^2):
     multi-fidelity and high-only estimate and bounds, correlation, variance reduction, equivalent
-    plain-MC n, and the cost ratio when known."""
-    from .store import display_unit
+    plain-MC n, and the cost columns when known."""
     a = mds.attrs
-    cost = "cost_ratio" in "".join(mds.data_vars)
+    extra = _extra_columns(mds, name)
     lines = [f"mean of per-realisation {name}: {a['high_model']} level on N = {a['n_high']} with "
              f"{a['low_model']} on M = {a['n_low']} as control variate; two-sided "
              f"{100 * a['confidence']:g} % bounds",
              f"{'quantity':<13s}{'dir':<4s}{'unit':<8s}{'MF':>10s}{'lower':>10s}{'upper':>10s}"
              f"{'high only':>10s}{'lower':>10s}{'upper':>10s}{'rho':>7s}{'VR':>7s}{'n_eq':>8s}"
-             + (f"{'cost MF/MC':>11s}" if cost else "")]
-    for q in mds.quantity.values:
-        for d in mds.direction.values:
-            f, unit = display_unit(str(q), str(d))
-            m = mds[f"{name}_mean"].sel(quantity=q, direction=d)
-            cells = "".join(_cell(float(m.sel(estimator=e, bound=b)), f)
-                            for e in ESTIMATORS for b in BOUNDS)
-            diag = (f"{float(mds[f'{name}_correlation'].sel(quantity=q, direction=d)):7.2f}"
-                    f"{float(mds[f'{name}_variance_reduction'].sel(quantity=q, direction=d)):7.2f}"
-                    f"{float(mds[f'{name}_equivalent_n'].sel(quantity=q, direction=d)):8.0f}")
-            extra = _cell(float(mds[f"{name}_cost_ratio"].sel(quantity=q, direction=d)), 1, 11) \
-                if cost else ""
-            lines.append(f"{q:<13s}{d:<4s}{unit:<8s}{cells}{diag}{extra}")
+             + "".join(f"{h:>11s}" for h in extra.values())]
+    lines += [_row(mds, name, q, d) for q in mds.quantity.values for d in mds.direction.values]
     notes = ["rho: correlation between the levels; VR: variance reduction over plain MC on the same N; "
              "n_eq: plain-MC sample size of the same variance"]
-    if cost:
+    if "cost_ratio" in extra:
         notes.append(f"cost MF/MC: multi-fidelity over plain-MC cost for the same interval width at "
                      f"the optimal M/N (one {a['high_model']} realisation costs "
                      f"{a['cost_high_over_low']:g} {a['low_model']} ones); above 1 it does not pay")
+    if "plain_n_for_width" in extra:
+        notes.append(f"n MC, N MF, M MF: realisations for a half-width of "
+                     f"{100 * a['relative_half_width']:g} % of the mean (normal approximation)")
     if a["n_high"] < MIN_N_MF:
         notes.append(f"MF: no {100 * a['confidence']:g} % interval below N = {MIN_N_MF} "
                      f"(N = {a['n_high']} here)")

@@ -93,7 +93,6 @@ def _ensemble(configs, name: str, model: str, realizations, seed: int = 0):
     return run_chunk(spec, list(realizations))
 
 
-@pytest.mark.slow
 def test_real_pair_covers_the_population_mean(configs):
     """A real rss6 pair on the same draws: quasi-static on the paper scene (2 s, high) and on the
     smoke scene (its first 0.2 s, low), 300 realisations each.  500 random sub-samples (N = 32
@@ -128,7 +127,13 @@ def test_dataset_from_a_smoke_pair_and_pairing_check(configs):
                                    "quantity", "direction"))
     assert np.isnan(mean.sel(estimator="multifidelity", bound="lower")).all()
     assert mds.attrs["n_high"] == 3 and mds.attrs["n_low"] == 6
-    assert "mean_abs_error_cost_ratio" in mds
+    assert "mean_abs_error_cost_ratio" in mds and "max_abs_error_plain_n_for_width" not in mds
+    sized = multifidelity_dataset(high, low, CONF, cost_high_over_low=4.0, width=0.05)
+    y = high["max_abs_error"].transpose("realization", ...).values          # all finished
+    mf = sized["max_abs_error_mean"].sel(estimator="multifidelity", bound="estimate").values
+    n_plain = (1.959964 * y.std(axis=0, ddof=1) / (0.05 * mf)) ** 2          # independent formula
+    np.testing.assert_allclose(sized["max_abs_error_plain_n_for_width"], np.ceil(n_plain), atol=1)
+    assert (sized["max_abs_error_high_n_for_width"] <= sized["max_abs_error_plain_n_for_width"]).all()
     other = _ensemble(configs, "smoke", "quasi-static", range(6), seed=1)
     with pytest.raises(EnsembleFileError, match="seed"):
         multifidelity_dataset(high, other)
@@ -145,7 +150,8 @@ def test_level_paths():
 def test_cli_bad_options_exit_2_before_work(tmp_path, capsys):
     out = tmp_path / "F.nc"
     for argv, word in ((["-n", "8", "--low-n", "4"], "--low-n 4"),
-                       (["--high", "paper", "--low", "paper"], "--low paper")):
+                       (["--high", "paper", "--low", "paper"], "--low paper"),
+                       (["--width", "0.02"], "--width")):
         assert main(["multifidelity", "smoke", *argv, "-o", str(out)]) == 2
         err = capsys.readouterr().err
         assert word in err and len(err.strip().splitlines()) == 1
@@ -168,4 +174,5 @@ def test_cli_runs_resumes_and_writes_json(tmp_path, capsys):
     assert main(argv + ["--json"]) == 0
     js = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(c))
     assert js["n_high"] == 32 and js["max_abs_error"]["displacement"]["x"]["multifidelity_lower"]
+    assert js["mean_abs_error"]["velocity"]["z"]["correlation"] is not None
     xr.testing.assert_identical(load_netcdf(out).drop_attrs(), first.drop_attrs())
