@@ -19,14 +19,14 @@ LAWS = {"normal": sps.norm(), "gamma(2)": sps.gamma(2.0), "Laplace": sps.laplace
 
 
 def _pairs(law, rho: float, n: int, m: int, trials: int, seed: int):
-    """Y (n, trials) and X (m, trials), standardised margins of ``law``, corr(Y, X[:n]) = rho; the
-    true mean of Y is 0."""
+    """Y (n, trials) and X (m, trials), standardised margins of ``law`` (X shifted by 1),
+    corr(Y, X[:n]) = rho; the true mean of Y is 0."""
     rng = np.random.default_rng(seed)
 
     def draw(size):
         return (law.rvs(size=size, random_state=rng) - law.mean()) / law.std()
     x = draw((m, trials))
-    return rho * x[:n] + np.sqrt(1 - rho ** 2) * draw((n, trials)), x
+    return rho * x[:n] + np.sqrt(1 - rho ** 2) * draw((n, trials)), x + 1.0
 
 
 @pytest.mark.parametrize("law", list(LAWS))
