@@ -143,6 +143,12 @@ def test_dataset_from_a_smoke_pair_and_pairing_check(configs):
         multifidelity_dataset(low.isel(realization=[0, 1, 2]), shuffled)
 
 
+def test_help_states_the_measured_minimum(capsys):
+    with pytest.raises(SystemExit):
+        main(["multifidelity", "-h"])
+    assert f"no interval below N = {MIN_N_MF}" in " ".join(capsys.readouterr().out.split())
+
+
 def test_level_paths():
     assert [p.name for p in level_paths("out/F.nc")] == ["F.high.nc", "F.low.nc"]
 
