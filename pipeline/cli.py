@@ -338,6 +338,95 @@ def _plot(args) -> int:
     return 0
 
 
+def _level_spec(args, scene, level: str):
+    """The ensemble spec of one level of ``rss6 multifidelity``: the scene's settings for it."""
+    from .run import EnsembleSpec
+    model, integrator, dt, elements = _settings(
+        argparse.Namespace(model=level, integrator=None, dt=None, elements=None), scene)
+    return EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements,
+                        args.seed, "summary")
+
+
+def _multifidelity(args) -> int:
+    from .multifidelity import format_multifidelity, level_paths, multifidelity_dataset, to_json
+    from .outputs import check_output_path
+    from .run import SchedulerUnavailable, ensemble
+    from .store import write_netcdf
+    if args.high == args.low:
+        raise SceneError(f"--low {args.low}: must differ from --high (the same level is no control "
+                         "variate)")
+    if args.low_n < args.n:
+        raise SceneError(f"--low-n {args.low_n}: must be at least -n ({args.n}); the first -n low "
+                         "realisations are the pairs")
+    if args.width is not None and args.cost_ratio is None:
+        raise SceneError("--width: needs --cost-ratio (the cost of a high realisation over a low one)")
+    scene = find_scene(args.config)
+    output = check_output_path(args.output, args.parents)
+    _warn_oversubscription(args.workers, args.scheduler)
+    files = level_paths(output)
+    data = []
+    for level, n, path in ((args.high, args.n, files[0]), (args.low, args.low_n, files[1])):
+        print(f"rss6 multifidelity: {level} level, {n} realisations in {path}", file=sys.stderr)
+        try:
+            out = ensemble(_level_spec(args, scene, level), n, path, workers=args.workers,
+                           scheduler=args.scheduler, progress=not args.json)
+        except SchedulerUnavailable as exc:
+            print(f"rss6: error: {exc}; finished chunks are kept; rerun to resume", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print(f"rss6: interrupted; finished chunks are kept in {path}.parts; rerun the same "
+                  "command to continue", file=sys.stderr)
+            return 130
+        data.append(out.dataset.sel(realization=out.dataset["realization"].values < n))
+    try:
+        mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio, args.width)
+    except ValueError as exc:   # too few finished pairs
+        print(f"rss6: error: {files[0]}: {exc}", file=sys.stderr)
+        return 1
+    write_netcdf(mds, output)
+    if args.json:
+        print(json.dumps(to_json(mds), indent=2, allow_nan=False))
+    else:
+        print(f"wrote {output} (also the means of mean_abs_error; --json prints both)")
+        print(format_multifidelity(mds))
+    return 0
+
+
+def _multifidelity_parser(sub) -> None:
+    mf = sub.add_parser("multifidelity", help="means of a dear level with a cheap level on more "
+                        "realisations as control variate (multi-fidelity Monte Carlo)")
+    mf.add_argument("config", nargs="?", default="paper",
+                    help="scene TOML file or embedded scene name (default: paper)")
+    mf.add_argument("--high", choices=MODELS, default="contact",
+                    help="the dear level, run on realisations 0..N-1 (default: contact)")
+    mf.add_argument("--low", choices=MODELS, default="quasi-static",
+                    help="the cheap level, run on realisations 0..M-1 (default: quasi-static)")
+    mf.add_argument("-n", type=_int_at_least(3), default=64,
+                    help="high-level realisations N, 3 or more (default 64); no interval below N = 32")
+    mf.add_argument("--low-n", type=_positive_int, default=1024,
+                    help="low-level realisations M, at least N (default 1024)")
+    mf.add_argument("-o", "--output", required=True,
+                    help="multi-fidelity netCDF file F.nc; the two ensembles are ordinary rss6 run "
+                         "files beside it, F.high.nc and F.low.nc, resumed like any other")
+    mf.add_argument("--parents", action="store_true", help="create the output's missing folders")
+    mf.add_argument("--seed", type=_nonnegative_int, default=0,
+                    help="random seed, 0 or more (default 0)")
+    mf.add_argument("--confidence", type=_fraction, default=0.95,
+                    help="confidence of the two-sided intervals, in (0, 1) (default 0.95)")
+    mf.add_argument("--cost-ratio", type=_positive_float, metavar="C",
+                    help="cost of one high realisation over one low one (e.g. from rss6 tradeoff); "
+                         "adds the cost-optimal M/N and the cost against plain MC (default: none)")
+    mf.add_argument("--width", type=_fraction, metavar="REL",
+                    help="with --cost-ratio: also the realisations plain MC and multi-fidelity need "
+                         "for a half-width of REL times the mean, e.g. 0.02 (default: none)")
+    mf.add_argument("--workers", type=_positive_int, default=2,
+                    help="local dask workers, one thread each (default 2)")
+    mf.add_argument("--scheduler", help=SCHEDULER_HELP)
+    mf.add_argument("--json", action="store_true",
+                    help="print one strict JSON object (SI units; null where no number)")
+    mf.set_defaults(func=_multifidelity)
+
+
 def _tradeoff(args) -> int:
     from .study import tradeoff, write_tradeoff
     scene = find_scene(args.config)
@@ -507,6 +596,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.set_defaults(func=_report)
 
     _stats_parser(sub)
+    _multifidelity_parser(sub)
 
     pl = sub.add_parser("plot", help="PNG figures of an ensemble file, or the error histories of "
                                      "a simulate -o file")

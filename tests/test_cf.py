@@ -69,3 +69,17 @@ def test_statistics_file_is_cf(tmp_path):
     out = tmp_path / "stats.nc"
     assert main(["stats", str(ens), "-o", str(out), "--require", "displacement:x<=1m@q50"]) in (0, 1)
     assert cf_errors(out) == []
+
+
+def test_multifidelity_file_is_cf(tmp_path):
+    """`rss6 multifidelity -o F.nc`: the combined Dataset of two smoke ensembles on the same draws."""
+    from pipeline.multifidelity import multifidelity_dataset
+    spec = EnsembleSpec(SMOKE.read_text(), str(SMOKE), "paper", "newmark", 1e-3, 4, 0, "summary")
+    path = tmp_path / "mf.nc"
+    low = run_chunk(EnsembleSpec(SMOKE.read_text(), str(SMOKE), "quasi-static", "newmark", 1e-3, 4,
+                                 0, "summary"), [0, 1, 2, 3])
+    write_netcdf(multifidelity_dataset(run_chunk(spec, [0, 1, 2]), low, cost_high_over_low=3.0), path)
+    assert cf_errors(path) == []
+    ds = load_netcdf(path)
+    assert ds["max_abs_error_mean"].attrs["units"] == "m or rad, per direction (see coordinate " \
+                                                      "'unit'); time derivatives thereof"
