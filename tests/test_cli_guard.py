@@ -307,7 +307,7 @@ def test_a_write_failing_on_a_full_disk_says_so(tmp_path, monkeypatch):
     ds = run_chunk(_spec(), [0])
     free = iter([10 ** 9, 1000])   # room before the write, none after it failed
     monkeypatch.setattr(shutil, "disk_usage", lambda p: namedtuple("u", "total used free")(0, 0, next(free)))
-    monkeypatch.setattr(xr.Dataset, "to_netcdf", lambda *a, **k: (_ for _ in ()).throw(
+    monkeypatch.setattr(xr.Dataset, "dump_to_store", lambda *a, **k: (_ for _ in ()).throw(
         RuntimeError("NetCDF: HDF error")))
     with pytest.raises(EnsembleFileError, match="not enough disk space"):
         write_netcdf(ds, tmp_path / "x.nc")
