@@ -185,7 +185,9 @@ def local_cluster(workers: int):
 def _workers_ignore_ctrl_c():
     """Worker processes started in this block inherit an ignored SIGINT: a terminal's Ctrl-C reaches
     the whole process group, and only this process should act on it (the cluster is closed from
-    here); otherwise each worker prints its own traceback."""
+    here); otherwise each worker prints its own traceback. The disposition is the process's, so a
+    Ctrl-C while the local cluster starts (1-3 s) is lost; blocking SIGINT instead does not reach
+    the workers (dask starts them from threads that do not block it)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
