@@ -265,6 +265,8 @@ def cf_encode(ds: xr.Dataset) -> tuple[xr.Dataset, dict]:
                             {"long_name": label.attrs.get("long_name", dim)})})
     for name in out.variables:
         out[name].attrs = _cf_attrs(name, out[name])
+    if "Conventions" not in out.attrs:   # files without rss6's provenance (statistics, studies)
+        out.attrs = {"Conventions": "CF-1.10", **out.attrs}
     encoding = {name: {"_FillValue": None} for name in out.coords
                 if out[name].dtype.kind == "f"}
     return out, encoding
