@@ -146,8 +146,6 @@ def write_netcdf(ds: xr.Dataset, path) -> None:
     Dataset gives (every variable is written when it is defined, in the Dataset's order).
     """
     import os
-
-    import dask
     tmp = f"{path}.part"
     encoded, encoding = cf_encode(ds)
     needed = netcdf_size(ds)
