@@ -230,15 +230,21 @@ def _report(args) -> int:
     from pathlib import Path
 
     from .report import ReportPlan, write_report
+    from .run import SchedulerUnavailable
     out = Path(args.output)
     tracked = [] if args.overwrite_tracked else _tracked([out / "results.md", out / "results"])
     if tracked:
         raise SceneError(f"{args.output}: would overwrite {tracked[0]}, which git tracks "
                          f"({len(tracked)} tracked files); choose another -o or pass "
                          "--overwrite-tracked")
-    plan = ReportPlan(args.n, args.family_n, args.workers, args.scheduler, args.seed)
+    plan = ReportPlan(args.n, args.family_n, args.workers, args.scheduler, args.seed,
+                      args.worker_timeout)
     try:
         path = write_report(args.configs, args.output, plan, args.data)
+    except SchedulerUnavailable as exc:
+        print(f"rss6: error: {exc}; finished ensembles and chunks are kept; rerun the same command "
+              "to continue", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("rss6: interrupted; finished ensembles and chunks are kept; rerun the same command "
               "to continue", file=sys.stderr)
@@ -548,10 +554,7 @@ def _run_parser(sub) -> None:
     run.add_argument("--elements", type=_positive_int, help=ELEMENTS_HELP)
     run.add_argument("--workers", type=_positive_int, default=2,
                      help="local dask workers, one thread each (default 2)")
-    run.add_argument("--scheduler", help=SCHEDULER_HELP)
-    run.add_argument("--worker-timeout", type=_positive_float, default=60.0, metavar="S",
-                     help="with --scheduler: stop (exit 2, finished chunks kept) once the scheduler "
-                          "has had no workers for S seconds (default 60)")
+    _scheduler_options(run)
     run.add_argument("--chunk", type=_positive_int,
                      help="realisations per task (default: n cut into a multiple of the workers "
                           "nearly equal chunks of at most 64; each task integrates its realisations "
@@ -592,7 +595,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     rp.add_argument("--workers", type=_positive_int, default=2,
                     help="local dask workers, one thread each (default 2)")
-    rp.add_argument("--scheduler", help=SCHEDULER_HELP)
+    _scheduler_options(rp)
     rp.set_defaults(func=_report)
 
     _stats_parser(sub)
@@ -614,6 +617,14 @@ def build_parser() -> argparse.ArgumentParser:
                     help="simulated time of the contact sweeps, s (default 0.2)")
     sb.set_defaults(func=_stability)
     return parser
+
+
+def _scheduler_options(parser) -> None:
+    """--scheduler and --worker-timeout, the same for every command that runs ensembles."""
+    parser.add_argument("--scheduler", help=SCHEDULER_HELP)
+    parser.add_argument("--worker-timeout", type=_positive_float, default=60.0, metavar="S",
+                        help="with --scheduler: stop (exit 2, finished chunks kept) once the "
+                             "scheduler has had no workers for S seconds (default 60)")
 
 
 def main(argv: list[str] | None = None) -> int:

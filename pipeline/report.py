@@ -20,7 +20,7 @@ from rss6core import parse_scene
 from rss6core.kinematics import rigid_motion
 from rss6core.models import default_integrator, default_time_step
 
-from .run import EnsembleSpec, run_ensemble
+from .run import WORKER_TIMEOUT_S, EnsembleSpec, run_ensemble
 from .scenes import find_scene
 from .plots import draw_abs_envelope, figure_unit, plain_ticks, plt, save_figure
 from . import report_text as text
@@ -65,6 +65,7 @@ class ReportPlan:
     workers: int = 2
     scheduler: str | None = None
     seed: int = 0
+    worker_timeout: float = WORKER_TIMEOUT_S   # s without workers before an external scheduler is given up
 
 
 def with_clearance(text: str, values: dict[str, float], source: str = "<report>") -> str:
@@ -83,7 +84,8 @@ def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store):
     sim = scene.simulation
     spec = EnsembleSpec(text, source, model, default_integrator(scene, model),
                         default_time_step(scene, model), sim.elements_per_link, plan.seed, store)
-    return run_ensemble(spec, n, path, workers=plan.workers, scheduler=plan.scheduler)
+    return run_ensemble(spec, n, path, workers=plan.workers, scheduler=plan.scheduler,
+                        worker_timeout=plan.worker_timeout)
 
 
 def run_scene(config, data: Path, plan: ReportPlan) -> dict[str, Path]:

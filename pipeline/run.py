@@ -33,7 +33,7 @@ from rss6core.models import simulate_batch, stored_draw
 
 from .outputs import OutputLock, PartsManifest
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
-                    realization_dataset, write_netcdf)
+                    realization_dataset, sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
            "local_cluster", "BLAS_ENV", "SchedulerUnavailable"]
@@ -99,7 +99,8 @@ def _check_identity(path, attrs: dict, spec: EnsembleSpec) -> None:
 
 
 def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest) -> tuple[list, set]:
-    """Datasets already stored for this ensemble (final file and verified parts), their realisations.
+    """Datasets already stored for this ensemble (final file and verified parts, their histories
+    left on disk), and their realisations.
 
     Each realisation is taken once: parts left beside a finished file (a run stopped
     between writing it and removing the parts) add only what the file lacks.
@@ -109,7 +110,7 @@ def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest) -> tuple[
         manifest.verify(path)
     candidates = ([output] if output.exists() else []) + manifest.parts()
     for path in candidates:
-        ds = open_ensemble(path)
+        ds = open_ensemble(path, lazy=True)
         _check_identity(path, ds.attrs, spec)
         new = [int(r) for r in ds["realization"].values if int(r) not in done]
         if new:
@@ -184,7 +185,9 @@ def local_cluster(workers: int):
 def _workers_ignore_ctrl_c():
     """Worker processes started in this block inherit an ignored SIGINT: a terminal's Ctrl-C reaches
     the whole process group, and only this process should act on it (the cluster is closed from
-    here); otherwise each worker prints its own traceback."""
+    here); otherwise each worker prints its own traceback. The disposition is the process's, so a
+    Ctrl-C while the local cluster starts (1-3 s) is lost; blocking SIGINT instead does not reach
+    the workers (dask starts them from threads that do not block it)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -222,20 +225,22 @@ def _client(workers: int, scheduler: str | None):
     return Client(cluster), cluster
 
 
-def _finished(client, futures: list, scheduler: str | None, worker_timeout: float):
-    """The chunk results as they finish; on an external scheduler the workers are counted every
-    POLL_S and SchedulerUnavailable is raised once it has had none for ``worker_timeout`` s."""
-    from dask.distributed import as_completed
-    if not scheduler:
-        for future in as_completed(futures):
-            yield future.result()
-        return
-    _quiet_lost_results()
+def _finished(client, futures: list, scheduler: str | None, worker_timeout: float,
+              interrupted: list):
+    """The chunk results as they finish, waiting at most POLL_S at a time: KeyboardInterrupt is
+    raised here, between waits, once ``interrupted`` holds a Ctrl-C (never inside dask's client,
+    where it could leave a lock held and hang the cluster's shutdown). On an external scheduler
+    the workers are counted and SchedulerUnavailable is raised once it has had none for
+    ``worker_timeout`` s."""
+    if scheduler:
+        _quiet_lost_results()
     pending, idle_since = set(futures), None
     while pending:
+        if interrupted:
+            raise KeyboardInterrupt
         got = list(_gathered(client, pending))
         yield from got
-        if got or client.nthreads():
+        if not scheduler or got or client.nthreads():
             idle_since = None
             continue
         idle_since = time.monotonic() if idle_since is None else idle_since
@@ -333,40 +338,50 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
             bar = _Progress(n, n - len(todo)) if progress else None
             if bar:
                 bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
-            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout)
+            written = _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout)
+            pieces += [open_ensemble(path, lazy=True) for path in written]
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
-        merged = pieces[0] if up_to_date else finish_ensemble(pieces, spec.scene(), **_kw(spec))
+        merged = pieces[0] if up_to_date else _merged(pieces, spec)
         extra = annotate(merged) if annotate else {}
         annotated = any(str(merged.attrs.get(k)) != str(v) for k, v in extra.items())
-        merged = merged.assign_attrs(extra)
         if not up_to_date or annotated:
-            write_netcdf(merged, output)
+            write_netcdf(merged.assign_attrs(extra), output)   # streams the histories from the parts
+            merged = open_ensemble(output, lazy=True)
         if manifest.folder.exists():
             shutil.rmtree(manifest.folder)
     return EnsembleOutcome(merged, len(todo), len(done), not up_to_date)
 
 
+def _merged(pieces: list, spec: EnsembleSpec):
+    """The stored pieces as one ensemble, in realisation order; histories stay lazy (on disk)."""
+    pieces = sorted(pieces, key=lambda ds: int(ds["realization"][0]))
+    return finish_ensemble(pieces, spec.scene(), **_kw(spec))
+
+
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
              scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S) -> list:
-    """Run the chunks on dask; each finished chunk is stored as a part at once."""
+    """Run the chunks on dask; each finished chunk is stored as a part at once. Returns the parts'
+    paths (the chunks are not kept in memory)."""
     client, cluster = _client(workers, scheduler)
-    pieces = []
+    written = []
     try:
-        futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
-        for ds in _finished(client, futures, scheduler, worker_timeout):
-            first, last = int(ds.realization[0]), int(ds.realization[-1])
-            manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
-            pieces.append(ds)
-            if bar:
-                bar.advance(ds.sizes["realization"])
-    finally:
+        with sigint_deferred() as interrupted:   # Ctrl-C is acted on in _finished
+            futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
+            for ds in _finished(client, futures, scheduler, worker_timeout, interrupted):
+                first, last = int(ds.realization[0]), int(ds.realization[-1])
+                written.append(manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc"))
+                if bar:
+                    bar.advance(ds.sizes["realization"])
+    finally:   # a second Ctrl-C may cut a slow shutdown short
         client.close()
         if cluster is not None:
             cluster.close()
-    return pieces
+    return written
 
 
 def run_ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
-                 chunk: int | None = None, progress: bool = True):
+                 chunk: int | None = None, progress: bool = True,
+                 worker_timeout: float = WORKER_TIMEOUT_S):
     """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset."""
-    return ensemble(spec, n, output, workers, scheduler, chunk, progress).dataset
+    return ensemble(spec, n, output, workers, scheduler, chunk, progress,
+                    worker_timeout=worker_timeout).dataset

@@ -10,13 +10,14 @@ import contextlib
 import signal
 import threading
 
+import dask
 import numpy as np
 import xarray as xr
 
 from rss6core import __version__
 
 __all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "display_unit", "error_summaries", "run_dataset",
-           "write_netcdf", "cf_encode", "cf_decode", "check_free_space"]
+           "write_netcdf", "cf_encode", "cf_decode", "check_free_space", "netcdf_size"]
 
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
 QUANTITIES = ("displacement", "velocity", "acceleration")
@@ -115,14 +116,18 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
 def sigint_deferred():
     """Ctrl-C during the block takes effect when it ends: a file write is never cut inside the
     netCDF library or xarray's file lock (an interrupt landing there left the lock held and hung
-    the run). Python runs signal handlers in the main thread only, so elsewhere this does nothing."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+    the run). Python runs signal handlers in the main thread only, so elsewhere this does nothing.
+
+    Yields the list the held signals are appended to: a long block may look at it at a safe point
+    and stop early (raising KeyboardInterrupt itself).
+    """
     received = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
     previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
     try:
-        yield
+        yield received
     finally:
         signal.signal(signal.SIGINT, previous)
     if received:
@@ -136,26 +141,76 @@ def write_netcdf(ds: xr.Dataset, path) -> None:
     """Write ``ds`` as CF-1.10 netCDF4 to ``path`` via a temporary file, so a crash leaves no half file.
 
     The in-memory schema is mapped to CF here (:func:`cf_encode`) and back in :func:`load_netcdf`.
+    Variables held as dask arrays (an ensemble merged from its parts) are streamed block by block:
+    the write holds one block in memory, and the file is byte for byte the one an in-memory
+    Dataset gives (every variable is written when it is defined, in the Dataset's order).
     """
     import os
-
-    import dask
     tmp = f"{path}.part"
     encoded, encoding = cf_encode(ds)
-    # The data are in memory. While a dask.distributed client is open, xarray would otherwise
-    # guard the file with a distributed lock: a scheduler round trip per variable, which made
-    # each chunk's write 8x slower and kept the scheduler busy beside the workers.
-    check_free_space(path, ds.nbytes)
-    with sigint_deferred():
+    needed = netcdf_size(ds)
+    check_free_space(path, needed)
+    with sigint_deferred() as interrupted:
         try:
+            # The data are in memory or in local files. While a dask.distributed client is open,
+            # xarray would otherwise guard the file with a distributed lock: a scheduler round
+            # trip per variable, which made each chunk's write 8x slower.
             with dask.config.set(scheduler="synchronous"):
-                encoded.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
-        except (OSError, RuntimeError):  # a full disk shows as "NetCDF: HDF error"
+                _stream_to_netcdf(encoded, tmp, encoding, interrupted)
+        except BaseException as exc:
             if os.path.exists(tmp):
                 os.remove(tmp)
-            check_free_space(path, ds.nbytes)
+            if isinstance(exc, (OSError, RuntimeError)):  # a full disk shows as "NetCDF: HDF error"
+                check_free_space(path, needed)
             raise
         os.replace(tmp, path)
+
+
+class _InOrderWriter:
+    """xarray's array writer, writing each variable as soon as it is defined; a dask-backed one
+    block by block (strings at once: they are small and their heap layout then matches), stopping
+    between blocks once ``interrupted`` (a list) is not empty."""
+    lock = None
+
+    def __init__(self, interrupted: list):
+        self.interrupted = interrupted
+
+    def add(self, source, target, region=None) -> None:
+        if region is not None:
+            raise ValueError("region writes are not used by rss6")
+        if not dask.is_dask_collection(source):
+            target[...] = source
+        elif source.dtype.kind in "OUS":
+            target[...] = source.compute()
+        else:
+            edges = [np.cumsum((0,) + tuple(c)) for c in source.chunks]
+            for block in np.ndindex(*source.numblocks):
+                if self.interrupted:
+                    raise KeyboardInterrupt
+                where = tuple(slice(e[i], e[i + 1]) for e, i in zip(edges, block))
+                target[where] = source.blocks[block].compute()
+
+
+def _stream_to_netcdf(ds: xr.Dataset, path, encoding: dict, interrupted: list) -> None:
+    """``ds.to_netcdf(path)`` (netCDF4, NETCDF4 format) with :class:`_InOrderWriter`."""
+    from xarray.backends import NetCDF4DataStore
+    store = NetCDF4DataStore.open(path, mode="w", format="NETCDF4")
+    try:
+        ds.dump_to_store(store, writer=_InOrderWriter(interrupted), encoding=encoding)
+    finally:
+        store.close()
+
+
+def netcdf_size(ds: xr.Dataset) -> int:
+    """Bytes the values of ``ds`` take in a netCDF4 file (without its ~30 kB of metadata): the
+    numbers, and per string its UTF-8 bytes padded to 8 plus 32 bytes of HDF5 overhead."""
+    total = 0
+    for var in ds.variables.values():
+        if var.dtype.kind in "OUS":
+            total += sum(32 + -(-len(str(s).encode()) // 8) * 8 for s in np.ravel(var.values))
+        else:
+            total += var.nbytes
+    return total
 
 
 def check_free_space(path, needed: int) -> None:
@@ -208,6 +263,8 @@ def cf_encode(ds: xr.Dataset) -> tuple[xr.Dataset, dict]:
                             {"long_name": label.attrs.get("long_name", dim)})})
     for name in out.variables:
         out[name].attrs = _cf_attrs(name, out[name])
+    if "Conventions" not in out.attrs:   # files without rss6's provenance (statistics, studies)
+        out.attrs = {"Conventions": "CF-1.10", **out.attrs}
     encoding = {name: {"_FillValue": None} for name in out.coords
                 if out[name].dtype.kind == "f"}
     return out, encoding
@@ -293,7 +350,8 @@ def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: s
     """Concatenate realisations (sorted) and add coordinates and provenance."""
     ds = xr.concat(parts, dim="realization", data_vars="minimal", coords="minimal",
                    compat="override", join="override") if len(parts) > 1 else parts[0]
-    ds = ds.sortby("realization")
+    if not (np.diff(ds["realization"].values) > 0).all():   # (lazy histories: no reindexing)
+        ds = ds.sortby("realization")
     ds = ds.assign_coords(
         direction=("direction", list(DIRECTIONS), {"long_name": "platform pose direction, base frame"}),
         quantity=("quantity", list(QUANTITIES)),
@@ -316,12 +374,26 @@ def identity(attrs: dict) -> dict:
     return {k: attrs.get(k) for k in IDENTITY}
 
 
-def load_netcdf(path) -> xr.Dataset:
-    """Any netCDF file fully into memory; EnsembleFileError names the file if it is missing or unreadable."""
+HISTORY_BLOCK = 64   # realisations per block of a history read lazily (a merge holds one block)
+
+
+def load_netcdf(path, lazy: bool = False) -> xr.Dataset:
+    """Any netCDF file fully into memory; EnsembleFileError names the file if it is missing or unreadable.
+
+    ``lazy``: the variables over time (histories) stay on disk as dask arrays of HISTORY_BLOCK
+    realisations, read block by block when used; the file stays open while the Dataset is used.
+    """
     import os
     if not os.path.exists(path):
         raise EnsembleFileError(f"{path}: no such file")
     try:
+        if lazy:
+            ds = xr.open_dataset(path, engine="netcdf4", decode_times=False,
+                                 chunks={"realization": HISTORY_BLOCK})
+            for var in ds.variables.values():
+                if _ELAPSED not in var.dims:
+                    var.load()
+            return cf_decode(ds)
         with xr.open_dataset(path, engine="netcdf4", decode_times=False) as ds:
             return cf_decode(ds.load())
     except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...
@@ -329,9 +401,10 @@ def load_netcdf(path) -> xr.Dataset:
                                 f"(truncated or corrupt?): {exc}") from None
 
 
-def open_ensemble(path) -> xr.Dataset:
-    """Open an ensemble file fully into memory; EnsembleFileError names the file and the problem."""
-    ds = load_netcdf(path)
+def open_ensemble(path, lazy: bool = False) -> xr.Dataset:
+    """Open an ensemble file into memory (``lazy``: its histories stay on disk, see
+    :func:`load_netcdf`); EnsembleFileError names the file and the problem."""
+    ds = load_netcdf(path, lazy)
     missing = [k for k in ("max_abs_error", "mean_abs_error", "status") if k not in ds]
     if missing or "rss6_version" not in ds.attrs or "realization" not in ds.dims:
         raise EnsembleFileError(f"{path}: not an rss6 ensemble file (missing "

@@ -29,6 +29,9 @@ def cf_errors(path) -> list[str]:
         score = r.value if isinstance(r.value, tuple) else (int(bool(r.value)), 1)
         if r.weight == 3 and score[0] < score[1]:
             errors.append(f"{r.name}: {'; '.join(r.msgs)}")
+    with xr.open_dataset(path, engine="netcdf4") as ds:   # the claim the checker takes on trust
+        if ds.attrs.get("Conventions") != "CF-1.10":
+            errors.append(f"Conventions is {ds.attrs.get('Conventions')!r}, not 'CF-1.10'")
     return errors + [f"checker crashed in {name}: {exc}" for name, exc in crashed.items()]
 
 

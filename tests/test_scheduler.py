@@ -148,3 +148,29 @@ def test_scheduler_without_any_worker_stops_after_the_timeout(tmp_path):
                     "(--worker-timeout 3)"), line
     assert 3 < elapsed < 20, elapsed
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scheduler.log"]   # no lock, no parts
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("workers", ["unreachable", "none"])
+def test_report_on_an_unavailable_scheduler_is_one_line_and_exit_2(tmp_path, workers):
+    """`rss6 report --scheduler` ends as `rss6 run --scheduler` does: one line, exit 2."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    procs = []
+    try:
+        if workers == "none":
+            procs.append(_start(["scheduler", "--host", "127.0.0.1", "--port", str(port),
+                                 "--no-dashboard"], tmp_path / "scheduler.log"))
+            _wait_for(lambda: "Scheduler at" in (tmp_path / "scheduler.log").read_text(), 30,
+                      "scheduler started")
+        proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "report", "smoke", "-n", "4",
+                               "--family-n", "2", "-o", str(tmp_path / "rep"), "--scheduler", address,
+                               "--worker-timeout", "3"], cwd=tmp_path, capture_output=True,
+                              text=True, timeout=120)
+    finally:
+        for p in procs:
+            _stop(p)
+    line = _error_line(proc.stderr)
+    assert proc.returncode == 2, proc.stderr
+    why = "cannot reach the dask scheduler" if workers == "unreachable" else "no workers for 3 s"
+    assert line.startswith("rss6: error: ") and address in line and why in line, line

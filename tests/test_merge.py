@@ -1,0 +1,134 @@
+"""The merge of an ensemble's parts into OUT.nc streams the histories block by block: the file is
+byte for byte the one an in-memory merge writes, the disk check asks for the file's size, and a
+full disk or a Ctrl-C during the merge keeps every part."""
+import os
+import shutil
+import signal
+from collections import namedtuple
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import pipeline.store as store
+from pipeline.outputs import PartsManifest
+from pipeline.run import EnsembleSpec, ensemble, run_chunk
+from pipeline.scenes import PACKAGE
+from pipeline.store import EnsembleFileError, netcdf_size, open_ensemble, write_netcdf
+
+SMOKE = Path(str(resources.files(PACKAGE))) / "smoke.toml"
+N = 6
+USAGE = namedtuple("usage", "total used free")
+
+
+def _spec():
+    return EnsembleSpec(SMOKE.read_text(), str(SMOKE), "quasi-static", "newmark", 1e-3, 4, 3, "full")
+
+
+@pytest.fixture(scope="module")
+def chunks():
+    """Three computed chunks of two realisations (full histories), computed once."""
+    spec = _spec()
+    return [run_chunk(spec, [r, r + 1]) for r in range(0, N, 2)]
+
+
+def _parts(out: Path, chunks) -> Path:
+    """``out``'s parts folder holding every chunk, as a finished run leaves it before its merge."""
+    manifest = PartsManifest(Path(str(out) + ".parts"), _spec().attrs())
+    for ds in chunks:
+        r = ds["realization"].values
+        manifest.write(ds, f"chunk-{r[0]:07d}-{r[-1]:07d}.nc")
+    return manifest.folder
+
+
+def _merge(out: Path):
+    return ensemble(_spec(), N, out, workers=1, progress=False)
+
+
+def _history_writes(monkeypatch) -> list:
+    """The number of blocks in which each dask-backed numeric variable is written."""
+    blocks, add = [], store._InOrderWriter.add
+
+    def spy(self, source, target, region=None):
+        if store.dask.is_dask_collection(source) and source.dtype.kind == "f":
+            blocks.append(source.npartitions)
+        return add(self, source, target, region)
+    monkeypatch.setattr(store._InOrderWriter, "add", spy)
+    return blocks
+
+
+def test_streamed_merge_is_the_in_memory_file_and_reads_one_block_at_a_time(tmp_path, chunks,
+                                                                             monkeypatch):
+    monkeypatch.setattr(store, "HISTORY_BLOCK", 1)
+    out = tmp_path / "out.nc"
+    parts = _parts(out, chunks)
+    blocks = _history_writes(monkeypatch)
+    outcome = _merge(out)
+    assert outcome.written and outcome.stored_before == N and not parts.exists()
+    assert blocks == [N]   # the histories, one realisation per block
+    in_memory = tmp_path / "in_memory.nc"
+    write_netcdf(open_ensemble(out), in_memory)   # everything loaded: one write per variable
+    assert out.read_bytes() == in_memory.read_bytes()
+    assert np.array_equal(outcome.dataset["error"].values,
+                          xr.concat([c["error"] for c in chunks], "realization").values)
+
+
+def test_the_disk_check_asks_for_the_size_of_the_merged_file(tmp_path, chunks, monkeypatch):
+    out = tmp_path / "out.nc"
+    parts = _parts(out, chunks)
+    ref = tmp_path / "ref.nc"
+    _parts(ref, chunks)
+    _merge(ref)
+    needed, size = netcdf_size(open_ensemble(ref)), ref.stat().st_size
+    assert needed <= size <= needed + 64 * 2 ** 10   # values plus ~30 kB of metadata
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: USAGE(0, 0, needed + 2 ** 20 - 1))
+    with pytest.raises(EnsembleFileError, match="not enough disk space"):
+        _merge(out)
+    assert not out.exists() and len(list(parts.glob("*.nc"))) == 3
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: USAGE(0, 0, needed + 2 ** 20))
+    assert _merge(out).written and out.read_bytes() == ref.read_bytes()
+
+
+def _fail_after_first_block(monkeypatch, action):
+    """Run ``action`` after the first history block is written (inside the streamed merge)."""
+    real = store._InOrderWriter.add
+
+    def add(self, source, target, region=None):
+        if store.dask.is_dask_collection(source) and source.dtype.kind == "f":
+            real_target = target
+
+            class Target:
+                def __setitem__(self, key, value):
+                    real_target[key] = value
+                    action()
+            target = Target()
+        return real(self, source, target, region)
+    monkeypatch.setattr(store._InOrderWriter, "add", add)
+
+
+@pytest.mark.parametrize("event", ["ctrl-c", "full disk"])
+def test_an_interrupt_or_a_full_disk_during_the_merge_keeps_every_part(tmp_path, chunks,
+                                                                        monkeypatch, event):
+    monkeypatch.setattr(store, "HISTORY_BLOCK", 1)
+    out = tmp_path / "out.nc"
+    parts = _parts(out, chunks)
+    before = sorted((p.name, p.read_bytes()) for p in parts.iterdir())
+    if event == "ctrl-c":
+        _fail_after_first_block(monkeypatch, lambda: os.kill(os.getpid(), signal.SIGINT))
+        with pytest.raises(KeyboardInterrupt):
+            _merge(out)
+    else:
+        def full():
+            monkeypatch.setattr(shutil, "disk_usage", lambda p: USAGE(0, 0, 1000))
+            raise RuntimeError("NetCDF: HDF error")
+        _fail_after_first_block(monkeypatch, full)
+        with pytest.raises(EnsembleFileError, match="not enough disk space"):
+            _merge(out)
+    assert sorted(tmp_path.iterdir()) == [parts]   # no output, no temporary file, no lock
+    assert sorted((p.name, p.read_bytes()) for p in parts.iterdir()) == before
+    monkeypatch.undo()
+    resumed = _merge(out)
+    assert resumed.written and resumed.computed == 0 and not parts.exists()
+    assert open_ensemble(out)["realization"].values.tolist() == list(range(N))
