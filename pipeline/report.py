@@ -16,9 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import parse_scene
-from rss6core.kinematics import rigid_motion
-from rss6core.models import default_integrator, default_time_step
+from rss6core import default_integrator, default_time_step, parse_scene, rigid_motion, simulate
 
 from .run import EnsembleSpec, run_ensemble
 from .scenes import find_scene
@@ -88,7 +86,6 @@ def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store):
 
 def run_scene(config, data: Path, plan: ReportPlan) -> dict[str, Path]:
     """Run (or resume) every file the report needs for one scene; returns their paths by role."""
-    from rss6core.models import simulate
     scene = find_scene(config)
     data.mkdir(parents=True, exist_ok=True)
     paths = {}

@@ -28,8 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import parse_scene
-from rss6core.models import simulate_batch, stored_draw
+from rss6core import SimulationResult, parse_scene, simulate_batch, stored_draw, time_grid
 
 from .outputs import OutputLock, PartsManifest
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
@@ -70,7 +69,6 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
         results = simulate_batch(scene, spec.model, spec.integrator, spec.dt, spec.elements,
                                  spec.seed, realizations)
     except (ArithmeticError, np.linalg.LinAlgError) as exc:  # numerical failure: record it
-        from rss6core.elastic import SimulationResult, time_grid
         t = time_grid(scene.trajectory.duration, spec.dt)
         nan = np.full((len(t), 6), np.nan)
         results = [SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)

@@ -23,16 +23,17 @@ import scipy.linalg
 
 from .assembly import build_elastic_model, dense_matrices, end_maps
 from .clearance import draw_clearances
-from .contact_dynamics import simulate_contact
+from .contact_dynamics import build_joint_model, simulate_contact
 from .elastic import SimulationResult, simulate_elastic, time_grid
 from .integrators import make_integrator
 from .kinematics import rigid_motion
 from .paper_method import PaperClosure, paper_contact_forces, paper_draw
 from .quasi_static import quasi_static_error
-from .scene import MODELS
 
 __all__ = ["simulate", "simulate_batch", "default_time_step", "default_integrator", "stored_draw",
-           "natural_frequencies", "MODELS"]
+           "natural_frequencies", "degrees_of_freedom", "MODELS"]
+
+MODELS = ("rigid", "quasi-static", "elastic", "paper", "contact")   # the levels, cheapest first
 
 
 def stored_draw(scene, model: str, seed: int, realization: int, dt: float):
@@ -130,3 +131,13 @@ def natural_frequencies(scene, elements: int | None = None, t: float = 0.0) -> n
     maps = end_maps(model, rigid_motion(scene, np.array([t])), scene.geometry)
     M, K = dense_matrices(model, maps[0])
     return np.sqrt(np.abs(scipy.linalg.eigh(K, M, eigvals_only=True)))
+
+
+def degrees_of_freedom(scene, model: str, elements: int | None = None) -> int:
+    """Unknowns a level solves for: the 6 pose errors (rigid, quasi-static), else the finite-element
+    model's degrees of freedom (the contact level's with its joints' own nodes)."""
+    if model in ("rigid", "quasi-static"):
+        return 6
+    elements = elements or scene.simulation.elements_per_link
+    build = build_joint_model if model == "contact" else build_elastic_model
+    return build(scene, elements).dofs
