@@ -35,7 +35,7 @@ from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
                     realization_dataset, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
-           "local_cluster", "BLAS_ENV", "SchedulerUnavailable"]
+           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -62,23 +62,41 @@ class EnsembleSpec:
                 "store": self.store}
 
 
+NUMERICAL_FAILURES = (ArithmeticError, np.linalg.LinAlgError)   # recorded as a failed realisation
+
+
 def run_chunk(spec: EnsembleSpec, realizations: list[int]):
-    """Simulate the given realisations; returns their ensemble Dataset (a dask task)."""
+    """Simulate the given realisations; returns their ensemble Dataset (a dask task).
+
+    A numerical failure raised by the batch is traced to its realisations by running each alone:
+    only those that fail alone are recorded as failed (with the reason), the others are kept, so
+    the file does not depend on how the realisations were cut into chunks."""
     scene = spec.scene()
     try:
-        results = simulate_batch(scene, spec.model, spec.integrator, spec.dt, spec.elements,
-                                 spec.seed, realizations)
-    except (ArithmeticError, np.linalg.LinAlgError) as exc:  # numerical failure: record it
-        t = time_grid(scene.trajectory.duration, spec.dt)
-        nan = np.full((len(t), 6), np.nan)
-        results = [SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
-                   ] * len(realizations)
+        results = _simulate(scene, spec, realizations)
+    except NUMERICAL_FAILURES:
+        results = [_alone(scene, spec, r) for r in realizations]
     # the clearance levels hand back their draws; drawn here only without clearances or on failure
     parts = [realization_dataset(result, result.draw if result.draw is not None
                                  else stored_draw(scene, spec.model, spec.seed, r, spec.dt), r,
                                  spec.store, scene.simulation.settle_time)
              for r, result in zip(realizations, results)]
     return finish_ensemble(parts, scene, **_kw(spec))
+
+
+def _simulate(scene, spec: EnsembleSpec, realizations: list[int]) -> list:
+    return simulate_batch(scene, spec.model, spec.integrator, spec.dt, spec.elements, spec.seed,
+                          realizations)
+
+
+def _alone(scene, spec: EnsembleSpec, realization: int):
+    """Realisation ``realization`` by itself; a numerical failure becomes its failed result."""
+    try:
+        return _simulate(scene, spec, [realization])[0]
+    except NUMERICAL_FAILURES as exc:
+        t = time_grid(scene.trajectory.duration, spec.dt)
+        nan = np.full((len(t), 6), np.nan)
+        return SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
 
 
 def _kw(spec: EnsembleSpec) -> dict:
@@ -203,6 +221,19 @@ class SchedulerUnavailable(RuntimeError):
     environment problem: the finished chunks stay in OUT.nc.parts)."""
 
 
+@contextlib.contextmanager
+def dask_client(workers: int = 2, scheduler: str | None = None):
+    """A dask client on a new local cluster of ``workers`` (or on ``scheduler``), closed with its
+    cluster at the end of the block: one cluster for many ensembles (``client=`` of :func:`ensemble`)."""
+    client, cluster = _client(workers, scheduler)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
 def _client(workers: int, scheduler: str | None):
     from dask.distributed import Client
     if scheduler:
@@ -307,13 +338,15 @@ class EnsembleOutcome:
 
 def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
              chunk: int | None = None, progress: bool = True, annotate=None,
-             worker_timeout: float = WORKER_TIMEOUT_S) -> EnsembleOutcome:
+             worker_timeout: float = WORKER_TIMEOUT_S, client=None) -> EnsembleOutcome:
     """Run realisations 0..n-1 not yet stored in ``output`` (one writer at a time: OUT.lock).
 
     ``annotate(dataset) -> dict``, if given, adds global attributes (e.g. requirement verdicts)
     computed from the finished ensemble before it is written; the file is rewritten only if they
     change it. ``worker_timeout`` (s): how long an external ``scheduler`` may have no workers
-    before SchedulerUnavailable is raised."""
+    before SchedulerUnavailable is raised. ``client``: an open dask client to run on (see
+    :func:`dask_client`; ``workers`` then only sizes the default chunks, and ``scheduler`` says
+    whether it is external); without one, a cluster is started for this call and closed after."""
     if n < 1:
         raise ValueError(f"the number of realisations must be at least 1, got {n}")
     chunk = default_chunk(n, workers) if chunk is None else chunk
@@ -331,7 +364,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
             bar = _Progress(n, n - len(todo)) if progress else None
             if bar:
                 bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
-            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout)
+            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout, client)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
         merged = pieces[0] if up_to_date else finish_ensemble(pieces, spec.scene(), **_kw(spec))
         extra = annotate(merged) if annotate else {}
@@ -345,26 +378,28 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
 
 
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
-             scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S) -> list:
-    """Run the chunks on dask; each finished chunk is stored as a part at once."""
-    client, cluster = _client(workers, scheduler)
-    pieces = []
-    try:
+             scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S, client=None) -> list:
+    """Run the chunks on dask (on ``client``, else on a cluster of this call); each finished chunk
+    is stored as a part at once."""
+    pieces, shared = [], client is not None
+    with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
-        for ds in _finished(client, futures, scheduler, worker_timeout):
-            first, last = int(ds.realization[0]), int(ds.realization[-1])
-            manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
-            pieces.append(ds)
-            if bar:
-                bar.advance(ds.sizes["realization"])
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        try:
+            for ds in _finished(client, futures, scheduler, worker_timeout):
+                first, last = int(ds.realization[0]), int(ds.realization[-1])
+                manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
+                pieces.append(ds)
+                if bar:
+                    bar.advance(ds.sizes["realization"])
+        except BaseException:
+            if shared:   # the cluster outlives this call: leave it none of this call's work
+                client.cancel(futures)
+            raise
     return pieces
 
 
 def run_ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
-                 chunk: int | None = None, progress: bool = True):
-    """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset."""
-    return ensemble(spec, n, output, workers, scheduler, chunk, progress).dataset
+                 chunk: int | None = None, progress: bool = True, client=None):
+    """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset. ``client``:
+    an open dask client to reuse (:func:`dask_client`), else a cluster is started for this call."""
+    return ensemble(spec, n, output, workers, scheduler, chunk, progress, client=client).dataset
