@@ -14,6 +14,8 @@ Running a level
 - INTEGRATORS: the time integrators a level accepts by name.
 - simulate: one realisation of a level along the scene's trajectory.
 - simulate_batch: many realisations of one level, sharing what they share.
+- prepare_level: a level on a scene with what all its realisations share computed once.
+- Level: what prepare_level returns; its ``simulate(seed, realizations)`` runs a batch.
 - SimulationResult: what every level returns (error histories in SI, status and message).
 - time_grid: the output instants (s) of a duration and step, or ValueError if the step does not divide it.
 - stored_draw: the clearance draw an ensemble file records for one realisation.
@@ -38,14 +40,15 @@ from .assembly import build_elastic_model
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
 from .kinematics import rigid_motion
-from .models import (MODELS, default_integrator, default_time_step, degrees_of_freedom,
-                     natural_frequencies, simulate, simulate_batch, stored_draw)
+from .models import (MODELS, Level, default_integrator, default_time_step, degrees_of_freedom,
+                     natural_frequencies, prepare_level, simulate, simulate_batch, stored_draw)
 from .scene import Scene, SceneError, load_scene, parse_scene
 from .sections import crank_inertia, rod_inertia
 
 __version__ = "0.1.0"
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
-           "MODELS", "INTEGRATORS", "simulate", "simulate_batch", "SimulationResult", "time_grid",
+           "MODELS", "INTEGRATORS", "simulate", "simulate_batch", "prepare_level", "Level",
+           "SimulationResult", "time_grid",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom",
            "Integrator", "build_elastic_model", "quasi_static_state", "simulate_elastic",

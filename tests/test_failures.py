@@ -4,6 +4,7 @@ import numpy as np
 import xarray as xr
 
 import pipeline.run as run
+from rss6core import Level
 from pipeline.run import EnsembleSpec, run_chunk, run_ensemble
 from pipeline.scene_variant import scene_variant
 from pipeline.scenes import scene_text
@@ -23,14 +24,14 @@ def test_a_realisation_that_raises_fails_alone_and_its_chunk_keeps_the_others(mo
     exactly what a clean run gives; the chunk equals the same realisations run one per chunk."""
     spec = _quasi_static()
     clean = run_chunk(spec, [0, 1, 2, 3])
-    simulate_batch = run.simulate_batch
+    simulate = Level.simulate
 
-    def fails_with_2(scene, model, integrator, dt, elements, seed, realizations):
+    def fails_with_2(level, seed, realizations):
         if 2 in realizations:
             raise FloatingPointError("overflow in the closure of realisation 2")
-        return simulate_batch(scene, model, integrator, dt, elements, seed, realizations)
+        return simulate(level, seed, realizations)
 
-    monkeypatch.setattr(run, "simulate_batch", fails_with_2)
+    monkeypatch.setattr(Level, "simulate", fails_with_2)
     chunk = run_chunk(spec, [0, 1, 2, 3])
     assert list(chunk["status"].values) == ["finished", "finished", "failed", "finished"]
     assert chunk["status_message"].values[2] == "FloatingPointError: overflow in the closure of realisation 2"
