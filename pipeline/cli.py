@@ -11,8 +11,7 @@ import sys
 
 import numpy as np
 
-from rss6core import SceneError, __version__
-from rss6core.scene import INTEGRATORS, MODELS
+from rss6core import INTEGRATORS, MODELS, SceneError, __version__
 
 from .scenes import find_scene
 from .summary import contact_peaks, error_summary, format_errors, format_summary, scene_summary
@@ -64,8 +63,7 @@ def _check(args) -> int:
 def _settings(args, scene) -> tuple[str, str, float, int]:
     """Model, integrator, time step and mesh: the command line's, else the scene's; the step is
     checked here, before any work, against the scene's duration."""
-    from rss6core.elastic import time_grid
-    from rss6core.models import default_integrator, default_time_step
+    from rss6core import default_integrator, default_time_step, time_grid
     sim = scene.simulation
     model = args.model or sim.model
     dt = args.dt or default_time_step(scene, model)
@@ -90,7 +88,7 @@ def _refuse_clearance_free_default(args, scene, model: str) -> None:
 def _simulate(args) -> int:
     import time
 
-    from rss6core.models import simulate
+    from rss6core import simulate
 
     from .store import run_dataset, write_netcdf
     from .outputs import check_output_path

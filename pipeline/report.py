@@ -16,11 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import parse_scene
-from rss6core.kinematics import rigid_motion
-from rss6core.models import default_integrator, default_time_step
+from rss6core import default_integrator, default_time_step, parse_scene, rigid_motion, simulate
 
-from .run import WORKER_TIMEOUT_S, EnsembleSpec, run_ensemble
+from .run import WORKER_TIMEOUT_S, EnsembleSpec, dask_client, run_ensemble
 from .scenes import find_scene
 from .plots import draw_abs_envelope, figure_unit, plain_ticks, plt, save_figure
 from . import report_text as text
@@ -80,17 +78,17 @@ def _only(text: str, family: str, source: str) -> str:
                                  for k in keys}, source)
 
 
-def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store):
+def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store, client):
     sim = scene.simulation
     spec = EnsembleSpec(text, source, model, default_integrator(scene, model),
                         default_time_step(scene, model), sim.elements_per_link, plan.seed, store)
     return run_ensemble(spec, n, path, workers=plan.workers, scheduler=plan.scheduler,
-                        worker_timeout=plan.worker_timeout)
+                        worker_timeout=plan.worker_timeout, client=client)
 
 
-def run_scene(config, data: Path, plan: ReportPlan) -> dict[str, Path]:
-    """Run (or resume) every file the report needs for one scene; returns their paths by role."""
-    from rss6core.models import simulate
+def run_scene(config, data: Path, plan: ReportPlan, client=None) -> dict[str, Path]:
+    """Run (or resume) every file the report needs for one scene; returns their paths by role.
+    ``client``: an open dask client for all its ensembles, else each starts its own cluster."""
     scene = find_scene(config)
     data.mkdir(parents=True, exist_ok=True)
     paths = {}
@@ -103,12 +101,12 @@ def run_scene(config, data: Path, plan: ReportPlan) -> dict[str, Path]:
     paths["elastic"] = path
     for model, store in (("quasi-static", "summary"), ("paper", "full"), ("contact", "full")):
         path = data / f"{scene.name}_{model}.nc"
-        _ensemble(scene, scene.source_text, str(config), model, plan.n, path, plan, store)
+        _ensemble(scene, scene.source_text, str(config), model, plan.n, path, plan, store, client)
         paths[model] = path
     for family in FAMILY_KEYS:
         path = data / f"{scene.name}_contact_only{family}.nc"
         _ensemble(scene, _only(scene.source_text, family, str(config)), str(config), "contact",
-                  plan.family_n, path, plan, "summary")
+                  plan.family_n, path, plan, "summary", client)
         paths[f"only{family}"] = path
     return paths
 
@@ -323,10 +321,10 @@ def _explanations(scene, st: dict, dt: float) -> list[str]:
     return out
 
 
-def _open_scene(config, data: Path, plan: ReportPlan) -> dict:
-    """The scene's files by role, run where missing and opened into memory."""
+def _open_scene(config, data: Path, plan: ReportPlan, client) -> dict:
+    """The scene's files by role, run where missing (on ``client``) and opened into memory."""
     return {k: (_open_run(p) if k == "elastic" else open_ensemble(p))
-            for k, p in run_scene(config, data, plan).items()}
+            for k, p in run_scene(config, data, plan, client).items()}
 
 
 def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
@@ -350,13 +348,14 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
     figs = out / "results"
     figs.mkdir(parents=True, exist_ok=True)
     scenes, ens, st = [], {}, {}
-    for config in configs:
-        scene = find_scene(config)
-        if scene.name in ens:
-            raise ValueError(f"{config}: scene name {scene.name!r} given twice")
-        ens[scene.name] = _open_scene(config, data, plan)
-        st[scene.name] = {k: ensemble_stats(ds) for k, ds in ens[scene.name].items()}
-        scenes.append(scene)
+    with dask_client(plan.workers, plan.scheduler) as client:   # one cluster for every ensemble
+        for config in configs:
+            scene = find_scene(config)
+            if scene.name in ens:
+                raise ValueError(f"{config}: scene name {scene.name!r} given twice")
+            ens[scene.name] = _open_scene(config, data, plan, client)
+            st[scene.name] = {k: ensemble_stats(ds) for k, ds in ens[scene.name].items()}
+            scenes.append(scene)
     rel = lambda p: Path(p).relative_to(out).as_posix() if Path(p).is_relative_to(out) else str(p)  # noqa: E731
     command = ("rss6 report " + " ".join(map(str, configs)) + f" -o {out} -n {plan.n} "
                f"--family-n {plan.family_n}")

@@ -16,6 +16,7 @@ on the chunk size or the number of workers.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import shutil
@@ -28,15 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import parse_scene
-from rss6core.models import simulate_batch, stored_draw
+from rss6core import SimulationResult, parse_scene, prepare_level, stored_draw, time_grid
 
 from .outputs import OutputLock, PartsManifest
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
                     realization_dataset, sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
-           "local_cluster", "BLAS_ENV", "SchedulerUnavailable"]
+           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -63,24 +63,48 @@ class EnsembleSpec:
                 "store": self.store}
 
 
+NUMERICAL_FAILURES = (ArithmeticError, np.linalg.LinAlgError)   # recorded as a failed realisation
+
+
 def run_chunk(spec: EnsembleSpec, realizations: list[int]):
-    """Simulate the given realisations; returns their ensemble Dataset (a dask task)."""
+    """Simulate the given realisations; returns their ensemble Dataset (a dask task).
+
+    A numerical failure raised by the batch is traced to its realisations by running each alone:
+    only those that fail alone are recorded as failed (with the reason), the others are kept, so
+    the file does not depend on how the realisations were cut into chunks."""
     scene = spec.scene()
     try:
-        results = simulate_batch(scene, spec.model, spec.integrator, spec.dt, spec.elements,
-                                 spec.seed, realizations)
-    except (ArithmeticError, np.linalg.LinAlgError) as exc:  # numerical failure: record it
-        from rss6core.elastic import SimulationResult, time_grid
-        t = time_grid(scene.trajectory.duration, spec.dt)
-        nan = np.full((len(t), 6), np.nan)
-        results = [SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
-                   ] * len(realizations)
+        results = _simulate(spec, realizations)
+    except NUMERICAL_FAILURES:
+        results = [_alone(scene, spec, r) for r in realizations]
     # the clearance levels hand back their draws; drawn here only without clearances or on failure
     parts = [realization_dataset(result, result.draw if result.draw is not None
                                  else stored_draw(scene, spec.model, spec.seed, r, spec.dt), r,
                                  spec.store, scene.simulation.settle_time)
              for r, result in zip(realizations, results)]
     return finish_ensemble(parts, scene, **_kw(spec))
+
+
+def _simulate(spec: EnsembleSpec, realizations: list[int]) -> list:
+    level = _level(spec.scene_text, spec.source, spec.model, spec.integrator, spec.dt, spec.elements)
+    return level.simulate(spec.seed, realizations)
+
+
+@functools.lru_cache(maxsize=1)
+def _level(scene_text: str, source: str, model: str, integrator: str, dt: float, elements: int):
+    """The level every chunk of an ensemble shares, prepared once per worker process (the paper
+    level's elastic run took a third of each chunk's time when every chunk computed it)."""
+    return prepare_level(parse_scene(scene_text, source), model, integrator, dt, elements)
+
+
+def _alone(scene, spec: EnsembleSpec, realization: int):
+    """Realisation ``realization`` by itself; a numerical failure becomes its failed result."""
+    try:
+        return _simulate(spec, [realization])[0]
+    except NUMERICAL_FAILURES as exc:
+        t = time_grid(scene.trajectory.duration, spec.dt)
+        nan = np.full((len(t), 6), np.nan)
+        return SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
 
 
 def _kw(spec: EnsembleSpec) -> dict:
@@ -171,14 +195,32 @@ def local_cluster(workers: int):
     default (a value set in the environment by the user still applies). The cluster's own logs
     are silenced below CRITICAL: closing it races with the workers' heartbeats, which then log a
     traceback although nothing failed; rss6 reports every task's failure itself.
+
+    The workers are forked from a server process that imports rss6 and its libraries once
+    (:func:`_preload_worker_imports`), not started afresh: each fresh worker spent seconds importing
+    them, and closing the cluster took seconds more.
     """
     import dask
     from dask.distributed import LocalCluster
     os.environ.update(BLAS_ENV)  # inherited by the worker processes
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
-            _workers_ignore_ctrl_c():
+    settings = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+                "distributed.worker.multiprocessing-method": "forkserver"}
+    with dask.config.set(settings), _workers_ignore_ctrl_c():
+        _preload_worker_imports()
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                             dashboard_address=None, host="127.0.0.1", silence_logs=logging.CRITICAL)
+
+
+WORKER_IMPORTS = ["distributed", "pipeline.run"]   # what a worker needs: rss6core, numpy, xarray, ...
+
+
+def _preload_worker_imports() -> None:
+    """Make the fork server that starts the workers import WORKER_IMPORTS first (effective until it
+    starts, at the first worker: it then lives as long as this process and forks every worker).
+
+    It starts in the environment of that moment (one BLAS thread, SIGINT ignored: see the caller)."""
+    from distributed.utils import get_mp_context
+    get_mp_context().set_forkserver_preload(WORKER_IMPORTS)   # after dask's own, which it replaces
 
 
 @contextlib.contextmanager
@@ -206,6 +248,19 @@ POLL_S = 1.0              # how often, s, the workers of an external scheduler a
 class SchedulerUnavailable(RuntimeError):
     """The external dask scheduler cannot be reached, or has had no workers for too long (an
     environment problem: the finished chunks stay in OUT.nc.parts)."""
+
+
+@contextlib.contextmanager
+def dask_client(workers: int = 2, scheduler: str | None = None):
+    """A dask client on a new local cluster of ``workers`` (or on ``scheduler``), closed with its
+    cluster at the end of the block: one cluster for many ensembles (``client=`` of :func:`ensemble`)."""
+    client, cluster = _client(workers, scheduler)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def _client(workers: int, scheduler: str | None):
@@ -314,13 +369,15 @@ class EnsembleOutcome:
 
 def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
              chunk: int | None = None, progress: bool = True, annotate=None,
-             worker_timeout: float = WORKER_TIMEOUT_S) -> EnsembleOutcome:
+             worker_timeout: float = WORKER_TIMEOUT_S, client=None) -> EnsembleOutcome:
     """Run realisations 0..n-1 not yet stored in ``output`` (one writer at a time: OUT.lock).
 
     ``annotate(dataset) -> dict``, if given, adds global attributes (e.g. requirement verdicts)
     computed from the finished ensemble before it is written; the file is rewritten only if they
     change it. ``worker_timeout`` (s): how long an external ``scheduler`` may have no workers
-    before SchedulerUnavailable is raised."""
+    before SchedulerUnavailable is raised. ``client``: an open dask client to run on (see
+    :func:`dask_client`; ``workers`` then only sizes the default chunks, and ``scheduler`` says
+    whether it is external); without one, a cluster is started for this call and closed after."""
     if n < 1:
         raise ValueError(f"the number of realisations must be at least 1, got {n}")
     chunk = default_chunk(n, workers) if chunk is None else chunk
@@ -338,7 +395,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
             bar = _Progress(n, n - len(todo)) if progress else None
             if bar:
                 bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
-            written = _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout)
+            written = _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout, client)
             pieces += [open_ensemble(path, lazy=True) for path in written]
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
         merged = pieces[0] if up_to_date else _merged(pieces, spec)
@@ -359,29 +416,30 @@ def _merged(pieces: list, spec: EnsembleSpec):
 
 
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
-             scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S) -> list:
-    """Run the chunks on dask; each finished chunk is stored as a part at once. Returns the parts'
-    paths (the chunks are not kept in memory)."""
-    client, cluster = _client(workers, scheduler)
-    written = []
-    try:
-        with sigint_deferred() as interrupted:   # Ctrl-C is acted on in _finished
-            futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
-            for ds in _finished(client, futures, scheduler, worker_timeout, interrupted):
-                first, last = int(ds.realization[0]), int(ds.realization[-1])
-                written.append(manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc"))
-                if bar:
-                    bar.advance(ds.sizes["realization"])
-    finally:   # a second Ctrl-C may cut a slow shutdown short
-        client.close()
-        if cluster is not None:
-            cluster.close()
+             scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S, client=None) -> list:
+    """Run the chunks on dask (on ``client``, else on a cluster of this call); each finished chunk
+    is stored as a part at once. Returns the parts' paths (the chunks are not kept in memory)."""
+    written, shared = [], client is not None
+    with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
+        futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
+        try:
+            with sigint_deferred() as interrupted:   # Ctrl-C is acted on in _finished
+                for ds in _finished(client, futures, scheduler, worker_timeout, interrupted):
+                    first, last = int(ds.realization[0]), int(ds.realization[-1])
+                    written.append(manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc"))
+                    if bar:
+                        bar.advance(ds.sizes["realization"])
+        except BaseException:
+            if shared:   # the cluster outlives this call: leave it none of this call's work
+                client.cancel(futures)
+            raise
     return written
 
 
 def run_ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
                  chunk: int | None = None, progress: bool = True,
-                 worker_timeout: float = WORKER_TIMEOUT_S):
-    """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset."""
+                 worker_timeout: float = WORKER_TIMEOUT_S, client=None):
+    """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset. ``client``:
+    an open dask client to reuse (:func:`dask_client`), else a cluster is started for this call."""
     return ensemble(spec, n, output, workers, scheduler, chunk, progress,
-                    worker_timeout=worker_timeout).dataset
+                    worker_timeout=worker_timeout, client=client).dataset

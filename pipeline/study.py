@@ -19,7 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from rss6core.models import simulate_batch
+from rss6core import (Integrator, build_elastic_model, degrees_of_freedom, natural_frequencies,
+                      quasi_static_state, simulate_batch, simulate_elastic)
 
 from .stats import estimates
 from .store import DIRECTIONS, QUANTITIES, error_summaries
@@ -183,19 +184,9 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
                "settle_time_s": scene.simulation.settle_time})
     ds["max_relative_error"] = ds["relative_error"].max(("quantity", "direction", "statistic"))
     ds["max_relative_error"].attrs["units"] = "1"
-    ds["modes"] = ("setting", [_dofs(scene, s) for s in settings])
+    ds["modes"] = ("setting", [degrees_of_freedom(scene, s.model, s.elements) for s in settings])
     ds["modes"].attrs["long_name"] = "modes kept (no modal reduction is offered: all DOFs)"
     return ds
-
-
-def _dofs(scene, s: Setting) -> int:
-    if s.model in ("rigid", "quasi-static"):
-        return 6
-    from rss6core.assembly import build_elastic_model
-    from rss6core.contact_dynamics import build_joint_model
-    model = build_joint_model(scene, s.elements) if s.model == "contact" else build_elastic_model(
-        scene, s.elements)
-    return model.dofs
 
 
 def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
@@ -337,7 +328,6 @@ def _horizon(scene, duration: float):
 
 def _explicit_limit(scene) -> float:
     """2/omega_max (s): the central-difference limit of the undamped elastic model at t = 0."""
-    from rss6core.models import natural_frequencies
     return 2.0 / natural_frequencies(scene)[-1]
 
 
@@ -402,9 +392,6 @@ def _explicit_sweep(scene, limit, steps, tolerance, seed, log):
     starts from the quasi-static state plus a seeded random velocity of 1e-6 m/s (rad/s) scale and
     lasts ``steps`` quarter-limit steps; it fails when the elastic displacement passes 1 mm.
     """
-    from rss6core.assembly import build_elastic_model
-    from rss6core.elastic import quasi_static_state, simulate_elastic
-    from rss6core.integrators import Integrator
     still = dataclasses.replace(_horizon(scene, steps * 0.25 * limit), damping=dataclasses.replace(
         scene.damping, mass_coefficient=0.0, stiffness_coefficient=0.0))
     model = build_elastic_model(still, scene.simulation.elements_per_link)

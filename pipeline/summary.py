@@ -3,10 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rss6core.dynamics import inverse_dynamics
-from rss6core.kinematics import rigid_motion
-from rss6core.models import natural_frequencies
-from rss6core.sections import crank_inertia, rod_inertia
+from rss6core import crank_inertia, inverse_dynamics, natural_frequencies, rigid_motion, rod_inertia
 
 from .store import DIRECTIONS, display_unit
 

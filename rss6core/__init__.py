@@ -1,8 +1,55 @@
 """rss6core: the physics of a 6-RSS robot with elastic links and clearance joints.
 
-Pure numpy/scipy: no dask, xarray or netCDF here (those live in ``pipeline``).
+Pure numpy/scipy/numba: no dask, xarray or netCDF here (those live in ``pipeline``).  This module
+is the core's public facade; ``pipeline`` imports the core from here only.
+
+Scenes
+- Scene: the immutable description of one robot, its motion and its run settings (SI).
+- SceneError: a scene that cannot describe a physical robot; the message names the file and key.
+- load_scene: a Scene from a TOML file.
+- parse_scene: a Scene from TOML text.
+
+Running a level
+- MODELS: the model levels, cheapest first (rigid, quasi-static, elastic, paper, contact).
+- INTEGRATORS: the time integrators a level accepts by name.
+- simulate: one realisation of a level along the scene's trajectory.
+- simulate_batch: many realisations of one level, sharing what they share.
+- prepare_level: a level on a scene with what all its realisations share computed once.
+- Level: what prepare_level returns; its ``simulate(seed, realizations)`` runs a batch.
+- SimulationResult: what every level returns (error histories in SI, status and message).
+- time_grid: the output instants (s) of a duration and step, or ValueError if the step does not divide it.
+- stored_draw: the clearance draw an ensemble file records for one realisation.
+- default_time_step: a scene's time step (s) for a level.
+- default_integrator: a scene's integrator for a level.
+- natural_frequencies: undamped angular frequencies (rad/s) of the elastic robot at one instant.
+- degrees_of_freedom: how many unknowns a level solves for.
+
+The elastic level's parts (the stability study's explicit sweep)
+- Integrator: a generalized-alpha family member (Newmark, HHT, central difference, ...).
+- build_elastic_model: the finite-element model of the links with ideal joints.
+- quasi_static_state: the elastic state on the quasi-static path at one instant.
+- simulate_elastic: the elastic level with a given model, integrator and initial state.
+
+The rigid robot
+- rigid_motion: the ideal rigid motion (platform and cranks) along the trajectory.
+- inverse_dynamics: actuator torques and joint forces of the rigid motion (N m, N).
+- crank_inertia, rod_inertia: the rigid links' masses (kg) and inertias (kg m^2).
 """
+from .elastic import SimulationResult, quasi_static_state, simulate_elastic, time_grid
+from .assembly import build_elastic_model
+from .dynamics import inverse_dynamics
+from .integrators import INTEGRATORS, Integrator
+from .kinematics import rigid_motion
+from .models import (MODELS, Level, default_integrator, default_time_step, degrees_of_freedom,
+                     natural_frequencies, prepare_level, simulate, simulate_batch, stored_draw)
 from .scene import Scene, SceneError, load_scene, parse_scene
+from .sections import crank_inertia, rod_inertia
 
 __version__ = "0.1.0"
-__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "__version__"]
+__all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
+           "MODELS", "INTEGRATORS", "simulate", "simulate_batch", "prepare_level", "Level",
+           "SimulationResult", "time_grid",
+           "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
+           "degrees_of_freedom",
+           "Integrator", "build_elastic_model", "quasi_static_state", "simulate_elastic",
+           "rigid_motion", "inverse_dynamics", "crank_inertia", "rod_inertia", "__version__"]

@@ -45,7 +45,6 @@ from .elastic import SimulationResult, quasi_static_state, time_grid
 from .integrators import Integrator, make_integrator
 from .kinematics import crank_axes, rigid_motion
 from .quasi_static import closure_matrix
-from .scene import MAX_CONTACT_REFINEMENTS
 from .sections import section_properties
 
 __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactBatch"]
@@ -53,6 +52,7 @@ __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactBatch"
 TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
 TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
 MAX_ITERATIONS = 60
+MAX_CONTACT_REFINEMENTS = 10   # halvings of the contact step the adaptive step may take (1/1024)
 ENGINES = ("compiled", "numpy")
 
 

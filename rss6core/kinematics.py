@@ -15,8 +15,12 @@ from .trajectory import PlatformMotion, euler_rate_matrix, platform_motion, rota
 
 __all__ = [
     "inverse_kinematics", "crank_points", "crank_axes", "platform_joints", "leg_jacobian",
-    "RigidMotion", "rigid_motion", "forward_kinematics", "check_workspace",
+    "RigidMotion", "rigid_motion", "forward_kinematics", "check_workspace", "WorkspaceError",
 ]
+
+
+class WorkspaceError(ValueError):
+    """A trajectory that leaves the robot's workspace; the message names the leg and the time."""
 
 
 def platform_joints(geometry, o: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -138,13 +142,12 @@ def forward_kinematics(geometry, alpha: np.ndarray, pose0: np.ndarray, tol: floa
 
 
 def check_workspace(scene, min_transmission: float = 1e-3, max_condition: float = 1e8) -> None:
-    """Raise SceneError naming the leg and time where the trajectory leaves the workspace.
+    """Raise WorkspaceError naming the leg and time where the trajectory leaves the workspace.
 
     Checks on the scene's time grid that every b_i is reachable (|K/rho| <= 1),
     that no leg is near its crank-rod singularity (|n . dc| / (L_ac L_cb) >=
     ``min_transmission``) and that the platform Jacobian is well conditioned.
     """
-    from .scene import SceneError
     geo, t = scene.geometry, scene.times
     pm = platform_motion(scene.trajectory, t)
     b, r = platform_joints(geo, pm.o, pm.R)
@@ -153,7 +156,7 @@ def check_workspace(scene, min_transmission: float = 1e-3, max_condition: float 
     bad = np.argwhere(~(np.abs(ratio) <= 1.0))
     if bad.size:
         k, leg = bad[0]
-        raise SceneError(f"trajectory leaves the workspace: leg {leg + 1} cannot reach its "
+        raise WorkspaceError(f"trajectory leaves the workspace: leg {leg + 1} cannot reach its "
                          f"platform joint at t = {t[k]:.4f} s (|K/rho| = {abs(ratio[k, leg]):.4f} "
                          f"> 1){where}")
     alpha = inverse_kinematics(geo, b)
@@ -163,11 +166,11 @@ def check_workspace(scene, min_transmission: float = 1e-3, max_condition: float 
     bad = np.argwhere(trans < min_transmission)
     if bad.size:
         k, leg = bad[0]
-        raise SceneError(f"trajectory leaves the workspace: leg {leg + 1} is at its crank-rod "
+        raise WorkspaceError(f"trajectory leaves the workspace: leg {leg + 1} is at its crank-rod "
                          f"singularity at t = {t[k]:.4f} s{where}")
     rows = np.concatenate([n, np.cross(r, n)], axis=-1) / geo.rod_length
     cond = np.linalg.cond(rows)
     if np.any(~(cond < max_condition)):
         k = int(np.argmax(~(cond < max_condition)))
-        raise SceneError(f"trajectory leaves the workspace: the platform is singular "
+        raise WorkspaceError(f"trajectory leaves the workspace: the platform is singular "
                          f"(condition number {cond[k]:.3g}) at t = {t[k]:.4f} s{where}")

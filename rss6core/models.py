@@ -17,22 +17,24 @@ the batch as one array.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 
 from .assembly import build_elastic_model, dense_matrices, end_maps
 from .clearance import draw_clearances
-from .contact_dynamics import simulate_contact
+from .contact_dynamics import build_joint_model, simulate_contact
 from .elastic import SimulationResult, simulate_elastic, time_grid
-from .integrators import make_integrator
-from .kinematics import rigid_motion
+from .integrators import Integrator, make_integrator
+from .kinematics import RigidMotion, rigid_motion
 from .paper_method import PaperClosure, paper_contact_forces, paper_draw
 from .quasi_static import quasi_static_error
-from .scene import MODELS
 
-__all__ = ["simulate", "simulate_batch", "default_time_step", "default_integrator", "stored_draw",
-           "natural_frequencies", "MODELS"]
+__all__ = ["simulate", "simulate_batch", "Level", "prepare_level", "default_time_step", "default_integrator",
+           "stored_draw", "natural_frequencies", "degrees_of_freedom", "MODELS"]
+
+MODELS = ("rigid", "quasi-static", "elastic", "paper", "contact")   # the levels, cheapest first
 
 
 def stored_draw(scene, model: str, seed: int, realization: int, dt: float):
@@ -82,46 +84,89 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
     ``tolerance`` (m) and ``refinements`` set the contact level's adaptive step
     (default: the scene's; see :func:`.contact_dynamics.simulate_contact`).
     """
+    level = prepare_level(scene, model, integrator, dt, elements, tolerance, refinements)
+    return level.simulate(seed, realizations)
+
+
+@dataclass(frozen=True)
+class Level:
+    """One level's settings on one scene, with what all its realisations share computed once: the
+    rigid motion (quasi-static), the ideal-joint elastic run (elastic, paper) and the leg closure
+    (paper).  Made by :func:`prepare_level`; an ensemble worker keeps it for all its chunks."""
+    scene: object
+    model: str
+    integrator: Integrator | None   # None for the rigid and quasi-static levels
+    dt: float                       # s
+    elements: int
+    tolerance: float | None = None  # m, the contact level's adaptive step (None: the scene's)
+    refinements: int | None = None
+    motion: RigidMotion | None = None
+    elastic: SimulationResult | None = None
+    closure: PaperClosure | None = None
+
+    def simulate(self, seed: int, realizations) -> list[SimulationResult]:
+        """Realisations ``realizations`` of the run seeded ``seed``, one result each, in order."""
+        realizations = list(realizations)
+        if self.model == "rigid":
+            t = time_grid(self.scene.trajectory.duration, self.dt)
+            zero = np.zeros((len(t), 6))
+            return [SimulationResult(t, zero, zero, zero, "finished", "", len(t) - 1)] * len(realizations)
+        if self.model == "elastic":
+            return [self.elastic] * len(realizations)
+        run = {"quasi-static": self._quasi_static, "paper": self._paper, "contact": self._contact}
+        return run[self.model](seed, realizations)
+
+    def _quasi_static(self, seed: int, realizations: list) -> list[SimulationResult]:
+        t, mode = self.motion.t, self.scene.simulation.quasi_static_eccentricity
+        out = []
+        for r in realizations:
+            draw = draw_clearances(self.scene, seed, r)
+            d, v, a = quasi_static_error(self.scene, self.motion, draw, mode)
+            out.append(SimulationResult(t, d, v, a, "finished", "", len(t) - 1, draw=draw))
+        return out
+
+    def _contact(self, seed: int, realizations: list) -> list[SimulationResult]:
+        draws = [draw_clearances(self.scene, seed, r) for r in realizations]
+        batch = simulate_contact(self.scene, draws, self.elements, self.integrator, self.dt,
+                                 tolerance=self.tolerance, refinements=self.refinements)
+        return [dataclasses.replace(batch.result(k), draw=draw) for k, draw in enumerate(draws)]
+
+    def _paper(self, seed: int, realizations: list) -> list[SimulationResult]:
+        elastic = self.elastic
+        out = []
+        for r in realizations:
+            draw = paper_draw(self.scene, seed, r, len(elastic.t))
+            d, v, a = self.closure.error(draw)
+            force = paper_contact_forces(self.scene, draw, self.dt)
+            out.append(SimulationResult(elastic.t, elastic.displacement + d, elastic.velocity + v,
+                                        elastic.acceleration + a, elastic.status, elastic.message,
+                                        elastic.steps, contact_force_peak=force.max(0),
+                                        draw=_first_step(draw)))
+        return out
+
+
+def prepare_level(scene, model: str | None = None, integrator: str | None = None,
+                  dt: float | None = None, elements: int | None = None, tolerance: float | None = None,
+                  refinements: int | None = None) -> Level:
+    """``model`` (default: the scene's) on ``scene`` with the given settings (default: the scene's),
+    its shared part computed: the elastic run for the elastic and paper levels, for instance."""
     sim = scene.simulation
     model = model or sim.model
     if model not in MODELS:
         raise ValueError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
     dt = default_time_step(scene, model) if dt is None else dt
     elements = elements or sim.elements_per_link
-    realizations = list(realizations)
     if model in ("rigid", "quasi-static"):
         t = time_grid(scene.trajectory.duration, dt)
-        if model == "rigid":
-            zero = np.zeros((len(t), 6))
-            return [SimulationResult(t, zero, zero, zero, "finished", "", len(t) - 1)] * len(realizations)
-        motion = rigid_motion(scene, t)
-        out = []
-        for r in realizations:
-            draw = draw_clearances(scene, seed, r)
-            d, v, a = quasi_static_error(scene, motion, draw, sim.quasi_static_eccentricity)
-            out.append(SimulationResult(t, d, v, a, "finished", "", len(t) - 1, draw=draw))
-        return out
+        return Level(scene, model, None, dt, elements,
+                     motion=rigid_motion(scene, t) if model == "quasi-static" else None)
     method = make_integrator(integrator or default_integrator(scene, model), sim.newmark_beta,
                              sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
     if model == "contact":
-        draws = [draw_clearances(scene, seed, r) for r in realizations]
-        batch = simulate_contact(scene, draws, elements, method, dt, tolerance=tolerance,
-                                 refinements=refinements)
-        return [dataclasses.replace(batch.result(k), draw=draw) for k, draw in enumerate(draws)]
+        return Level(scene, model, method, dt, elements, tolerance, refinements)
     elastic = simulate_elastic(scene, elements, method, dt)
-    if model == "elastic":
-        return [elastic] * len(realizations)
-    closure = PaperClosure(scene, rigid_motion(scene, elastic.t))
-    out = []
-    for r in realizations:
-        draw = paper_draw(scene, seed, r, len(elastic.t))
-        d, v, a = closure.error(draw)
-        force = paper_contact_forces(scene, draw, dt)
-        out.append(SimulationResult(elastic.t, elastic.displacement + d, elastic.velocity + v,
-                                    elastic.acceleration + a, elastic.status, elastic.message,
-                                    elastic.steps, contact_force_peak=force.max(0),
-                                    draw=_first_step(draw)))
-    return out
+    closure = PaperClosure(scene, rigid_motion(scene, elastic.t)) if model == "paper" else None
+    return Level(scene, model, method, dt, elements, elastic=elastic, closure=closure)
 
 
 def natural_frequencies(scene, elements: int | None = None, t: float = 0.0) -> np.ndarray:
@@ -130,3 +175,13 @@ def natural_frequencies(scene, elements: int | None = None, t: float = 0.0) -> n
     maps = end_maps(model, rigid_motion(scene, np.array([t])), scene.geometry)
     M, K = dense_matrices(model, maps[0])
     return np.sqrt(np.abs(scipy.linalg.eigh(K, M, eigvals_only=True)))
+
+
+def degrees_of_freedom(scene, model: str, elements: int | None = None) -> int:
+    """Unknowns a level solves for: the 6 pose errors (rigid, quasi-static), else the finite-element
+    model's degrees of freedom (the contact level's with its joints' own nodes)."""
+    if model in ("rigid", "quasi-static"):
+        return 6
+    elements = elements or scene.simulation.elements_per_link
+    build = build_joint_model if model == "contact" else build_elastic_model
+    return build(scene, elements).dofs

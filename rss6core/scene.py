@@ -17,9 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
+from .contact_dynamics import MAX_CONTACT_REFINEMENTS
+from .integrators import INTEGRATORS
+from .kinematics import WorkspaceError, check_workspace
+from .models import MODELS
+from .sections import RectangleSection, TubeSection
+
 __all__ = [
-    "SceneError", "Scene", "Geometry", "RectangleSection", "TubeSection",
-    "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping", "Clearances", "ContactLaw",
+    "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping", "Clearances", "ContactLaw",
     "load_scene", "parse_scene",
 ]
 
@@ -72,20 +77,6 @@ class Geometry:
     def w(self) -> np.ndarray:
         """Revolute axes w_i = [-sin u_i, cos u_i, 0] (6, 3)."""
         return _frozen(self.k[:, :, 1])
-
-
-@dataclass(frozen=True)
-class RectangleSection:
-    """Solid rectangle: ``axial_width`` along the revolute axis, ``height`` in the plane of motion, m."""
-    axial_width: float
-    height: float
-
-
-@dataclass(frozen=True)
-class TubeSection:
-    """Circular tube, outer and inner diameters, m."""
-    outer_diameter: float
-    inner_diameter: float
 
 
 @dataclass(frozen=True)
@@ -143,11 +134,6 @@ class ContactLaw:
     slip_velocity: float          # v1, m/s
     impact_speed_floor: float = 1e-3  # m/s, lower bound of delta_dot_c1 in eq. 17 (resting contact)
     stiffness_scale: float = 1.0      # factor on eq. 17's Hertz stiffness K (sensitivity, stability)
-
-
-MODELS = ("rigid", "quasi-static", "elastic", "paper", "contact")
-INTEGRATORS = ("newmark", "hht", "generalized-alpha", "central-difference")
-MAX_CONTACT_REFINEMENTS = 10   # halvings of the contact step the adaptive step may take (1/1024)
 
 
 @dataclass(frozen=True)
@@ -419,7 +405,6 @@ def _build(v: dict, text: str, source: str) -> Scene:
 
 def parse_scene(text: str, source: str = "<string>") -> Scene:
     """Build a scene from TOML text and check its trajectory stays in the workspace."""
-    from .kinematics import check_workspace  # kinematics needs the Scene type only at run time
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -427,7 +412,7 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
     try:
         scene = _build(_read_table(raw, _SCHEMA), text, source)
         check_workspace(scene)
-    except SceneError as exc:
+    except (SceneError, WorkspaceError) as exc:
         raise SceneError(f"{source}: {exc}") from None
     return scene
 

@@ -11,10 +11,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import RectangleSection, TubeSection
-
-__all__ = ["SectionProperties", "section_properties", "rectangle_torsion_constant",
+__all__ = ["RectangleSection", "TubeSection", "SectionProperties", "section_properties", "rectangle_torsion_constant",
            "LinkInertia", "crank_inertia", "rod_inertia"]
+
+
+@dataclass(frozen=True)
+class RectangleSection:
+    """Solid rectangle: ``axial_width`` along the revolute axis, ``height`` in the plane of motion, m."""
+    axial_width: float
+    height: float
+
+
+@dataclass(frozen=True)
+class TubeSection:
+    """Circular tube, outer and inner diameters, m."""
+    outer_diameter: float
+    inner_diameter: float
 
 
 @dataclass(frozen=True)

@@ -36,3 +36,12 @@ def smoke(configs):
 @pytest.fixture(scope="session")
 def paper_text(configs):
     return (configs / "paper.toml").read_text()
+
+
+@pytest.fixture(scope="session")
+def cluster_client():
+    """One local dask cluster of 2 workers shared by the tests that run ensembles without testing
+    the cluster itself (each cluster costs seconds to start, and its workers their imports)."""
+    from pipeline.run import dask_client
+    with dask_client(2) as client:
+        yield client

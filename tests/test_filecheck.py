@@ -17,10 +17,10 @@ SMOKE = CONFIGS / "smoke.toml"
 
 
 @pytest.fixture(scope="module")
-def good(tmp_path_factory):
+def good(tmp_path_factory, cluster_client):
     path = tmp_path_factory.mktemp("good") / "good.nc"
     spec = EnsembleSpec(SMOKE.read_text(), str(SMOKE), "quasi-static", "newmark", 1e-3, 4, 0, "summary")
-    run_ensemble(spec, 6, path, workers=1, progress=False)
+    run_ensemble(spec, 6, path, progress=False, client=cluster_client)
     return path
 
 

@@ -46,17 +46,18 @@ def test_default_chunks_are_equal_and_a_multiple_of_the_workers(n, workers):
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory):
+def reference(tmp_path_factory, cluster_client):
     path = tmp_path_factory.mktemp("ref") / "ref.nc"
-    return run_ensemble(_spec(), 10, path, workers=2, chunk=4, progress=False), path
+    return run_ensemble(_spec(), 10, path, workers=2, chunk=4, progress=False, client=cluster_client), path
 
 
-def test_same_seed_same_summaries_any_workers_and_chunks(reference, tmp_path):
+def test_same_seed_same_summaries_any_workers_and_chunks(reference, tmp_path, cluster_client):
     ref, _ = reference
     one = run_ensemble(_spec(), 10, tmp_path / "one.nc", workers=1, chunk=3, progress=False)
     assert np.array_equal(error_summaries(one), error_summaries(ref))
     assert list(one.realization.values) == list(range(10))
-    other_seed = run_ensemble(_spec(seed=4), 10, tmp_path / "s4.nc", workers=1, chunk=10, progress=False)
+    other_seed = run_ensemble(_spec(seed=4), 10, tmp_path / "s4.nc", chunk=10, progress=False,
+                              client=cluster_client)
     assert not np.array_equal(error_summaries(other_seed), error_summaries(ref))
 
 
@@ -118,23 +119,23 @@ def test_truncated_and_foreign_files_are_named(reference, tmp_path):
     assert main(["stats", str(foreign)]) == 2
 
 
-def test_extending_an_ensemble_keeps_what_is_stored(reference, tmp_path):
+def test_extending_an_ensemble_keeps_what_is_stored(reference, tmp_path, cluster_client):
     ref, _ = reference
     path = tmp_path / "grow.nc"
-    run_ensemble(_spec(), 4, path, workers=1, chunk=2, progress=False)
-    grown = run_ensemble(_spec(), 10, path, workers=1, chunk=2, progress=False)
+    run_ensemble(_spec(), 4, path, chunk=2, progress=False, client=cluster_client)
+    grown = run_ensemble(_spec(), 10, path, chunk=2, progress=False, client=cluster_client)
     assert np.array_equal(error_summaries(grown), error_summaries(ref))
 
 
-def test_parts_left_beside_a_finished_file_add_no_duplicates(reference, tmp_path):
+def test_parts_left_beside_a_finished_file_add_no_duplicates(reference, tmp_path, cluster_client):
     """A run stopped between writing OUT.nc and removing OUT.nc.parts: the rerun takes each once."""
     ref, _ = reference
     path = tmp_path / "left.nc"
-    run_ensemble(_spec(), 10, path, workers=1, chunk=5, progress=False)
+    run_ensemble(_spec(), 10, path, chunk=5, progress=False, client=cluster_client)
     parts = Path(str(path) + ".parts")
     PartsManifest(parts, _spec().attrs()).write(open_ensemble(path).isel(realization=[0, 1]),
                                                 "chunk-0000000-0000001.nc")
-    again = run_ensemble(_spec(), 10, path, workers=1, chunk=5, progress=False)
+    again = run_ensemble(_spec(), 10, path, chunk=5, progress=False, client=cluster_client)
     assert list(again.realization.values) == list(range(10)) and not parts.exists()
     assert np.array_equal(error_summaries(open_ensemble(path)), error_summaries(ref))
 
@@ -218,10 +219,10 @@ def test_smoke_ensemble_through_the_cli(tmp_path, capsys):
     assert len(pngs) == 9 and all((tmp_path / "plots" / p).stat().st_size > 10_000 for p in pngs)
 
 
-def test_failed_realisations_are_recorded_and_the_ensemble_goes_on(tmp_path):
+def test_failed_realisations_are_recorded_and_the_ensemble_goes_on(tmp_path, cluster_client):
     """Central difference at 1 ms (500x its critical step) diverges: stored as failed, with its message."""
     spec = EnsembleSpec(SMOKE_TEXT, SMOKE, "elastic", "central-difference", 1e-3, 1, 0)
-    ds = run_ensemble(spec, 2, tmp_path / "fail.nc", workers=1, chunk=2, progress=False)
+    ds = run_ensemble(spec, 2, tmp_path / "fail.nc", chunk=2, progress=False, client=cluster_client)
     assert list(ds["status"].values) == ["failed", "failed"]
     assert all("diverged at t =" in m for m in ds["status_message"].values)
     assert ds.attrs["n_failed"] == 2

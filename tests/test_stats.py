@@ -171,10 +171,10 @@ def test_text_table_shows_dashes_and_the_n_needed(tmp_path, capsys):
     assert stop.value.code == 2
 
 
-def _paper_ensemble(path, n):
+def _paper_ensemble(path, n, client=None):
     spec = EnsembleSpec((CONFIGS / "paper.toml").read_text(), "paper", "quasi-static", "newmark",
                         1e-3, 4, 0, "summary")
-    return run_ensemble(spec, n, path, workers=1, progress=False)
+    return run_ensemble(spec, n, path, workers=1, progress=False, client=client)
 
 
 def _subsample_coverage(ds, n: int, draws: int, statistic: str, seed: int) -> np.ndarray:
@@ -196,8 +196,8 @@ def _subsample_coverage(ds, n: int, draws: int, statistic: str, seed: int) -> np
 
 
 @pytest.fixture(scope="module")
-def paper_qs(tmp_path_factory):
-    return _paper_ensemble(tmp_path_factory.mktemp("qs") / "qs.nc", 400)
+def paper_qs(tmp_path_factory, cluster_client):
+    return _paper_ensemble(tmp_path_factory.mktemp("qs") / "qs.nc", 400, cluster_client)
 
 
 @pytest.mark.parametrize("statistic", ["mean", "q50"])

@@ -1,0 +1,135 @@
+"""The core's boundaries, read from the installed sources: an acyclic import graph with every import
+at module level, each module exporting only what it defines, and a pipeline that uses the core
+through its public facade (``rss6core/__init__.py``) alone."""
+import ast
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pipeline
+import rss6core
+
+CORE = Path(rss6core.__file__).parent
+PIPELINE = Path(pipeline.__file__).parent
+
+
+def _trees(folder: Path) -> dict[str, ast.Module]:
+    return {p.stem: ast.parse(p.read_text(encoding="utf-8"), str(p)) for p in sorted(folder.glob("*.py"))}
+
+
+def _imports(tree: ast.Module, everywhere: bool = True) -> list:
+    nodes = ast.walk(tree) if everywhere else tree.body
+    return [n for n in nodes if isinstance(n, (ast.Import, ast.ImportFrom))]
+
+
+def _core_modules_imported(node) -> set[str]:
+    """The rss6core modules (``__init__`` for the facade) an import statement inside rss6core loads."""
+    if isinstance(node, ast.Import):
+        return {a.name.split(".")[1] if "." in a.name else "__init__" for a in node.names
+                if a.name.split(".")[0] == "rss6core"}
+    if node.level == 0 and not (node.module or "").startswith("rss6core"):
+        return set()
+    parts = (node.module or "").split(".")[1:] if node.level == 0 else (node.module or "").split(".")
+    if parts and parts[0]:
+        return {parts[0]}
+    return {a.name for a in node.names}                 # from . import x: x is a module
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str]:
+    """One import cycle of ``graph`` as a list of modules, or [] if it has none."""
+    state, path = {}, []
+
+    def visit(m):
+        state[m] = "open"
+        path.append(m)
+        for n in sorted(graph.get(m, ())):
+            if state.get(n) == "open":
+                return path[path.index(n):] + [n]
+            if n not in state and (found := visit(n)):
+                return found
+        state[m] = "done"
+        path.pop()
+        return []
+
+    for m in sorted(graph):
+        if m not in state and (found := visit(m)):
+            return found
+    return []
+
+
+def test_core_imports_only_at_module_level_and_without_a_cycle():
+    trees = _trees(CORE)
+    deferred = [f"{name}.py:{n.lineno}" for name, tree in trees.items()
+                for n in set(_imports(tree)) - set(_imports(tree, everywhere=False))]
+    assert deferred == [], f"imports inside functions or classes: {deferred}"
+    graph = {name: set().union(*map(_core_modules_imported, _imports(tree, False))) - {name}
+             for name, tree in trees.items()}
+    assert graph["scene"] >= {"models", "integrators", "kinematics"}   # the case that had a cycle
+    assert _cycle(graph) == []
+
+
+def test_cycle_finder_finds_a_cycle():
+    assert _cycle({"scene": {"kinematics"}, "kinematics": {"trajectory", "scene"}}) == [
+        "kinematics", "scene", "kinematics"]
+
+
+def _defined(tree: ast.Module) -> set[str]:
+    names = set()
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names |= {t.id for t in targets if isinstance(t, ast.Name)}
+    return names
+
+
+def _exported(tree: ast.Module) -> list[str]:
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", "") == "__all__" for t in node.targets):
+            return list(ast.literal_eval(node.value))
+    return []
+
+
+def test_every_core_module_exports_only_names_it_defines():
+    """Names are owned where they are defined: MODELS in models, INTEGRATORS in integrators (the
+    scene schema imports them from there), not re-exported by another module."""
+    trees = _trees(CORE)
+    foreign = {name: sorted(set(_exported(tree)) - _defined(tree)) for name, tree in trees.items()
+               if name != "__init__"}
+    assert {k: v for k, v in foreign.items() if v} == {}
+    owners = {n: sorted(m for m, tree in trees.items() if n in _defined(tree)) for n in ("MODELS", "INTEGRATORS")}
+    assert owners == {"MODELS": ["models"], "INTEGRATORS": ["integrators"]}
+
+
+def test_pipeline_imports_the_core_through_its_facade_only():
+    """No pipeline module (at any depth, inside functions too) imports rss6core.<submodule>, and
+    every name it takes from rss6core is in the facade's __all__ and described in its docstring."""
+    offences = []
+    for name, tree in _trees(PIPELINE).items():
+        for node in _imports(tree):
+            if isinstance(node, ast.Import):
+                offences += [f"{name}.py:{node.lineno} import {a.name}" for a in node.names
+                             if a.name.startswith("rss6core.")]
+            elif node.level == 0 and (node.module or "").startswith("rss6core"):
+                if node.module != "rss6core":
+                    offences.append(f"{name}.py:{node.lineno} from {node.module}")
+                offences += [f"{name}.py:{node.lineno} {a.name} is not in rss6core.__all__"
+                             for a in node.names if a.name not in rss6core.__all__]
+    assert offences == []
+    undocumented = [n for n in rss6core.__all__ if n != "__version__"
+                    and not re.search(rf"^- (\w+, )*{n}[:,]", rss6core.__doc__, re.M)]
+    assert undocumented == []
+
+
+def test_load_scene_names_a_missing_file_without_the_shipped_scenes(tmp_path):
+    """In a process where ``pipeline`` (and with it the shipped scenes' package) cannot be imported,
+    ``load_scene`` of a missing file still raises SceneError naming the file."""
+    code = ("import sys\nsys.modules['pipeline'] = None   # any import of pipeline now fails\n"
+            "import rss6core\n"
+            "try:\n    rss6core.load_scene('nope.toml')\n"
+            "except rss6core.SceneError as exc:\n    print(type(exc).__name__, exc)\n")
+    done = subprocess.run([sys.executable, "-I", "-c", code], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=120)
+    assert (done.returncode, done.stdout, done.stderr) == (0, "SceneError nope.toml: no such scene file\n", "")
