@@ -393,12 +393,22 @@ def load_netcdf(path, lazy: bool = False) -> xr.Dataset:
             for var in ds.variables.values():
                 if _ELAPSED not in var.dims:
                     var.load()
-            return cf_decode(ds)
+            return _forget_string_widths(cf_decode(ds))
         with xr.open_dataset(path, engine="netcdf4", decode_times=False) as ds:
-            return cf_decode(ds.load())
+            return _forget_string_widths(cf_decode(ds.load()))
     except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...
         raise EnsembleFileError(f"{path}: not a readable netCDF file "
                                 f"(truncated or corrupt?): {exc}") from None
+
+
+def _forget_string_widths(ds: xr.Dataset) -> xr.Dataset:
+    """Drop the read width of string variables (encoding ``dtype`` '<U6'): a Dataset concatenated
+    from pieces keeps the first piece's encoding, which would cut longer strings on writing
+    ('finished' stored as 'finish' after a piece holding only 'failed')."""
+    for var in ds.variables.values():
+        if var.dtype.kind in "OUS":
+            var.encoding.pop("dtype", None)
+    return ds
 
 
 def open_ensemble(path, lazy: bool = False) -> xr.Dataset:

@@ -132,3 +132,17 @@ def test_an_interrupt_or_a_full_disk_during_the_merge_keeps_every_part(tmp_path,
     resumed = _merge(out)
     assert resumed.written and resumed.computed == 0 and not parts.exists()
     assert open_ensemble(out)["realization"].values.tolist() == list(range(N))
+
+
+def test_parts_with_shorter_strings_first_merge_without_cutting_longer_ones(tmp_path):
+    """A part holding only 'failed' read back before one holding 'finished': the merged file keeps
+    'finished' whole (the first part's read width '<U6' once cut it to 'finish')."""
+    from pipeline.run import _merged
+    spec = _spec()
+    first, second = run_chunk(spec, [0]), run_chunk(spec, [1])
+    first["status"].values[:] = np.array(["failed"], dtype=object)
+    write_netcdf(first, tmp_path / "a.nc")
+    write_netcdf(second, tmp_path / "b.nc")
+    merged = _merged([open_ensemble(tmp_path / p, lazy=True) for p in ("a.nc", "b.nc")], spec)
+    write_netcdf(merged, tmp_path / "m.nc")
+    assert list(store.load_netcdf(tmp_path / "m.nc")["status"].values) == ["failed", "finished"]
