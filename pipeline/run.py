@@ -53,14 +53,25 @@ class EnsembleSpec:
     elements: int
     seed: int
     store: str = "summary"
+    qmc_replicates: int | None = None   # None: plain Monte Carlo; else R of pipeline/sampler.py
 
     def scene(self):
         return parse_scene(self.scene_text, self.source)
 
+    def design(self):
+        """The QMC design (the draws' ``uniforms`` callback), or None for plain Monte Carlo."""
+        from .sampler import QMCDesign
+        return None if self.qmc_replicates is None else QMCDesign(self.seed, self.qmc_replicates)
+
+    def sampler_attrs(self) -> dict:
+        """The sampler's file attributes; none for mc, so its files stay as they were."""
+        design = self.design()
+        return {} if design is None else design.attrs()
+
     def attrs(self) -> dict:
         return {"scene_toml": self.scene_text, "model": self.model, "integrator": self.integrator,
                 "time_step_s": self.dt, "elements_per_link": self.elements, "seed": self.seed,
-                "store": self.store}
+                "store": self.store, **self.sampler_attrs()}
 
 
 def run_chunk(spec: EnsembleSpec, realizations: list[int]):
@@ -68,7 +79,7 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
     scene = spec.scene()
     try:
         results = simulate_batch(scene, spec.model, spec.integrator, spec.dt, spec.elements,
-                                 spec.seed, realizations)
+                                 spec.seed, realizations, uniforms=spec.design())
     except (ArithmeticError, np.linalg.LinAlgError) as exc:  # numerical failure: record it
         from rss6core.elastic import SimulationResult, time_grid
         t = time_grid(scene.trajectory.duration, spec.dt)
@@ -77,10 +88,16 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
                    ] * len(realizations)
     # the clearance levels hand back their draws; drawn here only without clearances or on failure
     parts = [realization_dataset(result, result.draw if result.draw is not None
-                                 else stored_draw(scene, spec.model, spec.seed, r, spec.dt), r,
+                                 else stored_draw(scene, spec.model, spec.seed, r, spec.dt,
+                                                  spec.design()), r,
                                  spec.store, scene.simulation.settle_time)
              for r, result in zip(realizations, results)]
-    return finish_ensemble(parts, scene, **_kw(spec))
+    return _finish(parts, scene, spec)
+
+
+def _finish(parts: list, scene, spec: EnsembleSpec):
+    """The realisations as one ensemble Dataset with the spec's provenance and sampler."""
+    return finish_ensemble(parts, scene, **_kw(spec)).assign_attrs(spec.sampler_attrs())
 
 
 def _kw(spec: EnsembleSpec) -> dict:
@@ -335,7 +352,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
                 bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
             pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
-        merged = pieces[0] if up_to_date else finish_ensemble(pieces, spec.scene(), **_kw(spec))
+        merged = pieces[0] if up_to_date else _finish(pieces, spec.scene(), spec)
         extra = annotate(merged) if annotate else {}
         annotated = any(str(merged.attrs.get(k)) != str(v) for k, v in extra.items())
         merged = merged.assign_attrs(extra)

@@ -238,7 +238,8 @@ def cf_decode(ds: xr.Dataset) -> xr.Dataset:
 # --- ensembles -------------------------------------------------------------
 
 JOINTS = tuple(f"{j}{i}" for j in "ACB" for i in range(1, 7))
-IDENTITY = ("scene_toml", "model", "integrator", "time_step_s", "elements_per_link", "seed", "store")
+IDENTITY = ("scene_toml", "model", "integrator", "time_step_s", "elements_per_link", "seed", "store",
+            "sampler", "qmc_replicates")   # the last two absent (None) in mc files
 
 
 class EnsembleFileError(ValueError):

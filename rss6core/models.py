@@ -35,12 +35,13 @@ __all__ = ["simulate", "simulate_batch", "default_time_step", "default_integrato
            "natural_frequencies", "MODELS"]
 
 
-def stored_draw(scene, model: str, seed: int, realization: int, dt: float):
-    """The draw an ensemble file records for a realisation: the paper level's first step, else the draw."""
+def stored_draw(scene, model: str, seed: int, realization: int, dt: float, uniforms=None):
+    """The draw an ensemble file records for a realisation: the paper level's first step, else the
+    draw (``uniforms`` as in :func:`.clearance.draw_clearances`)."""
     if model == "paper":
         steps = len(time_grid(scene.trajectory.duration, dt))
-        return _first_step(paper_draw(scene, seed, realization, steps))
-    return draw_clearances(scene, seed, realization)
+        return _first_step(paper_draw(scene, seed, realization, steps, uniforms))
+    return draw_clearances(scene, seed, realization, uniforms=uniforms)
 
 
 def _first_step(draw):
@@ -76,8 +77,11 @@ def simulate(scene, model: str | None = None, integrator: str | None = None,
 def simulate_batch(scene, model: str | None = None, integrator: str | None = None,
                    dt: float | None = None, elements: int | None = None, seed: int = 0,
                    realizations=(0,), tolerance: float | None = None,
-                   refinements: int | None = None) -> list[SimulationResult]:
+                   refinements: int | None = None, uniforms=None) -> list[SimulationResult]:
     """Realisations ``realizations`` of the run seeded ``seed``, one result each, in order.
+
+    ``uniforms(realization, dimension)``, if given, supplies each draw's uniforms (a quasi-Monte
+    Carlo design, see :func:`.clearance.draw_clearances`) instead of the realisation's stream.
 
     ``tolerance`` (m) and ``refinements`` set the contact level's adaptive step
     (default: the scene's; see :func:`.contact_dynamics.simulate_contact`).
@@ -97,14 +101,14 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
         motion = rigid_motion(scene, t)
         out = []
         for r in realizations:
-            draw = draw_clearances(scene, seed, r)
+            draw = draw_clearances(scene, seed, r, uniforms=uniforms)
             d, v, a = quasi_static_error(scene, motion, draw, sim.quasi_static_eccentricity)
             out.append(SimulationResult(t, d, v, a, "finished", "", len(t) - 1, draw=draw))
         return out
     method = make_integrator(integrator or default_integrator(scene, model), sim.newmark_beta,
                              sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
     if model == "contact":
-        draws = [draw_clearances(scene, seed, r) for r in realizations]
+        draws = [draw_clearances(scene, seed, r, uniforms=uniforms) for r in realizations]
         batch = simulate_contact(scene, draws, elements, method, dt, tolerance=tolerance,
                                  refinements=refinements)
         return [dataclasses.replace(batch.result(k), draw=draw) for k, draw in enumerate(draws)]
@@ -114,7 +118,7 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
     closure = PaperClosure(scene, rigid_motion(scene, elastic.t))
     out = []
     for r in realizations:
-        draw = paper_draw(scene, seed, r, len(elastic.t))
+        draw = paper_draw(scene, seed, r, len(elastic.t), uniforms)
         d, v, a = closure.error(draw)
         force = paper_contact_forces(scene, draw, dt)
         out.append(SimulationResult(elastic.t, elastic.displacement + d, elastic.velocity + v,
