@@ -313,8 +313,11 @@ def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: s
 
 
 def identity(attrs: dict) -> dict:
-    """The attributes that must match for two pieces to belong to the same ensemble."""
-    return {k: attrs.get(k) for k in IDENTITY}
+    """The attributes that must match for two pieces to belong to the same ensemble (numbers as
+    Python scalars; a file without a sampler is plain Monte Carlo)."""
+    out = {k: attrs.get(k) for k in IDENTITY}
+    out = {k: v.item() if isinstance(v, np.generic) else v for k, v in out.items()}
+    return out | {"sampler": out["sampler"] or "mc"}
 
 
 def load_netcdf(path) -> xr.Dataset:
