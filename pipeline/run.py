@@ -10,8 +10,9 @@ checks every stored part against the manifest written with it (checksum,
 provenance) and refuses pieces from a different scene, model or seed.  One
 process writes an output at a time (``OUT.nc.lock``).  When all realisations
 are stored they are merged into OUT.nc and the parts are removed.
-Realisation r draws from the stream (seed, r) only, so the file does not depend
-on the chunk size or the number of workers.
+Realisation r draws from the stream (seed, r) only (with ``--sampler qmc`` from a
+fixed point of a fixed scrambling, pipeline/sampler.py), so the file does not
+depend on the chunk size or the number of workers.
 """
 from __future__ import annotations
 

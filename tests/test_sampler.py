@@ -133,11 +133,14 @@ def test_statistics_of_a_qmc_file_use_the_replicates_and_say_so():
 
 
 def test_no_qmc_interval_once_a_realisation_failed():
-    x = np.random.default_rng(3).gamma(2.0, size=(64, 6))
-    status = ["finished"] * 63 + ["failed"]
-    sds = ensemble_stats(_ensemble(x, range(64), {"sampler": "qmc", "qmc_replicates": 4,
-                                                  "seed": 0}, status))
+    x = np.random.default_rng(3).gamma(2.0, size=(129, 6))   # 128 finished: m = 32 would do
+    status = ["finished"] * 128 + ["failed"]
+    sds = ensemble_stats(_ensemble(x, range(129), {"sampler": "qmc", "qmc_replicates": 4,
+                                                   "seed": 0}, status))
     assert np.isnan(sds["max_abs_error"].sel(bound="lower")).all()
+    sds = ensemble_stats(_ensemble(x[:128], range(128), {"sampler": "qmc", "qmc_replicates": 4,
+                                                         "seed": 0}))
+    assert np.isfinite(sds["max_abs_error"].sel(bound="lower", statistic="mean")).all()
 
 
 # --- coverage ------------------------------------------------------------------------
