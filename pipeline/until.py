@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .spec import QUANTITIES, SpecError, _directions, _statistic, _unit_factor
+from .spec import SpecError, _statistic, _subject, _unit_factor
 
 __all__ = ["Target", "UntilError", "parse_target", "parse_targets", "checkpoints", "widths",
            "run_until", "GROWTH", "CONFIDENCE"]
@@ -83,13 +83,7 @@ def parse_target(text: str) -> Target:
     subject, at, right = text.partition("@")
     if not at:
         raise _fail(text, "missing '@STATISTIC<=HALF-WIDTH' (e.g. displacement:x,y@q95<=5%)")
-    quantity, colon, dirs = subject.partition(":")
-    quantity = quantity.strip()
-    if quantity not in QUANTITIES:
-        raise _fail(text, f"unknown quantity {quantity!r} (choose from {', '.join(QUANTITIES)})")
-    if not colon or not dirs.strip():
-        raise _fail(text, "missing directions after the quantity (e.g. displacement:x,y)")
-    directions = _spec_piece(text, _directions, text, dirs)
+    quantity, directions = _spec_piece(text, _subject, text, subject)
     m = re.search(r"<=|<", right)
     if m is None:
         raise _fail(text, "missing '<=' and the half-width after the statistic (e.g. @q95<=5%)")
