@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr, ndtri
 
-__all__ = ["ClearanceDraw", "UniformVector", "realization_rng", "truncated_normal",
+__all__ = ["SIZE_UNIFORMS", "ClearanceDraw", "UniformVector", "realization_rng", "truncated_normal",
            "sphere_directions", "draw_clearances", "clearances_from_uniforms", "uniform_dimension"]
 
 
@@ -89,10 +89,13 @@ def _sizes(rng, nominal: float, tolerance: float) -> np.ndarray:
     return truncated_normal(rng, nominal, tolerance * nominal, 0.0, 2.0 * nominal, 6)
 
 
+SIZE_UNIFORMS = 24   # a draw takes its uniforms for the 4 x 6 clearance sizes first
+
+
 def uniform_dimension(steps: int | None = None) -> int:
     """Most uniforms one draw uses: 4 x 6 sizes, then per joint and step radial, angle, axial,
     and magnitude and two direction angles for C and for B (fewer where a law is degenerate)."""
-    return 24 + 9 * 6 * (1 if steps is None else steps)
+    return SIZE_UNIFORMS + 9 * 6 * (1 if steps is None else steps)
 
 
 def draw_clearances(scene, seed: int, realization: int, steps: int | None = None,
