@@ -69,7 +69,7 @@ BOUNDS = ("estimate", "lower", "upper")
 VARIABLES = ("max_abs_error", "mean_abs_error")
 MIN_N_MEAN = 8      # smallest n whose coverage was measured (>= 94 % on all three laws)
 MIN_N_STD = 200     # Bonett: >= 93 % measured on all three laws from here
-MIN_POINTS_RQMC = {"mean": 16, "std": 32, "q05": 64, "q50": 16, "q95": 64, "q99": 256}
+MIN_POINTS_RQMC = {"mean": 16, "std": 32, "q05": 128, "q50": 16, "q95": 128, "q99": 256}
 MAX_NOTE = ("no interval: the sample maximum estimates no population parameter; the next "
             "realisation exceeds it with probability 1/(n + 1)")
 _RTOL = 1e-12       # binomial coverage computed in floating point

@@ -184,7 +184,7 @@ def test_the_linear_map_is_the_quasi_static_level(paper):
 
 @pytest.mark.slow
 def test_rqmc_intervals_cover_at_nominal_minus_2_points_over_500_repetitions(paper):
-    """500 independent RQMC runs (R = 8 scramblings of 64 points, n = 512) of the max |error| over
+    """500 independent RQMC runs (R = 8 scramblings of 128 points, n = 1024) of the max |error| over
     16 instants of the quasi-static level; the truth from 2^20 iid draws (its own error is 0.1-0.3
     % of the value, under a tenth of the intervals' half-widths of 6-20 %)."""
     assert paper.sampling.size_tolerance == 0.0             # _max_errors relies on fixed sizes
@@ -197,7 +197,7 @@ def test_rqmc_intervals_cover_at_nominal_minus_2_points_over_500_repetitions(pap
     hits = np.zeros((len(names), 6))
     for rep in range(500):
         groups = np.stack([_max_errors(paper, M, np.roll(qmc.Sobol(78, rng=np.random.default_rng(
-            [rep, k, 99])).random(64), 24, axis=1)) for k in range(8)])   # as QMCDesign orders
+            [rep, k, 99])).random(128), 24, axis=1)) for k in range(8)])   # as QMCDesign orders
         iv = rqmc_intervals(groups, 0.95)[rows]
         hits += (iv[:, 0] <= truth) & (truth <= iv[:, 1])
     coverage = hits / 500

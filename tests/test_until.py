@@ -52,7 +52,7 @@ def test_checkpoints_start_at_the_statistics_minimum_n_and_grow_to_the_cap():
     assert points[0] == min_n_for_quantile(0.95, 0.95) == 59
     assert points == [59, 74, 93, 117, 147, 184, 200]
     assert all(b == max(a + 1, int(np.ceil(a * GROWTH))) for a, b in zip(points[:-2], points[1:-1]))
-    assert checkpoints([q95], 1024, replicates=8) == [512, 1024]
+    assert checkpoints([q95], 2048, replicates=8) == [1024, 2048]
     assert checkpoints([parse_target("displacement:x@mean<=5%")], 1000, replicates=8) == [
         128, 256, 512, 1000]
     assert checkpoints([q95], 30) == [30]
