@@ -80,7 +80,7 @@ def test_qmc_runs_are_checked_before_any_work():
 
 def test_rqmc_interval_is_student_t_over_the_replicates_about_the_pooled_estimate():
     rng = np.random.default_rng(0)
-    groups = rng.gamma(2.0, size=(8, 64, 3))
+    groups = rng.gamma(2.0, size=(8, MIN_POINTS_RQMC["q95"], 3))
     iv = rqmc_intervals(groups, 0.9)
     means = groups.mean(axis=1)                                # (8, 3)
     half = sps.t.ppf(0.95, 7) * means.std(axis=0, ddof=1) / np.sqrt(8)
