@@ -133,21 +133,32 @@ def _run(args) -> int:
     from .gate import exit_code, format_verdicts
     from .summary import failure_reasons
     specs, verdicts = _requirements(args), []
-    for s in specs:
+    targets = _until_targets(args)
+    for s in specs + targets:
         if s.window:
-            raise SceneError(f"--require {s.text!r}: rss6 run stores no analysis windows; drop "
+            flag = "--until" if s in targets else "--require"
+            raise SceneError(f"{flag} {s.text!r}: rss6 run stores no analysis windows; drop "
                              f"'/{s.window}'")
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
     _refuse_clearance_free_default(args, scene, model)
+    replicates = _replicates(args, scene, model, dt)
     output = check_output_path(args.output or f"{scene.name}_{model}.nc", args.parents)
     _warn_oversubscription(args.workers, args.scheduler)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements,
-                        args.seed, args.store)
+                        args.seed, args.store, qmc_replicates=replicates)
+    until = None
     try:
-        outcome = ensemble(spec, args.n, output, workers=args.workers, scheduler=args.scheduler,
-                           chunk=args.chunk, annotate=_annotate(specs, verdicts),
-                           worker_timeout=args.worker_timeout)
+        if targets:
+            from .until import run_until
+            until = run_until(spec, targets, args.n, output, workers=args.workers,
+                              scheduler=args.scheduler, chunk=args.chunk,
+                              annotate=_annotate(specs, verdicts), worker_timeout=args.worker_timeout)
+            outcome = until.ensemble
+        else:
+            outcome = ensemble(spec, args.n, output, workers=args.workers, scheduler=args.scheduler,
+                               chunk=args.chunk, annotate=_annotate(specs, verdicts),
+                               worker_timeout=args.worker_timeout)
     except SchedulerUnavailable as exc:
         parts = output.with_name(output.name + ".parts")
         kept = (f"; the finished chunks are kept in {parts}; rerun the same command to resume"
@@ -159,7 +170,7 @@ def _run(args) -> int:
               "command to continue", file=sys.stderr)
         return 130
     ds = outcome.dataset
-    print(_outcome_line(outcome, output, args.n, model))
+    print(_outcome_line(outcome, output, args.n if until is None else until.n, model))
     reasons = failure_reasons(ds)
     for line in reasons:
         print(line, file=sys.stderr)
@@ -167,10 +178,52 @@ def _run(args) -> int:
         print("rss6: every realisation failed; no statistics", file=sys.stderr)
         return 1
     print(format_stats(ensemble_stats(ds).sel(quantity=["displacement"])))
+    code = 0 if until is None else _until_verdict(until, args.n)
     if not specs:
-        return 0
+        return code
     print(format_verdicts(verdicts))
-    return exit_code(verdicts, args.undecided)
+    return max(code, exit_code(verdicts, args.undecided))
+
+
+def _until_targets(args) -> list:
+    """The --until targets, parsed before any work; a malformed one is a one-line error."""
+    from .until import UntilError, parse_targets
+    try:
+        return parse_targets(args.until)
+    except UntilError as exc:
+        raise SceneError(str(exc)) from None
+
+
+def _replicates(args, scene, model: str, dt: float) -> int | None:
+    """R for --sampler qmc (None for mc), checked before any work against -n and the level."""
+    from rss6core import time_grid, uniform_dimension
+
+    from .sampler import DEFAULT_REPLICATES, check_qmc
+    from .summary import CLEARANCE_LEVELS
+    if args.sampler == "mc":
+        if args.replicates is not None:
+            raise SceneError("--replicates applies to --sampler qmc only")
+        return None
+    if model not in CLEARANCE_LEVELS:
+        raise SceneError(f"--sampler qmc: the {model} level draws no clearances")
+    replicates = DEFAULT_REPLICATES if args.replicates is None else args.replicates
+    steps = len(time_grid(scene.trajectory.duration, dt)) if model == "paper" else None
+    try:
+        check_qmc(args.n, replicates, uniform_dimension(steps))
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+    return replicates
+
+
+def _until_verdict(until, cap: int) -> int:
+    """Print whether the --until targets were met; 1 if the cap was reached first."""
+    if until.met:
+        print(f"--until: every target met at n = {until.n}")
+        return 0
+    missing = sorted({w.target for w in until.widths if not w.met})
+    print(f"rss6: --until not met at n = {until.n} (cap -n {cap}): {'; '.join(missing)}; raise -n "
+          "and rerun the same command to continue", file=sys.stderr)
+    return 1
 
 
 def _annotate(specs: list, verdicts: list):
@@ -561,6 +614,18 @@ def _run_parser(sub) -> None:
                      help="summary: per-realisation maxima and means; full: also time histories "
                           "(default: summary)")
     _require_arguments(run)
+    run.add_argument("--until", action="append", metavar="TARGET",
+                     help="add realisations until a confidence interval is this narrow, e.g. "
+                          "'displacement:x,y,z@q95<=5%%' (half-width relative to the estimate) or "
+                          "'displacement:z@mean<=0.001mm' (absolute), 95 %% confidence; checked at "
+                          "fixed n (x1.25 from the statistic's minimum n; qmc: doubling), up to -n "
+                          "as the cap; exit 1 if the cap comes first (repeatable; default: none)")
+    run.add_argument("--sampler", choices=("mc", "qmc"), default="mc",
+                     help="mc: independent random draws; qmc: randomised quasi-Monte Carlo, "
+                          "scrambled Sobol' points in --replicates independent scramblings, "
+                          "-n a multiple of them; intervals from the replicates (default: mc)")
+    run.add_argument("--replicates", type=_int_at_least(2), metavar="R",
+                     help="with --sampler qmc: independent scramblings (default 8)")
     run.set_defaults(func=_run)
 
 

@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .spec import Spec
-from .stats import MIN_N_MEAN, MIN_N_STD, min_n_for_quantile
+from .stats import interval_floor
 
 __all__ = ["OUTCOMES", "Verdict", "exit_code", "format_verdicts", "overall", "judge", "judge_all",
            "verdicts_json"]
@@ -49,15 +49,11 @@ class Verdict:
     reason: str
 
 
-def _quantile_p(statistic: str) -> float | None:
-    return int(statistic[1:]) / 100 if statistic.startswith("q") else None
-
-
-def _n_needed(spec: Spec, est: float, lo: float, hi: float, n: int, confidence: float):
-    """(n, reason) that would likely decide an undecided spec (see module doc)."""
-    p = _quantile_p(spec.statistic)
-    floor = (min_n_for_quantile(p, confidence) if p is not None
-             else {"mean": MIN_N_MEAN, "std": MIN_N_STD}[spec.statistic])
+def _n_needed(spec: Spec, est: float, lo: float, hi: float, n: int, confidence: float,
+              replicates: int | None = None):
+    """(n, reason) that would likely decide an undecided spec (see module doc); ``replicates``: R
+    of a randomised QMC file, whose intervals start at other n."""
+    floor = interval_floor(spec.statistic, confidence, replicates)
     if not (np.isfinite(lo) and np.isfinite(hi)):
         return max(floor, n + 1), f"no {100 * confidence:g} % interval exists at n = {n}"
     margin = abs(est - spec.limit)
@@ -96,11 +92,14 @@ def judge(spec: Spec, stats) -> list[Verdict]:
     """Verdicts of one spec, one per direction, from a statistics Dataset (``pipeline.stats``)."""
     da = _select(spec=spec, stats=stats)
     n, confidence = int(stats.attrs["n_finished"]), float(stats.attrs["confidence"])
+    replicates = stats.attrs.get("qmc_replicates")
+    replicates = None if replicates is None else int(replicates)
     out = []
     for d in spec.directions:
         est, lo, hi = (float(da.sel(direction=d, bound=b)) for b in ("estimate", "lower", "upper"))
         outcome = _outcome(spec, lo, hi)
-        need, reason = (_n_needed(spec, est, lo, hi, n, confidence) if outcome == "undecided"
+        need, reason = (_n_needed(spec, est, lo, hi, n, confidence, replicates)
+                        if outcome == "undecided"
                         else (None, "the whole interval " + ("meets" if outcome == "pass"
                                                              else "violates") + " the limit"))
         out.append(Verdict(spec.text, spec.quantity, d, spec.statistic, spec.measure, spec.window,

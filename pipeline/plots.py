@@ -113,13 +113,16 @@ def _histograms(ds, q: str, finished):
 def _convergence(ds, q: str, finished, confidence: float = 0.95):
     peak = _peaks(ds, q, finished)
     n = np.arange(1, peak.shape[0] + 1)
+    iid = str(ds.attrs.get("sampler", "mc")) == "mc"   # a QMC prefix has no running iid interval
     fig, axes = _grid(figure_title(f"running mean of max |{q} error| with its "
-                                   f"{100 * confidence:g} % interval (given from n = {MIN_N_MEAN})",
+                                   f"{100 * confidence:g} % interval (given from n = {MIN_N_MEAN})"
+                                   if iid else f"running mean of max |{q} error| (randomised "
+                                   "QMC: intervals from the replicates, rss6 stats)",
                                    ds, peak.shape[0]))
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
         f, unit = figure_unit(q, d, peak[:, k])
         mean, (lo, hi) = running_mean_interval(peak[:, k] * f, confidence)
-        has = np.isfinite(lo) & np.isfinite(hi)
+        has = np.isfinite(lo) & np.isfinite(hi) & iid
         if has.any():
             ax.fill_between(n[has], lo[has], hi[has], alpha=0.3, lw=0,
                             label=f"{100 * confidence:g} % interval")

@@ -10,8 +10,9 @@ checks every stored part against the manifest written with it (checksum,
 provenance) and refuses pieces from a different scene, model or seed.  One
 process writes an output at a time (``OUT.nc.lock``).  When all realisations
 are stored they are merged into OUT.nc and the parts are removed.
-Realisation r draws from the stream (seed, r) only, so the file does not depend
-on the chunk size or the number of workers.
+Realisation r draws from the stream (seed, r) only (with ``--sampler qmc`` from a
+fixed point of a fixed scrambling, pipeline/sampler.py), so the file does not
+depend on the chunk size or the number of workers.
 """
 from __future__ import annotations
 
@@ -53,14 +54,25 @@ class EnsembleSpec:
     elements: int
     seed: int
     store: str = "summary"
+    qmc_replicates: int | None = None   # None: plain Monte Carlo; else R of pipeline/sampler.py
 
     def scene(self):
         return parse_scene(self.scene_text, self.source)
 
+    def design(self):
+        """The QMC design (the draws' ``uniforms`` callback), or None for plain Monte Carlo."""
+        from .sampler import QMCDesign
+        return None if self.qmc_replicates is None else QMCDesign(self.seed, self.qmc_replicates)
+
+    def sampler_attrs(self) -> dict:
+        """The sampler's file attributes; none for mc, so its files stay as they were."""
+        design = self.design()
+        return {} if design is None else design.attrs()
+
     def attrs(self) -> dict:
         return {"scene_toml": self.scene_text, "model": self.model, "integrator": self.integrator,
                 "time_step_s": self.dt, "elements_per_link": self.elements, "seed": self.seed,
-                "store": self.store}
+                "store": self.store, **self.sampler_attrs()}
 
 
 NUMERICAL_FAILURES = (ArithmeticError, np.linalg.LinAlgError)   # recorded as a failed realisation
@@ -79,15 +91,21 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
         results = [_alone(scene, spec, r) for r in realizations]
     # the clearance levels hand back their draws; drawn here only without clearances or on failure
     parts = [realization_dataset(result, result.draw if result.draw is not None
-                                 else stored_draw(scene, spec.model, spec.seed, r, spec.dt), r,
+                                 else stored_draw(scene, spec.model, spec.seed, r, spec.dt,
+                                                  spec.design()), r,
                                  spec.store, scene.simulation.settle_time)
              for r, result in zip(realizations, results)]
-    return finish_ensemble(parts, scene, **_kw(spec))
+    return _finish(parts, scene, spec)
+
+
+def _finish(parts: list, scene, spec: EnsembleSpec):
+    """The realisations as one ensemble Dataset with the spec's provenance and sampler."""
+    return finish_ensemble(parts, scene, **_kw(spec)).assign_attrs(spec.sampler_attrs())
 
 
 def _simulate(spec: EnsembleSpec, realizations: list[int]) -> list:
     level = _level(spec.scene_text, spec.source, spec.model, spec.integrator, spec.dt, spec.elements)
-    return level.simulate(spec.seed, realizations)
+    return level.simulate(spec.seed, realizations, spec.design())
 
 
 @functools.lru_cache(maxsize=1)
@@ -412,7 +430,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
 def _merged(pieces: list, spec: EnsembleSpec):
     """The stored pieces as one ensemble, in realisation order; histories stay lazy (on disk)."""
     pieces = sorted(pieces, key=lambda ds: int(ds["realization"][0]))
-    return finish_ensemble(pieces, spec.scene(), **_kw(spec))
+    return _finish(pieces, spec.scene(), spec)
 
 
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,

@@ -141,6 +141,17 @@ def _statistic(text: str, token: str) -> tuple[str, str, str | None]:
     return stat, measure, window
 
 
+def _subject(text: str, subject: str) -> tuple[str, tuple[str, ...]]:
+    """``'displacement:x,y'`` -> (quantity, directions)."""
+    quantity, colon, dirs = subject.partition(":")
+    quantity = quantity.strip()
+    if quantity not in QUANTITIES:
+        raise _fail(text, f"unknown quantity {quantity!r} (choose from {', '.join(QUANTITIES)})")
+    if not colon or not dirs.strip():
+        raise _fail(text, "missing directions after the quantity (e.g. displacement:x,y)")
+    return quantity, _directions(text, dirs)
+
+
 def _comparison(text: str, left: str) -> tuple[str, str, str]:
     """``'displacement:x<=0.05mm'`` -> (subject, op, value-and-unit)."""
     m = _OPERATOR.search(left)
@@ -158,13 +169,7 @@ def parse_spec(text: str) -> Spec:
     if not at:
         raise _fail(text, "missing '@STATISTIC' (e.g. @q95)")
     subject, op, rest = _comparison(text, left)
-    quantity, colon, dirs = subject.partition(":")
-    quantity = quantity.strip()
-    if quantity not in QUANTITIES:
-        raise _fail(text, f"unknown quantity {quantity!r} (choose from {', '.join(QUANTITIES)})")
-    if not colon or not dirs.strip():
-        raise _fail(text, "missing directions after the quantity (e.g. displacement:x,y)")
-    directions = _directions(text, dirs)
+    quantity, directions = _subject(text, subject)
     m = _NUMBER.match(rest)
     if m is None:
         raise _fail(text, f"missing value after {op!r} (e.g. 0.05mm)")

@@ -36,6 +36,17 @@ about 1):
   largest value seen, so it is not offered.
 
 No bootstrap runs: none of the intervals above needs one.
+
+Randomised quasi-Monte Carlo files (``sampler = "qmc"``, pipeline/sampler.py)
+are not iid samples, so none of the intervals above holds for them.  There the
+R independent scramblings give R independent estimates of each statistic
+(replicate k: its first m = n // R points); the interval is Student t with
+R - 1 degrees of freedom about their average (``rqmc_intervals``).  It is
+given for the mean, std and quantiles once every replicate has at least
+MIN_POINTS_RQMC[statistic] points (a replicate's quantile or std estimate is
+biased by O(1/m); coverage measured in tests/test_sampler.py), never for the
+maximum, and not at all if a realisation failed (a replicate with holes is no
+longer a scrambled net).  Point estimates stay those of all n realisations.
 """
 from __future__ import annotations
 
@@ -49,7 +60,8 @@ from scipy import stats as sps
 __all__ = ["QUANTILES", "STATISTICS", "BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "quantile_ranks",
            "min_n_for_quantile", "quantile_estimates", "estimates", "mean_interval",
            "running_mean_interval", "std_interval", "quantile_interval", "ensemble_stats",
-           "to_json", "format_stats"]
+           "to_json", "format_stats", "MIN_POINTS_RQMC", "rqmc_intervals", "replicate_groups",
+           "interval_floor"]
 
 QUANTILES = {"q05": 0.05, "q50": 0.5, "q95": 0.95, "q99": 0.99}
 STATISTICS = ("mean", "std", *QUANTILES, "max")
@@ -57,6 +69,7 @@ BOUNDS = ("estimate", "lower", "upper")
 VARIABLES = ("max_abs_error", "mean_abs_error")
 MIN_N_MEAN = 8      # smallest n whose coverage was measured (>= 94 % on all three laws)
 MIN_N_STD = 200     # Bonett: >= 93 % measured on all three laws from here
+MIN_POINTS_RQMC = {"mean": 16, "std": 32, "q05": 128, "q50": 16, "q95": 128, "q99": 256}
 MAX_NOTE = ("no interval: the sample maximum estimates no population parameter; the next "
             "realisation exceeds it with probability 1/(n + 1)")
 _RTOL = 1e-12       # binomial coverage computed in floating point
@@ -221,6 +234,41 @@ def _summaries(x: np.ndarray, confidence: float) -> np.ndarray:
     return np.concatenate([est[:, None], _intervals(x, confidence)], axis=1)
 
 
+# --- randomised quasi-Monte Carlo ----------------------------------------------------
+
+def replicate_groups(x: np.ndarray, realizations, replicates: int) -> np.ndarray:
+    """(R, m, cells) of data x (n, cells) whose row j is realisation ``realizations[j]``: replicate
+    k holds points 0..m-1 of scrambling k (realisation k + R i), m = n // R; rows beyond are left out."""
+    order = np.argsort(np.asarray(realizations))
+    m = len(order) // replicates
+    first = x[order[:replicates * m]]                        # realisations 0 .. R m - 1
+    return first.reshape(m, replicates, *x.shape[1:]).swapaxes(0, 1)
+
+
+def rqmc_intervals(groups: np.ndarray, confidence: float) -> np.ndarray:
+    """(statistic, 2, cells): Student t over the R replicate estimates of each statistic of
+    STATISTICS; NaN where a replicate has fewer than MIN_POINTS_RQMC points, and for the max."""
+    R, m = groups.shape[:2]
+    per = np.moveaxis(estimates(np.swapaxes(groups, 0, 1)), -1, 0)   # (statistic, R, cells)
+    # sectioning: centred on the estimate of all R m points, whose O(1/m) bias a replicate
+    # quantile's would carry R times over; the spread of the replicates gives the width
+    centre = np.moveaxis(estimates(groups.reshape(R * m, *groups.shape[2:])), -1, 0)
+    spread = per.std(axis=1, ddof=1) if R > 1 else np.nan * per[:, 0]
+    half = sps.t.ppf(0.5 + confidence / 2, max(R - 1, 1)) * spread / np.sqrt(R)
+    out = np.stack([centre - half, centre + half], axis=1)
+    enough = np.array([R >= 2 and m >= MIN_POINTS_RQMC.get(s, np.inf) for s in STATISTICS])
+    return np.where(enough[:, None, None], out, np.nan)
+
+
+def interval_floor(statistic: str, confidence: float, replicates: int | None = None) -> int:
+    """Smallest n with an interval of ``statistic`` (mc: iid intervals; with ``replicates``: RQMC)."""
+    if replicates is not None:
+        return replicates * MIN_POINTS_RQMC[statistic]
+    if statistic in QUANTILES:
+        return min_n_for_quantile(QUANTILES[statistic], confidence)
+    return {"mean": MIN_N_MEAN, "std": MIN_N_STD}[statistic]
+
+
 # --- the Dataset -------------------------------------------------------------------
 
 def _as_ensemble(ds: xr.Dataset) -> xr.Dataset:
@@ -240,23 +288,49 @@ def ensemble_stats(ds: xr.Dataset, confidence: float = 0.95) -> xr.Dataset:
     ``mean_abs_error`` over the finished realisations of an ensemble (or single-run) Dataset."""
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
-    ens = _as_ensemble(ds)
+    from .sampler import design_of
+    ens, design = _as_ensemble(ds), design_of(ds.attrs)
     finished = np.asarray(ens["status"].values == "finished")
     data = {}
     for name in VARIABLES:
         var = ens[name].transpose("realization", "quantity", "direction")
         x = var.values[finished]                                          # (n, Q, D)
         flat = _summaries(x.reshape(x.shape[0], x.shape[1] * x.shape[2]), confidence)
+        if design is not None:                                            # not iid: see module doc
+            flat[:, 1:] = _rqmc_bounds(x.reshape(x.shape[0], -1), ens["realization"].values,
+                                       finished, design.replicates, confidence)
         attrs = {"long_name": f"statistics over finished realisations of {name}",
                  "units": var.attrs.get("units", "")}
         data[name] = (("statistic", "bound", "quantity", "direction"),
                       flat.reshape(flat.shape[:2] + x.shape[1:]), attrs)
     n = int(finished.sum())
+    attrs = _attrs(ds, n, int((~finished).sum()), confidence)
+    if design is not None:
+        attrs |= _rqmc_attrs(design.replicates, confidence)
     coords = {"statistic": list(STATISTICS), "bound": list(BOUNDS),
               "quantity": ens["quantity"].values, "direction": ens["direction"].values}
     if "unit" in ds.coords:
         coords["unit"] = (("quantity", "direction"), ds["unit"].values, ds["unit"].attrs)
-    return xr.Dataset(data, coords=coords, attrs=_attrs(ds, n, int((~finished).sum()), confidence))
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _rqmc_bounds(x: np.ndarray, realizations, finished: np.ndarray, replicates: int,
+                 confidence: float) -> np.ndarray:
+    """(statistic, 2, cells) RQMC bounds of finished data x (n, cells); all NaN if any failed."""
+    if not finished.all():
+        return np.full((len(STATISTICS), 2, x.shape[1]), np.nan)
+    return rqmc_intervals(replicate_groups(x, realizations, replicates), confidence)
+
+
+def _rqmc_attrs(replicates: int, confidence: float) -> dict:
+    """The attributes that say which intervals a QMC file's statistics carry (module doc)."""
+    floors = ", ".join(f"{k} {interval_floor(k, confidence, replicates)}" for k in MIN_POINTS_RQMC)
+    text = (f"randomised QMC: Student t ({replicates - 1} degrees of freedom) over the "
+            f"{replicates} replicate estimates, centred on the estimate of all complete "
+            f"replicate rounds; NaN below n = {floors}, or if a realisation failed")
+    return {"sampler": "qmc", "qmc_replicates": replicates,
+            **{f"interval_{k}": text for k in ("mean", "std", "quantiles")},
+            **{f"min_n_{k}": interval_floor(k, confidence, replicates) for k in QUANTILES}}
 
 
 def _attrs(ds, n: int, failed: int, confidence: float) -> dict:
@@ -301,10 +375,15 @@ def _cell(value: float, factor: float) -> str:
 def _missing_notes(sds: xr.Dataset) -> list[str]:
     """Why bounds are dashes: the n each interval needs, and the maximum's note."""
     n, conf = sds.attrs["n_finished"], 100 * sds.attrs["confidence"]
-    need = {"mean": MIN_N_MEAN, "std": MIN_N_STD}
-    need |= {k: min_n_for_quantile(p, sds.attrs["confidence"]) for k, p in QUANTILES.items()}
+    replicates = sds.attrs.get("qmc_replicates")
+    replicates = None if replicates is None else int(replicates)
+    need = {k: interval_floor(k, sds.attrs["confidence"], replicates)
+            for k in ("mean", "std", *QUANTILES)}
     notes = [f"{k}: no {conf:g} % interval below n = {v} (n = {n} here)"
              for k, v in need.items() if n < v]
+    if replicates is not None:
+        notes.insert(0, f"randomised QMC, {replicates} replicates: intervals are Student t over "
+                        "the replicates (none if a realisation failed)")
     return notes + [f"max: {MAX_NOTE}"]
 
 

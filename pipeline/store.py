@@ -295,7 +295,8 @@ def cf_decode(ds: xr.Dataset) -> xr.Dataset:
 # --- ensembles -------------------------------------------------------------
 
 JOINTS = tuple(f"{j}{i}" for j in "ACB" for i in range(1, 7))
-IDENTITY = ("scene_toml", "model", "integrator", "time_step_s", "elements_per_link", "seed", "store")
+IDENTITY = ("scene_toml", "model", "integrator", "time_step_s", "elements_per_link", "seed", "store",
+            "sampler", "qmc_replicates")   # the last two absent (None) in mc files
 
 
 class EnsembleFileError(ValueError):
@@ -370,8 +371,11 @@ def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: s
 
 
 def identity(attrs: dict) -> dict:
-    """The attributes that must match for two pieces to belong to the same ensemble."""
-    return {k: attrs.get(k) for k in IDENTITY}
+    """The attributes that must match for two pieces to belong to the same ensemble (numbers as
+    Python scalars; a file without a sampler is plain Monte Carlo)."""
+    out = {k: attrs.get(k) for k in IDENTITY}
+    out = {k: v.item() if isinstance(v, np.generic) else v for k, v in out.items()}
+    return out | {"sampler": out["sampler"] or "mc"}
 
 
 HISTORY_BLOCK = 64   # realisations per block of a history read lazily (a merge holds one block)

@@ -24,6 +24,12 @@ Running a level
 - natural_frequencies: undamped angular frequencies (rad/s) of the elastic robot at one instant.
 - degrees_of_freedom: how many unknowns a level solves for.
 
+Clearance draws
+- draw_clearances: one realisation's clearance sizes and eccentricities (m), from its seeded stream.
+- clearances_from_uniforms: the same draw as a function of a vector of uniforms (quasi-Monte Carlo).
+- uniform_dimension: how many uniforms one draw uses at most.
+- SIZE_UNIFORMS: how many of them (the first) set the clearance sizes.
+
 The elastic level's parts (the stability study's explicit sweep)
 - Integrator: a generalized-alpha family member (Newmark, HHT, central difference, ...).
 - build_elastic_model: the finite-element model of the links with ideal joints.
@@ -37,6 +43,7 @@ The rigid robot
 """
 from .elastic import SimulationResult, quasi_static_state, simulate_elastic, time_grid
 from .assembly import build_elastic_model
+from .clearance import SIZE_UNIFORMS, clearances_from_uniforms, draw_clearances, uniform_dimension
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
 from .kinematics import rigid_motion
@@ -51,5 +58,6 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
            "SimulationResult", "time_grid",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom",
+           "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "SIZE_UNIFORMS",
            "Integrator", "build_elastic_model", "quasi_static_state", "simulate_elastic",
            "rigid_motion", "inverse_dynamics", "crank_inertia", "rod_inertia", "__version__"]

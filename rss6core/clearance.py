@@ -13,6 +13,10 @@ socket (crank), e_B = ball (rod) minus socket (platform).
   uniform on the sphere) is the option ``direction = "paper"``.
 Realisation r of a run with seed s draws from its own stream
 SeedSequence([s, r]), so results do not depend on chunking or worker count.
+Every law inverts a CDF, so a draw is a function of a vector of uniforms
+(:func:`clearances_from_uniforms`, at most :func:`uniform_dimension` of them):
+plain Monte Carlo takes them from the realisation's stream, randomised
+quasi-Monte Carlo (pipeline/sampler.py) from a scrambled Sobol' point.
 """
 from __future__ import annotations
 
@@ -21,13 +25,30 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr, ndtri
 
-__all__ = ["ClearanceDraw", "realization_rng", "truncated_normal", "sphere_directions",
-           "draw_clearances"]
+__all__ = ["SIZE_UNIFORMS", "ClearanceDraw", "UniformVector", "realization_rng", "truncated_normal",
+           "sphere_directions", "draw_clearances", "clearances_from_uniforms", "uniform_dimension"]
 
 
 def realization_rng(seed: int, realization: int) -> np.random.Generator:
     """The random stream of realisation ``realization`` of a run seeded ``seed``."""
     return np.random.default_rng(np.random.SeedSequence([int(seed), int(realization)]))
+
+
+class UniformVector:
+    """Given uniforms on [0, 1) handed out in order with a Generator's ``uniform(low, high, size)``
+    signature, so one draw routine serves a random stream and a quasi-random point alike."""
+
+    def __init__(self, u):
+        self.u, self.used = np.asarray(u, float).ravel(), 0
+
+    def uniform(self, low=0.0, high=1.0, size=None) -> np.ndarray:
+        shape = () if size is None else tuple(np.atleast_1d(size))
+        count = int(np.prod(shape))
+        if self.used + count > self.u.size:
+            raise ValueError(f"the draw needs more than the {self.u.size} uniforms given")
+        out = self.u[self.used:self.used + count].reshape(shape)
+        self.used += count
+        return low + (high - low) * out
 
 
 def truncated_normal(rng: np.random.Generator, mean, std, low, high, size) -> np.ndarray:
@@ -68,14 +89,37 @@ def _sizes(rng, nominal: float, tolerance: float) -> np.ndarray:
     return truncated_normal(rng, nominal, tolerance * nominal, 0.0, 2.0 * nominal, 6)
 
 
-def draw_clearances(scene, seed: int, realization: int, steps: int | None = None) -> ClearanceDraw:
-    """Draw realisation ``realization`` of the scene's clearance laws from its own stream.
+SIZE_UNIFORMS = 24   # a draw takes its uniforms for the 4 x 6 clearance sizes first
 
-    With ``steps`` the sizes are drawn once and the eccentricities ``steps`` times
-    (leading axis), as the paper level redraws them every time step (sec. 2).
+
+def uniform_dimension(steps: int | None = None) -> int:
+    """Most uniforms one draw uses: 4 x 6 sizes, then per joint and step radial, angle, axial,
+    and magnitude and two direction angles for C and for B (fewer where a law is degenerate)."""
+    return SIZE_UNIFORMS + 9 * 6 * (1 if steps is None else steps)
+
+
+def draw_clearances(scene, seed: int, realization: int, steps: int | None = None,
+                    uniforms=None) -> ClearanceDraw:
+    """Draw realisation ``realization`` of the scene's clearance laws.
+
+    From its own stream, or with ``uniforms(realization, dimension) -> ndarray`` (e.g. a
+    quasi-Monte Carlo design) from the uniforms it returns.  With ``steps`` the sizes are
+    drawn once and the eccentricities ``steps`` times (leading axis), as the paper level
+    redraws them every time step (sec. 2).
     """
+    if uniforms is not None:
+        return clearances_from_uniforms(scene, uniforms(realization, uniform_dimension(steps)), steps)
+    return _draw(scene, realization_rng(seed, realization), steps)
+
+
+def clearances_from_uniforms(scene, u, steps: int | None = None) -> ClearanceDraw:
+    """The draw as a function of a vector of at most ``uniform_dimension(steps)`` uniforms in [0, 1)."""
+    return _draw(scene, UniformVector(u), steps)
+
+
+def _draw(scene, rng, steps: int | None) -> ClearanceDraw:
+    """The draw from ``rng`` (a Generator or a :class:`UniformVector`), uniforms taken in a fixed order."""
     cl, law = scene.clearance, scene.sampling
-    rng = realization_rng(seed, realization)
     tol = law.size_tolerance
     dr, da = _sizes(rng, cl.revolute_radial, tol), _sizes(rng, cl.revolute_axial, tol)
     dC, dB = _sizes(rng, cl.spherical_C, tol), _sizes(rng, cl.spherical_B, tol)

@@ -37,12 +37,13 @@ __all__ = ["simulate", "simulate_batch", "Level", "prepare_level", "default_time
 MODELS = ("rigid", "quasi-static", "elastic", "paper", "contact")   # the levels, cheapest first
 
 
-def stored_draw(scene, model: str, seed: int, realization: int, dt: float):
-    """The draw an ensemble file records for a realisation: the paper level's first step, else the draw."""
+def stored_draw(scene, model: str, seed: int, realization: int, dt: float, uniforms=None):
+    """The draw an ensemble file records for a realisation: the paper level's first step, else the
+    draw (``uniforms`` as in :func:`.clearance.draw_clearances`)."""
     if model == "paper":
         steps = len(time_grid(scene.trajectory.duration, dt))
-        return _first_step(paper_draw(scene, seed, realization, steps))
-    return draw_clearances(scene, seed, realization)
+        return _first_step(paper_draw(scene, seed, realization, steps, uniforms))
+    return draw_clearances(scene, seed, realization, uniforms=uniforms)
 
 
 def _first_step(draw):
@@ -78,14 +79,17 @@ def simulate(scene, model: str | None = None, integrator: str | None = None,
 def simulate_batch(scene, model: str | None = None, integrator: str | None = None,
                    dt: float | None = None, elements: int | None = None, seed: int = 0,
                    realizations=(0,), tolerance: float | None = None,
-                   refinements: int | None = None) -> list[SimulationResult]:
+                   refinements: int | None = None, uniforms=None) -> list[SimulationResult]:
     """Realisations ``realizations`` of the run seeded ``seed``, one result each, in order.
+
+    ``uniforms(realization, dimension)``, if given, supplies each draw's uniforms (a quasi-Monte
+    Carlo design, see :func:`.clearance.draw_clearances`) instead of the realisation's stream.
 
     ``tolerance`` (m) and ``refinements`` set the contact level's adaptive step
     (default: the scene's; see :func:`.contact_dynamics.simulate_contact`).
     """
     level = prepare_level(scene, model, integrator, dt, elements, tolerance, refinements)
-    return level.simulate(seed, realizations)
+    return level.simulate(seed, realizations, uniforms)
 
 
 @dataclass(frozen=True)
@@ -104,8 +108,9 @@ class Level:
     elastic: SimulationResult | None = None
     closure: PaperClosure | None = None
 
-    def simulate(self, seed: int, realizations) -> list[SimulationResult]:
-        """Realisations ``realizations`` of the run seeded ``seed``, one result each, in order."""
+    def simulate(self, seed: int, realizations, uniforms=None) -> list[SimulationResult]:
+        """Realisations ``realizations`` of the run seeded ``seed``, one result each, in order
+        (``uniforms``: a quasi-Monte Carlo design, as in :func:`simulate_batch`)."""
         realizations = list(realizations)
         if self.model == "rigid":
             t = time_grid(self.scene.trajectory.duration, self.dt)
@@ -114,28 +119,28 @@ class Level:
         if self.model == "elastic":
             return [self.elastic] * len(realizations)
         run = {"quasi-static": self._quasi_static, "paper": self._paper, "contact": self._contact}
-        return run[self.model](seed, realizations)
+        return run[self.model](seed, realizations, uniforms)
 
-    def _quasi_static(self, seed: int, realizations: list) -> list[SimulationResult]:
+    def _quasi_static(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
         t, mode = self.motion.t, self.scene.simulation.quasi_static_eccentricity
         out = []
         for r in realizations:
-            draw = draw_clearances(self.scene, seed, r)
+            draw = draw_clearances(self.scene, seed, r, uniforms=uniforms)
             d, v, a = quasi_static_error(self.scene, self.motion, draw, mode)
             out.append(SimulationResult(t, d, v, a, "finished", "", len(t) - 1, draw=draw))
         return out
 
-    def _contact(self, seed: int, realizations: list) -> list[SimulationResult]:
-        draws = [draw_clearances(self.scene, seed, r) for r in realizations]
+    def _contact(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
+        draws = [draw_clearances(self.scene, seed, r, uniforms=uniforms) for r in realizations]
         batch = simulate_contact(self.scene, draws, self.elements, self.integrator, self.dt,
                                  tolerance=self.tolerance, refinements=self.refinements)
         return [dataclasses.replace(batch.result(k), draw=draw) for k, draw in enumerate(draws)]
 
-    def _paper(self, seed: int, realizations: list) -> list[SimulationResult]:
+    def _paper(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
         elastic = self.elastic
         out = []
         for r in realizations:
-            draw = paper_draw(self.scene, seed, r, len(elastic.t))
+            draw = paper_draw(self.scene, seed, r, len(elastic.t), uniforms)
             d, v, a = self.closure.error(draw)
             force = paper_contact_forces(self.scene, draw, self.dt)
             out.append(SimulationResult(elastic.t, elastic.displacement + d, elastic.velocity + v,

@@ -81,6 +81,7 @@ def paper_contact_forces(scene, draw, dt: float) -> np.ndarray:
     return lankarani_nikravesh(rho - size, rate, impact, K, ct.exponent, ct.restitution)[0]
 
 
-def paper_draw(scene, seed: int, realization: int, steps: int):
-    """The realisation's per-step draw (sizes once, eccentricities ``steps`` times)."""
-    return draw_clearances(scene, seed, realization, steps=steps)
+def paper_draw(scene, seed: int, realization: int, steps: int, uniforms=None):
+    """The realisation's per-step draw (sizes once, eccentricities ``steps`` times); ``uniforms``
+    as in :func:`.clearance.draw_clearances`."""
+    return draw_clearances(scene, seed, realization, steps=steps, uniforms=uniforms)

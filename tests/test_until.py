@@ -1,0 +1,170 @@
+"""`rss6 run --until`: the target grammar, the fixed checkpoints, the stopping rule (no interval
+counts as not met), and end to end on the smoke scene's quasi-static level: the run stops at the
+first checkpoint where every target holds, its data equal a plain run of that n bit for bit, an
+interrupted run resumes to the same file, and a cap reached first exits 1."""
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from pipeline.stats import ensemble_stats, min_n_for_quantile
+from pipeline.store import open_ensemble
+from pipeline.until import GROWTH, UntilError, checkpoints, parse_target, widths
+
+
+def test_a_relative_target_over_every_direction():
+    t = parse_target("displacement:all@q95<=5%")
+    assert (t.quantity, t.directions, t.statistic, t.measure) == (
+        "displacement", ("x", "y", "z", "rx", "ry", "rz"), "q95", "max")
+    assert t.relative == pytest.approx(0.05) and t.absolute is None
+
+
+def test_an_absolute_target_in_a_unit_of_the_quantity():
+    t = parse_target("velocity:z @ mean:mean <= 0.5 mm/s")
+    assert t.absolute == pytest.approx(5e-4) and t.measure == "mean" and t.relative is None
+    assert parse_target("displacement:rx,ry@q50<=2mrad").absolute == pytest.approx(2e-3)
+
+
+@pytest.mark.parametrize("text, token", [
+    ("displacment:x@q95<=5%", "unknown quantity 'displacment'"),
+    ("displacement:x@q95", "missing '<='"),
+    ("displacement:x<=5%", "missing '@STATISTIC"),
+    ("displacement:x@max<=5%", "statistic 'max' has no confidence interval"),
+    ("displacement:x@q95<=0%", "must be a positive number"),
+    ("displacement:x@q95<=5%mm", "unexpected 'mm' after the percentage"),
+    ("displacement:x,rx@q95<=0.1mm", "mix translations and rotations"),
+    ("displacement:x@q95<=0.1m/s", "unknown unit 'm/s'"),
+    ("displacement:w@q95<=5%", "unknown direction 'w'"),
+])
+def test_a_malformed_target_is_one_line_naming_the_token(text, token):
+    with pytest.raises(UntilError, match="^--until .*" + token.replace("(", r"\(")) as err:
+        parse_target(text)
+    assert "\n" not in str(err.value) and "--require" not in str(err.value)
+
+
+def test_checkpoints_start_at_the_statistics_minimum_n_and_grow_to_the_cap():
+    q95 = parse_target("displacement:x@q95<=5%")
+    points = checkpoints([q95, parse_target("displacement:x@mean<=5%")], 200)
+    assert points[0] == min_n_for_quantile(0.95, 0.95) == 59
+    assert points == [59, 74, 93, 117, 147, 184, 200]
+    assert all(b == max(a + 1, int(np.ceil(a * GROWTH))) for a, b in zip(points[:-2], points[1:-1]))
+    assert checkpoints([q95], 2048, replicates=8) == [1024, 2048]
+    assert checkpoints([parse_target("displacement:x@mean<=5%")], 1000, replicates=8) == [
+        128, 256, 512, 1000]
+    assert checkpoints([q95], 30) == [30]
+
+
+def _stats(values):
+    n = len(values)
+    data = np.zeros((3, n, 6))
+    data[0, :, 0] = values
+    data[0, :, 1] = 1.0 + 0.0 * values
+    ds = xr.Dataset({"max_abs_error": (("quantity", "realization", "direction"), data),
+                     "mean_abs_error": (("quantity", "realization", "direction"), data),
+                     "status": ("realization", np.array(["finished"] * n, dtype=object))},
+                    coords={"realization": np.arange(n),
+                            "quantity": ["displacement", "velocity", "acceleration"],
+                            "direction": ["x", "y", "z", "rx", "ry", "rz"]})
+    return ensemble_stats(ds)
+
+
+def test_the_half_width_is_compared_relative_or_absolute_and_no_interval_is_not_met():
+    x = np.random.default_rng(0).normal(10.0, 1.0, 400)
+    sds = _stats(x)
+    lo, hi = sds["max_abs_error"].sel(quantity="displacement", direction="x", statistic="mean",
+                                      bound=["lower", "upper"]).values
+    half = (hi - lo) / 2                                    # about 1.96 / sqrt(400) = 0.098
+    rel = half / x.mean()
+    (w,) = widths([parse_target(f"displacement:x@mean<={100 * rel * 1.01}%")], sds)
+    assert w.met and w.half_width == pytest.approx(half)
+    (w,) = widths([parse_target(f"displacement:x@mean<={100 * rel * 0.99}%")], sds)
+    assert not w.met
+    (w,) = widths([parse_target(f"displacement:x@mean<={half * 1.01}m")], sds)
+    assert w.met
+    (w,) = widths([parse_target("displacement:x@q99<=1000%")], _stats(x[:100]))  # q99 needs 299
+    assert w.half_width is None and not w.met
+
+
+# --- end to end ------------------------------------------------------------------------
+
+def _rss6(args, cwd) -> subprocess.CompletedProcess:
+    exe = shutil.which("rss6")
+    cmd = [exe] if exe else [sys.executable, "-m", "pipeline.cli"]
+    return subprocess.run(cmd + list(args), cwd=cwd, capture_output=True, text=True, timeout=600)
+
+
+TARGETS = ["displacement:y,z@q50<=12%", "displacement:z@mean<=50%"]   # the second met at once
+UNTIL = [a for t in TARGETS for a in ("--until", t)]
+RUN = ["run", "smoke", "--model", "quasi-static", "--seed", "3", "--workers", "1"]
+
+
+@pytest.fixture(scope="module")
+def until_run(tmp_path_factory):
+    cwd = tmp_path_factory.mktemp("until")
+    proc = _rss6(RUN + ["-n", "400", *UNTIL, "-o", "u.nc"], cwd)
+    return proc, cwd
+
+
+@pytest.mark.slow
+def test_until_stops_at_the_first_checkpoint_meeting_every_target(until_run):
+    proc, cwd = until_run
+    assert proc.returncode == 0, proc.stderr
+    ds = open_ensemble(cwd / "u.nc")
+    n = ds.sizes["realization"]
+    assert ds.attrs["until_met"] == "met" and int(ds.attrs["until_n"]) == n
+    targets = [parse_target(t) for t in TARGETS]
+    points = checkpoints(targets, 400)
+    assert n in points and n < 400
+    found = json.loads(ds.attrs["until_widths"])
+    assert all(w["met"] for w in found) and len(found) == 3
+    earlier = points[points.index(n) - 1]                   # the previous check was not met
+    assert not all(w.met for w in widths(targets,
+                                         ensemble_stats(ds.sel(realization=slice(0, earlier - 1)))))
+    assert f"n = {earlier}: displacement q50 half-width <= 12 %" in proc.stderr
+    assert f"every target met at n = {n}" in proc.stdout
+
+
+@pytest.mark.slow
+def test_the_until_file_is_a_plain_run_of_the_final_n(until_run, tmp_path):
+    _, cwd = until_run
+    until = open_ensemble(cwd / "u.nc")
+    n = until.sizes["realization"]
+    assert _rss6(RUN + ["-n", str(n), "-o", "plain.nc"], tmp_path).returncode == 0
+    plain = open_ensemble(tmp_path / "plain.nc")
+    assert set(until.data_vars) == set(plain.data_vars)
+    for name in plain.data_vars:
+        assert until[name].equals(plain[name]), name
+    extra = {k for k in until.attrs if k not in plain.attrs}
+    assert extra == {"until_rule", "until_met", "until_n", "until_widths"}
+
+
+@pytest.mark.slow
+def test_a_run_stopped_at_a_cap_resumes_to_the_same_file_and_a_cap_reached_first_exits_1(
+        until_run, tmp_path):
+    _, cwd = until_run
+    first = _rss6(RUN + ["-n", "74", *UNTIL, "-o", "r.nc"], tmp_path)
+    assert first.returncode == 1 and "--until not met at n = 74 (cap -n 74)" in first.stderr
+    assert open_ensemble(tmp_path / "r.nc").attrs["until_met"] == "not met"
+    again = _rss6(RUN + ["-n", "400", *UNTIL, "-o", "r.nc"], tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert "r.nc holds 74 realisations; checked there first" in again.stderr
+    resumed, whole = open_ensemble(tmp_path / "r.nc"), open_ensemble(cwd / "u.nc")
+    for name in whole.data_vars:
+        assert resumed[name].equals(whole[name]), name
+    assert resumed.attrs["until_widths"] == whole.attrs["until_widths"]
+
+
+def test_a_malformed_target_or_qmc_option_exits_2_before_any_work(tmp_path):
+    for extra, token in ((["--until", "displacement:x@q95<5"], "--until 'displacement:x@q95<5': "
+                                                                 "missing unit"),
+                         (["--sampler", "qmc", "-n", "12"], "-n 12 with --sampler qmc must be a "
+                                                            "multiple of --replicates 8"),
+                         (["--replicates", "4"], "--replicates applies to --sampler qmc only")):
+        proc = _rss6(["run", "smoke", "--model", "quasi-static", "-o", "x.nc"] + extra, tmp_path)
+        assert proc.returncode == 2 and token in proc.stderr, proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1
+        assert list(tmp_path.iterdir()) == []
