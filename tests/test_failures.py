@@ -26,10 +26,10 @@ def test_a_realisation_that_raises_fails_alone_and_its_chunk_keeps_the_others(mo
     clean = run_chunk(spec, [0, 1, 2, 3])
     simulate = Level.simulate
 
-    def fails_with_2(level, seed, realizations):
+    def fails_with_2(level, seed, realizations, uniforms=None):
         if 2 in realizations:
             raise FloatingPointError("overflow in the closure of realisation 2")
-        return simulate(level, seed, realizations)
+        return simulate(level, seed, realizations, uniforms)
 
     monkeypatch.setattr(Level, "simulate", fails_with_2)
     chunk = run_chunk(spec, [0, 1, 2, 3])

@@ -15,8 +15,9 @@ from pipeline.cli import main
 from pipeline.store import open_ensemble
 
 DASK = str(Path(sys.executable).with_name("dask"))
-RUN = [sys.executable, "-m", "pipeline.cli", "run", "smoke", "--model", "quasi-static", "-n", "40",
-       "--chunk", "4"]
+N = 200   # long enough (100 chunks) that the worker is killed while chunks remain
+RUN = [sys.executable, "-m", "pipeline.cli", "run", "smoke", "--model", "quasi-static", "-n", str(N),
+       "--chunk", "2"]
 
 
 def _free_port() -> int:
@@ -122,9 +123,9 @@ def test_scheduler_that_loses_every_worker_stops_and_keeps_the_parts(tmp_path):
     assert not merged
     assert kept, "no part kept"
     assert rerun.returncode == 0, rerun.stderr
-    assert f"wrote {out}: 40 realisations" in rerun.stdout, rerun.stdout
+    assert f"wrote {out}: {N} realisations" in rerun.stdout, rerun.stdout
     assert f"{len(stored)} of them stored before" in rerun.stdout, rerun.stdout
-    assert list(open_ensemble(out)["realization"].values) == list(range(40))
+    assert list(open_ensemble(out)["realization"].values) == list(range(N))
 
 
 def test_scheduler_without_any_worker_stops_after_the_timeout(tmp_path):
