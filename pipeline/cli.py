@@ -64,7 +64,7 @@ def _check(args) -> int:
 def _settings(args, scene) -> tuple[str, str, float, int]:
     """Model, integrator, time step and mesh: the command line's, else the scene's; the step is
     checked here, before any work, against the scene's duration."""
-    from rss6core.elastic import time_grid
+    from rss6core.results import time_grid
     from rss6core.models import default_integrator, default_time_step
     sim = scene.simulation
     model = args.model or sim.model

@@ -70,7 +70,7 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
         results = simulate_batch(scene, spec.model, spec.integrator, spec.dt, spec.elements,
                                  spec.seed, realizations)
     except (ArithmeticError, np.linalg.LinAlgError) as exc:  # numerical failure: record it
-        from rss6core.elastic import SimulationResult, time_grid
+        from rss6core.results import SimulationResult, time_grid
         t = time_grid(scene.trajectory.duration, spec.dt)
         nan = np.full((len(t), 6), np.nan)
         results = [SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)

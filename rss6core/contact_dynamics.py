@@ -41,14 +41,15 @@ from .contact_kernel import (DIVERGED, NEWTON_FAILED, advance_chunk, newton_scra
                              work_arrays)
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
-from .elastic import SimulationResult, quasi_static_state, time_grid
+from .elastic import quasi_static_state
+from .results import ContactBatch, time_grid
 from .integrators import Integrator, make_integrator
 from .kinematics import crank_axes, rigid_motion
 from .quasi_static import closure_matrix
 from .scene import MAX_CONTACT_REFINEMENTS
 from .sections import section_properties
 
-__all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactBatch"]
+__all__ = ["JointModel", "build_joint_model", "simulate_contact"]
 
 TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
 TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
@@ -239,28 +240,6 @@ def _contacts(e, de, w, joints: _Joints, impact, law, omega, radius):
     order = [0, 3, 1, 2]   # [A radial, C, B, A axial] -> [A radial, A axial, C, B]
     return (f, De, Dv, np.concatenate([d, da[..., None]], -1)[..., order],
             np.concatenate([r, ra[..., None]], -1)[..., order])
-
-
-@dataclass
-class ContactBatch:
-    """Results of a batch of realisations (leading axis R), on the output time grid."""
-    t: np.ndarray                 # (T,) s
-    displacement: np.ndarray      # (R, T, 6)
-    velocity: np.ndarray
-    acceleration: np.ndarray
-    peak: np.ndarray              # (R, 3, 6) max |error| over every internal step
-    contact_peak: np.ndarray      # (R, 18) max |contact force| per joint A1..A6, C1..C6, B1..B6, N
-    status: list
-    message: list
-    steps: np.ndarray             # (R,) internal steps completed
-    iterations: np.ndarray        # (R,) Newton iterations in all
-    refined: np.ndarray           # (R,) steps retried as two half steps
-
-    def result(self, k: int) -> SimulationResult:
-        return SimulationResult(self.t, self.displacement[k], self.velocity[k], self.acceleration[k],
-                                self.status[k], self.message[k], int(self.steps[k]),
-                                peak_abs_error=self.peak[k], contact_force_peak=self.contact_peak[k],
-                                iterations=int(self.iterations[k]))
 
 
 class _Chunk:

@@ -8,43 +8,15 @@ that blows up (non-finite state or an elastic displacement above
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .assembly import (ElasticModel, StepSolver, apply, build_elastic_model, internal_force,
                        system_at)
 from .integrators import Integrator
 from .kinematics import rigid_motion
+from .results import SimulationResult, time_grid
 
-__all__ = ["SimulationResult", "simulate_elastic", "time_grid", "quasi_static_state", "elastic_energy"]
-
-
-@dataclass(frozen=True)
-class SimulationResult:
-    """Platform elastic error (actual minus ideal rigid pose) and solver diagnostics, SI."""
-    t: np.ndarray             # (T,) s
-    displacement: np.ndarray  # (T, 6) x, y, z [m], rx, ry, rz [rad]
-    velocity: np.ndarray      # (T, 6) m/s, rad/s
-    acceleration: np.ndarray  # (T, 6) m/s^2, rad/s^2
-    status: str               # 'finished' or 'failed'
-    message: str
-    steps: int                # steps taken
-    states: tuple | None = None  # full (d, v, a) histories (T, N) when asked for
-    peak_abs_error: np.ndarray | None = None      # (3, 6) max |error| over internal steps, if finer
-    contact_force_peak: np.ndarray | None = None  # (18,) N, joints A1..A6, C1..C6, B1..B6
-    iterations: int = 0                           # Newton iterations (contact level)
-    draw: object | None = None  # the ClearanceDraw an ensemble file records (clearance levels)
-
-
-def time_grid(duration: float, dt: float) -> np.ndarray:
-    """t_k = k dt on [0, duration]; dt must divide the duration."""
-    if not dt > 0:
-        raise ValueError(f"time step must be positive, got {dt!r}")
-    n = duration / dt
-    if abs(n - round(n)) > 1e-6 * max(1.0, n):
-        raise ValueError(f"time step {dt!r} s does not divide the duration {duration!r} s")
-    return np.arange(int(round(n)) + 1) * dt
+__all__ = ["simulate_elastic", "quasi_static_state", "elastic_energy"]
 
 
 def _system(scene, model: ElasticModel, t: np.ndarray):

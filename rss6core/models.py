@@ -24,7 +24,8 @@ import scipy.linalg
 from .assembly import build_elastic_model, dense_matrices, end_maps
 from .clearance import draw_clearances
 from .contact_dynamics import simulate_contact
-from .elastic import SimulationResult, simulate_elastic, time_grid
+from .elastic import simulate_elastic
+from .results import SimulationResult, time_grid
 from .integrators import make_integrator
 from .kinematics import rigid_motion
 from .paper_method import PaperClosure, paper_contact_forces, paper_draw
