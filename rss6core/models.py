@@ -28,9 +28,10 @@ from .elastic import simulate_elastic
 from .results import SimulationResult, time_grid
 from .integrators import make_integrator
 from .kinematics import rigid_motion
-from .paper_method import PaperClosure, paper_contact_forces, paper_draw
-from .quasi_static import quasi_static_error
+from .paper_method import PaperClosure, paper_contact_forces, paper_draw, paper_result
+from .quasi_static import quasi_static_result
 from .scene import MODELS
+from .status import FINISHED
 
 __all__ = ["simulate", "simulate_batch", "default_time_step", "default_integrator", "stored_draw",
            "natural_frequencies", "MODELS"]
@@ -94,14 +95,10 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
         t = time_grid(scene.trajectory.duration, dt)
         if model == "rigid":
             zero = np.zeros((len(t), 6))
-            return [SimulationResult(t, zero, zero, zero, "finished", "", len(t) - 1)] * len(realizations)
+            return [SimulationResult(t, zero, zero, zero, FINISHED, "", len(t) - 1)] * len(realizations)
         motion = rigid_motion(scene, t)
-        out = []
-        for r in realizations:
-            draw = draw_clearances(scene, seed, r)
-            d, v, a = quasi_static_error(scene, motion, draw, sim.quasi_static_eccentricity)
-            out.append(SimulationResult(t, d, v, a, "finished", "", len(t) - 1, draw=draw))
-        return out
+        return [quasi_static_result(scene, motion, draw_clearances(scene, seed, r),
+                                    sim.quasi_static_eccentricity) for r in realizations]
     method = make_integrator(integrator or default_integrator(scene, model), sim.newmark_beta,
                              sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
     if model == "contact":
@@ -116,12 +113,8 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
     out = []
     for r in realizations:
         draw = paper_draw(scene, seed, r, len(elastic.t))
-        d, v, a = closure.error(draw)
-        force = paper_contact_forces(scene, draw, dt)
-        out.append(SimulationResult(elastic.t, elastic.displacement + d, elastic.velocity + v,
-                                    elastic.acceleration + a, elastic.status, elastic.message,
-                                    elastic.steps, contact_force_peak=force.max(0),
-                                    draw=_first_step(draw)))
+        out.append(paper_result(elastic, closure, draw, paper_contact_forces(scene, draw, dt),
+                                _first_step(draw)))
     return out
 
 
