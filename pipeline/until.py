@@ -173,7 +173,7 @@ def until_attrs(targets: list[Target], found: list[Width], n: int, points: list[
     """File attributes: the rule, whether it was met, the widths reached (SI JSON) and the final n."""
     met = all(w.met for w in found)
     shown = points if len(points) <= 12 else points[:6] + ["..."] + points[-3:]
-    return {"until_rule": (f"stop at the first checked n where every target holds: "
+    return {"until_rule": ("stop at the first checked n where every target holds: "
                            + "; ".join(t.text for t in targets)
                            + f" (interval half-widths at {100 * CONFIDENCE:g} % confidence; "
                            f"checked at n = {', '.join(map(str, shown))}; cap -n {cap})"),

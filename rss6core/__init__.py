@@ -17,6 +17,7 @@ Running a level
 - prepare_level: a level on a scene with what all its realisations share computed once.
 - Level: what prepare_level returns; its ``simulate(seed, realizations)`` runs a batch.
 - SimulationResult: what every level returns (error histories in SI, status and message).
+- ContactBatch: the contact level's results for a batch of realisations (one SimulationResult each).
 - time_grid: the output instants (s) of a duration and step, or ValueError if the step does not divide it.
 - stored_draw: the clearance draw an ensemble file records for one realisation.
 - default_time_step: a scene's time step (s) for a level.
@@ -41,7 +42,8 @@ The rigid robot
 - inverse_dynamics: actuator torques and joint forces of the rigid motion (N m, N).
 - crank_inertia, rod_inertia: the rigid links' masses (kg) and inertias (kg m^2).
 """
-from .elastic import SimulationResult, quasi_static_state, simulate_elastic, time_grid
+from .elastic import quasi_static_state, simulate_elastic
+from .results import ContactBatch, SimulationResult, time_grid
 from .assembly import build_elastic_model
 from .clearance import SIZE_UNIFORMS, clearances_from_uniforms, draw_clearances, uniform_dimension
 from .dynamics import inverse_dynamics
@@ -55,7 +57,7 @@ from .sections import crank_inertia, rod_inertia
 __version__ = "0.1.0"
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
            "MODELS", "INTEGRATORS", "simulate", "simulate_batch", "prepare_level", "Level",
-           "SimulationResult", "time_grid",
+           "SimulationResult", "ContactBatch", "time_grid",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom",
            "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "SIZE_UNIFORMS",

@@ -25,11 +25,15 @@ per leg bordered by the 6 platform DOFs.  Realisations are an array axis: the
 per-step matrices, factorizations and rigid loads are shared by the batch; the
 steps themselves run compiled (:mod:`.contact_kernel`), one realisation after
 another, with the vectorised numpy functions below (``engine="numpy"``) as their
-reference.
+reference.  Both engines sit behind one stepper contract (:class:`ContactStepper`: it owns
+the batch's state and status; ``advance`` says how far it got and why it stopped), and
+:func:`simulate_contact` is a short driver over chunks of steps.
 """
 from __future__ import annotations
 
+import abc
 import dataclasses
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,17 +41,20 @@ import numpy as np
 from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
                        platform_point_map, split)
 from .beam import link_matrices
-from .contact_kernel import (DIVERGED, NEWTON_FAILED, advance_chunk, newton_scratch, newton_step,
-                             work_arrays)
+from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Records, Settings, State, System,
+                             Out, advance_chunk, make_scratch, make_work, newton_step)
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
-from .elastic import SimulationResult, quasi_static_state, time_grid
-from .integrators import Integrator, make_integrator
+from .elastic import quasi_static_state
+from .results import ContactBatch, time_grid
+from .integrators import Integrator, StepWeights, correct, make_integrator, predict
 from .kinematics import crank_axes, rigid_motion
 from .quasi_static import closure_matrix
 from .sections import section_properties
+from .status import DIVERGED, DIVERGENCE_LIMIT, FAILED, FINISHED, NEWTON_FAILED, contact_failure
 
-__all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactBatch"]
+__all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactStepper", "NumpyStepper",
+           "CompiledStepper", "Progress"]
 
 TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
 TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
@@ -241,28 +248,6 @@ def _contacts(e, de, w, joints: _Joints, impact, law, omega, radius):
             np.concatenate([r, ra[..., None]], -1)[..., order])
 
 
-@dataclass
-class ContactBatch:
-    """Results of a batch of realisations (leading axis R), on the output time grid."""
-    t: np.ndarray                 # (T,) s
-    displacement: np.ndarray      # (R, T, 6)
-    velocity: np.ndarray
-    acceleration: np.ndarray
-    peak: np.ndarray              # (R, 3, 6) max |error| over every internal step
-    contact_peak: np.ndarray      # (R, 18) max |contact force| per joint A1..A6, C1..C6, B1..B6, N
-    status: list
-    message: list
-    steps: np.ndarray             # (R,) internal steps completed
-    iterations: np.ndarray        # (R,) Newton iterations in all
-    refined: np.ndarray           # (R,) steps retried as two half steps
-
-    def result(self, k: int) -> SimulationResult:
-        return SimulationResult(self.t, self.displacement[k], self.velocity[k], self.acceleration[k],
-                                self.status[k], self.message[k], int(self.steps[k]),
-                                peak_abs_error=self.peak[k], contact_force_peak=self.contact_peak[k],
-                                iterations=int(self.iterations[k]))
-
-
 class _Chunk:
     """Shared, per-instant data of a run of steps: joint maps, loads, ideal angular velocities
     (and the joint radii [journal, sphere, sphere] (3, 1), m, that the contact evaluation needs)."""
@@ -286,9 +271,9 @@ class _Chunk:
         law = scene.contact
         self.radius = np.array([[law.journal_radius], [law.sphere_radius], [law.sphere_radius]])
 
-    def arrays(self):
-        """What :func:`.contact_kernel.advance_chunk` reads: F, Mp, G, J, Rr, omega, t."""
-        return self.F, self.Mp, self.G, self.J, self.Rr, self.omega, self.t
+    def arrays(self) -> ChunkArrays:
+        """What :func:`.contact_kernel.advance_chunk` reads of the chunk."""
+        return ChunkArrays(F=self.F, Mp=self.Mp, G=self.G, J=self.J, Rr=self.Rr, omega=self.omega, t=self.t)
 
 
 def _platform_mass(jm: JointModel, Ip: np.ndarray) -> np.ndarray:
@@ -389,24 +374,9 @@ def _solve_arrow(L, border, lower, P, rl, rp):
     return u - (E @ (border @ y[..., None, :, None]))[..., 0], y
 
 
-def _newton_compiled(scene, ch: _Chunk, j, params, law_v, w_axes, joints, Sl, Sp, impact,
-                     rb, rp, db, dpp, vb, vpp, ab, ap, bh2, gh, w):
-    """One step's Newton iteration on the joint nodes, compiled (:func:`.contact_kernel.newton_step`)."""
-    R = ab.shape[0]
-    f = np.empty((R, 6, 3, 3))
-    gl, gp = np.empty((R, 6, 12)), np.empty((R, 6))
-    delta, rate = np.empty((R, 6, 4)), np.empty((R, 6, 4))
-    done, count = np.zeros(R, np.bool_), np.zeros(R, np.int64)
-    newton_step(ch.G[j], ch.J[j], ch.Rr[j], ch.omega[j], w_axes, ch.radius[:, 0], Sl,
-                np.ascontiguousarray(Sp), params, law_v, impact, rb, rp, db, dpp, vb, vpp, ab, ap,
-                float(bh2), float(gh), float(w), TOL_DISPLACEMENT, TOL_VELOCITY, MAX_ITERATIONS,
-                f, gl, gp, delta, rate, done, count)
-    return ab, ap, f, gl, gp, done, count, delta, rate
-
-
-def _newton_numpy(scene, ch: _Chunk, j, params, law_v, w_axes, joints, Sl, Sp, impact,
-                  rb, rp, db, dpp, vb, vpp, ab, ap, bh2, gh, w):
-    """The same iteration vectorised over the batch with numpy: the compiled kernel's reference."""
+def _newton_numpy(scene, ch: _Chunk, j, joints: _Joints, sy: System, ab, ap, bh2, gh, wf):
+    """One step's Newton iteration on the joint nodes (see :func:`.contact_kernel.newton_one`),
+    vectorised over the batch with numpy: the compiled kernel's reference."""
     R = ab.shape[0]
     done = np.zeros(R, bool)
     count = np.zeros(R, np.int64)
@@ -416,12 +386,12 @@ def _newton_numpy(scene, ch: _Chunk, j, params, law_v, w_axes, joints, Sl, Sp, i
     base_l, base_p = ab, ap
     step_l, step_p = np.zeros_like(ab), np.zeros_like(ap)
     for it in range(MAX_ITERATIONS + 1):
-        xb, xp = db + bh2 * ab, dpp + bh2 * ap
-        ub, up = vb + gh * ab, vpp + gh * ap
-        f, De, Dv, delta, rate = _evaluate(scene, ch, j, joints, impact, xb, xp, ub, up)
+        xb, ub = correct(sy.db, sy.vb, ab, bh2, gh)
+        xp, up = correct(sy.dpp, sy.vpp, ap, bh2, gh)
+        f, De, Dv, delta, rate = _evaluate(scene, ch, j, joints, sy.impact, xb, xp, ub, up)
         gl, gp = _generalized(ch, j, f)
-        res_l = ab @ Sl.T - rb - w * gl
-        res_p = (Sp @ ap[..., None])[..., 0] - rp - w * gp
+        res_l = ab @ sy.Sl.T - sy.rb - wf * gl
+        res_p = (sy.Sp @ ap[..., None])[..., 0] - sy.rp - wf * gp
         norm = np.sqrt((res_l ** 2).sum((-1, -2)) + (res_p ** 2).sum(-1))
         # converged when the update this residual calls for (the last solve's gain times
         # it) moves no joint by more than the tolerances: the iterate just evaluated is kept
@@ -440,8 +410,8 @@ def _newton_numpy(scene, ch: _Chunk, j, params, law_v, w_axes, joints, Sl, Sp, i
             count += worse
             continue
         last = np.where(done, last, norm)
-        D = w * (bh2 * De + gh * Dv)
-        L, border, lower, P = _tangent(ch, j, D, Sl, Sp)
+        D = wf * (bh2 * De + gh * Dv)
+        L, border, lower, P = _tangent(ch, j, D, sy.Sl, sy.Sp)
         dl, dpl = _solve_arrow(L, border, lower, P, res_l, res_p)
         # converged realisations keep their iterate: a result never depends on its batch
         dl, dpl = np.where(done[:, None, None], 0.0, dl), np.where(done[:, None], 0.0, dpl)
@@ -499,7 +469,7 @@ def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
 def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | None = None,
                      dt: float | None = None, output_step: float | None = None,
                      model: JointModel | None = None, chunk: int = 200,
-                     divergence_limit: float = 1.0, settle: float | None = None,
+                     divergence_limit: float = DIVERGENCE_LIMIT, settle: float | None = None,
                      engine: str = "compiled", tolerance: float | None = None,
                      refinements: int | None = None) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (see :func:`_simulate_contact`).
@@ -526,13 +496,61 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
 @dataclass(frozen=True)
 class _StepSize:
     """What one step length h needs: the condensed step matrix and the integrator's weights."""
-    h: float
-    span: int          # fine-grid intervals per step
+    span: int              # fine-grid intervals per step
     cond: _Condensed
-    coef_p: float      # weight of the platform mass in the step matrix
-    bh2: float         # beta h^2
-    gh: float          # gamma h
-    error: float       # |beta - 1/6| h^2: Zienkiewicz-Xie local error per unit acceleration jump
+    coef_p: float          # weight of the platform mass in the step matrix
+    weights: StepWeights   # predictor/corrector weights; weights.h the step, s
+    error: float           # |beta - 1/6| h^2: Zienkiewicz-Xie local error per unit acceleration jump
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """An immutable description of one contact run: the model, the batch's joints, the step levels
+    (0 the base step), the output grid and the limits."""
+    scene: object
+    jm: JointModel
+    joints: _Joints
+    integrator: Integrator
+    sizes: tuple            # _StepSize per level
+    t: np.ndarray           # base-step instants, s
+    every: int              # base steps per output sample
+    settle_at: float        # s: peaks from here on
+    tolerance: float        # m, local error per step (0: refine only where Newton fails)
+    limit: float            # m, divergence limit
+    refinements: int
+
+    @property
+    def fine(self) -> int:
+        return self.sizes[0].span
+
+    @property
+    def weighted(self) -> bool:
+        return self.integrator.alpha_m != 0.0 or self.integrator.alpha_f != 0.0
+
+
+def _setup(scene, draws, elements, integrator, dt, output_step, model, divergence_limit, settle,
+           tolerance, refinements) -> _Setup:
+    sim = scene.simulation
+    integrator = integrator or make_integrator(sim.contact_integrator, sim.newmark_beta,
+                                               sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
+    jm = model or build_joint_model(scene, elements)
+    h = sim.contact_time_step if dt is None else dt
+    out = max(h, sim.time_step if output_step is None else output_step)
+    every = int(round(out / h))
+    if abs(every * h - out) > 1e-9 * out:
+        raise ValueError(f"output step {out!r} s is not a multiple of the time step {h!r} s")
+    lam1, lam2 = jm.mass_damping, jm.stiffness_damping
+    sizes = []
+    for level in range(refinements + 1):
+        hl = h / 2 ** level
+        cM, cC, cK = integrator.step_coefficients(hl)
+        sizes.append(_StepSize(2 ** refinements >> level, _Condensed(jm, cM + cC * lam1, cC * lam2 + cK),
+                               cM + cC * lam1, integrator.weights(hl),
+                               abs(integrator.beta - 1.0 / 6.0) * hl * hl))
+    settle_at = (sim.settle_time if settle is None else settle) - 1e-9 * h
+    return _Setup(scene, jm, _joints(scene, draws), integrator, tuple(sizes),
+                  time_grid(scene.trajectory.duration, h), every, settle_at, float(tolerance),
+                  float(divergence_limit), int(refinements))
 
 
 class _Workspace:
@@ -549,59 +567,254 @@ class _Workspace:
         self.peak = np.zeros((R, 3, 6))
         self.cpeak = np.zeros((R, 18))
         self.alive = np.ones(R, bool)
-        self.status, self.message = ["finished"] * R, [""] * R
+        self.status, self.message = [FINISHED] * R, [""] * R
         self.steps, self.iters = np.zeros(R, np.int64), np.zeros(R, np.int64)
         self.refined = np.zeros(R, np.int64)
-        self.fail = np.zeros(R, np.int64)          # NEWTON_FAILED, DIVERGED (contact_kernel)
-        self.fail_at = np.zeros((R, 3))            # t (s), step (s), largest |d| (m)
+        self.fail = np.zeros(R, np.int64)          # :mod:`.status` failure code
+        self.fail_t, self.fail_h, self.fail_size = np.zeros(R), np.zeros(R), np.zeros(R)   # s, s, m
 
     def failed(self, r, code, t, h, size, limit):
-        """Mark realisation r failed at t (s) with an h (s) step, saying why."""
+        """Mark realisation r failed (``code`` from :mod:`.status`) in its next step, ending at t (s),
+        of length h (s); size (m) its largest displacement."""
         self.alive[r] = False
-        self.status[r] = "failed"
-        self.message[r] = (f"Newton on the contact forces did not converge in {MAX_ITERATIONS} "
-                           f"iterations at t = {t:.6g} s with a {h:.3g} s step" if code == NEWTON_FAILED
-                           else f"diverged at t = {t:.6g} s: displacement {size:.3g} exceeds "
-                                f"{limit:g} or is not finite")
+        self.fail[r], self.fail_t[r], self.fail_h[r], self.fail_size[r] = code, t, h, size
+        self.status[r] = FAILED
+        self.message[r] = contact_failure(code, t, self.steps[r] + 1, h, size, limit, MAX_ITERATIONS)
+
+    def history(self, k):
+        """Keep the platform's error at output instant k for the realisations still alive."""
+        live = self.alive
+        self.hist[:, live, k] = np.stack([self.d[live, -6:], self.v[live, -6:], self.a[live, -6:]])
+
+    def peaks(self, idx, d, v, a, f):
+        """Peaks of |platform error| and |contact force| of realisations idx updated with a step."""
+        p = np.stack([d[..., -6:], v[..., -6:], a[..., -6:]], 1)     # (R, 3, 6)
+        self.peak[idx] = np.maximum(self.peak[idx], np.abs(p))
+        mags = np.swapaxes(np.linalg.norm(f, axis=-1), -1, -2).reshape(len(idx), 18)
+        self.cpeak[idx] = np.maximum(self.cpeak[idx], mags)
+
+    def batch(self, t) -> ContactBatch:
+        return ContactBatch(t, self.hist[0], self.hist[1], self.hist[2], self.peak, self.cpeak,
+                            self.status, self.message, self.steps, self.iters, self.refined)
 
 
-class _CompiledSteps:
-    """What :func:`.contact_kernel.advance_chunk` needs besides the batch's state and the chunk:
-    the step levels, the links' layout, the integrator's and the contact's constants."""
+Progress = namedtuple("Progress", "t alive reason")
+Progress.__doc__ = """How far :meth:`ContactStepper.advance` got: the time (s) the live realisations
+reached (or the last failure's, when none is left), how many are alive, and why it stopped
+(:data:`CHUNK_DONE` or :data:`ALL_FAILED`)."""
+CHUNK_DONE, ALL_FAILED = "chunk done", "all failed"
 
-    def __init__(self, jm: JointModel, sizes, integrator, ws: _Workspace, settle_at, tolerance,
-                 divergence_limit, refinements, params, law_v, w_axes, radius):
-        maps = [sz.cond.maps() for sz in sizes]
-        self.levels = (np.array([sz.span for sz in sizes], np.int64),
-                       *(np.array([getattr(sz, q) for sz in sizes])
-                         for q in ("h", "coef_p", "bh2", "gh", "error")),
-                       np.stack([sz.cond.legs for sz in sizes]),
-                       *(np.stack([m[link][q] for m in maps]) for link in (0, 1) for q in (0, 1)))
-        self.layout = (jm.crank_dofs, np.concatenate([jm.crank_M, jm.crank_K]),
-                       np.concatenate([jm.rod_M, jm.rod_K]), np.ascontiguousarray(jm.crank_M),
-                       np.ascontiguousarray(jm.rod_M), jm.crank_boundary.astype(np.int64))
-        self.coef = np.array([jm.mass_damping, jm.stiffness_damping, integrator.beta, integrator.gamma,
-                              integrator.alpha_m, integrator.alpha_f, settle_at, ws.contacts.floor, tolerance,
-                              divergence_limit])
-        self.limit, self.refinements = divergence_limit, refinements
-        self.params, self.law, self.w = params, law_v, w_axes
-        self.radius = radius
-        N, nc = ws.d.shape[1], jm.crank_dofs
-        self.work = work_arrays(N, nc, (N - 6) // 6 - nc, self.levels[7].shape[2] - 6,
-                                self.levels[9].shape[2] - 6)
-        self.scratch = newton_scratch()
 
-    def advance(self, ws: _Workspace, ch: _Chunk, first, n_base, every):
-        """Base steps first .. first + n_base - 1 of every live realisation (see advance_chunk)."""
+class ContactStepper(abc.ABC):
+    """The stepper contract of the contact level (in the spirit of SciPy's ``OdeSolver``): one object
+    owns the batch's state and status; :meth:`start` sets the initial accelerations, :meth:`advance`
+    carries every live realisation through a chunk of base steps and says how far it got and why it
+    stopped, :meth:`batch` hands the results over.  :class:`NumpyStepper` is the readable reference,
+    :class:`CompiledStepper` runs the same steps compiled (:mod:`.contact_kernel`)."""
+
+    def __init__(self, setup: _Setup):
+        self.setup = setup
+        self.ws = _Workspace(len(setup.joints.radial), len(setup.t[::setup.every]),
+                             setup.scene.contact.impact_speed_floor)
+
+    def start(self):
+        """The initial state (:func:`initial_state`) and its accelerations at t = 0, output sample 0."""
+        su, ws = self.setup, self.ws
+        ch = _Chunk(su.scene, su.jm, su.t[:1])
+        ws.d, ws.v = initial_state(su.scene, su.jm, su.joints)
+        everyone = np.arange(len(ws.d))
+        rest = _internal(su.jm, ch.Mp[0], ws.d, ws.v)
+        ws.a, f, ws.g, _, _, delta, rate, used = self._newton(
+            everyone, ch, 0, _Condensed(su.jm, 1.0, 0.0), 1.0, ch.F[0] - rest, ws.d, ws.v,
+            np.zeros_like(ws.d), 0.0, 0.0, 1.0)
+        ws.contacts.update(everyone, delta, rate, used)
+        ws.Ma, ws.rest = _mass(su.jm, ch.Mp[0], ws.a), rest
+        if 0.0 >= su.settle_at:
+            ws.peaks(everyone, ws.d, ws.v, ws.a, f)
+        ws.history(0)
+
+    @abc.abstractmethod
+    def advance(self, ch: _Chunk, first: int, n_base: int) -> Progress:
+        """Base steps first .. first + n_base - 1 on the chunk ``ch`` (its instants on the finest grid,
+        from the start of step ``first``)."""
+
+    def batch(self) -> ContactBatch:
+        return self.ws.batch(self.setup.t[::self.setup.every])
+
+    def _progress(self, ch: _Chunk) -> Progress:
+        alive = int(self.ws.alive.sum())
+        if alive:
+            return Progress(float(ch.t[-1]), alive, CHUNK_DONE)
+        return Progress(float(self.ws.fail_t.max()), 0, ALL_FAILED)
+
+    def _newton(self, idx, ch, j, cond, coef_p, rhs, dp, vp, a_guess, bh2, gh, wf):
+        """Accelerations for a step of realisations ``idx`` at chunk instant j; returns a, contact
+        forces, generalised contact forces, converged flags, iteration counts, penetrations, their
+        rates and the impact speeds used."""
+        jm = self.setup.jm
+        rc, rr, rp = split(jm, rhs)
+        rb, keep = cond.condense(rc, rr)
+        db, dpp = _joint_nodes(jm, dp)
+        vb, vpp = _joint_nodes(jm, vp)
+        ab, ap = _joint_nodes(jm, a_guess)
+        impact = self.ws.contacts.impact(idx)
+        sy = System(Sl=cond.legs, Sp=coef_p * ch.Mp[j], impact=impact, rb=rb, rp=np.ascontiguousarray(rp),
+                    db=db, dpp=np.ascontiguousarray(dpp), vb=vb, vpp=np.ascontiguousarray(vpp))
+        ab, ap, f, gl, gp, done, count, delta, rate = self._solve(idx, ch, j, sy, ab, ap.copy(), bh2, gh, wf)
+        ac, ar = cond.recover(ab, keep, rc.shape, rr.shape)
+        return (join(ac, ar, ap), f, join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count,
+                delta, rate, impact)
+
+    @abc.abstractmethod
+    def _solve(self, idx, ch, j, sy: System, ab, ap, bh2, gh, wf):
+        """Newton on the joint nodes for realisations ``idx`` at chunk instant j (see
+        :func:`.contact_kernel.newton_one`): ab, ap, f, gl, gp, done, count, delta, rate."""
+
+
+class NumpyStepper(ContactStepper):
+    """The steps vectorised over the batch with numpy: the compiled stepper's reference."""
+
+    def _solve(self, idx, ch, j, sy, ab, ap, bh2, gh, wf):
+        return _newton_numpy(self.setup.scene, ch, j, _subset(self.setup.joints, idx), sy, ab, ap, bh2, gh, wf)
+
+    def advance(self, ch: _Chunk, first: int, n_base: int) -> Progress:
+        su, ws = self.setup, self.ws
+        for j in range(n_base):
+            live = np.flatnonzero(ws.alive)
+            if not len(live):
+                break
+            self._step(live, ch, j * su.fine, 0)
+            if (first + j) % su.every == 0:
+                ws.history((first + j) // su.every)
+        return self._progress(ch)
+
+    def _step(self, idx, ch, k0, level):
+        """Step realisations ``idx`` from fine instant k0 of the chunk by sizes[level], halving where
+        needed; their state moves to k0 + sizes[level].span."""
+        su, ws = self.setup, self.ws
+        sz = su.sizes[level]
+        k1 = k0 + sz.span
+        a_new, d_new, v_new, f, g, ok, delta, rate, used = self._candidate(idx, ch, k0, k1, sz)
+        sound = ok & np.isfinite(d_new).all(-1) & (np.abs(d_new).max(-1) < su.limit)
+        accept = np.ones(len(idx), bool)
+        if level < su.refinements:
+            accept = sound
+            if su.tolerance > 0.0:
+                jb, jp = _joint_nodes(su.jm, a_new - ws.a[idx])
+                jump = np.linalg.norm(_relative(ch, k1, jb, jp), axis=-1).max((-1, -2))
+                accept &= sz.error * jump <= su.tolerance
+        for i in np.flatnonzero(accept & ~sound):
+            ws.failed(idx[i], DIVERGED if ok[i] else NEWTON_FAILED, ch.t[k1], sz.weights.h,
+                      np.abs(d_new[i]).max(), su.limit)
+        keep = accept & sound
+        if keep.any():
+            self._keep(idx[keep], ch, k1, a_new[keep], d_new[keep], v_new[keep], f[keep], g[keep],
+                       delta[keep], rate[keep], used[keep])
+        retry = idx[~accept]
+        if len(retry):
+            ws.refined[retry] += 1
+            self._step(retry, ch, k0, level + 1)
+            retry = retry[ws.alive[retry]]
+            if len(retry):
+                self._step(retry, ch, k0 + sz.span // 2, level + 1)
+
+    def _candidate(self, idx, ch, k0, k1, sz: _StepSize):
+        """Predictor, alpha-weighted right-hand side, Newton and corrector of one step attempt."""
+        su, ws = self.setup, self.ws
+        d, v, a = ws.d[idx], ws.v[idx], ws.a[idx]
+        w = sz.weights
+        dp, vp = predict(d, v, a, w.h, w.d_pred, w.v_pred)
+        af, am = su.integrator.alpha_f, su.integrator.alpha_m
+        r = (1.0 - af) * (ch.F[k1] - _internal(su.jm, ch.Mp[k1], dp, vp))
+        if su.weighted:
+            r += af * (ch.F[k0] + ws.g[idx] - ws.rest[idx]) - am * ws.Ma[idx]
+        a_new, f, g, ok, count, delta, rate, used = self._newton(
+            idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp, a, sz.weights.d_corr, sz.weights.v_corr, 1.0 - af)
+        ws.iters[idx] += count
+        d_new, v_new = correct(dp, vp, a_new, w.d_corr, w.v_corr)
+        return a_new, d_new, v_new, f, g, ok, delta, rate, used
+
+    def _keep(self, kept, ch, k1, a, d, v, f, g, delta, rate, used):
+        """Make an accepted step the state of realisations ``kept``."""
+        su, ws = self.setup, self.ws
+        ws.d[kept], ws.v[kept], ws.a[kept] = d, v, a
+        ws.contacts.update(kept, delta, rate, used)
+        ws.steps[kept] += 1
+        if su.weighted:
+            ws.Ma[kept] = _mass(su.jm, ch.Mp[k1], a)
+            ws.rest[kept] = _internal(su.jm, ch.Mp[k1], d, v)
+            ws.g[kept] = g
+        if ch.t[k1] >= su.settle_at:
+            ws.peaks(kept, d, v, a, f)
+
+
+class CompiledStepper(ContactStepper):
+    """The same steps compiled (:func:`.contact_kernel.advance_chunk`), one realisation after another."""
+
+    def __init__(self, setup: _Setup):
+        super().__init__(setup)
+        su, jm, it = setup, setup.jm, setup.integrator
+        stack = [sz.cond.maps() for sz in su.sizes]
+        per_level = {q: np.array([getattr(sz.weights, q) for sz in su.sizes])
+                     for q in (f.name for f in dataclasses.fields(StepWeights))}
+        self.levels = Levels(span=np.array([sz.span for sz in su.sizes], np.int64),
+                             coef_p=np.array([sz.coef_p for sz in su.sizes]),
+                             error=np.array([sz.error for sz in su.sizes]),
+                             legs=np.stack([sz.cond.legs for sz in su.sizes]),
+                             crank_T=np.stack([m[0][0] for m in stack]), crank_U=np.stack([m[0][1] for m in stack]),
+                             rod_T=np.stack([m[1][0] for m in stack]), rod_U=np.stack([m[1][1] for m in stack]),
+                             **per_level)
+        self.layout = Layout(crank_dofs=int(jm.crank_dofs), crank_MK=np.concatenate([jm.crank_M, jm.crank_K]),
+                             rod_MK=np.concatenate([jm.rod_M, jm.rod_K]), crank_M=np.ascontiguousarray(jm.crank_M),
+                             rod_M=np.ascontiguousarray(jm.rod_M),
+                             crank_boundary=jm.crank_boundary.astype(np.int64))
+        self.settings = Settings(mass_damping=float(jm.mass_damping), stiffness_damping=float(jm.stiffness_damping),
+                                 alpha_m=float(it.alpha_m), alpha_f=float(it.alpha_f),
+                                 settle_at=float(su.settle_at),
+                                 impact_floor=float(su.scene.contact.impact_speed_floor), tolerance=su.tolerance,
+                                 divergence_limit=su.limit, tol_d=float(TOL_DISPLACEMENT),
+                                 tol_v=float(TOL_VELOCITY), max_iterations=int(MAX_ITERATIONS),
+                                 refinements=su.refinements)
+        self.scratch = make_scratch()
+        self.work = None
+
+    def _joints_of(self, idx) -> Joints:
+        j, law, su = self.setup.joints, self.setup.scene.contact, self.setup
+        return Joints(size=np.ascontiguousarray(np.stack([j.radial, j.size_C, j.size_B], -1)[idx]),
+                      axial=np.ascontiguousarray(j.axial[idx]),
+                      stiffness=np.ascontiguousarray(np.stack([j.k_A, j.k_C, j.k_B], -1)[idx]),
+                      w=np.ascontiguousarray(su.scene.geometry.w, dtype=float),
+                      radius=np.array([law.journal_radius, law.sphere_radius, law.sphere_radius], float),
+                      law=Law(exponent=float(law.exponent), restitution=float(law.restitution),
+                              mu=float(law.friction_coefficient), v0=float(law.stick_velocity),
+                              v1=float(law.slip_velocity)))
+
+    def _solve(self, idx, ch, j, sy, ab, ap, bh2, gh, wf):
+        R = ab.shape[0]
+        out = Out(f=np.empty((R, 6, 3, 3)), gl=np.empty((R, 6, 12)), gp=np.empty((R, 6)),
+                  delta=np.empty((R, 6, 4)), rate=np.empty((R, 6, 4)))
+        done, count = np.zeros(R, np.bool_), np.zeros(R, np.int64)
+        newton_step(Frame(G=ch.G[j], J=ch.J[j], Rr=ch.Rr[j], omega=ch.omega[j]), self._joints_of(idx), sy, ab, ap,
+                    float(bh2), float(gh), float(wf), self.settings, out, done, count, self.scratch)
+        return ab, ap, out.f, out.gl, out.gp, done, count, out.delta, out.rate
+
+    def advance(self, ch: _Chunk, first: int, n_base: int) -> Progress:
+        ws, lv = self.ws, self.levels
+        if self.work is None:
+            N, nc = ws.d.shape[1], self.layout.crank_dofs
+            self.work = make_work(N, nc, (N - 6) // 6 - nc, lv.crank_T.shape[2] - 6, lv.rod_T.shape[2] - 6)
         before = ws.alive.copy()
-        advance_chunk(np.flatnonzero(ws.alive), first, n_base, every, self.levels, self.layout, self.coef,
-                      *ch.arrays(), self.w, self.radius, self.params, self.law,
-                      np.array([TOL_DISPLACEMENT, TOL_VELOCITY, MAX_ITERATIONS]), self.refinements,
-                      ws.d, ws.v, ws.a, ws.Ma, ws.rest, ws.g, ws.contacts.stored, ws.contacts.in_contact,
-                      ws.contacts.rate, ws.peak, ws.cpeak, ws.hist, ws.alive, ws.fail, ws.fail_at, ws.steps,
-                      ws.iters, ws.refined, self.work, self.scratch)
+        state = State(d=ws.d, v=ws.v, a=ws.a, Ma=ws.Ma, rest=ws.rest, g=ws.g, stored=ws.contacts.stored,
+                      in_contact=ws.contacts.in_contact, crate=ws.contacts.rate)
+        records = Records(peak=ws.peak, cpeak=ws.cpeak, hist=ws.hist, alive=ws.alive, fail=ws.fail,
+                          fail_t=ws.fail_t, fail_h=ws.fail_h, fail_size=ws.fail_size, steps=ws.steps,
+                          iters=ws.iters, refined=ws.refined)
+        advance_chunk(np.flatnonzero(ws.alive), first, n_base, self.setup.every, lv, self.layout,
+                      self.settings, ch.arrays(), self._joints_of(slice(None)), state, records,
+                      self.work, self.scratch)
         for r in np.flatnonzero(before & ~ws.alive):
-            ws.failed(r, ws.fail[r], *ws.fail_at[r], self.limit)
+            ws.failed(r, ws.fail[r], ws.fail_t[r], ws.fail_h[r], ws.fail_size[r], self.setup.limit)
+        return self._progress(ch)
 
 
 def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
@@ -619,156 +832,22 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     scene's settle time, the start-up transient left out).  A realisation whose Newton
     iteration fails at the finest step or whose state diverges is marked failed; the others go on.
     """
-    sim = scene.simulation
-    integrator = integrator or make_integrator(sim.contact_integrator, sim.newmark_beta,
-                                               sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
-    jm = model or build_joint_model(scene, elements)
-    h = sim.contact_time_step if dt is None else dt
-    out = max(h, sim.time_step if output_step is None else output_step)
-    every = int(round(out / h))
-    if abs(every * h - out) > 1e-9 * out:
-        raise ValueError(f"output step {out!r} s is not a multiple of the time step {h!r} s")
-    t = time_grid(scene.trajectory.duration, h)
-    fine = 2 ** refinements
-    settle_at = (sim.settle_time if settle is None else settle) - 1e-9 * h
-    joints = _joints(scene, draws)
-    R = len(draws)
-    ws = _Workspace(R, len(t[::every]), scene.contact.impact_speed_floor)
-    beta, gamma, am, af = integrator.beta, integrator.gamma, integrator.alpha_m, integrator.alpha_f
-    lam1, lam2 = jm.mass_damping, jm.stiffness_damping
-    sizes = []
-    for level in range(refinements + 1):
-        hl = h / 2 ** level
-        cM, cC, cK = integrator.step_coefficients(hl)
-        sizes.append(_StepSize(hl, fine >> level, _Condensed(jm, cM + cC * lam1, cC * lam2 + cK),
-                               cM + cC * lam1, beta * hl * hl, gamma * hl, abs(beta - 1.0 / 6.0) * hl * hl))
-    start = _Condensed(jm, 1.0, 0.0)
-    wf = 1.0 - af
-    weighted = am != 0.0 or af != 0.0
-
-    params = np.ascontiguousarray(np.stack([joints.radial, joints.axial, joints.size_C, joints.size_B,
-                                            joints.k_A, joints.k_C, joints.k_B], -1))
-    law = scene.contact
-    law_v = np.array([law.exponent, law.restitution, law.friction_coefficient, law.stick_velocity,
-                      law.slip_velocity])
-    w_axes = np.ascontiguousarray(scene.geometry.w, dtype=float)
-    solve = _newton_numpy if engine == "numpy" else _newton_compiled
-
-    def newton(idx, ch, j, cond, coef_p, rhs, dp, vp, a_guess, bh2, gh, w):
-        """Accelerations for a step of realisations ``idx``; returns a, contact forces, generalised
-        contact forces, converged flags, iteration counts, penetrations, their rates and the
-        impact speeds used."""
-        Mp = ch.Mp[j]
-        rc, rr, rp = split(jm, rhs)
-        rb, keep = cond.condense(rc, rr)
-        db, dpp = _joint_nodes(jm, dp)
-        vb, vpp = _joint_nodes(jm, vp)
-        ab, ap = _joint_nodes(jm, a_guess)
-        impact = ws.contacts.impact(idx)
-        sub = _subset(joints, idx) if engine == "numpy" else None   # the kernel reads params
-        ab, ap, f, gl, gp, done, count, delta, rate = solve(
-            scene, ch, j, params[idx], law_v, w_axes, sub, cond.legs, coef_p * Mp,
-            impact, rb, np.ascontiguousarray(rp), db, np.ascontiguousarray(dpp), vb,
-            np.ascontiguousarray(vpp), ab, ap.copy(), bh2, gh, w)   # ab, ap: updated in place
-        ac, ar = cond.recover(ab, keep, rc.shape, rr.shape)
-        a = join(ac, ar, ap)
-        return a, f, join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count, delta, rate, impact
-
-    def peaks(idx, d, v, a, f, time):
-        if time >= settle_at:
-            p = np.stack([d[..., -6:], v[..., -6:], a[..., -6:]], 1)     # (R, 3, 6)
-            ws.peak[idx] = np.maximum(ws.peak[idx], np.abs(p))
-            mags = np.swapaxes(np.linalg.norm(f, axis=-1), -1, -2).reshape(len(idx), 18)
-            ws.cpeak[idx] = np.maximum(ws.cpeak[idx], mags)
-
-    def advance(idx, ch, k0, level):
-        """Step realisations ``idx`` from fine instant k0 of the chunk by sizes[level], halving where
-        needed; their state moves to k0 + sizes[level].span."""
-        sz = sizes[level]
-        k1 = k0 + sz.span
-        d, v, a = ws.d[idx], ws.v[idx], ws.a[idx]
-        dp = d + sz.h * v + (0.5 - beta) * sz.h * sz.h * a
-        vp = v + (1.0 - gamma) * sz.h * a
-        Mp = ch.Mp[k1]
-        r = wf * (ch.F[k1] - _internal(jm, Mp, dp, vp))
-        if weighted:
-            r += af * (ch.F[k0] + ws.g[idx] - ws.rest[idx]) - am * ws.Ma[idx]
-        a_new, f, g, ok, count, delta, rate, used = newton(idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp,
-                                                           a, sz.bh2, sz.gh, wf)
-        ws.iters[idx] += count
-        d_new, v_new = dp + sz.bh2 * a_new, vp + sz.gh * a_new
-        sound = ok & np.isfinite(d_new).all(-1) & (np.abs(d_new).max(-1) < divergence_limit)
-        accept = np.ones(len(idx), bool)
-        if level < refinements:
-            accept = sound
-            if tolerance > 0.0:
-                jb, jp = _joint_nodes(jm, a_new - a)
-                jump = np.linalg.norm(_relative(ch, k1, jb, jp), axis=-1).max((-1, -2))
-                accept &= sz.error * jump <= tolerance
-        for i in np.flatnonzero(accept & ~sound):
-            ws.failed(idx[i], DIVERGED if ok[i] else NEWTON_FAILED, ch.t[k1], sz.h, np.abs(d_new[i]).max(),
-                      divergence_limit)
-        keep = accept & sound
-        if keep.any():
-            kept = idx[keep]
-            ws.d[kept], ws.v[kept], ws.a[kept] = d_new[keep], v_new[keep], a_new[keep]
-            ws.contacts.update(kept, delta[keep], rate[keep], used[keep])
-            ws.steps[kept] += 1
-            if weighted:
-                ws.Ma[kept] = _mass(jm, Mp, a_new[keep])
-                ws.rest[kept] = _internal(jm, Mp, d_new[keep], v_new[keep])
-                ws.g[kept] = g[keep]
-            peaks(kept, d_new[keep], v_new[keep], a_new[keep], f[keep], ch.t[k1])
-        retry = idx[~accept]
-        if len(retry):
-            ws.refined[retry] += 1
-            advance(retry, ch, k0, level + 1)
-            retry = retry[ws.alive[retry]]
-            if len(retry):
-                advance(retry, ch, k0 + sz.span // 2, level + 1)
-
-    ch = _Chunk(scene, jm, t[:1])
-    ws.d, ws.v = initial_state(scene, jm, joints)
-    everyone = np.arange(R)
-    Mp0 = ch.Mp[0]
-    rest = _internal(jm, Mp0, ws.d, ws.v)
-    ws.a, f, ws.g, _, _, delta, rate, used = newton(everyone, ch, 0, start, 1.0, ch.F[0] - rest, ws.d,
-                                                    ws.v, np.zeros_like(ws.d), 0.0, 0.0, 1.0)
-    ws.contacts.update(everyone, delta, rate, used)
-    ws.Ma, ws.rest = _mass(jm, Mp0, ws.a), rest
-    peaks(everyone, ws.d, ws.v, ws.a, f, 0.0)
-    _history(ws, 0)
-    compiled = (_CompiledSteps(jm, sizes, integrator, ws, settle_at, tolerance, divergence_limit, refinements,
-                               params, law_v, w_axes, np.ascontiguousarray(ch.radius[:, 0]))
-                if engine == "compiled" else None)
+    setup = _setup(scene, draws, elements, integrator, dt, output_step, model, divergence_limit, settle,
+                   tolerance, refinements)
+    stepper = (CompiledStepper if engine == "compiled" else NumpyStepper)(setup)
+    stepper.start()
+    t, fine, h = setup.t, setup.fine, setup.sizes[0].weights.h
     for s0 in range(1, len(t), chunk):
         s1 = min(s0 + chunk, len(t))
         # the chunk's instants on the finest grid, from the start of its first step
-        ch = _Chunk(scene, jm, ((s0 - 1) * fine + np.arange((s1 - s0) * fine + 1)) * (h / fine))
-        if compiled:
-            compiled.advance(ws, ch, s0, s1 - s0, every)
-        else:
-            for j in range(s1 - s0):
-                live = np.flatnonzero(ws.alive)
-                if not len(live):
-                    break
-                advance(live, ch, j * fine, 0)
-                if (s0 + j) % every == 0:
-                    _history(ws, (s0 + j) // every)
-        if not ws.alive.any():
+        ch = _Chunk(scene, setup.jm, ((s0 - 1) * fine + np.arange((s1 - s0) * fine + 1)) * (h / fine))
+        if stepper.advance(ch, s0, s1 - s0).reason == ALL_FAILED:
             break
-    return ContactBatch(t[::every], ws.hist[0], ws.hist[1], ws.hist[2], ws.peak, ws.cpeak, ws.status,
-                        ws.message, ws.steps, ws.iters, ws.refined)
+    return stepper.batch()
 
 
 def _subset(joints: _Joints, idx) -> _Joints:
     return _Joints(*(getattr(joints, f.name)[idx] for f in dataclasses.fields(joints)))
-
-
-def _history(ws: _Workspace, k):
-    """Keep the platform's error at output instant k for the realisations still alive."""
-    live = ws.alive
-    ws.hist[:, live, k] = np.stack([ws.d[live, -6:], ws.v[live, -6:], ws.a[live, -6:]])
 
 
 def _full_contact(jm: JointModel, gl, shape_c, shape_r):

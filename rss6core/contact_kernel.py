@@ -6,8 +6,8 @@ numpy's per-call overhead is many times the arithmetic.  This module runs
 that work compiled with numba, one realisation after another, so a
 realisation's result never depends on its batch.  It computes what the
 vectorised functions of :mod:`.contact_dynamics` compute (its "numpy" engine:
-``_contacts``, ``_generalized``, ``_tangent``, ``_solve_arrow`` and the step
-``advance``; the tests compare them).  One module, because numba's on-disk
+``_contacts``, ``_generalized``, ``_tangent``, ``_solve_arrow`` and
+``NumpyStepper._step``; the tests compare them).  One module, because numba's on-disk
 cache of a function is invalidated only by changes to its own file, and
 :func:`advance_chunk` compiles the Newton iteration into itself.
 
@@ -26,25 +26,16 @@ forces, the static condensation onto the joint nodes, the Newton iteration,
 the recovery of the link interiors, the corrector, and the adaptive step's
 accept-or-halve decision, without numpy's per-call overhead, which dominated
 wherever a few realisations refine a step while the others wait.  Per
-realisation, a refined base step follows the same attempts as ``advance``'s
+realisation, a refined base step follows the same attempts as ``NumpyStepper._step``'s
 recursion: a failed attempt at level l is retried at level l + 1 from the same
 instant; after an accepted step the next attempt takes the coarsest level
 whose step starts at the instant reached.  The dense products (six legs at a
 time per link type) go to BLAS through ``np.dot``.
 
-Arrays (R the batch, N the system size, T the chunk's instants on the finest
-grid, L the step levels):
-- state d, v, a and, for the alpha-weighted integrators, M a, C v + K d and the
-  generalised contact forces g (R, N), updated in place;
-- contact memory: stored impact speeds, in-contact flags, penetration rates (R, 6, 4);
-- levels ``lv``: fine-grid intervals per step, h (s), the platform mass weight,
-  beta h^2, gamma h, |beta - 1/6| h^2 (L,), the condensed leg matrices (L, 12, 12)
-  and per link type the condensation r -> [r_i E_ii^-1, r_b - r_i P] (L, n, n_i + 6)
-  and recovery [y, x_b] -> x (L, n_i + 6, n) maps (:meth:`.contact_dynamics._Condensed.maps`);
-- ``layout``: crank DOFs, [M; K] of crank and rod, M of crank and rod, the crank's
-  joint-node indices;
-- chunk: loads F (T, N), platform mass matrices (T, 6, 6), joint maps G, platform
-  point maps J, rod frames Rr, ideal relative angular velocities (T, 6, 3, 3), t (T,) s.
+Everything the kernel reads is a named structure read by name (:class:`Levels`,
+:class:`Layout`, :class:`Settings`, :class:`ChunkArrays`, :class:`Joints`, :class:`State`,
+:class:`Records`, :class:`Work`, :class:`Scratch`): numba compiles namedtuples of arrays and
+scalars in nopython mode, and a reordered field is then a renamed field, not a silently wrong vector.
 
 Small helpers take scalars and whole arrays with indices rather than views, and
 are inlined: each array argument costs two atomic reference-count updates,
@@ -52,10 +43,16 @@ which had been a third of the run time.
 """
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
-__all__ = ["newton_step", "advance_chunk", "ball", "NEWTON_FAILED", "DIVERGED"]
+from .status import DIVERGED, NEWTON_FAILED   # the failure codes written to ``fail``
+
+__all__ = ["newton_step", "advance_chunk", "ball", "predict_one", "correct_one", "Levels", "Layout",
+           "Settings", "ChunkArrays", "Frame", "Law", "Joints", "State", "Records", "Out", "System",
+           "make_work", "make_scratch"]
 
 # reassociation and fused multiply-add, but no finite-math assumption: a diverging
 # realisation's inf and nan must survive to be reported.  Every fastmath function is inlined
@@ -66,6 +63,83 @@ __all__ = ["newton_step", "advance_chunk", "ball", "NEWTON_FAILED", "DIVERGED"]
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
 # non-zero 3x3 blocks of a leg's joint map G: relative displacement j <- joint-node block c
 _PATTERN = np.array([[0, 0], [1, 1], [1, 2], [2, 3]], np.int64)
+
+
+# --- named structures: every array and constant the kernel reads, by name ---
+
+Levels = namedtuple("Levels", "span h coef_p d_pred v_pred d_corr v_corr error legs crank_T crank_U rod_T rod_U")
+Levels.__doc__ = """Step levels l = 0 (the base step) .. L - 1 (finest): fine-grid intervals per step, h (s),
+the platform mass weight of the step matrix, the predictor/corrector weights
+(:class:`.integrators.StepWeights`), |beta - 1/6| h^2 (s^2) (L,); the condensed leg matrices
+(L, 12, 12) and per link type the condensation r -> [r_i E_ii^-1, r_b - r_i P] (L, n, n_i + 6) and
+recovery [y, x_b] -> x (L, n_i + 6, n) maps (:meth:`.contact_dynamics._Condensed.maps`)."""
+Layout = namedtuple("Layout", "crank_dofs crank_MK rod_MK crank_M rod_M crank_boundary")
+Layout.__doc__ = """The links' layout: crank DOFs, [M; K] of crank and rod, M of crank and rod, the crank's
+joint-node indices (6,)."""
+Settings = namedtuple("Settings", "mass_damping stiffness_damping alpha_m alpha_f settle_at impact_floor "
+                      "tolerance divergence_limit tol_d tol_v max_iterations refinements")
+Settings.__doc__ = """Rayleigh lambda_1 (1/s), lambda_2 (s); alpha_m, alpha_f; settle time (s); impact speed
+floor (m/s); local error tolerance (m); divergence limit (m); Newton's tolerances on displacement (m)
+and velocity (m/s) and its iteration cap; step refinements allowed."""
+ChunkArrays = namedtuple("ChunkArrays", "F Mp G J Rr omega t")
+ChunkArrays.__doc__ = """A chunk's instants on the finest grid (T): loads F (T, N), platform mass matrices
+(T, 6, 6), joint maps G (T, 6, 9, 12), platform point maps J (T, 6, 3, 6), rod frames Rr (T, 6, 3, 3),
+ideal relative angular velocities omega (T, 6, 3, 3) rad/s, t (T,) s."""
+Frame = namedtuple("Frame", "G J Rr omega")
+Frame.__doc__ = """One instant of a chunk: G (6, 9, 12), J (6, 3, 6), Rr (6, 3, 3), omega (6, 3, 3)."""
+Law = namedtuple("Law", "exponent restitution mu v0 v1")
+Law.__doc__ = """Contact law: force exponent, restitution, mu_d, stick and slip velocities (m/s)."""
+Joints = namedtuple("Joints", "size axial stiffness w radius law")
+Joints.__doc__ = """Per realisation (R): radial clearances [A radial, C, B] (R, 6, 3) m, A axial (R, 6) m,
+stiffnesses [A, C, B] (R, 6, 3) N/m^1.5; revolute axes w (6, 3), radii [journal, sphere, sphere]
+(3,) m, the :class:`Law`."""
+State = namedtuple("State", "d v a Ma rest g stored in_contact crate")
+State.__doc__ = """The batch's state (R, N): d, v, a and, for the alpha-weighted integrators, M a,
+C v + K d and the generalised contact forces g; contact memory (R, 6, 4): stored impact speeds,
+in-contact flags, penetration rates."""
+Records = namedtuple("Records", "peak cpeak hist alive fail fail_t fail_h fail_size steps iters refined")
+Records.__doc__ = """Per realisation: peaks (R, 3, 6), contact force peaks (R, 18), histories (3, R, T_out, 6),
+alive, failure code (:mod:`.status`), time (s), step (s) and largest |d| (m) at failure, steps,
+Newton iterations, refined steps."""
+Out = namedtuple("Out", "f gl gp delta rate")
+Out.__doc__ = """Newton's results at the accepted iterate: contact forces (6, 3, 3), generalised forces on
+the joint nodes (6, 12) and the platform (6,), penetrations and rates (6, 4)."""
+Work = namedtuple("Work", "Zc Zr Ic Ir Ac Ar Yc Yr dp vp rhs tmp a_new d_new v_new rb db vb ab dpp vpp ap "
+                  "impact Sp f gl gp delta rate e jb jp")
+Scratch = namedtuple("Scratch", "e de De Dv D pair xb ub xp up res_l res_p dl dp base_l base_p A Ainv Up "
+                     "rhat M top top0 tb z schur ypiv y border lower DG DJ DR")
+
+
+def make_work(N, nc, nr, ni_c, ni_r) -> Work:
+    """Per-realisation work arrays of :func:`advance_chunk` (N system size, nc/nr crank/rod DOFs per
+    leg, ni_c/ni_r their interior DOFs)."""
+    e = np.empty
+    return Work(e((6, 2 * nc)), e((6, 2 * nr)), e((6, nc)), e((6, nr)), e((6, nc)), e((6, nr)),
+                e((6, ni_c + 6)), e((6, ni_r + 6)), e(N), e(N), e(N), e(N), e(N), e(N), e(N),
+                e((6, 12)), e((6, 12)), e((6, 12)), e((6, 12)), e(6), e(6), e(6), e((6, 4)), e((6, 6)),
+                e((6, 3, 3)), e((6, 12)), e(6), e((6, 4)), e((6, 4)), e((6, 3, 3)), e((6, 12)), e(6))
+
+
+def make_scratch() -> Scratch:
+    """Work arrays of one realisation's Newton iteration (see :func:`newton_one`)."""
+    e = np.empty
+    return Scratch(e((6, 3, 3)), e((6, 3, 3)), e((6, 3, 3, 3)), e((6, 3, 3, 3)), e((6, 3, 3, 3)), e(21),
+                   e((6, 12)), e((6, 12)), e(6), e(6), e((6, 12)), e(6), e((6, 12)), e(6), e((6, 12)), e(6),
+                   e((4, 3, 3)), e((6, 4, 3, 3)), e((6, 3, 3, 3)), e((6, 4, 3)), e((3, 3)), e((3, 3)),
+                   e((6, 3)), e((6, 3, 6)), e(3), e((6, 6)), e(6, np.int64), e(6), e((3, 6)), e((6, 3)),
+                   e((_PATTERN.shape[0], 3, 3)), e((3, 6)), e((3, 3)))
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def predict_one(d, v, a, h, d_pred, v_pred):
+    """The generalized-alpha predictor on plain floats: the twin of :func:`.integrators.predict`."""
+    return d + h * v + d_pred * a, v + v_pred * a
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def correct_one(dp, vp, a, d_corr, v_corr):
+    """The corrector on plain floats: the twin of :func:`.integrators.correct`."""
+    return dp + d_corr * a, vp + v_corr * a
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -153,10 +227,10 @@ def _store(out, f, De, Dv, leg, j):
 @njit(cache=True, fastmath=_FAST)
 def ball(e, de, size, k, impact, law, omega, radius, f, De, Dv):
     """:func:`_pair` on (3,) arrays e, de, omega: force into f, d f/d e into De, d f/d de into Dv
-    (3, 3); law = [exponent, restitution, mu_d, v0, v1].  Returns (penetration m, its rate m/s)."""
+    (3, 3); law a :class:`Law`.  Returns (penetration m, its rate m/s)."""
     out = np.empty(21)
-    delta, rate = _pair(e[0], e[1], e[2], de[0], de[1], de[2], size, k, impact, law[0], law[1], law[2],
-                        law[3], law[4], omega[0], omega[1], omega[2], radius, out)
+    delta, rate = _pair(e[0], e[1], e[2], de[0], de[1], de[2], size, k, impact, law.exponent, law.restitution,
+                        law.mu, law.v0, law.v1, omega[0], omega[1], omega[2], radius, out)
     f[:] = out[:3]
     De[:, :] = out[3:12].reshape((3, 3))
     Dv[:, :] = out[12:].reshape((3, 3))
@@ -186,32 +260,35 @@ def relative(G, J, xb, xp, e):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _evaluate(G, J, w, omega, radius, params, law, impact, xb, xp, ub, up,
-              e, de, f, De, Dv, delta, rate, gl, gp, out):
-    """Contact forces, Jacobians, penetrations and generalised forces of one realisation."""
+def _evaluate(fr, jt, r, impact, xb, xp, ub, up, s, out):
+    """Contact forces, Jacobians (into s), penetrations and generalised forces (into out) of
+    realisation r at joint-node displacements xb, xp and velocities ub, up."""
+    e, de, De, Dv, f, delta, rate = s.e, s.de, s.De, s.Dv, out.f, out.delta, out.rate
+    G, J, w, omega, radius = fr.G, fr.J, jt.w, fr.omega, jt.radius
     relative(G, J, xb, xp, e)
     relative(G, J, ub, up, de)
-    exponent, restitution, mu, v0, v1 = law[0], law[1], law[2], law[3], law[4]
+    exponent, restitution, mu, v0, v1 = jt.law.exponent, jt.law.restitution, jt.law.mu, jt.law.v0, jt.law.v1
     for leg in range(6):
         w0, w1, w2 = w[leg, 0], w[leg, 1], w[leg, 2]
         sA = w0 * e[leg, 0, 0] + w1 * e[leg, 0, 1] + w2 * e[leg, 0, 2]
+        kA = jt.stiffness[r, leg, 0]
         # A radial: the journal's eccentricity projected on the bearing plane (normal to w)
-        d, r = _pair(e[leg, 0, 0] - sA * w0, e[leg, 0, 1] - sA * w1, e[leg, 0, 2] - sA * w2,
-                     de[leg, 0, 0], de[leg, 0, 1], de[leg, 0, 2], params[leg, 0], params[leg, 4],
-                     impact[leg, 0], exponent, restitution, mu, v0, v1, omega[leg, 0, 0], omega[leg, 0, 1],
-                     omega[leg, 0, 2], radius[0], out)
-        _store(out, f, De, Dv, leg, 0)
-        delta[leg, 0], rate[leg, 0] = d, r
+        d, rt = _pair(e[leg, 0, 0] - sA * w0, e[leg, 0, 1] - sA * w1, e[leg, 0, 2] - sA * w2,
+                      de[leg, 0, 0], de[leg, 0, 1], de[leg, 0, 2], jt.size[r, leg, 0], kA,
+                      impact[leg, 0], exponent, restitution, mu, v0, v1, omega[leg, 0, 0], omega[leg, 0, 1],
+                      omega[leg, 0, 2], radius[0], s.pair)
+        _store(s.pair, f, De, Dv, leg, 0)
+        delta[leg, 0], rate[leg, 0] = d, rt
         for a in range(3):     # De @ Pw, Pw = I - w w^T
-            s = De[leg, 0, a, 0] * w0 + De[leg, 0, a, 1] * w1 + De[leg, 0, a, 2] * w2
-            De[leg, 0, a, 0] -= s * w0
-            De[leg, 0, a, 1] -= s * w1
-            De[leg, 0, a, 2] -= s * w2
+            q = De[leg, 0, a, 0] * w0 + De[leg, 0, a, 1] * w1 + De[leg, 0, a, 2] * w2
+            De[leg, 0, a, 0] -= q * w0
+            De[leg, 0, a, 1] -= q * w1
+            De[leg, 0, a, 2] -= q * w2
         # A axial: the journal's faces, along +-w, radial stiffness, no friction
         sign = 1.0 if sA >= 0.0 else -1.0
-        da = abs(sA) - params[leg, 1]
+        da = abs(sA) - jt.axial[r, leg]
         ra = sign * (w0 * de[leg, 0, 0] + w1 * de[leg, 0, 1] + w2 * de[leg, 0, 2])
-        Fa, dFa, dFra = _normal_law(da, ra, impact[leg, 1], params[leg, 4], exponent, restitution)
+        Fa, dFa, dFra = _normal_law(da, ra, impact[leg, 1], kA, exponent, restitution)
         wl = (w0, w1, w2)
         for a in range(3):
             f[leg, 0, a] -= Fa * sign * wl[a]
@@ -222,13 +299,19 @@ def _evaluate(G, J, w, omega, radius, params, law, impact, xb, xp, ub, up,
         delta[leg, 1], rate[leg, 1] = da, ra
         # spherical C and B
         for j in (1, 2):
-            d, r = _pair(e[leg, j, 0], e[leg, j, 1], e[leg, j, 2], de[leg, j, 0], de[leg, j, 1],
-                         de[leg, j, 2], params[leg, 1 + j], params[leg, 4 + j], impact[leg, 1 + j],
-                         exponent, restitution, mu, v0, v1, omega[leg, j, 0], omega[leg, j, 1],
-                         omega[leg, j, 2], radius[j], out)
-            _store(out, f, De, Dv, leg, j)
-            delta[leg, 1 + j], rate[leg, 1 + j] = d, r
-        # generalised forces: G^T f on the joint nodes, -sum J^T f_B on the platform
+            d, rt = _pair(e[leg, j, 0], e[leg, j, 1], e[leg, j, 2], de[leg, j, 0], de[leg, j, 1],
+                          de[leg, j, 2], jt.size[r, leg, j], jt.stiffness[r, leg, j], impact[leg, 1 + j],
+                          exponent, restitution, mu, v0, v1, omega[leg, j, 0], omega[leg, j, 1],
+                          omega[leg, j, 2], radius[j], s.pair)
+            _store(s.pair, f, De, Dv, leg, j)
+            delta[leg, 1 + j], rate[leg, 1 + j] = d, rt
+    _generalized(G, J, f, out.gl, out.gp)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _generalized(G, J, f, gl, gp):
+    """Generalised contact forces: G^T f on the joint nodes (6, 12), -sum J^T f_B on the platform (6,)."""
+    for leg in range(6):
         for c in range(12):
             gl[leg, c] = 0.0
         for q in range(_PATTERN.shape[0]):
@@ -244,6 +327,259 @@ def _evaluate(G, J, w, omega, radius, params, law, impact, xb, xp, ub, up,
             for a in range(3):
                 s += J[leg, a, b] * f[leg, 2, a]
         gp[b] = -s
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _leg_chain(G, Sl, D, res_l, leg, s):
+    """Eliminate leg ``leg``'s block-tridiagonal chain L = Sl - G^T diag(D) G down to its B end:
+    the pivots' inverses s.Ainv, the upper blocks s.Up and the reduced right-hand sides s.rhat."""
+    A, Ainv, Up, rhat, M, top, DG = s.A, s.Ainv, s.Up, s.rhat, s.M, s.top, s.DG
+    # DG_q = D_j G_jc for the pattern's blocks; joint-node block c has pattern entry q = c
+    for q in range(_PATTERN.shape[0]):
+        j, c = _PATTERN[q, 0], _PATTERN[q, 1]
+        for u in range(3):
+            for b in range(3):
+                DG[q, u, b] = (D[leg, j, u, 0] * G[leg, 3 * j, 3 * c + b]
+                               + D[leg, j, u, 1] * G[leg, 3 * j + 1, 3 * c + b]
+                               + D[leg, j, u, 2] * G[leg, 3 * j + 2, 3 * c + b])
+    # diagonal blocks Sl_cc - G_c^T DG_c, off-diagonal: Sl (links) and - G_1^T D_C G_2 (joint C)
+    for c in range(4):
+        j = _PATTERN[c, 0]
+        for a in range(3):
+            g0, g1, g2 = G[leg, 3 * j, 3 * c + a], G[leg, 3 * j + 1, 3 * c + a], G[leg, 3 * j + 2, 3 * c + a]
+            for b in range(3):
+                A[c, a, b] = Sl[3 * c + a, 3 * c + b] - (g0 * DG[c, 0, b] + g1 * DG[c, 1, b] + g2 * DG[c, 2, b])
+    for a in range(3):
+        g0, g1, g2 = G[leg, 3, 3 + a], G[leg, 4, 3 + a], G[leg, 5, 3 + a]          # G_1 (tip)
+        for b in range(3):
+            Up[leg, 0, a, b] = Sl[a, 3 + b]
+            Up[leg, 1, a, b] = -(g0 * DG[2, 0, b] + g1 * DG[2, 1, b] + g2 * DG[2, 2, b])
+            Up[leg, 2, a, b] = Sl[6 + a, 9 + b]
+    # forward elimination down the chain: Ahat_{k+1} = A_{k+1} - W_k Ahat_k^-1 U_k
+    for a in range(3):
+        rhat[leg, 0, a] = res_l[leg, a]
+    _inv3(A, 0, Ainv, leg, 0)
+    for k in range(3):
+        # W_k, the block below the diagonal: Sl (k = 0, 2) or - G_2^T D_C G_1 (k = 1)
+        for a in range(3):
+            for b in range(3):
+                if k == 1:
+                    M[a, b] = -(G[leg, 3, 6 + a] * DG[1, 0, b] + G[leg, 4, 6 + a] * DG[1, 1, b]
+                                + G[leg, 5, 6 + a] * DG[1, 2, b])
+                else:
+                    M[a, b] = Sl[3 * (k + 1) + a, 3 * k + b]
+        for a in range(3):                      # W_k Ahat_k^-1
+            for b in range(3):
+                top[a, b] = M[a, 0] * Ainv[leg, k, 0, b] + M[a, 1] * Ainv[leg, k, 1, b] \
+                    + M[a, 2] * Ainv[leg, k, 2, b]
+        for a in range(3):
+            q = res_l[leg, 3 * (k + 1) + a]
+            for b in range(3):
+                q -= top[a, b] * rhat[leg, k, b]
+                A[k + 1, a, b] -= (top[a, 0] * Up[leg, k, 0, b] + top[a, 1] * Up[leg, k, 1, b]
+                                   + top[a, 2] * Up[leg, k, 2, b])
+            rhat[leg, k + 1, a] = q
+        _inv3(A, k + 1, Ainv, leg, k + 1)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _leg_border(J, Rr, D, leg, s):
+    """Leg ``leg``'s border B = Rr^T D_B J (3x6), its partner C = J^T D_B Rr (6x3), P -= J^T D_B J, and
+    its share of the platform's Schur complement P - C Ahat_3^-1 B and right-hand side in s."""
+    DJ, DR, border, lower, schur, y, top0, tb, Ainv, rhat = (s.DJ, s.DR, s.border, s.lower, s.schur, s.y,
+                                                             s.top0, s.tb, s.Ainv, s.rhat)
+    for u in range(3):
+        for b in range(6):
+            DJ[u, b] = D[leg, 2, u, 0] * J[leg, 0, b] + D[leg, 2, u, 1] * J[leg, 1, b] \
+                + D[leg, 2, u, 2] * J[leg, 2, b]
+        for b in range(3):
+            DR[u, b] = D[leg, 2, u, 0] * Rr[leg, 0, b] + D[leg, 2, u, 1] * Rr[leg, 1, b] \
+                + D[leg, 2, u, 2] * Rr[leg, 2, b]
+    for a in range(3):
+        for b in range(6):
+            border[a, b] = Rr[leg, 0, a] * DJ[0, b] + Rr[leg, 1, a] * DJ[1, b] + Rr[leg, 2, a] * DJ[2, b]
+    for a in range(6):
+        for b in range(3):
+            lower[a, b] = J[leg, 0, a] * DR[0, b] + J[leg, 1, a] * DR[1, b] + J[leg, 2, a] * DR[2, b]
+        for b in range(6):
+            schur[a, b] -= J[leg, 0, a] * DJ[0, b] + J[leg, 1, a] * DJ[1, b] + J[leg, 2, a] * DJ[2, b]
+    # the B end: x_3 = Ahat_3^-1 (rhat_3 - border dp) = top0 - tb dp
+    for a in range(3):
+        top0[leg, a] = (Ainv[leg, 3, a, 0] * rhat[leg, 3, 0] + Ainv[leg, 3, a, 1] * rhat[leg, 3, 1]
+                        + Ainv[leg, 3, a, 2] * rhat[leg, 3, 2])
+        for b in range(6):
+            tb[leg, a, b] = (Ainv[leg, 3, a, 0] * border[0, b] + Ainv[leg, 3, a, 1] * border[1, b]
+                             + Ainv[leg, 3, a, 2] * border[2, b])
+    for a in range(6):
+        for b in range(6):
+            schur[a, b] -= lower[a, 0] * tb[leg, 0, b] + lower[a, 1] * tb[leg, 1, b] + lower[a, 2] * tb[leg, 2, b]
+        y[a] -= lower[a, 0] * top0[leg, 0] + lower[a, 1] * top0[leg, 1] + lower[a, 2] * top0[leg, 2]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _back_substitute(s):
+    """The platform update s.dp from the Schur complement, then each leg's s.dl up its chain:
+    x_3 = top0 - tb dp, x_k = Ahat_k^-1 (rhat_k - U_k x_{k+1})."""
+    dl, dp, z, Ainv, Up, rhat = s.dl, s.dp, s.z, s.Ainv, s.Up, s.rhat
+    _lu(s.schur, s.ypiv)
+    for a in range(6):
+        dp[a] = s.y[a]
+    _lu_solve(s.schur, s.ypiv, dp.reshape((6, 1)), 1)
+    for leg in range(6):
+        for a in range(3):
+            q = s.top0[leg, a]
+            for b in range(6):
+                q -= s.tb[leg, a, b] * dp[b]
+            dl[leg, 9 + a] = q
+        for k in range(2, -1, -1):
+            for a in range(3):
+                q = rhat[leg, k, a]
+                for b in range(3):
+                    q -= Up[leg, k, a, b] * dl[leg, 3 * (k + 1) + b]
+                z[a] = q
+            for a in range(3):
+                dl[leg, 3 * k + a] = Ainv[leg, k, a, 0] * z[0] + Ainv[leg, k, a, 1] * z[1] + Ainv[leg, k, a, 2] * z[2]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _newton_update(fr, Sl, Sp, s):
+    """Solve the block-arrow Newton system [L B; C P] [s.dl; s.dp] = [s.res_l; s.res_p] of one realisation.
+
+    L = Sl - G^T diag(D) G per leg is block tridiagonal in the joint nodes' 3x3 blocks
+    (crank node 0 - crank tip: crank; tip - rod C end: joint C; C end - B end: rod), so
+    each leg is eliminated block by block down to its B end (no pivoting: the blocks are
+    the links' condensed step matrices, SPD, plus the contact stiffness); B = E Rr^T D_B J
+    and C = J^T D_B Rr (E the B-end rows) border it, P = Sp - sum J^T D_B J.  The 6x6 Schur
+    complement on the platform is solved with pivoting, then each leg back-substituted.
+    """
+    for a in range(6):
+        for b in range(6):
+            s.schur[a, b] = Sp[a, b]
+        s.y[a] = s.res_p[a]
+    for leg in range(6):
+        _leg_chain(fr.G, Sl, s.D, s.res_l, leg, s)
+        _leg_border(fr.J, fr.Rr, s.D, leg, s)
+    _back_substitute(s)
+
+
+System = namedtuple("System", "Sl Sp impact rb rp db dpp vb vpp")
+System.__doc__ = """One step's Newton problem on the joint nodes: condensed leg matrix Sl (12, 12), platform
+step matrix Sp (6, 6), impact speeds (6, 4) m/s, right-hand sides rb (6, 12), rp (6,), predicted
+displacements db, dpp and velocities vb, vpp (joint nodes (6, 12), platform (6,))."""
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _residual(sy, a_l, a_p, wf, out, s):
+    """Newton's residual Sl a_l - rb - wf gl, Sp a_p - rp - wf gp into s.res_l, s.res_p; its norm."""
+    norm2 = 0.0
+    for leg in range(6):
+        for a in range(12):
+            q = -sy.rb[leg, a] - wf * out.gl[leg, a]
+            for b in range(12):
+                q += sy.Sl[a, b] * a_l[leg, b]
+            s.res_l[leg, a] = q
+            norm2 += q * q
+    for a in range(6):
+        q = -sy.rp[a] - wf * out.gp[a]
+        for b in range(6):
+            q += sy.Sp[a, b] * a_p[b]
+        s.res_p[a] = q
+        norm2 += q * q
+    return np.sqrt(norm2)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _trial(sy, a_l, a_p, bh2, gh, s):
+    """The corrector at the iterate: joint-node displacements and velocities into s.xb, s.xp, s.ub, s.up."""
+    for leg in range(6):
+        for c in range(12):
+            s.xb[leg, c], s.ub[leg, c] = correct_one(sy.db[leg, c], sy.vb[leg, c], a_l[leg, c], bh2, gh)
+    for b in range(6):
+        s.xp[b], s.up[b] = correct_one(sy.dpp[b], sy.vpp[b], a_p[b], bh2, gh)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _move(a_l, a_p, lam, s):
+    """a = base - lam * update: a full Newton step (lam = 1, base set to the iterate) or a backtrack."""
+    for leg in range(6):
+        for c in range(12):
+            a_l[leg, c] = s.base_l[leg, c] - lam * s.dl[leg, c]
+    for b in range(6):
+        a_p[b] = s.base_p[b] - lam * s.dp[b]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _take_update(a_l, a_p, s):
+    """Apply the Newton update s.dl, s.dp to the iterate (kept as the base for backtracking); returns
+    the update's largest entry."""
+    size = 0.0
+    for leg in range(6):
+        for c in range(12):
+            size = max(size, abs(s.dl[leg, c]))
+            s.base_l[leg, c] = a_l[leg, c]
+            a_l[leg, c] -= s.dl[leg, c]
+    for b in range(6):
+        size = max(size, abs(s.dp[b]))
+        s.base_p[b] = a_p[b]
+        a_p[b] -= s.dp[b]
+    return size
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def newton_one(fr, jt, r, sy, a_l, a_p, bh2, gh, wf, cfg, out, s):
+    """Joint-node accelerations a_l (6, 12) and platform accelerations a_p (6,) of realisation r's
+    step, in place; returns (converged, iterations).
+
+    Solves Sl a_l - rb - wf gl(x, v) = 0, Sp a_p - rp - wf gp(x, v) = 0 with
+    x = d + bh2 a, v = v_pred + gh a (the integrator's corrector), Newton with
+    backtracking where a full step makes the residual worse (contact kinks).  Converged
+    when the update the residual calls for (the last solve's gain times the residual)
+    moves no joint by more than cfg.tol_d (m) and changes no velocity by more than cfg.tol_v
+    (m/s), at most cfg.max_iterations iterations.  Writes out (:class:`Out`) at the accepted iterate.
+    """
+    ok = False
+    n_it = 0
+    last = np.inf
+    gain = np.inf
+    lam = 1.0
+    for it in range(cfg.max_iterations + 1):
+        _trial(sy, a_l, a_p, bh2, gh, s)
+        _evaluate(fr, jt, r, sy.impact, s.xb, s.xp, s.ub, s.up, s, out)
+        norm = _residual(sy, a_l, a_p, wf, out, s)
+        est = gain * norm
+        if it > 0 and bh2 * est <= cfg.tol_d and gh * est <= cfg.tol_v:
+            ok = True
+        if norm == 0.0:
+            ok = True
+        if ok or it == cfg.max_iterations:
+            break
+        if norm > last and lam > 1.0 / 256.0:
+            lam *= 0.5                    # backtrack: halve the last update
+            _move(a_l, a_p, lam, s)
+            n_it += 1
+            continue
+        last = norm
+        for leg in range(6):
+            for j in range(3):
+                for a in range(3):
+                    for b in range(3):
+                        s.D[leg, j, a, b] = wf * (bh2 * s.De[leg, j, a, b] + gh * s.Dv[leg, j, a, b])
+        _newton_update(fr, sy.Sl, sy.Sp, s)
+        gain = _take_update(a_l, a_p, s) / max(norm, 1e-300)
+        lam = 1.0
+        n_it += 1
+    return ok, n_it
+
+
+@njit(cache=True, fastmath=_FAST)
+def newton_step(fr, jt, sy, ab, ap, bh2, gh, wf, cfg, out, done, count, scratch):
+    """:func:`newton_one` for every realisation of a batch (leading axis R of ``jt``'s and ``sy``'s
+    per-realisation arrays, ``out``'s, ab (R, 6, 12) and ap (R, 6)), one after another; ab and ap are
+    updated in place, done and count (R,) receive its returns; scratch: :func:`make_scratch`."""
+    for r in range(ab.shape[0]):
+        one = System(sy.Sl, sy.Sp, sy.impact[r], sy.rb[r], sy.rp[r], sy.db[r], sy.dpp[r], sy.vb[r], sy.vpp[r])
+        done[r], count[r] = newton_one(fr, jt, r, one, ab[r], ap[r], bh2, gh, wf, cfg,
+                                       Out(out.f[r], out.gl[r], out.gp[r], out.delta[r], out.rate[r]), scratch)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -312,247 +648,7 @@ def _inv3(A, c, out, leg, k):
     out[leg, k, 2, 2] = (A[c, 0, 0] * A[c, 1, 1] - A[c, 0, 1] * A[c, 1, 0]) * inv
 
 
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _newton_update(G, J, Rr, Sl, Sp, D, res_l, res_p, dl, dp, A, Ainv, Up, rhat, M, top, top0, tb,
-                   z, schur, ypiv, y, border, lower, DG, DJ, DR):
-    """Solve the block-arrow Newton system [L B; C P] [dl; dp] = [res_l; res_p] of one realisation.
-
-    L = Sl - G^T diag(D) G per leg is block tridiagonal in the joint nodes' 3x3 blocks
-    (crank node 0 - crank tip: crank; tip - rod C end: joint C; C end - B end: rod), so
-    each leg is eliminated block by block down to its B end (no pivoting: the blocks are
-    the links' condensed step matrices, SPD, plus the contact stiffness); B = E Rr^T D_B J
-    and C = J^T D_B Rr (E the B-end rows) border it, P = Sp - sum J^T D_B J.  The 6x6 Schur
-    complement on the platform is solved with pivoting, then each leg back-substituted.
-    """
-    for a in range(6):
-        for b in range(6):
-            schur[a, b] = Sp[a, b]
-        y[a] = res_p[a]
-    for leg in range(6):
-        # DG_q = D_j G_jc for the pattern's blocks; joint-node block c has pattern entry q = c
-        for q in range(_PATTERN.shape[0]):
-            j, c = _PATTERN[q, 0], _PATTERN[q, 1]
-            for u in range(3):
-                for b in range(3):
-                    DG[q, u, b] = (D[leg, j, u, 0] * G[leg, 3 * j, 3 * c + b]
-                                   + D[leg, j, u, 1] * G[leg, 3 * j + 1, 3 * c + b]
-                                   + D[leg, j, u, 2] * G[leg, 3 * j + 2, 3 * c + b])
-        # diagonal blocks Sl_cc - G_c^T DG_c, off-diagonal: Sl (links) and - G_1^T D_C G_2 (joint C)
-        for c in range(4):
-            j = _PATTERN[c, 0]
-            for a in range(3):
-                g0, g1, g2 = (G[leg, 3 * j, 3 * c + a], G[leg, 3 * j + 1, 3 * c + a],
-                              G[leg, 3 * j + 2, 3 * c + a])
-                for b in range(3):
-                    A[c, a, b] = Sl[3 * c + a, 3 * c + b] - (g0 * DG[c, 0, b] + g1 * DG[c, 1, b]
-                                                             + g2 * DG[c, 2, b])
-        for a in range(3):
-            g0, g1, g2 = G[leg, 3, 3 + a], G[leg, 4, 3 + a], G[leg, 5, 3 + a]          # G_1 (tip)
-            for b in range(3):
-                Up[leg, 0, a, b] = Sl[a, 3 + b]
-                Up[leg, 1, a, b] = -(g0 * DG[2, 0, b] + g1 * DG[2, 1, b] + g2 * DG[2, 2, b])
-                Up[leg, 2, a, b] = Sl[6 + a, 9 + b]
-        # forward elimination down the chain: Ahat_{k+1} = A_{k+1} - W_k Ahat_k^-1 U_k
-        for a in range(3):
-            rhat[leg, 0, a] = res_l[leg, a]
-        _inv3(A, 0, Ainv, leg, 0)
-        for k in range(3):
-            # W_k, the block below the diagonal: Sl (k = 0, 2) or - G_2^T D_C G_1 (k = 1)
-            for a in range(3):
-                for b in range(3):
-                    if k == 1:
-                        M[a, b] = -(G[leg, 3, 6 + a] * DG[1, 0, b] + G[leg, 4, 6 + a] * DG[1, 1, b]
-                                    + G[leg, 5, 6 + a] * DG[1, 2, b])
-                    else:
-                        M[a, b] = Sl[3 * (k + 1) + a, 3 * k + b]
-            for a in range(3):                      # W_k Ahat_k^-1
-                for b in range(3):
-                    top[a, b] = M[a, 0] * Ainv[leg, k, 0, b] + M[a, 1] * Ainv[leg, k, 1, b] \
-                        + M[a, 2] * Ainv[leg, k, 2, b]
-            for a in range(3):
-                s = res_l[leg, 3 * (k + 1) + a]
-                for b in range(3):
-                    s -= top[a, b] * rhat[leg, k, b]
-                    A[k + 1, a, b] -= (top[a, 0] * Up[leg, k, 0, b] + top[a, 1] * Up[leg, k, 1, b]
-                                       + top[a, 2] * Up[leg, k, 2, b])
-                rhat[leg, k + 1, a] = s
-            _inv3(A, k + 1, Ainv, leg, k + 1)
-        # border B_b = Rr^T D_B J (3x6), partner C_b = J^T D_B Rr (6x3), P -= J^T D_B J
-        for u in range(3):
-            for b in range(6):
-                DJ[u, b] = D[leg, 2, u, 0] * J[leg, 0, b] + D[leg, 2, u, 1] * J[leg, 1, b] \
-                    + D[leg, 2, u, 2] * J[leg, 2, b]
-            for b in range(3):
-                DR[u, b] = D[leg, 2, u, 0] * Rr[leg, 0, b] + D[leg, 2, u, 1] * Rr[leg, 1, b] \
-                    + D[leg, 2, u, 2] * Rr[leg, 2, b]
-        for a in range(3):
-            for b in range(6):
-                border[a, b] = Rr[leg, 0, a] * DJ[0, b] + Rr[leg, 1, a] * DJ[1, b] + Rr[leg, 2, a] * DJ[2, b]
-        for a in range(6):
-            for b in range(3):
-                lower[a, b] = J[leg, 0, a] * DR[0, b] + J[leg, 1, a] * DR[1, b] + J[leg, 2, a] * DR[2, b]
-            for b in range(6):
-                schur[a, b] -= J[leg, 0, a] * DJ[0, b] + J[leg, 1, a] * DJ[1, b] + J[leg, 2, a] * DJ[2, b]
-        # the B end: x_3 = Ahat_3^-1 (rhat_3 - border dp) = top0 - tb dp
-        for a in range(3):
-            top0[leg, a] = (Ainv[leg, 3, a, 0] * rhat[leg, 3, 0] + Ainv[leg, 3, a, 1] * rhat[leg, 3, 1]
-                            + Ainv[leg, 3, a, 2] * rhat[leg, 3, 2])
-            for b in range(6):
-                tb[leg, a, b] = (Ainv[leg, 3, a, 0] * border[0, b] + Ainv[leg, 3, a, 1] * border[1, b]
-                                 + Ainv[leg, 3, a, 2] * border[2, b])
-        # Schur complement: P - sum C Ahat_3^-1 B, right-hand side rp - sum C Ahat_3^-1 rhat_3
-        for a in range(6):
-            for b in range(6):
-                schur[a, b] -= (lower[a, 0] * tb[leg, 0, b] + lower[a, 1] * tb[leg, 1, b]
-                                + lower[a, 2] * tb[leg, 2, b])
-            y[a] -= lower[a, 0] * top0[leg, 0] + lower[a, 1] * top0[leg, 1] + lower[a, 2] * top0[leg, 2]
-    _lu(schur, ypiv)
-    for a in range(6):
-        dp[a] = y[a]
-    _lu_solve(schur, ypiv, dp.reshape((6, 1)), 1)
-    for leg in range(6):
-        for a in range(3):
-            s = top0[leg, a]
-            for b in range(6):
-                s -= tb[leg, a, b] * dp[b]
-            dl[leg, 9 + a] = s
-        for k in range(2, -1, -1):          # x_k = Ahat_k^-1 (rhat_k - U_k x_{k+1})
-            for a in range(3):
-                s = rhat[leg, k, a]
-                for b in range(3):
-                    s -= Up[leg, k, a, b] * dl[leg, 3 * (k + 1) + b]
-                z[a] = s
-            for a in range(3):
-                dl[leg, 3 * k + a] = (Ainv[leg, k, a, 0] * z[0] + Ainv[leg, k, a, 1] * z[1]
-                                      + Ainv[leg, k, a, 2] * z[2])
-
-
-@njit(cache=True)
-def newton_scratch():
-    """Work arrays of one realisation's Newton iteration (see :func:`newton_one`)."""
-    return (np.empty((6, 3, 3)), np.empty((6, 3, 3)), np.empty((6, 3, 3, 3)), np.empty((6, 3, 3, 3)),
-            np.empty((6, 3, 3, 3)), np.empty(21),
-            np.empty((6, 12)), np.empty((6, 12)), np.empty(6), np.empty(6), np.empty((6, 12)),
-            np.empty(6), np.empty((6, 12)), np.empty(6), np.empty((6, 12)), np.empty(6),
-            np.empty((4, 3, 3)), np.empty((6, 4, 3, 3)), np.empty((6, 3, 3, 3)), np.empty((6, 4, 3)),
-            np.empty((3, 3)), np.empty((3, 3)), np.empty((6, 3)), np.empty((6, 3, 6)), np.empty(3),
-            np.empty((6, 6)), np.empty(6, np.int64), np.empty(6), np.empty((3, 6)), np.empty((6, 3)),
-            np.empty((_PATTERN.shape[0], 3, 3)), np.empty((3, 6)), np.empty((3, 3)))
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def newton_one(G, J, Rr, omega, w, radius, Sl, Sp, params, law, impact, rb, rp, db, dpp, vb, vpp,
-               a_l, a_p, bh2, gh, wf, limits, f, gl, gp, delta, rate, scratch):
-    """Joint-node accelerations a_l (6, 12) and platform accelerations a_p (6,) of one realisation's
-    step, in place; returns (converged, iterations).
-
-    Solves Sl a_l - rb - wf gl(x, v) = 0, Sp a_p - rp - wf gp(x, v) = 0 with
-    x = d + bh2 a, v = v_pred + gh a (the integrator's corrector), Newton with
-    backtracking where a full step makes the residual worse (contact kinks).  Converged
-    when the update the residual calls for (the last solve's gain times the residual)
-    moves no joint by more than tol_d (m) and changes no velocity by more than tol_v
-    (m/s), at most limits[2] iterations (limits = [tol_d, tol_v, max iterations]: an array, so
-    its calls have 29 arguments: Python passes 31 or more as *args, which numba cannot inline).
-    Writes the contact forces f (6, 3, 3), generalised forces gl, gp and the penetrations and
-    rates (6, 4) [A radial, A axial, C, B] at the accepted iterate.
-    """
-    tol_d, tol_v, max_iterations = limits[0], limits[1], int(limits[2])
-    (e, de, De, Dv, D, pair, xb, ub, xp, up, res_l, res_p, dl, dp, base_l, base_p,
-     A, Ainv, Up, rhat, M, top, top0, tb, z, schur, ypiv, y, border, lower, DG, DJ, DR) = scratch
-    ok = False
-    n_it = 0
-    last = np.inf
-    gain = np.inf
-    lam = 1.0
-    for it in range(max_iterations + 1):
-        for leg in range(6):
-            for c in range(12):
-                xb[leg, c] = db[leg, c] + bh2 * a_l[leg, c]
-                ub[leg, c] = vb[leg, c] + gh * a_l[leg, c]
-        for b in range(6):
-            xp[b] = dpp[b] + bh2 * a_p[b]
-            up[b] = vpp[b] + gh * a_p[b]
-        _evaluate(G, J, w, omega, radius, params, law, impact, xb, xp, ub, up,
-                  e, de, f, De, Dv, delta, rate, gl, gp, pair)
-        norm2 = 0.0
-        for leg in range(6):
-            for a in range(12):
-                s = -rb[leg, a] - wf * gl[leg, a]
-                for b in range(12):
-                    s += Sl[a, b] * a_l[leg, b]
-                res_l[leg, a] = s
-                norm2 += s * s
-        for a in range(6):
-            s = -rp[a] - wf * gp[a]
-            for b in range(6):
-                s += Sp[a, b] * a_p[b]
-            res_p[a] = s
-            norm2 += s * s
-        norm = np.sqrt(norm2)
-        est = gain * norm
-        if it > 0 and bh2 * est <= tol_d and gh * est <= tol_v:
-            ok = True
-        if norm == 0.0:
-            ok = True
-        if ok or it == max_iterations:
-            break
-        if norm > last and lam > 1.0 / 256.0:
-            # backtrack: halve the last update
-            lam *= 0.5
-            for leg in range(6):
-                for c in range(12):
-                    a_l[leg, c] = base_l[leg, c] - lam * dl[leg, c]
-            for b in range(6):
-                a_p[b] = base_p[b] - lam * dp[b]
-            n_it += 1
-            continue
-        last = norm
-        for leg in range(6):
-            for j in range(3):
-                for a in range(3):
-                    for b in range(3):
-                        D[leg, j, a, b] = wf * (bh2 * De[leg, j, a, b] + gh * Dv[leg, j, a, b])
-        _newton_update(G, J, Rr, Sl, Sp, D, res_l, res_p, dl, dp, A, Ainv, Up, rhat, M, top, top0, tb,
-                       z, schur, ypiv, y, border, lower, DG, DJ, DR)
-        size = 0.0
-        for leg in range(6):
-            for c in range(12):
-                size = max(size, abs(dl[leg, c]))
-        for b in range(6):
-            size = max(size, abs(dp[b]))
-        gain = size / max(norm, 1e-300)
-        for leg in range(6):
-            for c in range(12):
-                base_l[leg, c] = a_l[leg, c]
-                a_l[leg, c] -= dl[leg, c]
-        for b in range(6):
-            base_p[b] = a_p[b]
-            a_p[b] -= dp[b]
-        lam = 1.0
-        n_it += 1
-    return ok, n_it
-
-
-@njit(cache=True, fastmath=_FAST)
-def newton_step(G, J, Rr, omega, w, radius, Sl, Sp, params, law, impact,
-                rb, rp, db, dpp, vb, vpp, ab, ap, bh2, gh, wf, tol_d, tol_v, max_iterations,
-                f, gl, gp, delta, rate, done, count):
-    """:func:`newton_one` for every realisation of a batch (leading axis R), one after another;
-    ab (R, 6, 12) and ap (R, 6) are updated in place, done and count receive its returns."""
-    scratch = newton_scratch()
-    limits = np.array([tol_d, tol_v, max_iterations])
-    for r in range(ab.shape[0]):
-        done[r], count[r] = newton_one(G, J, Rr, omega, w, radius, Sl, Sp, params[r], law, impact[r],
-                                       rb[r], rp[r], db[r], dpp[r], vb[r], vpp[r], ab[r], ap[r],
-                                       bh2, gh, wf, limits, f[r], gl[r], gp[r],
-                                       delta[r], rate[r], scratch)
-
-
 # --- whole steps: predictor, condensation, Newton, recovery, adaptive control ---
-
-NEWTON_FAILED = 1   # failure codes written to ``fail``
-DIVERGED = 2
-
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _gather(x, o, n, X, col):
@@ -587,12 +683,11 @@ def _platform(Mp, x, scale, out):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _internal(x, u, layout, coef, Mp, work, out):
+def _internal(x, u, layout, cfg, Mp, work, out):
     """C u + K x (Rayleigh C = l1 M + l2 K) into out (N,): per link type one product
     [l1 u, x + l2 u] (6, 2n) @ [M; K] (2n, n); the platform has mass only (l1 Mp u)."""
-    nc, Wc, Wr = layout[0], layout[1], layout[2]
-    l1, l2 = coef[0], coef[1]
-    Zc, Zr, Ic, Ir = work[0], work[1], work[2], work[3]
+    nc, l1, l2 = layout.crank_dofs, cfg.mass_damping, cfg.stiffness_damping
+    Zc, Zr = work.Zc, work.Zr
     N = out.shape[0]
     step = (N - 6) // 6
     nr = step - nc
@@ -604,25 +699,22 @@ def _internal(x, u, layout, coef, Mp, work, out):
         for c in range(nr):
             Zr[leg, c] = l1 * u[base + nc + c]
             Zr[leg, nr + c] = x[base + nc + c] + l2 * u[base + nc + c]
-    np.dot(Zc, Wc, Ic)
-    np.dot(Zr, Wr, Ir)
-    _scatter(Ic, Ir, out)
+    np.dot(Zc, layout.crank_MK, work.Ic)
+    np.dot(Zr, layout.rod_MK, work.Ir)
+    _scatter(work.Ic, work.Ir, out)
     _platform(Mp, u, l1, out)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _mass(acc, layout, Mp, work, out):
     """M a into out (N,), per link type one product a (6, n) @ M (n, n), and the platform's."""
-    nc, Mc, Mr = layout[0], layout[3], layout[4]
-    Ac, Ar, Ic, Ir = work[4], work[5], work[2], work[3]
-    N = out.shape[0]
-    step = (N - 6) // 6
-    nr = step - nc
-    _gather(acc, 0, nc, Ac, 0)
-    _gather(acc, nc, nr, Ar, 0)
-    np.dot(Ac, Mc, Ic)
-    np.dot(Ar, Mr, Ir)
-    _scatter(Ic, Ir, out)
+    nc = layout.crank_dofs
+    step = (out.shape[0] - 6) // 6
+    _gather(acc, 0, nc, work.Ac, 0)
+    _gather(acc, nc, step - nc, work.Ar, 0)
+    np.dot(work.Ac, layout.crank_M, work.Ic)
+    np.dot(work.Ar, layout.rod_M, work.Ir)
+    _scatter(work.Ic, work.Ir, out)
     _platform(Mp, acc, 1.0, out)
 
 
@@ -641,83 +733,92 @@ def _joint_nodes(x, cb, nc, xb, xp):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _attempt(r, level, k0, k1, lv, layout, coef, F, Mp, G, J, Rr, omega, w, radius, params, law,
-             newton_limits, d, v, a, Ma, rest, g, stored, in_contact, crate, work, scratch):
+def _prepare(r, level, k0, k1, lv, layout, cfg, ch, st, work):
+    """Realisation r's step from instant k0 to k1 at level ``level`` up to its Newton problem:
+    predictor, right-hand side, condensation onto the joint nodes, impact speeds, platform matrix."""
+    nc, cb, am, af = layout.crank_dofs, layout.crank_boundary, cfg.alpha_m, cfg.alpha_f
+    N = st.d.shape[1]
+    nr = (N - 6) // 6 - nc
+    ni_c, ni_r = work.Yc.shape[1] - 6, work.Yr.shape[1] - 6
+    h, d_pred, v_pred = lv.h[level], lv.d_pred[level], lv.v_pred[level]
+    for n in range(N):
+        work.dp[n], work.vp[n] = predict_one(st.d[r, n], st.v[r, n], st.a[r, n], h, d_pred, v_pred)
+    _internal(work.dp, work.vp, layout, cfg, ch.Mp[k1], work, work.tmp)
+    weighted = am != 0.0 or af != 0.0
+    wf = 1.0 - af
+    for n in range(N):
+        work.rhs[n] = wf * (ch.F[k1, n] - work.tmp[n])
+        if weighted:
+            work.rhs[n] += af * (ch.F[k0, n] + st.g[r, n] - st.rest[r, n]) - am * st.Ma[r, n]
+    # condensation onto the joint nodes: [r_i inv, r_b - r_i P] per link type
+    _gather(work.rhs, 0, nc, work.Ac, 0)
+    _gather(work.rhs, nc, nr, work.Ar, 0)
+    np.dot(work.Ac, lv.crank_T[level], work.Yc)
+    np.dot(work.Ar, lv.rod_T[level], work.Yr)
+    for leg in range(6):
+        for q in range(6):
+            work.rb[leg, q] = work.Yc[leg, ni_c + q]
+            work.rb[leg, 6 + q] = work.Yr[leg, ni_r + q]
+    _joint_nodes(work.dp, cb, nc, work.db, work.dpp)
+    _joint_nodes(work.vp, cb, nc, work.vb, work.vpp)
+    _joint_nodes(st.a[r], cb, nc, work.ab, work.ap)
+    for leg in range(6):
+        for m in range(4):
+            work.impact[leg, m] = (st.stored[r, leg, m] if st.in_contact[r, leg, m]
+                                   else max(st.crate[r, leg, m], cfg.impact_floor))
+    for i in range(6):
+        for j in range(6):
+            work.Sp[i, j] = lv.coef_p[level] * ch.Mp[k1, i, j]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _recover(level, lv, work):
+    """The link interiors from the joint nodes' new accelerations ([y, x_b] -> link vectors), then
+    the corrector: the candidate a_new, d_new, v_new in work."""
+    N = work.a_new.shape[0]
+    ni_c, ni_r = work.Yc.shape[1] - 6, work.Yr.shape[1] - 6
+    for leg in range(6):
+        for q in range(6):
+            work.Yc[leg, ni_c + q] = work.ab[leg, q]
+            work.Yr[leg, ni_r + q] = work.ab[leg, 6 + q]
+    np.dot(work.Yc, lv.crank_U[level], work.Ac)
+    np.dot(work.Yr, lv.rod_U[level], work.Ar)
+    _scatter(work.Ac, work.Ar, work.a_new)
+    for b in range(6):
+        work.a_new[N - 6 + b] = work.ap[b]
+    d_corr, v_corr = lv.d_corr[level], lv.v_corr[level]
+    for n in range(N):
+        work.d_new[n], work.v_new[n] = correct_one(work.dp[n], work.vp[n], work.a_new[n], d_corr, v_corr)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _attempt(r, level, k0, k1, lv, layout, cfg, ch, jt, st, work, scratch):
     """One step of realisation r from instant k0 to k1 with level ``level``'s step: predictor,
     right-hand side, condensation, Newton, recovery, corrector.  Leaves the candidate state in
     work and returns (converged, Newton iterations)."""
-    hs, coef_p, bh2s, ghs, S, Tc, Uc, Tr, Ur = lv[1], lv[2], lv[3], lv[4], lv[6], lv[7], lv[8], lv[9], lv[10]
-    nc, cb = layout[0], layout[5]
-    beta, gamma, am, af, floor = coef[2], coef[3], coef[4], coef[5], coef[7]
-    (Zc, Zr, Ic, Ir, Ac, Ar, Yc, Yr, dp, vp, rhs, tmp, a_new, d_new, v_new, rb, db, vb, ab, dpp, vpp,
-     ap, impact, Sp, f, gl, gp, delta, rate, e, jb, jp) = work
-    N = d.shape[1]
-    step = (N - 6) // 6
-    nr = step - nc
-    ni_c, ni_r = Yc.shape[1] - 6, Yr.shape[1] - 6
-    h = hs[level]
-    wf = 1.0 - af
-    c2 = (0.5 - beta) * h * h
-    c1 = (1.0 - gamma) * h
-    for n in range(N):
-        dp[n] = d[r, n] + h * v[r, n] + c2 * a[r, n]
-        vp[n] = v[r, n] + c1 * a[r, n]
-    _internal(dp, vp, layout, coef, Mp[k1], work, tmp)
-    weighted = am != 0.0 or af != 0.0
-    for n in range(N):
-        rhs[n] = wf * (F[k1, n] - tmp[n])
-        if weighted:
-            rhs[n] += af * (F[k0, n] + g[r, n] - rest[r, n]) - am * Ma[r, n]
-    # condensation onto the joint nodes: [r_i inv, r_b - r_i P] per link type
-    _gather(rhs, 0, nc, Ac, 0)
-    _gather(rhs, nc, nr, Ar, 0)
-    np.dot(Ac, Tc[level], Yc)
-    np.dot(Ar, Tr[level], Yr)
-    for leg in range(6):
-        for q in range(6):
-            rb[leg, q] = Yc[leg, ni_c + q]
-            rb[leg, 6 + q] = Yr[leg, ni_r + q]
-    _joint_nodes(dp, cb, nc, db, dpp)
-    _joint_nodes(vp, cb, nc, vb, vpp)
-    _joint_nodes(a[r], cb, nc, ab, ap)
-    for leg in range(6):
-        for m in range(4):
-            impact[leg, m] = stored[r, leg, m] if in_contact[r, leg, m] else max(crate[r, leg, m], floor)
-    for i in range(6):
-        for j in range(6):
-            Sp[i, j] = coef_p[level] * Mp[k1, i, j]
-    ok, count = newton_one(G[k1], J[k1], Rr[k1], omega[k1], w, radius, S[level], Sp, params[r], law,
-                           impact, rb, rhs[N - 6:], db, dpp, vb, vpp, ab, ap, bh2s[level], ghs[level], wf,
-                           newton_limits, f, gl, gp,
-                           delta, rate, scratch)
-    # recovery: [y, x_b] -> link vectors
-    for leg in range(6):
-        for q in range(6):
-            Yc[leg, ni_c + q] = ab[leg, q]
-            Yr[leg, ni_r + q] = ab[leg, 6 + q]
-    np.dot(Yc, Uc[level], Ac)
-    np.dot(Yr, Ur[level], Ar)
-    _scatter(Ac, Ar, a_new)
-    for b in range(6):
-        a_new[N - 6 + b] = ap[b]
-    bh2, gh = bh2s[level], ghs[level]
-    for n in range(N):
-        d_new[n] = dp[n] + bh2 * a_new[n]
-        v_new[n] = vp[n] + gh * a_new[n]
+    _prepare(r, level, k0, k1, lv, layout, cfg, ch, st, work)
+    N = st.d.shape[1]
+    fr = Frame(ch.G[k1], ch.J[k1], ch.Rr[k1], ch.omega[k1])
+    sy = System(lv.legs[level], work.Sp, work.impact, work.rb, work.rhs[N - 6:], work.db, work.dpp,
+                work.vb, work.vpp)
+    out = Out(work.f, work.gl, work.gp, work.delta, work.rate)
+    ok, count = newton_one(fr, jt, r, sy, work.ab, work.ap, lv.d_corr[level], lv.v_corr[level],
+                           1.0 - cfg.alpha_f, cfg, out, scratch)
+    _recover(level, lv, work)
     return ok, count
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _jump(r, k1, a, layout, G, J, work):
+def _jump(r, k1, a, layout, ch, work):
     """Largest change of a joint's relative acceleration over the candidate step, |delta a| (m/s^2)."""
-    ab, ap, e, jb, jp = work[18], work[21], work[29], work[30], work[31]
-    _joint_nodes(a[r], layout[5], layout[0], jb, jp)
+    jb, jp, e = work.jb, work.jp, work.e
+    _joint_nodes(a[r], layout.crank_boundary, layout.crank_dofs, jb, jp)
     for leg in range(6):           # ab, ap: the joint nodes of the new accelerations
         for q in range(12):
-            jb[leg, q] = ab[leg, q] - jb[leg, q]
+            jb[leg, q] = work.ab[leg, q] - jb[leg, q]
     for b in range(6):
-        jp[b] = ap[b] - jp[b]
-    relative(G[k1], J[k1], jb, jp, e)
+        jp[b] = work.ap[b] - jp[b]
+    relative(ch.G[k1], ch.J[k1], jb, jp, e)
     big = 0.0
     for leg in range(6):
         for j in range(3):
@@ -726,118 +827,115 @@ def _jump(r, k1, a, layout, G, J, work):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _accept(r, k1, layout, coef, Mp, t, d, v, a, Ma, rest, g, stored, in_contact, crate,
-            peak, cpeak, work):
+def _accept(r, k1, layout, cfg, ch, st, rec, work):
     """Make the candidate step in work realisation r's state: contact memory, weighted terms, peaks."""
-    cb = layout[5]
-    am, af, settle_at = coef[4], coef[5], coef[6]
-    a_new, d_new, v_new, impact, f, gl, gp, delta, rate = (work[12], work[13], work[14], work[22],
-                                                           work[24], work[25], work[26], work[27], work[28])
-    N = d.shape[1]
+    cb = layout.crank_boundary
+    N = st.d.shape[1]
     step = (N - 6) // 6
     for n in range(N):
-        d[r, n], v[r, n], a[r, n] = d_new[n], v_new[n], a_new[n]
+        st.d[r, n], st.v[r, n], st.a[r, n] = work.d_new[n], work.v_new[n], work.a_new[n]
     for leg in range(6):
         for m in range(4):
-            closed = delta[leg, m] > 0.0
-            if closed and not in_contact[r, leg, m]:
-                stored[r, leg, m] = impact[leg, m]
-            in_contact[r, leg, m] = closed
-            crate[r, leg, m] = rate[leg, m]
-    if am != 0.0 or af != 0.0:
-        _mass(a_new, layout, Mp[k1], work, Ma[r])
-        _internal(d_new, v_new, layout, coef, Mp[k1], work, rest[r])
+            closed = work.delta[leg, m] > 0.0
+            if closed and not st.in_contact[r, leg, m]:
+                st.stored[r, leg, m] = work.impact[leg, m]
+            st.in_contact[r, leg, m] = closed
+            st.crate[r, leg, m] = work.rate[leg, m]
+    if cfg.alpha_m != 0.0 or cfg.alpha_f != 0.0:
+        _mass(work.a_new, layout, ch.Mp[k1], work, st.Ma[r])
+        _internal(work.d_new, work.v_new, layout, cfg, ch.Mp[k1], work, st.rest[r])
         for n in range(N):
-            g[r, n] = 0.0
+            st.g[r, n] = 0.0
         for leg in range(6):
             base = leg * step
             for q in range(6):
-                g[r, base + cb[q]] = gl[leg, q]
-                g[r, base + step - 6 + q] = gl[leg, 6 + q]
+                st.g[r, base + cb[q]] = work.gl[leg, q]
+                st.g[r, base + step - 6 + q] = work.gl[leg, 6 + q]
         for b in range(6):
-            g[r, N - 6 + b] = gp[b]
-    if t[k1] >= settle_at:
-        for b in range(6):
-            peak[r, 0, b] = max(peak[r, 0, b], abs(d_new[N - 6 + b]))
-            peak[r, 1, b] = max(peak[r, 1, b], abs(v_new[N - 6 + b]))
-            peak[r, 2, b] = max(peak[r, 2, b], abs(a_new[N - 6 + b]))
-        for leg in range(6):
-            for j in range(3):
-                mag = np.sqrt(f[leg, j, 0] ** 2 + f[leg, j, 1] ** 2 + f[leg, j, 2] ** 2)
-                cpeak[r, 6 * j + leg] = max(cpeak[r, 6 * j + leg], mag)
+            st.g[r, N - 6 + b] = work.gp[b]
+    if ch.t[k1] >= cfg.settle_at:
+        _peaks(r, work, rec)
 
 
-@njit(cache=True)
-def work_arrays(N, nc, nr, ni_c, ni_r):
-    """Per-realisation work arrays of :func:`advance_chunk` (see ``_attempt``)."""
-    return (np.empty((6, 2 * nc)), np.empty((6, 2 * nr)), np.empty((6, nc)), np.empty((6, nr)),
-            np.empty((6, nc)), np.empty((6, nr)), np.empty((6, ni_c + 6)), np.empty((6, ni_r + 6)),
-            np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N),
-            np.empty((6, 12)), np.empty((6, 12)), np.empty((6, 12)), np.empty((6, 12)), np.empty(6),
-            np.empty(6), np.empty(6), np.empty((6, 4)), np.empty((6, 6)), np.empty((6, 3, 3)),
-            np.empty((6, 12)), np.empty(6), np.empty((6, 4)), np.empty((6, 4)), np.empty((6, 3, 3)),
-            np.empty((6, 12)), np.empty(6))
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _peaks(r, work, rec):
+    """Realisation r's peaks of |platform error| and |contact force| updated with the candidate step."""
+    N = work.d_new.shape[0]
+    for b in range(6):
+        rec.peak[r, 0, b] = max(rec.peak[r, 0, b], abs(work.d_new[N - 6 + b]))
+        rec.peak[r, 1, b] = max(rec.peak[r, 1, b], abs(work.v_new[N - 6 + b]))
+        rec.peak[r, 2, b] = max(rec.peak[r, 2, b], abs(work.a_new[N - 6 + b]))
+    f = work.f
+    for leg in range(6):
+        for j in range(3):
+            mag = np.sqrt(f[leg, j, 0] ** 2 + f[leg, j, 1] ** 2 + f[leg, j, 2] ** 2)
+            rec.cpeak[r, 6 * j + leg] = max(rec.cpeak[r, 6 * j + leg], mag)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _largest(x):
+    """Largest |x|; inf if any entry is inf or nan."""
+    big = 0.0
+    for n in range(x.shape[0]):
+        big = max(big, abs(x[n]))
+        if not np.isfinite(x[n]):
+            big = np.inf
+    return big
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _base_step(r, k_start, lv, layout, cfg, ch, jt, st, rec, work, scratch):
+    """Carry realisation r through one base step from fine instant k_start, halving where Newton fails
+    or the local error estimate exceeds the tolerance: a failed attempt at level l is retried at
+    l + 1 from the same instant; after an accepted step the next attempt takes the coarsest level
+    whose step starts at the instant reached.  Returns False where r failed (recorded in rec)."""
+    k, level = k_start, 0
+    while k < k_start + lv.span[0]:
+        k1 = k + lv.span[level]
+        ok, count = _attempt(r, level, k, k1, lv, layout, cfg, ch, jt, st, work, scratch)
+        rec.iters[r] += count
+        big = _largest(work.d_new)
+        sound = ok and big < cfg.divergence_limit
+        accept = True
+        if level < cfg.refinements:
+            accept = sound
+            if sound and cfg.tolerance > 0.0:
+                accept = lv.error[level] * _jump(r, k1, st.a, layout, ch, work) <= cfg.tolerance
+        if not accept:
+            rec.refined[r] += 1
+            level += 1
+            continue
+        if not sound:
+            rec.alive[r] = False
+            rec.fail[r] = NEWTON_FAILED if not ok else DIVERGED
+            rec.fail_t[r], rec.fail_h[r], rec.fail_size[r] = ch.t[k1], lv.h[level], big
+            return False
+        _accept(r, k1, layout, cfg, ch, st, rec, work)
+        rec.steps[r] += 1
+        k = k1
+        level = 0
+        while (k - k_start) % lv.span[level] != 0:
+            level += 1
+    return True
 
 
 @njit(cache=True, fastmath=_FAST)
-def advance_chunk(live, first, n_base, every, lv, layout, coef, F, Mp, G, J, Rr, omega, t, w, radius,
-                  params, law, newton_limits, refinements, d, v, a, Ma, rest, g, stored, in_contact,
-                  crate, peak, cpeak, hist, alive, fail, fail_at, steps, iters, refined, work, scratch):
+def advance_chunk(live, first, n_base, every, lv, layout, cfg, ch, jt, st, rec, work, scratch):
     """Carry realisations ``live`` through base steps first .. first + n_base - 1 (the chunk's
-    instants on the finest grid start at the first one's start), in place.
-
-    coef = [lambda_1, lambda_2, beta, gamma, alpha_m, alpha_f, settle time (s), impact speed
-    floor (m/s), tolerance (m), divergence limit (m)]; newton_limits = [tol_d (m), tol_v (m/s),
-    max iterations].  A realisation that fails gets ``fail`` (NEWTON_FAILED, DIVERGED) and
-    fail_at = [t (s), h (s), largest |d| (m)], and stops.  Histories are kept at base steps
-    divisible by ``every``.
-    """
-    spans, errs = lv[0], lv[5]
-    tolerance, limit = coef[8], coef[9]
-    N = d.shape[1]
-    fine = spans[0]
+    instants on the finest grid start at the first one's start), in place; a realisation that fails
+    is recorded in rec (:class:`Records`) and stops.  Histories are kept at base steps divisible by
+    ``every``.  Returns the number of realisations still alive."""
+    N = st.d.shape[1]
+    alive = 0
     for r in live:
         for s in range(n_base):
-            k_start = s * fine
-            k, level = k_start, 0
-            while k < k_start + fine:
-                k1 = k + spans[level]
-                ok, count = _attempt(r, level, k, k1, lv, layout, coef, F, Mp, G, J, Rr, omega, w,
-                                     radius, params, law, newton_limits, d, v, a, Ma, rest, g, stored,
-                                     in_contact, crate, work, scratch)
-                iters[r] += count
-                d_new = work[13]
-                big = 0.0                           # largest |d|; inf if any is inf or nan
-                for n in range(N):
-                    big = max(big, abs(d_new[n]))
-                    if not np.isfinite(d_new[n]):
-                        big = np.inf
-                sound = ok and big < limit
-                accept = True
-                if level < refinements:
-                    accept = sound
-                    if sound and tolerance > 0.0:
-                        accept = errs[level] * _jump(r, k1, a, layout, G, J, work) <= tolerance
-                if not accept:
-                    refined[r] += 1
-                    level += 1
-                    continue
-                if not sound:
-                    alive[r] = False
-                    fail[r] = NEWTON_FAILED if not ok else DIVERGED
-                    fail_at[r, 0], fail_at[r, 1], fail_at[r, 2] = t[k1], lv[1][level], big
-                    break
-                _accept(r, k1, layout, coef, Mp, t, d, v, a, Ma, rest, g, stored, in_contact, crate,
-                        peak, cpeak, work)
-                steps[r] += 1
-                k = k1
-                level = 0
-                while (k - k_start) % spans[level] != 0:
-                    level += 1
-            if not alive[r]:
+            if not _base_step(r, s * lv.span[0], lv, layout, cfg, ch, jt, st, rec, work, scratch):
                 break
             if (first + s) % every == 0:
+                k = (first + s) // every
                 for b in range(6):
-                    hist[0, r, (first + s) // every, b] = d[r, N - 6 + b]
-                    hist[1, r, (first + s) // every, b] = v[r, N - 6 + b]
-                    hist[2, r, (first + s) // every, b] = a[r, N - 6 + b]
+                    rec.hist[0, r, k, b] = st.d[r, N - 6 + b]
+                    rec.hist[1, r, k, b] = st.v[r, N - 6 + b]
+                    rec.hist[2, r, k, b] = st.a[r, N - 6 + b]
+        alive += rec.alive[r]
+    return alive

@@ -4,47 +4,20 @@ Per chunk of steps the condensed step matrices are factorised for all steps at
 once (numpy over time); the step loop then only does small matrix-vector
 products with constant link matrices and the time-varying end maps.  A run
 that blows up (non-finite state or an elastic displacement above
-``divergence_limit``) stops with status 'failed' and a message; it does not raise.
+``divergence_limit``) stops with status :data:`.status.FAILED` and a message; it does not raise.
 """
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
 from .assembly import (ElasticModel, StepSolver, apply, build_elastic_model, internal_force,
                        system_at)
-from .integrators import Integrator
+from .integrators import Integrator, correct, predict
 from .kinematics import rigid_motion
+from .results import SimulationResult, time_grid
+from .status import DIVERGENCE_LIMIT, FAILED, FINISHED, diverged, failure_message
 
-__all__ = ["SimulationResult", "simulate_elastic", "time_grid", "quasi_static_state", "elastic_energy"]
-
-
-@dataclass(frozen=True)
-class SimulationResult:
-    """Platform elastic error (actual minus ideal rigid pose) and solver diagnostics, SI."""
-    t: np.ndarray             # (T,) s
-    displacement: np.ndarray  # (T, 6) x, y, z [m], rx, ry, rz [rad]
-    velocity: np.ndarray      # (T, 6) m/s, rad/s
-    acceleration: np.ndarray  # (T, 6) m/s^2, rad/s^2
-    status: str               # 'finished' or 'failed'
-    message: str
-    steps: int                # steps taken
-    states: tuple | None = None  # full (d, v, a) histories (T, N) when asked for
-    peak_abs_error: np.ndarray | None = None      # (3, 6) max |error| over internal steps, if finer
-    contact_force_peak: np.ndarray | None = None  # (18,) N, joints A1..A6, C1..C6, B1..B6
-    iterations: int = 0                           # Newton iterations (contact level)
-    draw: object | None = None  # the ClearanceDraw an ensemble file records (clearance levels)
-
-
-def time_grid(duration: float, dt: float) -> np.ndarray:
-    """t_k = k dt on [0, duration]; dt must divide the duration."""
-    if not dt > 0:
-        raise ValueError(f"time step must be positive, got {dt!r}")
-    n = duration / dt
-    if abs(n - round(n)) > 1e-6 * max(1.0, n):
-        raise ValueError(f"time step {dt!r} s does not divide the duration {duration!r} s")
-    return np.arange(int(round(n)) + 1) * dt
+__all__ = ["simulate_elastic", "quasi_static_state", "elastic_energy"]
 
 
 def _system(scene, model: ElasticModel, t: np.ndarray):
@@ -70,7 +43,7 @@ def quasi_static_state(scene, model: ElasticModel, t0: float = 0.0, h: float = 1
 def simulate_elastic(scene, elements: int = 4, integrator: Integrator | None = None,
                      dt: float | None = None, model: ElasticModel | None = None,
                      initial=None, chunk: int = 200, keep_states: bool = False,
-                     divergence_limit: float = 1.0) -> SimulationResult:
+                     divergence_limit: float = DIVERGENCE_LIMIT) -> SimulationResult:
     """Integrate eq. 32 along the scene's trajectory; the platform error is its elastic motion.
 
     ``initial`` is (d, v, a) or None for the quasi-static state at t = 0;
@@ -83,12 +56,12 @@ def simulate_elastic(scene, elements: int = 4, integrator: Integrator | None = N
     d, v, a = quasi_static_state(scene, model) if initial is None else map(np.asarray, initial)
     cM, cC, cK = integrator.step_coefficients(h)
     lam1, lam2 = model.mass_damping, model.stiffness_damping
-    am, af, beta, gamma = integrator.alpha_m, integrator.alpha_f, integrator.beta, integrator.gamma
+    am, af, w = integrator.alpha_m, integrator.alpha_f, integrator.weights(h)
     weighted = am != 0.0 or af != 0.0
     keep = slice(None) if keep_states else slice(-6, None)  # full states or the platform's
     hist = np.full((3, len(t), d[..., keep].shape[-1]), np.nan)
     hist[:, 0] = d[keep], v[keep], a[keep]
-    status, message, steps = "finished", "", 0
+    status, message, steps = FINISHED, "", 0
     maps, F = _system(scene, model, t[:1])
     Ma, rest = apply(model, maps[0], a, 1.0, 0.0), internal_force(model, maps[0], d, v)
     Fn = F[0]
@@ -97,26 +70,25 @@ def simulate_elastic(scene, elements: int = 4, integrator: Integrator | None = N
         maps, F = _system(scene, model, t[start:stop])
         solver = StepSolver(model, maps, cM + cC * lam1, cC * lam2 + cK)
         for j in range(stop - start):
-            dp = d + h * v + (0.5 - beta) * h * h * a
-            vp = v + (1.0 - gamma) * h * a
+            dp, vp = predict(d, v, a, h, w.d_pred, w.v_pred)
             r = (1.0 - af) * (F[j] - internal_force(model, maps[j], dp, vp))
             if weighted:
                 r += af * (Fn - rest) - am * Ma
             a = solver.solve(j, r)
-            d, v = dp + beta * h * h * a, vp + gamma * h * a
+            d, v = correct(dp, vp, a, w.d_corr, w.v_corr)
             if weighted:
                 Ma = apply(model, maps[j], a, 1.0, 0.0)
                 rest = internal_force(model, maps[j], d, v)
                 Fn = F[j]
             k = start + j
             if not (np.all(np.isfinite(d)) and np.abs(d).max() < divergence_limit):
-                status = "failed"
-                message = (f"diverged at t = {t[k]:.6g} s (step {k}): elastic displacement "
-                           f"{np.abs(d).max():.3g} exceeds {divergence_limit:g} or is not finite")
+                status = FAILED
+                message = failure_message(diverged("elastic displacement", np.abs(d).max(),
+                                                   divergence_limit), t[k], k, h)
                 break
             hist[:, k] = d[keep], v[keep], a[keep]
             steps = k
-        if status == "failed":
+        if status == FAILED:
             break
     p = hist[..., -6:]
     return SimulationResult(t, p[0], p[1], p[2], status, message, steps,

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Integrator", "INTEGRATORS", "make_integrator"]
+__all__ = ["Integrator", "INTEGRATORS", "make_integrator", "StepWeights", "predict", "correct"]
 
 INTEGRATORS = ("newmark", "hht", "generalized-alpha", "central-difference")   # the names make_integrator knows
 
@@ -62,7 +62,34 @@ class Integrator:
         w = 1.0 - self.alpha_f
         return 1.0 - self.alpha_m, w * self.gamma * h, w * self.beta * h * h
 
+    def weights(self, h: float) -> "StepWeights":
+        """The predictor's and corrector's weights for a step of h (s)."""
+        return StepWeights(h, (0.5 - self.beta) * h * h, (1.0 - self.gamma) * h, self.beta * h * h,
+                           self.gamma * h)
 
+
+@dataclass(frozen=True)
+class StepWeights:
+    """Weights of one step of length h (s): predictor d~ = d + h v + d_pred a, v~ = v + v_pred a;
+    corrector d+ = d~ + d_corr a+, v+ = v~ + v_corr a+."""
+    h: float
+    d_pred: float   # (1/2 - beta) h^2, s^2
+    v_pred: float   # (1 - gamma) h, s
+    d_corr: float   # beta h^2, s^2
+    v_corr: float   # gamma h, s
+
+
+def predict(d, v, a, h: float, d_pred: float, v_pred: float):
+    """The generalized-alpha predictor (d~, v~) from the state at a step's start (any shape), with
+    the weights of :class:`StepWeights`.  :func:`.contact_kernel.predict_one` is its compiled twin
+    (tests/test_integrators.py)."""
+    return d + h * v + d_pred * a, v + v_pred * a
+
+
+def correct(dp, vp, a, d_corr: float, v_corr: float):
+    """The corrector (d+, v+) from the prediction and the step's new acceleration a+.
+    :func:`.contact_kernel.correct_one` is its compiled twin."""
+    return dp + d_corr * a, vp + v_corr * a
 
 
 def make_integrator(name: str, newmark_beta: float = 0.25, newmark_gamma: float = 0.5,

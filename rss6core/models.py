@@ -25,11 +25,13 @@ import scipy.linalg
 from .assembly import build_elastic_model, dense_matrices, end_maps
 from .clearance import draw_clearances
 from .contact_dynamics import build_joint_model, simulate_contact
-from .elastic import SimulationResult, simulate_elastic, time_grid
+from .elastic import simulate_elastic
 from .integrators import Integrator, make_integrator
 from .kinematics import RigidMotion, rigid_motion
-from .paper_method import PaperClosure, paper_contact_forces, paper_draw
-from .quasi_static import quasi_static_error
+from .paper_method import PaperClosure, paper_contact_forces, paper_draw, paper_result
+from .quasi_static import quasi_static_result
+from .results import SimulationResult, time_grid
+from .status import FINISHED
 
 __all__ = ["simulate", "simulate_batch", "Level", "prepare_level", "default_time_step", "default_integrator",
            "stored_draw", "natural_frequencies", "degrees_of_freedom", "MODELS"]
@@ -115,20 +117,17 @@ class Level:
         if self.model == "rigid":
             t = time_grid(self.scene.trajectory.duration, self.dt)
             zero = np.zeros((len(t), 6))
-            return [SimulationResult(t, zero, zero, zero, "finished", "", len(t) - 1)] * len(realizations)
+            return [SimulationResult(t, zero, zero, zero, FINISHED, "", len(t) - 1)] * len(realizations)
         if self.model == "elastic":
             return [self.elastic] * len(realizations)
         run = {"quasi-static": self._quasi_static, "paper": self._paper, "contact": self._contact}
         return run[self.model](seed, realizations, uniforms)
 
     def _quasi_static(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
-        t, mode = self.motion.t, self.scene.simulation.quasi_static_eccentricity
-        out = []
-        for r in realizations:
-            draw = draw_clearances(self.scene, seed, r, uniforms=uniforms)
-            d, v, a = quasi_static_error(self.scene, self.motion, draw, mode)
-            out.append(SimulationResult(t, d, v, a, "finished", "", len(t) - 1, draw=draw))
-        return out
+        mode = self.scene.simulation.quasi_static_eccentricity
+        return [quasi_static_result(self.scene, self.motion,
+                                    draw_clearances(self.scene, seed, r, uniforms=uniforms), mode)
+                for r in realizations]
 
     def _contact(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
         draws = [draw_clearances(self.scene, seed, r, uniforms=uniforms) for r in realizations]
@@ -141,12 +140,8 @@ class Level:
         out = []
         for r in realizations:
             draw = paper_draw(self.scene, seed, r, len(elastic.t), uniforms)
-            d, v, a = self.closure.error(draw)
-            force = paper_contact_forces(self.scene, draw, self.dt)
-            out.append(SimulationResult(elastic.t, elastic.displacement + d, elastic.velocity + v,
-                                        elastic.acceleration + a, elastic.status, elastic.message,
-                                        elastic.steps, contact_force_peak=force.max(0),
-                                        draw=_first_step(draw)))
+            out.append(paper_result(elastic, self.closure, draw,
+                                    paper_contact_forces(self.scene, draw, self.dt), _first_step(draw)))
         return out
 
 

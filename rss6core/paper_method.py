@@ -34,8 +34,10 @@ from .clearance import draw_clearances
 from .contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .kinematics import RigidMotion
 from .quasi_static import closure_matrix, time_derivatives
+from .results import SimulationResult
+from .status import FINISHED, check_history
 
-__all__ = ["PaperClosure", "paper_contact_forces", "paper_draw"]
+__all__ = ["PaperClosure", "paper_contact_forces", "paper_draw", "paper_result"]
 
 
 class PaperClosure:
@@ -85,3 +87,16 @@ def paper_draw(scene, seed: int, realization: int, steps: int, uniforms=None):
     """The realisation's per-step draw (sizes once, eccentricities ``steps`` times); ``uniforms``
     as in :func:`.clearance.draw_clearances`."""
     return draw_clearances(scene, seed, realization, steps=steps, uniforms=uniforms)
+
+
+def paper_result(elastic: SimulationResult, closure: PaperClosure, draw, force, stored_draw):
+    """The elastic run plus the draw's kinematic error: failed where the elastic run failed, or where
+    the sum is not finite or beyond the divergence limit; ``force`` (T, 18) N, ``stored_draw`` the
+    draw an ensemble file records."""
+    d, v, a = closure.error(draw)
+    d, v, a = elastic.displacement + d, elastic.velocity + v, elastic.acceleration + a
+    status, message, steps = elastic.status, elastic.message, elastic.steps
+    if status == FINISHED:
+        status, message, steps = check_history(d, elastic.t, "paper-level displacement error")
+    return SimulationResult(elastic.t, d, v, a, status, message, steps,
+                            contact_force_peak=force.max(0), draw=stored_draw)

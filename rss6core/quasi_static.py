@@ -15,8 +15,11 @@ import numpy as np
 from .clearance import ClearanceDraw
 from .dynamics import inverse_dynamics
 from .kinematics import RigidMotion
+from .results import SimulationResult
+from .status import check_history
 
-__all__ = ["closure_matrix", "reaction_eccentricities", "quasi_static_error", "time_derivatives"]
+__all__ = ["closure_matrix", "reaction_eccentricities", "quasi_static_error", "quasi_static_result",
+           "time_derivatives"]
 
 
 def closure_matrix(motion: RigidMotion) -> tuple[np.ndarray, np.ndarray]:
@@ -64,6 +67,14 @@ def quasi_static_error(scene, motion: RigidMotion, draw: ClearanceDraw, mode: st
         raise ValueError(f"quasi-static eccentricity must be 'drawn' or 'reaction', got {mode!r}")
     rhs = np.einsum("tli,tli->tl", n, np.broadcast_to(e_A + e_C - e_B, n.shape))
     return time_derivatives(np.linalg.solve(G, rhs[..., None])[..., 0], motion.t)
+
+
+def quasi_static_result(scene, motion: RigidMotion, draw: ClearanceDraw, mode: str = "drawn"):
+    """One realisation's result; failed where the error is not finite or beyond the divergence
+    limit (a near-singular closure, or clearances no linearisation can carry)."""
+    d, v, a = quasi_static_error(scene, motion, draw, mode)
+    status, message, steps = check_history(d, motion.t, "quasi-static displacement error")
+    return SimulationResult(motion.t, d, v, a, status, message, steps, draw=draw)
 
 
 def time_derivatives(d: np.ndarray, t: np.ndarray):

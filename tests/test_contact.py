@@ -193,10 +193,10 @@ def _law(exponent=1.5):
 def test_compiled_contact_pair_matches_the_vectorised_one(depth, spin, exponent):
     """Apart; in contact sticking (no spin, tiny slip), in the friction ramp, and sliding; with
     Hertz's 3/2 (computed as delta sqrt(delta)) and another exponent (pow)."""
-    from rss6core.contact_kernel import ball
+    from rss6core.contact_kernel import Law, ball
     law = _law(exponent)
-    law_v = np.array([law.exponent, law.restitution, law.friction_coefficient, law.stick_velocity,
-                      law.slip_velocity])
+    law_v = Law(exponent=float(law.exponent), restitution=float(law.restitution),
+                mu=float(law.friction_coefficient), v0=float(law.stick_velocity), v1=float(law.slip_velocity))
     rng = np.random.default_rng(9)
     e = rng.normal(size=3)
     e *= (2.5e-4 + depth) / np.linalg.norm(e)
@@ -385,8 +385,8 @@ def test_a_diverging_realisation_is_stopped_and_reported(smoke, engine):
     draws = [draw_clearances(scene, 0, r) for r in range(2)]
     run = simulate_contact(scene, draws, divergence_limit=1e-9, engine=engine)
     assert run.status == ["failed"] * 2
-    assert all(m.startswith("diverged at t = 0.0001 s: displacement ") and "exceeds 1e-09" in m
-               for m in run.message)
+    assert all(m.startswith("displacement ") and "exceeds the 1e-09 m divergence limit" in m
+               and m.endswith("at t = 0.0001 s, step 1, with a 0.0001 s step") for m in run.message)
     assert np.all(run.steps == 0)
     assert np.all(np.isfinite(run.displacement[:, 0])) and np.all(np.isnan(run.displacement[:, 1:]))
 
@@ -430,5 +430,5 @@ def test_a_newton_failure_is_reported_and_the_batch_returns(smoke, monkeypatch):
     monkeypatch.setattr(cd, "MAX_ITERATIONS", 0)       # no Newton update: no step converges
     run = simulate_contact(scene, [draw_clearances(scene, 0, r) for r in range(2)])
     assert run.status == ["failed", "failed"]
-    assert all("Newton" in m and "t = 0.0001 s with a 0.0001 s step" in m for m in run.message)
+    assert all("Newton" in m and "t = 0.0001 s, step 1, with a 0.0001 s step" in m for m in run.message)
     assert np.all(np.isnan(run.displacement[:, 1:]))

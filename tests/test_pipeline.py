@@ -224,6 +224,7 @@ def test_failed_realisations_are_recorded_and_the_ensemble_goes_on(tmp_path, clu
     spec = EnsembleSpec(SMOKE_TEXT, SMOKE, "elastic", "central-difference", 1e-3, 1, 0)
     ds = run_ensemble(spec, 2, tmp_path / "fail.nc", chunk=2, progress=False, client=cluster_client)
     assert list(ds["status"].values) == ["failed", "failed"]
-    assert all("diverged at t =" in m for m in ds["status_message"].values)
+    assert all("exceeds the 1 m divergence limit" in m and ", step " in m and "at t = " in m
+               for m in ds["status_message"].values)
     assert ds.attrs["n_failed"] == 2
     assert ensemble_stats(open_ensemble(tmp_path / "fail.nc")).attrs["n_finished"] == 0
