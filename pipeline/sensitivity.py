@@ -14,6 +14,7 @@ with bootstrap intervals: estimate +- z sd of the indices over resampled rows.
 """
 from __future__ import annotations
 
+import contextlib
 import warnings
 from dataclasses import dataclass
 
@@ -27,7 +28,8 @@ from .store import DIRECTIONS, JOINTS, QUANTITIES, _provenance, _unit_table, err
 
 __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
            "clearance_draws_from_uniforms", "Design", "designs", "sample_design",
-           "evaluate_statistics", "SobolIndices", "sobol_indices", "sensitivity", "SensitivityError"]
+           "evaluate_statistics", "SobolIndices", "sobol_indices", "sensitivity", "sensitivity_dataset",
+           "format_sensitivity", "SensitivityError"]
 
 FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
 LEVELS = ("quasi-static", "contact")     # the levels whose error is a function of one draw
@@ -204,38 +206,48 @@ def _chunks(rows: int, chunk: int) -> list[slice]:
     return [slice(i, min(i + chunk, rows)) for i in range(0, rows, chunk)]
 
 
-def evaluate_statistics(spec, inputs: ClearanceInputs, u: np.ndarray, workers: int = 2,
-                        chunk: int = 256, progress=None) -> np.ndarray:
-    """Per-row statistics (R, 2, 3, 6) of the level for uniforms u (R, D), in chunks on ``workers``
-    dask processes (in this process for one worker); SensitivityError if any row failed."""
-    parts = _chunks(len(u), chunk)
+def evaluate_statistics(spec, inputs: ClearanceInputs, u: np.ndarray, client=None,
+                        chunk: int | None = None) -> np.ndarray:
+    """Per-row statistics (R, 2, 3, 6) of the level for uniforms u (R, D), in chunks (default: four
+    per worker, at most 256 rows) on a dask ``client`` (None: in this process); SensitivityError
+    if any row failed."""
+    workers = max(1, len(client.nthreads())) if client is not None else 1
+    chunk = chunk or max(1, min(256, -(-len(u) // (4 * workers))))
     out, failures = np.empty((len(u), len(STATISTICS), len(QUANTITIES), len(DIRECTIONS))), []
-    for part, (stats, messages) in _run_chunks(spec, inputs, u, parts, workers):
+    for part, (stats, messages) in _run_chunks(spec, inputs, u, _chunks(len(u), chunk), client):
         out[part] = stats
         failures += [m for m in messages if m]
-        if progress:
-            progress(part.stop - part.start)
     if failures:
         raise SensitivityError(f"{len(failures)} of {len(u)} evaluations of the {spec.model} level "
                                f"failed (first: {failures[0]}); Sobol' indices need every row")
     return out
 
 
-def _run_chunks(spec, inputs, u, parts, workers: int):
+def _run_chunks(spec, inputs, u, parts, client):
     """(slice, chunk result) pairs as they finish."""
-    if workers == 1:
+    if client is None:
         for part in parts:
             yield part, _evaluate_chunk(spec, inputs, u[part])
         return
-    from dask.distributed import Client, as_completed
+    from dask.distributed import as_completed
+    futures = {client.submit(_evaluate_chunk, spec, inputs, u[p], pure=False): p for p in parts}
+    for future in as_completed(futures):
+        yield futures[future], future.result()
+
+
+@contextlib.contextmanager
+def _client(workers: int):
+    """A dask client on a local cluster of ``workers`` processes; None (this process) for one."""
+    if workers == 1:
+        yield None
+        return
+    from dask.distributed import Client
 
     from .run import local_cluster
     cluster = local_cluster(workers)
     client = Client(cluster)
     try:
-        futures = {client.submit(_evaluate_chunk, spec, inputs, u[p], pure=False): p for p in parts}
-        for future in as_completed(futures):
-            yield futures[future], future.result()
+        yield client
     finally:
         client.close()
         cluster.close()
@@ -326,7 +338,7 @@ def _outputs(stats: np.ndarray) -> np.ndarray:
 
 
 def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = 0.95, workers: int = 2,
-                progress=None) -> xr.Dataset:
+                announce=None) -> xr.Dataset:
     """Sobol' indices of the level ``spec.model`` with N base rows per design (a power of 2)."""
     import time
     if spec.model not in LEVELS:
@@ -341,9 +353,33 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = 0.95,
     scene = spec.scene()
     inputs = clearance_inputs(scene)
     results = []
-    for design in designs(inputs, per_joint):
-        u = sample_design(design, n, spec.seed)
-        stats = evaluate_statistics(spec, inputs, u, workers, progress=progress)
-        results.append(sobol_indices(design, _outputs(stats), confidence, spec.seed))
+    with _client(workers) as client:
+        for design in designs(inputs, per_joint):
+            u = sample_design(design, n, spec.seed)
+            if announce:
+                announce(f"{design.name}: {len(u)} evaluations of the {spec.model} level "
+                         f"({len(design.groups)} groups, N = {n}) on {workers} worker(s)")
+            stats = evaluate_statistics(spec, inputs, u, client)
+            results.append(sobol_indices(design, _outputs(stats), confidence, spec.seed))
     return sensitivity_dataset(scene, spec, inputs, results, n, confidence,
                                time.perf_counter() - start)
+
+
+def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
+    """A table of the family indices of ``statistic``: per quantity and direction, each family's
+    total index with its interval, and the family with the largest total index."""
+    da = ds[f"{statistic}_sobol"].sel(group=[g for g in FAMILIES if g in ds["group"].values])
+    conf = f"{100 * float(ds.attrs['confidence']):g} %"
+    head = "".join(f"{g:>24s}" for g in da["group"].values)
+    lines = [f"total Sobol' indices ST of the per-realisation {statistic} by joint family, "
+             f"{ds.attrs['model']} level, N = {ds.attrs['n_base_samples']}, [{conf} bootstrap interval]",
+             f"{'quantity':<13s}{'dir':<4s}{head}  dominant"]
+    for q in ds["quantity"].values:
+        for d in ds["direction"].values:
+            cell = da.sel(index="ST", quantity=q, direction=d)
+            est = cell.sel(bound="estimate").values
+            text = "".join(f"{e:8.3f} [{lo:6.3f},{hi:6.3f}]" for e, lo, hi in
+                           zip(est, cell.sel(bound="lower").values, cell.sel(bound="upper").values))
+            top = str(cell["group"].values[int(np.nanargmax(est))]) if np.isfinite(est).any() else "-"
+            lines.append(f"{q:<13s}{d:<4s}{text}  {top}")
+    return "\n".join(lines)
