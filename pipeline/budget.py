@@ -31,7 +31,7 @@ from .gate import Verdict, judge_all
 from .run import EnsembleSpec, ensemble
 from .scene_variant import scene_variant
 from .spec import Spec
-from .stats import ensemble_stats
+from .stats import MIN_N_MEAN, MIN_N_STD, QUANTILES, ensemble_stats, min_n_for_quantile
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
            "BudgetError"]
@@ -85,8 +85,20 @@ def scaled_scene(spec: EnsembleSpec, scale: float) -> tuple[str, dict]:
     return scene_variant(spec.scene_text, {"clearance": sizes}, spec.source), sizes
 
 
-def _check_specs(specs: list[Spec]) -> None:
+def _min_n(statistic: str, confidence: float) -> int:
+    """The smallest n at which rss6 gives an interval of ``statistic`` (pipeline.stats)."""
+    if statistic in QUANTILES:
+        return min_n_for_quantile(QUANTILES[statistic], confidence)
+    return {"mean": MIN_N_MEAN, "std": MIN_N_STD}[statistic]
+
+
+def _check_specs(specs: list[Spec], n: int, confidence: float) -> None:
+    """BudgetError for a spec no budget can answer, before any ensemble runs."""
     for s in specs:
+        need = _min_n(s.statistic, confidence)
+        if n < need:
+            raise BudgetError(f"--spec {s.text!r}: {s.statistic} has no {100 * confidence:g} % interval "
+                              f"below n = {need} (-n {n}); raise -n")
         if s.op not in ("<=", "<"):
             raise BudgetError(f"--spec {s.text!r}: a budget bounds the error from above; use <= or <")
         if s.window:
@@ -144,7 +156,7 @@ def _sweep(run, tolerance: float) -> list[Trial]:
 def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float = 0.95,
            workers: int = 2, tolerance: float = 0.05) -> Budget:
     """The largest common clearance scale factor for which every spec passes (module doc)."""
-    _check_specs(specs)
+    _check_specs(specs, n, confidence)
     folder = Path(folder)
     folder.mkdir(exist_ok=True)
 
@@ -158,7 +170,8 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
         trials = (first, run(scale))
         if not trials[-1].passed:   # the scaling argument of the module doc failed
             raise RuntimeError(f"the ensemble at the exact scale {scale:g} does not pass: {trials[-1].path}")
-        method = "exact scaling of one ensemble, checked by a second (the level is linear in the clearance)"
+        method = ("exact scaling from the ensemble at scale 1, the level being linear in the "
+                  "clearance; checked by an ensemble at the answer")
     else:
         trials = tuple(_sweep(run, tolerance))
         scale = max(t.scale for t in trials if t.passed)
@@ -178,7 +191,7 @@ def format_budget(b: Budget, scene_name: str, model: str) -> str:
              "bound is within the limit)",
              f"largest common clearance scale factor: {b.scale:.{DIGITS}g} ({b.method})",
              f"limiting: {b.limiting}",
-             "clearances at this factor: " + ", ".join(f"{k.removesuffix('_m')} {v * 1e3:.4g} mm"
+             "clearances at this factor: " + ", ".join(f"{k.removesuffix('_m')} {v * 1e3:.6g} mm"
                                                        for k, v in b.clearances.items()),
              f"scene at these clearances: {b.scene_path}",
              "ensembles run (scale: verdict, file):"]
