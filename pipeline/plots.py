@@ -214,7 +214,7 @@ def _sobol_panel(ax, da, groups: list[str], direction: str) -> None:
     ax.grid(alpha=0.3, axis="y")
 
 
-def sensitivity_figures(ds) -> dict:
+def sensitivity_figures(ds, quantities=QUANTITIES) -> dict:
     """{file name: Figure}: per statistic, quantity and grouping, a bar chart per direction of the
     first-order (S1) and total (ST) Sobol' indices with their bootstrap intervals."""
     figs = {}
@@ -222,7 +222,7 @@ def sensitivity_figures(ds) -> dict:
     for stat, what in (("max_abs_error", "max"), ("mean_abs_error", "mean")):
         for design in dict.fromkeys(str(v) for v in ds["group_design"].values):
             groups = [str(g) for g, d in zip(ds["group"].values, ds["group_design"].values) if d == design]
-            for q in QUANTITIES:
+            for q in quantities:
                 da = ds[f"{stat}_sobol"].sel(quantity=q, group=groups)
                 fig, axes = _grid(figure_title(
                     f"Sobol' indices of per-realisation {what} |{q} error| by "

@@ -103,13 +103,16 @@ def test_sweep_gives_up_with_one_line_when_nothing_passes():
 @pytest.mark.slow
 def test_paper_level_sweep(tmp_path, configs, capsys):
     """A level that is not linear in the clearance (elastic links plus the paper's closure): the
-    sweep's answer passes the gate in a plain run and 10 % more clearance does not."""
+    sweep's answer passes the gate in a plain run, and the sweep found a failing scale within 5 %
+    above it."""
     folder = tmp_path / "bp"
     spec = "displacement:x,y<=0.1mm@q95"
     assert main(["budget", str(configs / "smoke.toml"), "--model", "paper", "--spec", spec, "-n",
                  str(N), "-o", str(folder), "--workers", "1"]) == 0
     printed = capsys.readouterr().out
     assert "measured sweep" in printed
+    passes, fails = (float(w.rstrip(",")) for w in printed.split("limiting: scale ")[1].split()[0:3:2])
+    assert fails / passes <= 1.05 + 1e-9
     assert main(["run", str(folder / "smoke_budget.toml"), "--model", "paper", "-n", str(N),
                  "--workers", "1", "-o", str(tmp_path / "c.nc"), "--require", spec]) == 0
 
