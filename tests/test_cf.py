@@ -69,3 +69,11 @@ def test_statistics_file_is_cf(tmp_path):
     out = tmp_path / "stats.nc"
     assert main(["stats", str(ens), "-o", str(out), "--require", "displacement:x<=1m@q50"]) in (0, 1)
     assert cf_errors(out) == []
+
+
+def test_sensitivity_file_is_cf(tmp_path):
+    """`rss6 sensitivity -o S.nc`: the Sobol' indices with their string group labels."""
+    out = tmp_path / "sobol.nc"
+    assert main(["sensitivity", str(SMOKE), "-n", "64", "--workers", "1", "--no-plots",
+                 "-o", str(out)]) == 0
+    assert cf_errors(out) == []
