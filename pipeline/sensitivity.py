@@ -365,21 +365,31 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = 0.95,
                                time.perf_counter() - start)
 
 
+def _dominant(cell) -> str:
+    """The group of largest total index; with the runner-up named when their intervals overlap."""
+    est, lo, hi = (cell.sel(bound=b).values for b in BOUNDS)
+    if not np.isfinite(est).any():
+        return "-"
+    order = np.argsort(-np.nan_to_num(est, nan=-np.inf))
+    names = [str(g) for g in cell["group"].values]
+    top, second = order[0], order[1]
+    return names[top] + ("" if lo[top] > hi[second] else f" (overlaps {names[second]})")
+
+
 def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
     """A table of the family indices of ``statistic``: per quantity and direction, each family's
-    total index with its interval, and the family with the largest total index."""
+    total index with its interval, and the family of largest total index (with the runner-up when
+    their intervals overlap)."""
     da = ds[f"{statistic}_sobol"].sel(group=[g for g in FAMILIES if g in ds["group"].values])
     conf = f"{100 * float(ds.attrs['confidence']):g} %"
     head = "".join(f"{g:>24s}" for g in da["group"].values)
     lines = [f"total Sobol' indices ST of the per-realisation {statistic} by joint family, "
              f"{ds.attrs['model']} level, N = {ds.attrs['n_base_samples']}, [{conf} bootstrap interval]",
-             f"{'quantity':<13s}{'dir':<4s}{head}  dominant"]
+             f"{'quantity':<13s}{'dir':<4s}{head}  largest"]
     for q in ds["quantity"].values:
         for d in ds["direction"].values:
             cell = da.sel(index="ST", quantity=q, direction=d)
-            est = cell.sel(bound="estimate").values
             text = "".join(f"{e:8.3f} [{lo:6.3f},{hi:6.3f}]" for e, lo, hi in
-                           zip(est, cell.sel(bound="lower").values, cell.sel(bound="upper").values))
-            top = str(cell["group"].values[int(np.nanargmax(est))]) if np.isfinite(est).any() else "-"
-            lines.append(f"{q:<13s}{d:<4s}{text}  {top}")
+                           zip(*(cell.sel(bound=b).values for b in BOUNDS)))
+            lines.append(f"{q:<13s}{d:<4s}{text}  {_dominant(cell)}")
     return "\n".join(lines)

@@ -205,3 +205,16 @@ def main_code(argv) -> int:
         return main(argv)
     except SystemExit as exc:
         return exc.code
+
+
+def test_the_largest_family_is_named_with_its_overlap():
+    import xarray as xr
+    from pipeline.sensitivity import _dominant
+
+    def cell(est, half):
+        est = np.asarray(est)
+        return xr.DataArray(np.stack([est, est - half, est + half]), dims=("bound", "group"),
+                            coords={"bound": ["estimate", "lower", "upper"], "group": list(FAMILIES)})
+    assert _dominant(cell([0.7, 0.02, 0.5, 0.4], 0.05)) == "revolute_radial"
+    assert _dominant(cell([0.5, 0.02, 0.7, 0.65], 0.05)) == "spherical_C (overlaps spherical_B)"
+    assert _dominant(cell([np.nan] * 4, 0.05)) == "-"
