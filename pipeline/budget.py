@@ -92,8 +92,11 @@ def _min_n(statistic: str, confidence: float) -> int:
     return {"mean": MIN_N_MEAN, "std": MIN_N_STD}[statistic]
 
 
-def _check_specs(specs: list[Spec], n: int, confidence: float) -> None:
-    """BudgetError for a spec no budget can answer, before any ensemble runs."""
+def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> None:
+    """BudgetError for a request no budget can answer, before any ensemble runs."""
+    if model in ("rigid", "elastic"):
+        raise BudgetError(f"--model {model}: this level has no clearances, so no clearance budget; "
+                          "use quasi-static, paper or contact")
     for s in specs:
         need = _min_n(s.statistic, confidence)
         if n < need:
@@ -156,7 +159,7 @@ def _sweep(run, tolerance: float) -> list[Trial]:
 def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float = 0.95,
            workers: int = 2, tolerance: float = 0.05) -> Budget:
     """The largest common clearance scale factor for which every spec passes (module doc)."""
-    _check_specs(specs, n, confidence)
+    _check_request(spec.model, specs, n, confidence)
     folder = Path(folder)
     folder.mkdir(exist_ok=True)
 

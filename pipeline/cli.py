@@ -400,6 +400,9 @@ def _sensitivity(args) -> int:
                              announce=lambda line: print(f"rss6 sensitivity: {line}", file=sys.stderr))
         except SensitivityError as exc:
             raise SceneError(str(exc)) from None
+        except KeyboardInterrupt:
+            print("rss6: interrupted; nothing written (rss6 sensitivity does not resume)", file=sys.stderr)
+            return 130
         write_netcdf(ds, output)
     plots = Path(args.plots or output.with_name(output.stem + "_plots"))
     paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
@@ -431,6 +434,10 @@ def _budget(args) -> int:
         b = budget(spec, specs, args.n, folder, args.confidence, args.workers, args.tolerance)
     except BudgetError as exc:
         raise SceneError(str(exc)) from None
+    except KeyboardInterrupt:
+        print(f"rss6: interrupted; finished ensembles and chunks are kept in {folder}; rerun the same "
+              "command to continue", file=sys.stderr)
+        return 130
     print(format_budget(b, scene.name, model))
     return 0
 

@@ -129,6 +129,14 @@ def test_bad_specs_get_one_line(spec, message, configs, tmp_path, capsys):
     assert not (tmp_path / "b").exists()
 
 
+def test_a_level_without_clearances_is_refused(configs, tmp_path, capsys):
+    code = main(["budget", str(configs / "smoke.toml"), "--spec", SPEC, "--model", "elastic",
+                 "-o", str(tmp_path / "b")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "has no clearances" in err, err
+    assert not (tmp_path / "b").exists()
+
+
 def test_too_few_realisations_for_the_interval(configs, tmp_path, capsys):
     code = main(["budget", str(configs / "smoke.toml"), "--spec", SPEC, "-n", "20", "--workers", "1",
                  "-o", str(tmp_path / "b")])
