@@ -38,6 +38,9 @@ STATISTICS = ("max_abs_error", "mean_abs_error")
 BOUNDS = ("estimate", "lower", "upper")
 RESAMPLES = 500                          # bootstrap resamples of the rows per index (SALib default 100)
 MIN_N = 64                               # smallest base sample whose interval coverage was measured
+COVERAGE_NOTE = ("95 % intervals measured on the closed-form case (quasi-static displacement at one "
+                 "instant, 200 designs, tests/test_sensitivity.py): S1 94.2 %, ST 96.1 % at N = 64; "
+                 "97.7 %, 97.5 % at N = 256; not measured for the maxima and means over time")
 
 
 class SensitivityError(ValueError):
@@ -327,7 +330,8 @@ def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int
               "interval_method": f"bootstrap intervals: estimate -+ z sd, z the normal "
                                  f"{100 * confidence:g} % quantile and sd the standard deviation of "
                                  f"the index over {RESAMPLES} bootstrap resamples of the N base rows "
-                                 "(SALib); coverage measured on a linear model in tests",
+                                 "(SALib)",
+              "interval_coverage": COVERAGE_NOTE,
               "wall_time_s": wall_time}
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
