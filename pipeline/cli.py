@@ -476,7 +476,8 @@ def _budget_parser(sub) -> None:
                     help="scene TOML file or embedded scene name (default: paper)")
     bu.add_argument("--spec", action="append", required=True, metavar="SPEC",
                     help="an upper limit QUANTITY:DIRECTIONS <= VALUE UNIT@STATISTIC, as for "
-                         "rss6 run --require, e.g. 'displacement:x,y,z<=0.1mm@q95' (repeatable)")
+                         "rss6 run --require, e.g. 'displacement:x,y,z<=0.1mm@q95' (repeatable; required, no "
+                         "default)")
     bu.add_argument("--model", choices=MODELS, default="quasi-static",
                     help="model level (default quasi-static: exact scaling from one ensemble; other "
                          "levels: a bisection of ensemble runs)")
