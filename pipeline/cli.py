@@ -521,6 +521,126 @@ def _stability(args) -> int:
     return 0
 
 
+def _sensitivity(args) -> int:
+    import time
+    from pathlib import Path
+
+    from .outputs import OutputLock, check_output_path
+    from .plots import plot_sensitivity
+    from .run import EnsembleSpec
+    from .sensitivity import SensitivityError, format_sensitivity, sensitivity
+    from .store import load_netcdf, write_netcdf
+    scene = find_scene(args.config)
+    model, integrator, dt, elements = _settings(args, scene)
+    output = check_output_path(args.output or f"{scene.name}_{model}_sobol.nc", args.parents)
+    if output.exists():
+        raise SceneError(f"{output}: exists; rss6 sensitivity does not resume or overwrite (remove it "
+                         "or choose another -o)")
+    _warn_oversubscription(args.workers, None)
+    spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements, args.seed)
+    start = time.perf_counter()
+    with OutputLock(output):
+        try:
+            ds = sensitivity(spec, args.n, args.per_joint, args.confidence, args.workers,
+                             announce=lambda line: print(f"rss6 sensitivity: {line}", file=sys.stderr))
+        except SensitivityError as exc:
+            raise SceneError(str(exc)) from None
+        except KeyboardInterrupt:
+            print("rss6: interrupted; nothing written (rss6 sensitivity does not resume)", file=sys.stderr)
+            return 130
+        write_netcdf(ds, output)
+    plots = Path(args.plots or output.with_name(output.stem + "_plots"))
+    paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
+    print(f"wrote {output} in {time.perf_counter() - start:.1f} s" + (f"; bar charts in {plots}/" if paths else ""))
+    print(format_sensitivity(ds))
+    return 0
+
+
+def _budget(args) -> int:
+    from pathlib import Path
+
+    from .budget import BudgetError, budget, format_budget
+    from .run import EnsembleSpec
+    from .spec import SpecError, parse_spec
+    try:
+        specs = [parse_spec(t) for t in args.spec]
+    except SpecError as exc:
+        raise SceneError(str(exc).replace("--require", "--spec", 1)) from None
+    scene = find_scene(args.config)
+    model, integrator, dt, elements = _settings(args, scene)
+    folder = Path(args.output or f"budget_{scene.name}_{model}")
+    if not folder.parent.is_dir():
+        raise SceneError(f"{folder}: folder {folder.parent} does not exist")
+    if folder.exists() and not folder.is_dir():
+        raise SceneError(f"{folder}: exists and is not a folder")
+    _warn_oversubscription(args.workers, None)
+    spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements, args.seed)
+    try:
+        b = budget(spec, specs, args.n, folder, args.confidence, args.workers, args.tolerance)
+    except BudgetError as exc:
+        raise SceneError(str(exc)) from None
+    except KeyboardInterrupt:
+        print(f"rss6: interrupted; finished ensembles and chunks are kept in {folder}; rerun the same "
+              "command to continue", file=sys.stderr)
+        return 130
+    print(format_budget(b, scene.name, model))
+    return 0
+
+
+def _sensitivity_parser(sub) -> None:
+    from .sensitivity import LEVELS, MIN_N
+    se = sub.add_parser("sensitivity", help="Sobol' indices of the error statistics by joint family "
+                                            "(and joint), with bootstrap intervals (SALib)")
+    se.add_argument("config", nargs="?", default="paper",
+                    help="scene TOML file or embedded scene name (default: paper)")
+    se.add_argument("--model", choices=LEVELS, default="quasi-static",
+                    help="model level (default quasi-static; contact costs about 0.4 s per evaluation "
+                         "on the paper scene)")
+    se.add_argument("-n", type=_positive_int, default=1024,
+                    help=f"base sample N, a power of 2 of at least {MIN_N}; the level is evaluated "
+                         "N (G + 2) times for G groups: 6 N for the 4 families, 20 N more for the "
+                         "18 joints (default 1024)")
+    se.add_argument("-o", "--output", help="netCDF file of the indices (default: SCENE_MODEL_sobol.nc)")
+    se.add_argument("--parents", action="store_true", help="create the output's missing folders")
+    se.add_argument("--plots", help="folder of the bar charts (default: OUTPUT's name + _plots)")
+    se.add_argument("--no-plots", action="store_true", help="write no bar charts")
+    se.add_argument("--per-joint", action="store_true",
+                    help="also the indices of each of the 18 joints (a second design)")
+    se.add_argument("--seed", type=_nonnegative_int, default=0, help="random seed (default 0)")
+    se.add_argument("--confidence", type=_fraction, default=0.95,
+                    help="confidence of the bootstrap intervals (default 0.95)")
+    se.add_argument("--workers", type=_positive_int, default=2,
+                    help="local dask workers (1: in this process) (default 2)")
+    se.set_defaults(func=_sensitivity, dt=None, integrator=None, elements=None)
+
+
+def _budget_parser(sub) -> None:
+    bu = sub.add_parser("budget", help="the largest common clearance scale factor for which "
+                                       "requirement specs pass")
+    bu.add_argument("config", nargs="?", default="paper",
+                    help="scene TOML file or embedded scene name (default: paper)")
+    bu.add_argument("--spec", action="append", required=True, metavar="SPEC",
+                    help="an upper limit QUANTITY:DIRECTIONS <= VALUE UNIT@STATISTIC, as for "
+                         "rss6 run --require, e.g. 'displacement:x,y,z<=0.1mm@q95' (repeatable; required, no "
+                         "default)")
+    bu.add_argument("--model", choices=MODELS, default="quasi-static",
+                    help="model level (default quasi-static: exact scaling from one ensemble; other "
+                         "levels: a bisection of ensemble runs)")
+    bu.add_argument("-n", type=_positive_int, default=200,
+                    help="realisations per ensemble (default 200; q95 has an interval from n = 59)")
+    bu.add_argument("-o", "--output", help="folder of the ensembles and the budget scene "
+                                           "(default: budget_SCENE_MODEL); rerunning resumes")
+    bu.add_argument("--seed", type=_nonnegative_int, default=0, help="random seed (default 0)")
+    bu.add_argument("--confidence", type=_fraction, default=0.95,
+                    help="confidence of the intervals the specs are judged on (default 0.95)")
+    bu.add_argument("--tolerance", type=_positive_float, default=0.05,
+                    help="sweep levels: relative width in the scale at which bisection stops "
+                         "(default 0.05)")
+    bu.add_argument("--workers", type=_positive_int, default=2,
+                    help="local dask workers (default 2)")
+    bu.set_defaults(func=_budget, dt=None, integrator=None, elements=None)
+
+
 def _study_arguments(p, output: str, n: int, tolerance_help: str) -> None:
     p.add_argument("config", nargs="?", default="paper",
                    help="scene TOML file or embedded scene name (default: paper)")
@@ -663,6 +783,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     _stats_parser(sub)
     _multifidelity_parser(sub)
+    _sensitivity_parser(sub)
+    _budget_parser(sub)
 
     pl = sub.add_parser("plot", help="PNG figures of an ensemble file, or the error histories of "
                                      "a simulate -o file")

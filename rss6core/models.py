@@ -120,17 +120,19 @@ class Level:
             return [SimulationResult(t, zero, zero, zero, FINISHED, "", len(t) - 1)] * len(realizations)
         if self.model == "elastic":
             return [self.elastic] * len(realizations)
-        run = {"quasi-static": self._quasi_static, "paper": self._paper, "contact": self._contact}
-        return run[self.model](seed, realizations, uniforms)
+        if self.model == "paper":
+            return self._paper(seed, realizations, uniforms)
+        return self.simulate_draws([draw_clearances(self.scene, seed, r, uniforms=uniforms)
+                                    for r in realizations])
 
-    def _quasi_static(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
-        mode = self.scene.simulation.quasi_static_eccentricity
-        return [quasi_static_result(self.scene, self.motion,
-                                    draw_clearances(self.scene, seed, r, uniforms=uniforms), mode)
-                for r in realizations]
-
-    def _contact(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
-        draws = [draw_clearances(self.scene, seed, r, uniforms=uniforms) for r in realizations]
+    def simulate_draws(self, draws: list) -> list[SimulationResult]:
+        """The quasi-static or contact level on given clearance draws, one result each (the
+        sensitivity study's designed inputs; an ensemble's draws come from :meth:`simulate`)."""
+        if self.model == "quasi-static":
+            mode = self.scene.simulation.quasi_static_eccentricity
+            return [quasi_static_result(self.scene, self.motion, draw, mode) for draw in draws]
+        if self.model != "contact":
+            raise ValueError(f"the {self.model} level takes no given draws (quasi-static or contact do)")
         batch = simulate_contact(self.scene, draws, self.elements, self.integrator, self.dt,
                                  tolerance=self.tolerance, refinements=self.refinements)
         return [dataclasses.replace(batch.result(k), draw=draw) for k, draw in enumerate(draws)]

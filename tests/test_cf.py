@@ -86,3 +86,11 @@ def test_multifidelity_file_is_cf(tmp_path):
     ds = load_netcdf(path)
     assert ds["max_abs_error_mean"].attrs["units"] == "m or rad, per direction (see coordinate " \
                                                       "'unit'); time derivatives thereof"
+
+
+def test_sensitivity_file_is_cf(tmp_path):
+    """`rss6 sensitivity -o S.nc`: the Sobol' indices with their string group labels."""
+    out = tmp_path / "sobol.nc"
+    assert main(["sensitivity", str(SMOKE), "-n", "64", "--workers", "1", "--no-plots",
+                 "-o", str(out)]) == 0
+    assert cf_errors(out) == []

@@ -314,10 +314,10 @@ def test_a_write_failing_on_a_full_disk_says_so(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_run_and_simulate_help_give_every_default():
+def test_help_gives_every_default():
     from pipeline.cli import build_parser
     sub = next(a for a in build_parser()._actions if a.dest == "command")
-    for name in ("run", "simulate"):
+    for name in ("run", "simulate", "sensitivity", "budget"):
         for action in sub.choices[name]._actions:
             if action.option_strings and action.nargs != 0:   # options taking a value
                 assert "default" in (action.help or ""), f"rss6 {name} {action.option_strings[0]}"

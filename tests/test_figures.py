@@ -216,3 +216,29 @@ def test_plot_command_on_a_failed_simulate_file_gives_one_line(simulate_file, tm
     assert main(["plot", str(bad), "-o", str(tmp_path / "p")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "the run failed" in err and "Newton" in err
+
+
+def test_sensitivity_figures_are_legible(smoke, tmp_path):
+    """The bar charts of `rss6 sensitivity --per-joint` (18 joint labels per panel), drawn from a file
+    of made-up indices shaped like the command's (the numbers do not change the layout)."""
+    from pipeline.run import EnsembleSpec
+    from pipeline.sensitivity import (SobolIndices, clearance_inputs, designs,
+                                      sensitivity_dataset)
+    from pipeline.plots import sensitivity_figures
+    from pipeline.store import load_netcdf
+    inputs = clearance_inputs(smoke)
+    rng = np.random.default_rng(0)
+    results = []
+    for design in designs(inputs, True):
+        est = rng.uniform(-0.2, 1.2, size=(2, 1, len(design.groups), 36))
+        results.append(SobolIndices(design, np.concatenate([est, est - 0.1, est + 0.1], axis=1)))
+    spec = EnsembleSpec(smoke.source_text, "smoke", "quasi-static", "newmark", 1e-3, 4, 0)
+    path = tmp_path / "s.nc"
+    write_netcdf(sensitivity_dataset(smoke, spec, inputs, results, 64, 0.95, 0.0), path)
+    figs = sensitivity_figures(load_netcdf(path), quantities=("displacement",))
+    assert sorted(figs) == [f"sobol_{s}_displacement_{d}.png" for s in ("max", "mean")
+                            for d in ("families", "joints")]
+    for fig in figs.values():
+        flat = " ".join(fig._suptitle.get_text().split())
+        assert "scene smoke" in flat and "quasi-static level" in flat and "s.nc" in flat
+    assert_legible(figs)

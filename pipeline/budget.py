@@ -1,0 +1,205 @@
+"""``rss6 budget``: the largest common clearance scale factor for which requirement specs pass.
+
+A spec passes at the run's confidence when its statistic's whole interval meets the limit
+(pipeline.gate), so for an upper limit the answer is the largest scale s at which the
+interval's upper bound is within it, with every [clearance] size of the scene times s.
+
+- quasi-static: exact scaling from one ensemble.  Every draw law scales with the clearance
+  sizes on the same uniforms (truncated normals in units of the size, k times the size), so
+  the eccentricities of each realisation are s times those at s = 1, and the linear closure
+  (with the eccentricities drawn, or set by the sizes along the joint forces) makes its
+  error s times as large.  Every per-realisation maximum and mean |error| is then s times
+  as large, and so is every interval rss6 gives: quantile bounds are order statistics, and
+  the mean and std intervals are location-scale equivariant (the skewness and kurtosis that
+  enter them do not change).  Hence upper(s) = s upper(1) and s* = min(limit / upper(1)).
+- other levels: a measured sweep: ensembles of the same realisations (same seed) at
+  scales doubled or halved from 1 until one passes and one does not, then bisection to the
+  stated relative tolerance; the answer is the largest scale whose ensemble passed.  It
+  assumes the verdict changes once along the scale (errors grow with the clearance).
+
+The factor is rounded down to 4 significant digits, so a run at the printed clearances
+passes too (the gate compares the upper bound with the limit, and a factor that equals
+limit / upper up to rounding could land a hair above it).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from .gate import Verdict, judge_all
+from .run import EnsembleSpec, ensemble
+from .scene_variant import scene_variant
+from .spec import Spec
+from .stats import MIN_N_MEAN, MIN_N_STD, QUANTILES, ensemble_stats, min_n_for_quantile
+
+__all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
+           "BudgetError"]
+
+FAMILY_KEYS = ("revolute_radial_m", "revolute_axial_m", "spherical_C_m", "spherical_B_m")
+LINEAR_LEVELS = ("quasi-static",)
+DIGITS = 4            # significant digits the factor is rounded down to
+MAX_DOUBLINGS = 12    # the sweep looks for a passing and a failing scale within 2^-12..2^12
+
+
+class BudgetError(ValueError):
+    """A budget that cannot be computed (a lower-limit spec, no interval at this n, zero error)."""
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One ensemble of the sweep: its scale, output file and the verdicts of the specs there."""
+    scale: float
+    path: Path
+    verdicts: tuple[Verdict, ...]
+
+    @property
+    def passed(self) -> bool:
+        return all(v.outcome == "pass" for v in self.verdicts)
+
+
+@dataclass(frozen=True)
+class Budget:
+    """The answer: scale factor, how it was found, the clearances (m) it gives, and the trials
+    (for exact scaling: the ensemble at scale 1 and the check at the answer)."""
+    scale: float
+    method: str
+    clearances: dict
+    confidence: float
+    n: int
+    trials: tuple[Trial, ...]
+    limiting: str
+    scene_path: Path
+
+
+def round_down(x: float, digits: int = DIGITS) -> float:
+    """x > 0 rounded towards zero to ``digits`` significant digits."""
+    step = 10.0 ** (math.floor(math.log10(x)) - digits + 1)
+    return math.floor(x / step * (1 + 1e-12)) * step
+
+
+def scaled_scene(spec: EnsembleSpec, scale: float) -> tuple[str, dict]:
+    """The scene text with every [clearance] size times ``scale``, and those sizes (m)."""
+    cl = spec.scene().clearance
+    sizes = {k: scale * getattr(cl, k.removesuffix("_m")) for k in FAMILY_KEYS}
+    return scene_variant(spec.scene_text, {"clearance": sizes}, spec.source), sizes
+
+
+def _min_n(statistic: str, confidence: float) -> int:
+    """The smallest n at which rss6 gives an interval of ``statistic`` (pipeline.stats)."""
+    if statistic in QUANTILES:
+        return min_n_for_quantile(QUANTILES[statistic], confidence)
+    return {"mean": MIN_N_MEAN, "std": MIN_N_STD}[statistic]
+
+
+def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> None:
+    """BudgetError for a request no budget can answer, before any ensemble runs."""
+    if model in ("rigid", "elastic"):
+        raise BudgetError(f"--model {model}: this level has no clearances, so no clearance budget; "
+                          "use quasi-static, paper or contact")
+    for s in specs:
+        need = _min_n(s.statistic, confidence)
+        if n < need:
+            raise BudgetError(f"--spec {s.text!r}: {s.statistic} has no {100 * confidence:g} % interval "
+                              f"below n = {need} (-n {n}); raise -n")
+        if s.op not in ("<=", "<"):
+            raise BudgetError(f"--spec {s.text!r}: a budget bounds the error from above; use <= or <")
+        if s.window:
+            raise BudgetError(f"--spec {s.text!r}: ensembles store no analysis windows; drop "
+                              f"'/{s.window}'")
+
+
+def _trial(spec: EnsembleSpec, specs, scale: float, n: int, folder: Path, confidence: float,
+           workers: int) -> Trial:
+    """Run (or resume) the ensemble at ``scale`` and judge the specs on it."""
+    text, _ = scaled_scene(spec, scale)
+    scene = spec.scene()
+    path = folder / f"{scene.name}_{spec.model}_scale{scale:.6g}.nc"
+    outcome = ensemble(replace(spec, scene_text=text), n, path, workers=workers, progress=False)
+    return Trial(scale, path, tuple(judge_all(specs, ensemble_stats(outcome.dataset, confidence))))
+
+
+def exact_scale(verdicts: list[Verdict]) -> tuple[float, str]:
+    """(min over specs and directions of limit / upper bound, the limiting one) for a level whose
+    error is proportional to the clearance scale (module doc)."""
+    best = None
+    for v in verdicts:
+        if v.upper is None:
+            raise BudgetError(f"--spec {v.spec!r}: no {100 * v.confidence:g} % interval of {v.statistic} "
+                              f"at n = {v.n} ({v.reason}); raise -n")
+        if not v.upper > 0:
+            raise BudgetError(f"--spec {v.spec!r}: the {v.direction} error is zero at scale 1; any "
+                              "clearance meets it")
+        ratio = v.limit / v.upper
+        if best is None or ratio < best[0]:
+            best = (ratio, f"{v.quantity} {v.direction} {v.statistic}: upper bound "
+                           f"{v.upper / v.factor:.4g} {v.unit} at scale 1, limit {v.limit / v.factor:.4g} {v.unit}")
+    return best
+
+
+def _sweep(run, tolerance: float) -> list[Trial]:
+    """Trials of a doubling/halving search from 1, then bisection until (hi - lo) / lo <= tolerance."""
+    trials = [run(1.0)]
+    factor = 2.0 if trials[0].passed else 0.5
+    while all(t.passed for t in trials) or not any(t.passed for t in trials):
+        if len(trials) > MAX_DOUBLINGS:
+            kind = "passes" if trials[0].passed else "fails"
+            raise BudgetError(f"the spec still {kind} at clearance scale {trials[-1].scale:g}; "
+                              "no budget in 2^-12..2^12")
+        trials.append(run(trials[-1].scale * factor))
+    lo = max(t.scale for t in trials if t.passed)
+    hi = min(t.scale for t in trials if not t.passed and t.scale > lo)
+    while (hi - lo) / lo > tolerance:
+        t = run(round_down(math.sqrt(lo * hi)))
+        trials.append(t)
+        lo, hi = (t.scale, hi) if t.passed else (lo, t.scale)
+    return trials
+
+
+def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float = 0.95,
+           workers: int = 2, tolerance: float = 0.05) -> Budget:
+    """The largest common clearance scale factor for which every spec passes (module doc)."""
+    _check_request(spec.model, specs, n, confidence)
+    folder = Path(folder)
+    folder.mkdir(exist_ok=True)
+
+    def run(scale: float) -> Trial:
+        return _trial(spec, specs, scale, n, folder, confidence, workers)
+
+    if spec.model in LINEAR_LEVELS:
+        first = run(1.0)
+        ratio, limiting = exact_scale(list(first.verdicts))
+        scale = round_down(ratio)
+        trials = (first, run(scale))
+        if not trials[-1].passed:   # the scaling argument of the module doc failed
+            raise RuntimeError(f"the ensemble at the exact scale {scale:g} does not pass: {trials[-1].path}")
+        method = ("exact scaling from the ensemble at scale 1, the level being linear in the "
+                  "clearance; checked by an ensemble at the answer")
+    else:
+        trials = tuple(_sweep(run, tolerance))
+        scale = max(t.scale for t in trials if t.passed)
+        above = min(t.scale for t in trials if not t.passed and t.scale > scale)
+        limiting = f"scale {scale:.{DIGITS}g} passes, {above:.{DIGITS}g} does not"
+        method = f"measured sweep (doubling, then bisection to {100 * tolerance:g} % in the scale)"
+    text, sizes = scaled_scene(spec, scale)
+    scene_path = folder / f"{spec.scene().name}_budget.toml"
+    scene_path.write_text(text)
+    return Budget(scale, method, sizes, confidence, n, trials, limiting, scene_path)
+
+
+def format_budget(b: Budget, scene_name: str, model: str) -> str:
+    """The answer as lines: factor, method, clearances per family, the trials' verdicts."""
+    lines = [f"clearance budget: scene {scene_name}, {model} level, n = {b.n} realisations per "
+             f"ensemble, {100 * b.confidence:g} % intervals (a spec passes when its interval's upper "
+             "bound is within the limit)",
+             f"largest common clearance scale factor: {b.scale:.{DIGITS}g} ({b.method})",
+             f"limiting: {b.limiting}",
+             "clearances at this factor: " + ", ".join(f"{k.removesuffix('_m')} {v * 1e3:.6g} mm"
+                                                       for k, v in b.clearances.items()),
+             f"scene at these clearances: {b.scene_path}",
+             "ensembles run (scale: verdict, file):"]
+    for t in b.trials:
+        worst = "pass" if t.passed else ("fail" if any(v.outcome == "fail" for v in t.verdicts)
+                                         else "undecided")
+        lines.append(f"  {t.scale:.{DIGITS}g}: {worst}, {t.path}")
+    return "\n".join(lines)
