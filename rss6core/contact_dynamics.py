@@ -259,7 +259,10 @@ class _Chunk:
         Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
         self.Mp = _platform_mass(jm, Ip)                       # (T, 6, 6)
         fc, fr, fp = link_loads(jm.elastic, motion, scene, Rc, Rr, Ip)
-        self.F = join(fc[..., np.r_[0:3, 6:fc.shape[-1]]], fr, fp)
+        self.F = F = np.empty((len(t), jm.dofs))          # join(crank, rod, platform), one copy less
+        legs = F[:, :-6].reshape(len(t), 6, jm.leg_dofs)   # a view: the legs' part of each row
+        legs[..., :3], legs[..., 3:jm.crank_dofs], legs[..., jm.crank_dofs:] = fc[..., :3], fc[..., 6:], fr
+        F[:, -6:] = fp
         self.J = np.ascontiguousarray(platform_point_map(motion.r))   # (T, 6, 3, 6)
         G = np.zeros(Rc.shape[:2] + (9, 12))                   # joint nodes -> [e_A, e_C, e_B]
         G[..., 0:3, 0:3], G[..., 3:6, 3:6], G[..., 3:6, 6:9], G[..., 6:9, 9:12] = Rc, -Rc, Rr, Rr
