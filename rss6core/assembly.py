@@ -317,7 +317,8 @@ def link_loads(model: ElasticModel, motion: RigidMotion, scene, crank: np.ndarra
     arm = motion.c - geo.a
     # crank nodes at s L_ac turn about the fixed axis e: a = s (alpha'' e x arm - alpha'^2 arm)
     tip = motion.alpha_ddot[..., None] * np.cross(e, arm) - (motion.alpha_dot ** 2)[..., None] * arm
-    f_crank = _affine_nodal_loads(crank, np.broadcast_to(g, tip.shape), -tip, -motion.alpha_ddot[..., None] * e, model.crank_M_full)
+    f_crank = _affine_nodal_loads(crank, np.broadcast_to(g, tip.shape), -tip,
+                                  -motion.alpha_ddot[..., None] * e, model.crank_M_full)
     # rod: rigid acceleration is linear along the rod, c'' + s (b'' - c'')
     f_rod = _affine_nodal_loads(rod, g - motion.c_ddot, motion.c_ddot - motion.b_ddot,
                                 -rod_angular_motion(motion)[2], model.rod_M_full)
