@@ -158,10 +158,10 @@ def test_all_realisations_failing_exit_1_with_the_reason_and_plot_says_one_line(
     assert main(["run", str(SMOKE), "--model", "elastic", "--integrator", "central-difference",
                  "-n", "2", "--workers", "1", "-o", str(out)]) == 1
     err = capsys.readouterr().err
-    assert "2 of 2 realisations failed" in err and "2 x " in err and "diverged" in err
+    assert "2 of 2 realisations failed" in err and "2 x " in err and "divergence limit" in err
     assert "Traceback" not in err
     assert main(["plot", str(out), "-o", str(tmp_path / "plots")]) == 2
-    _one_line_error(capsys, "nothing to plot", "diverged")
+    _one_line_error(capsys, "nothing to plot", "divergence limit")
 
 
 # --- resume: manifest, -n, nothing to do ------------------------------------------------------
