@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from rss6core import FINISHED, STATUSES
+
 from .store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, EnsembleFileError, load_netcdf
 
 __all__ = ["check_ensemble", "check_run", "open_results"]
 
 SUMMARIES = ("max_abs_error", "mean_abs_error")
-STATUSES = ("finished", "failed")
 
 
 def _labels(ds, path) -> None:
@@ -82,7 +83,7 @@ def check_ensemble(ds, path) -> None:
     if unknown:
         raise EnsembleFileError(f"{path}: unknown status {sorted(unknown)[0]!r}; expected "
                                 f"{' or '.join(STATUSES)}")
-    _values(ds, path, status.values == "finished")
+    _values(ds, path, status.values == FINISHED)
 
 
 def check_run(ds, path) -> None:
@@ -95,7 +96,7 @@ def check_run(ds, path) -> None:
         raise EnsembleFileError(f"{path}: status attribute {status!r}; expected "
                                 f"{' or '.join(STATUSES)}")
     one = ds[list(SUMMARIES)].expand_dims(realization=[0], axis=1)
-    _values(one, path, np.array([status == "finished"]))
+    _values(one, path, np.array([status == FINISHED]))
 
 
 def open_results(path):

@@ -47,6 +47,8 @@ import numpy as np
 import xarray as xr
 from scipy import stats as sps
 
+from rss6core import FINISHED
+
 from .stats import BOUNDS, MIN_N_MEAN, VARIABLES, mean_interval
 
 __all__ = ["MIN_N_MF", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
@@ -135,7 +137,7 @@ def control_variate_mean(y: np.ndarray, x: np.ndarray, confidence: float = 0.95)
 # --- two ensemble files ------------------------------------------------------
 
 def _finished(ds: xr.Dataset) -> np.ndarray:
-    return np.asarray(ds["status"].values.astype(str) == "finished")
+    return np.asarray(ds["status"].values.astype(str) == FINISHED)
 
 
 def paired_values(high: xr.Dataset, low: xr.Dataset, name: str) -> tuple[np.ndarray, np.ndarray]:

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import SimulationResult, parse_scene, prepare_level, stored_draw, time_grid
+from rss6core import FAILED, SimulationResult, parse_scene, prepare_level, stored_draw, time_grid
 
 from .outputs import OutputLock, PartsManifest
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
@@ -122,7 +122,7 @@ def _alone(scene, spec: EnsembleSpec, realization: int):
     except NUMERICAL_FAILURES as exc:
         t = time_grid(scene.trajectory.duration, spec.dt)
         nan = np.full((len(t), 6), np.nan)
-        return SimulationResult(t, nan, nan, nan, "failed", f"{type(exc).__name__}: {exc}", 0)
+        return SimulationResult(t, nan, nan, nan, FAILED, f"{type(exc).__name__}: {exc}", 0)
 
 
 def _kw(spec: EnsembleSpec) -> dict:

@@ -22,7 +22,7 @@ import numpy as np
 import xarray as xr
 from scipy.special import ndtr, ndtri
 
-from rss6core import ClearanceDraw, prepare_level
+from rss6core import FINISHED, ClearanceDraw, prepare_level
 
 from .store import DIRECTIONS, JOINTS, QUANTITIES, _provenance, _unit_table, error_summaries
 
@@ -188,7 +188,7 @@ def _evaluate_chunk(spec, inputs: ClearanceInputs, u: np.ndarray):
     level = prepare_level(scene, spec.model, spec.integrator, spec.dt, spec.elements)
     results = level.simulate_draws(clearance_draws_from_uniforms(scene, inputs, u))
     stats = np.stack([np.stack(error_summaries(r, sim.settle_time)) for r in results])
-    return stats, [r.message or r.status if r.status != "finished" else "" for r in results]
+    return stats, [r.message or r.status if r.status != FINISHED else "" for r in results]
 
 
 def _chunks(rows: int, chunk: int) -> list[slice]:

@@ -17,6 +17,7 @@ Running a level
 - prepare_level: a level on a scene with what all its realisations share computed once.
 - Level: what prepare_level returns; its ``simulate(seed, realizations)`` runs a batch.
 - SimulationResult: what every level returns (error histories in SI, status and message).
+- FINISHED, FAILED, STATUSES: the status vocabulary every level and every file uses.
 - ContactBatch: the contact level's results for a batch of realisations (one SimulationResult each).
 - time_grid: the output instants (s) of a duration and step, or ValueError if the step does not divide it.
 - stored_draw: the clearance draw an ensemble file records for one realisation.
@@ -53,12 +54,13 @@ from .kinematics import rigid_motion
 from .models import (MODELS, Level, default_integrator, default_time_step, degrees_of_freedom,
                      natural_frequencies, prepare_level, simulate, simulate_batch, stored_draw)
 from .scene import Scene, SceneError, load_scene, parse_scene
+from .status import FAILED, FINISHED, STATUSES
 from .sections import crank_inertia, rod_inertia
 
 __version__ = "0.1.0"
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
            "MODELS", "INTEGRATORS", "simulate", "simulate_batch", "prepare_level", "Level",
-           "SimulationResult", "ContactBatch", "time_grid",
+           "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom",
            "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "SIZE_UNIFORMS",
