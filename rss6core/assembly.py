@@ -107,7 +107,7 @@ def scene_link_matrices(scene, link: str, elements: int) -> tuple[np.ndarray, np
     k = (shear_correction_factor(section, mat.poisson_ratio) if beam.theory == "timoshenko"
          else None)
     return link_matrices(section_properties(section), mat.youngs_modulus, mat.shear_modulus,
-                         mat.density, length, elements, k, beam.rotary_inertia)
+                         mat.density, length, elements, k, beam.rotary_inertia, beam.mass)
 
 
 def build_elastic_model(scene, elements: int) -> ElasticModel:

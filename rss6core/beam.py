@@ -1,18 +1,21 @@
-"""3-D two-node beam finite elements (12 DOF, consistent mass): Euler-Bernoulli or Timoshenko.
+"""3-D two-node beam finite elements (12 DOF, consistent or lumped mass): Euler-Bernoulli or Timoshenko.
 
 Node DOFs in the element's local axes: [u_x, u_y, u_z, r_x, r_y, r_z]; x runs
 along the beam.  Stiffness: axial EA, torsion GJ (Saint-Venant constant),
 bending EI_z in the x-y plane and EI_y in the x-z plane.  Mass: consistent
 translational mass plus torsional polar inertia rho (I_y + I_z).
 
-Two options (:class:`BeamTheory`, scene table ``[beam]``):
+Three options (:class:`BeamTheory`, scene table ``[beam]``):
 - ``timoshenko``: shear deformation with shear area k A, k the section's shear
   correction factor (:func:`rss6core.sections.shear_correction_factor`); the
   element uses the interdependent (shear-locking-free) interpolation, exact in
   statics, with Phi = 12 E I / (k G A l^2) per bending plane;
 - ``rotary_inertia``: the cross-section's rotary inertia rho I in bending, consistent
-  with the same interpolation.
-With neither (the default) the element is the Hermite Euler-Bernoulli element.
+  with the same interpolation;
+- ``mass = "lumped"``: a diagonal mass instead, half the element's at each node: rho A l / 2 on
+  each translation, rho I l / 2 on each rotation (the section's rotary inertia, polar for torsion);
+  it needs ``rotary_inertia`` (without it the bending rotations would carry no mass).
+With none (the default) the element is the Hermite Euler-Bernoulli element with consistent mass.
 Przemieniecki, Theory of Matrix Structural Analysis (1968), ch. 5 and 11 (eq. 11.41-11.42).
 """
 from __future__ import annotations
@@ -23,21 +26,25 @@ import numpy as np
 
 from .sections import SectionProperties
 
-__all__ = ["BEAM_THEORIES", "BeamTheory", "element_matrices", "link_matrices"]
+__all__ = ["BEAM_THEORIES", "MASS_MODELS", "BeamTheory", "element_matrices", "link_matrices"]
 
 BEAM_THEORIES = ("euler-bernoulli", "timoshenko")
+MASS_MODELS = ("consistent", "lumped")
 
 
 @dataclass(frozen=True)
 class BeamTheory:
-    """Which beam theory the links use: ``theory`` (one of BEAM_THEORIES) and bending rotary inertia."""
+    """Which beam theory the links use: ``theory`` (one of BEAM_THEORIES), bending rotary inertia,
+    and the mass model (one of MASS_MODELS)."""
     theory: str = "euler-bernoulli"
     rotary_inertia: bool = False
+    mass: str = "consistent"
 
     @property
     def label(self) -> str:
         name = {"euler-bernoulli": "Euler-Bernoulli", "timoshenko": "Timoshenko"}[self.theory]
-        return name + (" + rotary inertia" if self.rotary_inertia else "")
+        return (name + (" + rotary inertia" if self.rotary_inertia else "")
+                + (", lumped mass" if self.mass == "lumped" else ""))
 
 
 def _bending(l: float, sign: float) -> tuple[np.ndarray, np.ndarray]:
@@ -83,14 +90,25 @@ def _timoshenko_bending(l: float, phi: float) -> tuple[np.ndarray, np.ndarray, n
     return k, m, rot
 
 
+def _lumped_mass(props: SectionProperties, rho: float, l: float) -> np.ndarray:
+    """Diagonal 12 x 12 mass: half the element at each node, rho A l / 2 per translation (kg),
+    rho (I_y + I_z) l / 2, rho I_y l / 2, rho I_z l / 2 on r_x, r_y, r_z (kg m^2)."""
+    node = np.array([props.area] * 3 + [props.Iy + props.Iz, props.Iy, props.Iz]) * rho * l / 2.0
+    return np.diag(np.tile(node, 2))
+
+
 def element_matrices(props: SectionProperties, E: float, G: float, rho: float, l: float,
-                     shear_factor: float | None = None,
-                     rotary_inertia: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Local stiffness K (N/m, N/rad, ...) and consistent mass M (kg, kg m, kg m^2), 12 x 12.
+                     shear_factor: float | None = None, rotary_inertia: bool = False,
+                     mass: str = "consistent") -> tuple[np.ndarray, np.ndarray]:
+    """Local stiffness K (N/m, N/rad, ...) and mass M (kg, kg m, kg m^2), 12 x 12.
 
     ``shear_factor``: the shear correction factor k of a Timoshenko element (None: Euler-Bernoulli,
-    rigid in shear); ``rotary_inertia``: add the bending rotary inertia rho I.
+    rigid in shear); ``rotary_inertia``: add the bending rotary inertia rho I; ``mass``:
+    'consistent' or 'lumped' (:func:`_lumped_mass`, which needs ``rotary_inertia``).
     """
+    if mass not in MASS_MODELS or (mass == "lumped" and not rotary_inertia):
+        raise ValueError(f"mass must be one of {', '.join(MASS_MODELS)} (lumped with rotary inertia), "
+                         f"got {mass!r} with rotary_inertia={rotary_inertia}")
     K, M = np.zeros((12, 12)), np.zeros((12, 12))
     bar = np.array([[1.0, -1.0], [-1.0, 1.0]])
     bar_mass = np.array([[2.0, 1.0], [1.0, 2.0]]) * l / 6.0
@@ -110,17 +128,17 @@ def element_matrices(props: SectionProperties, E: float, G: float, rho: float, l
         flip = np.diag([1.0, sign, 1.0, sign])
         K[np.ix_(dofs, dofs)] += E * I * flip @ k @ flip
         M[np.ix_(dofs, dofs)] += flip @ (rho * props.area * m + rotary_inertia * rho * I * rot) @ flip
-    return K, M
+    return K, (_lumped_mass(props, rho, l) if mass == "lumped" else M)
 
 
 def link_matrices(props: SectionProperties, E: float, G: float, rho: float, length: float,
-                  elements: int, shear_factor: float | None = None,
-                  rotary_inertia: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                  elements: int, shear_factor: float | None = None, rotary_inertia: bool = False,
+                  mass: str = "consistent") -> tuple[np.ndarray, np.ndarray]:
     """Stiffness and mass of a straight link of ``elements`` equal elements, 6 (n+1) square
-    (``shear_factor``, ``rotary_inertia``: see :func:`element_matrices`)."""
+    (``shear_factor``, ``rotary_inertia``, ``mass``: see :func:`element_matrices`)."""
     if elements < 1:
         raise ValueError(f"elements must be at least 1, got {elements}")
-    k, m = element_matrices(props, E, G, rho, length / elements, shear_factor, rotary_inertia)
+    k, m = element_matrices(props, E, G, rho, length / elements, shear_factor, rotary_inertia, mass)
     n = 6 * (elements + 1)
     K, M = np.zeros((n, n)), np.zeros((n, n))
     for e in range(elements):

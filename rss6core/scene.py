@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .beam import BEAM_THEORIES, BeamTheory
+from .beam import BEAM_THEORIES, MASS_MODELS, BeamTheory
 from .contact_dynamics import MAX_CONTACT_REFINEMENTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
@@ -268,7 +268,8 @@ _SCHEMA: dict = {
         "size_tolerance": _Key(float, default=0.0, bounds=(0.0, 0.5)),
     },
     "beam": {"theory": _Key(str, default="euler-bernoulli", choices=BEAM_THEORIES),
-             "rotary_inertia": _Key(bool, default=False)},
+             "rotary_inertia": _Key(bool, default=False),
+             "mass": _Key(str, default="consistent", choices=MASS_MODELS)},
     "damping": {"mass_coefficient_per_s": _Key(float, check=_NONNEG),
                 "stiffness_coefficient_s": _Key(float, check=_NONNEG)},
     "clearance": {"revolute_radial_m": _Key(float, check=_NONNEG),
@@ -366,6 +367,9 @@ def _build(v: dict, text: str, source: str) -> Scene:
     if not -1.0 < mat.poisson_ratio <= 0.5:
         raise SceneError(f"[material] shear_modulus_Pa: implies Poisson ratio E/(2G)-1 = "
                          f"{mat.poisson_ratio:.3f}, outside (-1, 0.5]")
+    if v["beam"]["mass"] == "lumped" and not v["beam"]["rotary_inertia"]:
+        raise SceneError("[beam] mass: 'lumped' puts the sections' rotary inertia on the nodes' "
+                         "rotations; set [beam] rotary_inertia = true")
     if ct["stick_velocity_m_s"] >= ct["slip_velocity_m_s"]:
         raise SceneError("[contact] stick_velocity_m_s: must be smaller than slip_velocity_m_s")
     dt, duration = v["simulation"]["time_step_s"], tr["duration_s"]
@@ -408,7 +412,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
                            ct["exponent"], ct["friction_coefficient"], ct["stick_velocity_m_s"],
                            ct["slip_velocity_m_s"], ct["impact_speed_floor_m_s"],
                            ct["stiffness_scale"]),
-        beam=BeamTheory(v["beam"]["theory"], v["beam"]["rotary_inertia"]),
+        beam=BeamTheory(v["beam"]["theory"], v["beam"]["rotary_inertia"], v["beam"]["mass"]),
         source_text=text, source_path=source)
 
 

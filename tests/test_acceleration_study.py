@@ -48,7 +48,7 @@ def test_markdown_states_the_verdict_and_the_band():
     text = markdown(runs, "paper", 4, 0)
     assert "8 -> 16 elements" in text and "converged (within 5 %) in every direction" in text
     assert "model-form band" in text and "ry 3." in text
-    assert text.count("| 16 el,") == 4            # both theories, both steps
+    assert text.count("| 16 el,") == 5            # three beam models, two of them at half the step
 
 
 def test_bad_scene_is_one_line_and_exit_2(tmp_path, capsys):

@@ -48,11 +48,11 @@ def exact_frequencies(L, EI, rhoA, rhoI, shear_compliance, count, top):
     return np.array(roots[:count])
 
 
-def fe_frequencies(section, L, elements, shear, rotary, count):
+def fe_frequencies(section, L, elements, shear, rotary, count, mass="consistent"):
     """Lowest ``count`` frequencies (rad/s) of the x-y plane bending (v, r_z; EI_z) of a cantilever."""
     props = section_properties(section)
     k = shear_correction_factor(section, NU) if shear else None
-    K, M = link_matrices(props, E, G, RHO, L, elements, k, rotary)
+    K, M = link_matrices(props, E, G, RHO, L, elements, k, rotary, mass)
     plane = np.sort(np.r_[np.arange(7, K.shape[0], 6), np.arange(11, K.shape[0], 6)])  # nodes 1..n
     K, M = K[np.ix_(plane, plane)], M[np.ix_(plane, plane)]
     return np.sqrt(scipy.linalg.eigh(K, M, eigvals_only=True)[:count])
@@ -185,7 +185,30 @@ def test_scene_beam_table(paper_text):
     assert scene.beam == BeamTheory("timoshenko", True)
     assert parse_scene(paper_text).beam == BeamTheory("euler-bernoulli", False)
     for bad, key in (('theory = "timoshinko"', "[beam] theory"), ("rotary_inertia = 1", "[beam] rotary_inertia"),
-                     ("shear = true", "[beam] shear")):
+                     ("shear = true", "[beam] shear"), ('mass = "lumped"', "[beam] mass"),
+                     ('mass = "diagonal"\nrotary_inertia = true', "[beam] mass")):
         with pytest.raises(SceneError, match=key.replace("[", r"\[").replace("]", r"\]")) as info:
             parse_scene(paper_text + f"\n[beam]\n{bad}\n")
         assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("shear", [True, False])
+def test_lumped_mass_converges_from_below_at_second_order(shear):
+    """Measured: first mode 8.7-9.8 % low on 2 elements, 0.04 % on 32; ratio 4 per halving."""
+    exact = closed_form(THICK, SHORT, shear=shear, rotary=True)
+    err = [fe_frequencies(THICK, SHORT, n, shear, True, 3, "lumped") / exact - 1 for n in (8, 16, 32, 64)]
+    assert all((e < 0).all() for e in err)
+    assert np.abs(err[-1]).max() < 6e-4
+    for coarse, fine in zip(err[:-1], err[1:]):
+        assert (coarse / fine).min() > 3.5
+
+
+def test_lumped_mass_is_half_the_element_at_each_node():
+    props, l = section_properties(THICK), 0.07
+    _, M = element_matrices(props, E, G, RHO, l, None, True, "lumped")
+    assert np.count_nonzero(M - np.diag(np.diag(M))) == 0
+    assert np.diag(M)[[0, 1, 2, 6, 7, 8]] == pytest.approx([RHO * props.area * l / 2] * 6)
+    assert np.diag(M)[[3, 4, 5]] == pytest.approx(RHO * l / 2 * np.array([props.Iy + props.Iz, props.Iy,
+                                                                          props.Iz]))
+    with pytest.raises(ValueError, match="rotary"):
+        element_matrices(props, E, G, RHO, l, None, False, "lumped")
