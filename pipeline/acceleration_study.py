@@ -7,7 +7,7 @@ is taken per direction over the steady window t >= STEADY_START on the output hi
 friction-excited ~100 Hz bursts are measured as the max over each burst window (BURSTS) of the
 acceleration minus its running mean over BURST_PERIOD (which removes the slow trajectory-rate part).  One command reruns it::
 
-    python -m pipeline.acceleration_study paper -n 6 -o docs/study
+    python -m pipeline.acceleration_study paper -n 6 -o docs/study   # about 5 min, 2 cores
 
 and writes DIR/acceleration_maxima.csv (every realisation) and DIR/acceleration_maxima.md (medians,
 spread, the convergence verdict).
@@ -52,7 +52,7 @@ class Variant:
         return f"{self.elements} el, {self.beam.label}, step x{self.step_factor:g}"
 
 
-def default_variants(meshes=(1, 2, 4, 8, 16)) -> list[Variant]:
+def default_variants(meshes=(1, 2, 4, 8, 16, 32)) -> list[Variant]:
     """Every beam model on every mesh at the scene's step; Euler-Bernoulli and Timoshenko with
     consistent mass at half the step on the two finest meshes."""
     out = [Variant(m, b) for b in (EULER_BERNOULLI, TIMOSHENKO, LUMPED) for m in meshes]
@@ -178,13 +178,13 @@ def write(runs: dict, outdir, scene_name: str, n: int, seed: int) -> Path:
 
 
 def main(argv=None) -> int:
-    """``python -m pipeline.acceleration_study SCENE -n N -o DIR [--meshes 1 2 4 8 16]``."""
+    """``python -m pipeline.acceleration_study SCENE -n N -o DIR [--meshes 1 2 4 8 16 32]``."""
     from .scenes import find_scene
     p = argparse.ArgumentParser(prog="python -m pipeline.acceleration_study", description=__doc__.split("\n")[0])
     p.add_argument("scene", help="scene name or TOML file")
     p.add_argument("-n", type=int, default=6, help="realisations per variant (same seed for all)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8, 16], help="elements per link")
+    p.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8, 16, 32], help="elements per link")
     p.add_argument("-o", "--output", default="acceleration_study", help="output folder")
     args = p.parse_args(argv)
     if args.n < 1 or min(args.meshes) < 1:
