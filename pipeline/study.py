@@ -1,7 +1,7 @@
 """Speed against accuracy (``rss6 tradeoff``) and where methods fail (``rss6 stability``).
 
 Both run the same realisations (same seed) for many settings (model level,
-integrator, time step, elements per link) and compare the ensemble statistics
+integrator, time step, elements per link, beam theory) and compare the ensemble statistics
 users query, per quantity and direction: the mean and the 95 % quantile over
 realisations (pipeline.stats.estimates) of each realisation's max |error| (as
 stored in ensemble files: after the scene's settle time, over every internal
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from rss6core import (Integrator, build_elastic_model, degrees_of_freedom, natural_frequencies,
+from rss6core import (BeamTheory, Integrator, build_elastic_model, degrees_of_freedom, natural_frequencies,
                       quasi_static_state, simulate_batch, simulate_elastic)
 
 from .stats import estimates
@@ -34,8 +34,9 @@ RELATIVE_FLOOR = 1e-3
 
 @dataclass(frozen=True)
 class Setting:
-    """One way to compute the ensemble: model level, integrator, time step (s), elements per link;
-    for the contact level also the adaptive step's tolerance (m, 0: fixed step) and refinements."""
+    """One way to compute the ensemble: model level, integrator, time step (s), elements per link,
+    beam theory (None: the scene's); for the contact level also the adaptive step's tolerance
+    (m, 0: fixed step) and refinements."""
     model: str
     integrator: str
     dt: float
@@ -43,10 +44,13 @@ class Setting:
     stiffness_scale: float = 1.0
     tolerance: float = 0.0
     refinements: int = 0
+    beam: BeamTheory | None = None
 
     @property
     def label(self) -> str:
         extra = f", K x{self.stiffness_scale:g}" if self.stiffness_scale != 1.0 else ""
+        if self.beam is not None:
+            extra += f", {self.beam.label}"
         if self.refinements:
             extra += (f", adaptive {self.tolerance:g} m down to "
                       f"{self.dt / 2 ** self.refinements * 1e6:g} us")
@@ -56,6 +60,8 @@ class Setting:
 
 
 def _scene_for(scene, setting: Setting):
+    if setting.beam is not None and setting.beam != scene.beam:
+        scene = dataclasses.replace(scene, beam=setting.beam)
     if setting.stiffness_scale == scene.contact.stiffness_scale:
         return scene
     return dataclasses.replace(scene, contact=dataclasses.replace(
@@ -130,6 +136,10 @@ def default_settings(scene) -> tuple[list[Setting], Setting]:
     out += [Setting("contact", igc, dtc, half), Setting("contact", "newmark", dtc, el)]
     out += [Setting("contact", igc, dtc, el, 1.0, f * tol, levels) for f in (4.0, 1.0, 0.25)]
     out += [Setting("contact", igc, dtc, m, 1.0, tol, levels) for m in (half, 2 * el)]
+    other = BeamTheory("euler-bernoulli" if scene.beam.theory == "timoshenko" else "timoshenko",
+                       not scene.beam.rotary_inertia)
+    out += [Setting("elastic", ig, dt, el, beam=other), Setting("contact", igc, dtc, el, 1.0, tol, levels,
+                                                                 beam=other)]
     reference = Setting("contact", igc, _contact_step(scene, dtc / 2), 2 * el, 1.0, tol / 100, levels + 2)
     return out + [reference], reference
 
@@ -159,6 +169,7 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
          "integrator": ("setting", [s.integrator for s in settings]),
          "dt": ("setting", [s.dt for s in settings], {"units": "s", "long_name": "time step"}),
          "elements_per_link": ("setting", [s.elements for s in settings]),
+         "beam_theory": ("setting", [(s.beam or scene.beam).label for s in settings]),
          "stiffness_scale": ("setting", [s.stiffness_scale for s in settings]),
          "tolerance": ("setting", [s.tolerance for s in settings],
                        {"units": "m", "long_name": "adaptive contact step's local error bound "
@@ -226,14 +237,16 @@ def write_tradeoff(ds: xr.Dataset, outdir, tolerance: float) -> dict:
     from .store import write_netcdf
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
-    header = ["setting", "model", "integrator", "dt_s", "elements_per_link", "modes", "stiffness_scale",
+    header = ["setting", "model", "integrator", "dt_s", "elements_per_link", "beam_theory", "modes",
+              "stiffness_scale",
               "tolerance_m", "refinements", "seconds_per_realization", "failed", "max_rel_error"] + _columns()
     rows = []
     for i in range(ds.sizes["setting"]):
         rel = ds["relative_error"].values[i].reshape(-1)
         rows.append([str(ds["setting"].values[i]), str(ds["model"].values[i]),
                      str(ds["integrator"].values[i]), f"{float(ds['dt'].values[i]):.6g}",
-                     str(int(ds["elements_per_link"].values[i])), str(int(ds["modes"].values[i])),
+                     str(int(ds["elements_per_link"].values[i])), str(ds["beam_theory"].values[i]),
+                     str(int(ds["modes"].values[i])),
                      f"{float(ds['stiffness_scale'].values[i]):g}",
                      f"{float(ds['tolerance'].values[i]):g}", str(int(ds["refinements"].values[i])),
                      f"{float(ds['seconds_per_realization'].values[i]):.6g}",

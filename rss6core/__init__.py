@@ -36,6 +36,7 @@ Clearance draws
 The elastic level's parts (the stability study's explicit sweep)
 - Integrator: a generalized-alpha family member (Newmark, HHT, central difference, ...).
 - build_elastic_model: the finite-element model of the links with ideal joints.
+- BeamTheory, BEAM_THEORIES: the links' beam theory (Euler-Bernoulli or Timoshenko, rotary inertia).
 - quasi_static_state: the elastic state on the quasi-static path at one instant.
 - simulate_elastic: the elastic level with a given model, integrator and initial state.
 
@@ -47,6 +48,7 @@ The rigid robot
 from .elastic import quasi_static_state, simulate_elastic
 from .results import ContactBatch, SimulationResult, time_grid
 from .assembly import build_elastic_model
+from .beam import BEAM_THEORIES, BeamTheory
 from .clearance import SIZE_UNIFORMS, ClearanceDraw, clearances_from_uniforms, draw_clearances, uniform_dimension
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
@@ -64,5 +66,5 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom",
            "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "SIZE_UNIFORMS",
-           "Integrator", "build_elastic_model", "quasi_static_state", "simulate_elastic",
+           "Integrator", "build_elastic_model", "BeamTheory", "BEAM_THEORIES", "quasi_static_state", "simulate_elastic",
            "rigid_motion", "inverse_dynamics", "crank_inertia", "rod_inertia", "__version__"]

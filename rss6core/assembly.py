@@ -31,9 +31,9 @@ import numpy as np
 from .beam import link_matrices
 from .dynamics import euler_moment, platform_inertia_world, rod_angular_motion
 from .kinematics import RigidMotion, crank_axes
-from .sections import section_properties
+from .sections import section_properties, shear_correction_factor
 
-__all__ = ["LegLayout", "ElasticModel", "build_elastic_model", "EndMaps", "end_maps", "link_frames",
+__all__ = ["LegLayout", "ElasticModel", "build_elastic_model", "scene_link_matrices", "EndMaps", "end_maps", "link_frames",
            "frame_maps", "split", "join", "apply", "apply_pair", "internal_force", "StepSolver",
            "dense_matrices", "system_at", "rigid_loads", "link_loads", "platform_point_map",
            "frame_coupling_forces"]
@@ -98,14 +98,22 @@ class ElasticModel(LegLayout):
         return slice(self.crank_dofs - 6, self.crank_dofs - 3)
 
 
+def scene_link_matrices(scene, link: str, elements: int) -> tuple[np.ndarray, np.ndarray]:
+    """Stiffness and mass (6 (n+1) square, link frame) of the scene's ``link`` ('crank' or 'rod')
+    in ``elements`` elements, with the scene's beam theory ([beam] table)."""
+    section, length = {"crank": (scene.crank_section, scene.geometry.crank_length),
+                       "rod": (scene.rod_section, scene.geometry.rod_length)}[link]
+    mat, beam = scene.material, scene.beam
+    k = (shear_correction_factor(section, mat.poisson_ratio) if beam.theory == "timoshenko"
+         else None)
+    return link_matrices(section_properties(section), mat.youngs_modulus, mat.shear_modulus,
+                         mat.density, length, elements, k, beam.rotary_inertia, beam.mass)
+
+
 def build_elastic_model(scene, elements: int) -> ElasticModel:
     """Link matrices and DOF layout for ``elements`` beam elements per link."""
-    mat = scene.material
-    E, G, rho = mat.youngs_modulus, mat.shear_modulus, mat.density
-    Kc, Mc = link_matrices(section_properties(scene.crank_section), E, G, rho,
-                           scene.geometry.crank_length, elements)
-    Kr, Mr = link_matrices(section_properties(scene.rod_section), E, G, rho,
-                           scene.geometry.rod_length, elements)
+    Kc, Mc = scene_link_matrices(scene, "crank", elements)
+    Kr, Mr = scene_link_matrices(scene, "rod", elements)
     n6 = 6 * elements
     ends = np.r_[0:3, n6:n6 + 3]
     torsion = np.arange(3, n6 + 6, 6)

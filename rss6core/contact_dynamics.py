@@ -39,8 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
-                       platform_point_map, split)
-from .beam import link_matrices
+                       platform_point_map, scene_link_matrices, split)
 from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Records, Settings, State, System,
                              Out, advance_chunk, make_scratch, make_work, newton_step)
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
@@ -50,7 +49,6 @@ from .results import ContactBatch, time_grid
 from .integrators import Integrator, StepWeights, correct, make_integrator, predict
 from .kinematics import crank_axes, rigid_motion
 from .quasi_static import closure_matrix
-from .sections import section_properties
 from .status import DIVERGED, DIVERGENCE_LIMIT, FAILED, FINISHED, NEWTON_FAILED, contact_failure
 
 __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactStepper", "NumpyStepper",
@@ -90,9 +88,7 @@ class JointModel(LegLayout):
 def build_joint_model(scene, elements: int) -> JointModel:
     """Link matrices with free journals and free rod ends for ``elements`` elements per link."""
     em = build_elastic_model(scene, elements)
-    mat = scene.material
-    Kc, Mc = link_matrices(section_properties(scene.crank_section), mat.youngs_modulus,
-                           mat.shear_modulus, mat.density, scene.geometry.crank_length, elements)
+    Kc, Mc = scene_link_matrices(scene, "crank", elements)
     keep = np.r_[0:3, 6:6 * (elements + 1)]
     n6 = 6 * elements
     boundary = np.r_[0:3, n6 - 3:n6]   # node 0 translations; node n translations (offset by the 3 kept)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .beam import BEAM_THEORIES, MASS_MODELS, BeamTheory
 from .contact_dynamics import MAX_CONTACT_REFINEMENTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
@@ -182,6 +183,7 @@ class Scene:
     clearance: Clearances
     sampling: Sampling
     contact: ContactLaw
+    beam: BeamTheory = BeamTheory()   # [beam]: the links' beam theory (default Euler-Bernoulli)
     source_text: str = field(default="", repr=False, compare=False)
     source_path: str = field(default="", repr=False, compare=False)
 
@@ -204,7 +206,7 @@ class Scene:
 
 @dataclass(frozen=True)
 class _Key:
-    kind: type                  # float, int or str
+    kind: type                  # float, int, str or bool
     length: int | None = None   # array length, None for a scalar
     check: str | None = None    # 'positive', 'nonnegative', 'unit' (0, 1]
     default: object = None      # value when the key is absent; None: the key is required
@@ -265,6 +267,9 @@ _SCHEMA: dict = {
         "direction": _Key(str, default="uniform", choices=("uniform", "paper")),
         "size_tolerance": _Key(float, default=0.0, bounds=(0.0, 0.5)),
     },
+    "beam": {"theory": _Key(str, default="euler-bernoulli", choices=BEAM_THEORIES),
+             "rotary_inertia": _Key(bool, default=False),
+             "mass": _Key(str, default="consistent", choices=MASS_MODELS)},
     "damping": {"mass_coefficient_per_s": _Key(float, check=_NONNEG),
                 "stiffness_coefficient_s": _Key(float, check=_NONNEG)},
     "clearance": {"revolute_radial_m": _Key(float, check=_NONNEG),
@@ -287,7 +292,11 @@ def _where(path: tuple[str, ...]) -> str:
     return f"[{'.'.join(path[:-1])}] {path[-1]}" if len(path) > 1 else path[0]
 
 
-def _scalar(value, spec: _Key, path) -> float | int | str:
+def _scalar(value, spec: _Key, path) -> float | int | str | bool:
+    if spec.kind is bool:
+        if not isinstance(value, bool):
+            raise SceneError(f"{_where(path)}: expected true or false, got {value!r}")
+        return value
     if spec.kind is str:
         if not isinstance(value, str):
             raise SceneError(f"{_where(path)}: expected a string, got {value!r}")
@@ -358,6 +367,9 @@ def _build(v: dict, text: str, source: str) -> Scene:
     if not -1.0 < mat.poisson_ratio <= 0.5:
         raise SceneError(f"[material] shear_modulus_Pa: implies Poisson ratio E/(2G)-1 = "
                          f"{mat.poisson_ratio:.3f}, outside (-1, 0.5]")
+    if v["beam"]["mass"] == "lumped" and not v["beam"]["rotary_inertia"]:
+        raise SceneError("[beam] mass: 'lumped' puts the sections' rotary inertia on the nodes' "
+                         "rotations; set [beam] rotary_inertia = true")
     if ct["stick_velocity_m_s"] >= ct["slip_velocity_m_s"]:
         raise SceneError("[contact] stick_velocity_m_s: must be smaller than slip_velocity_m_s")
     dt, duration = v["simulation"]["time_step_s"], tr["duration_s"]
@@ -400,6 +412,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
                            ct["exponent"], ct["friction_coefficient"], ct["stick_velocity_m_s"],
                            ct["slip_velocity_m_s"], ct["impact_speed_floor_m_s"],
                            ct["stiffness_scale"]),
+        beam=BeamTheory(v["beam"]["theory"], v["beam"]["rotary_inertia"], v["beam"]["mass"]),
         source_text=text, source_path=source)
 
 

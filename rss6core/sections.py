@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["RectangleSection", "TubeSection", "SectionProperties", "section_properties", "rectangle_torsion_constant",
-           "LinkInertia", "crank_inertia", "rod_inertia"]
+           "shear_correction_factor", "LinkInertia", "crank_inertia", "rod_inertia"]
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,23 @@ def section_properties(section) -> SectionProperties:
         ro, ri = section.outer_diameter / 2.0, section.inner_diameter / 2.0
         I = np.pi * (ro ** 4 - ri ** 4) / 4.0
         return SectionProperties(np.pi * (ro ** 2 - ri ** 2), I, I, 2.0 * I)
+    raise TypeError(f"unknown section type {type(section).__name__}")
+
+
+def shear_correction_factor(section, poisson: float) -> float:
+    """Timoshenko shear correction factor k (shear area k A) of a section, Cowper (1966), Table 1.
+
+    Solid rectangle: k = 10 (1 + nu) / (12 + 11 nu) (0.850 at nu = 0.3, either bending plane);
+    circular tube, m = d_i / d_o: k = 6 (1 + nu) (1 + m^2)^2 / ((7 + 6 nu) (1 + m^2)^2
+    + (20 + 12 nu) m^2) (solid circle 0.886, thin tube 0.531 at nu = 0.3).
+    """
+    nu = poisson
+    if isinstance(section, RectangleSection):
+        return 10.0 * (1.0 + nu) / (12.0 + 11.0 * nu)
+    if isinstance(section, TubeSection):
+        m2 = (section.inner_diameter / section.outer_diameter) ** 2
+        return 6.0 * (1.0 + nu) * (1.0 + m2) ** 2 / ((7.0 + 6.0 * nu) * (1.0 + m2) ** 2
+                                                    + (20.0 + 12.0 * nu) * m2)
     raise TypeError(f"unknown section type {type(section).__name__}")
 
 
