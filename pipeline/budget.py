@@ -105,7 +105,7 @@ def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> 
         if s.op not in ("<=", "<"):
             raise BudgetError(f"--spec {s.text!r}: a budget bounds the error from above; use <= or <")
         if s.window:
-            raise BudgetError(f"--spec {s.text!r}: ensembles store no analysis windows; drop "
+            raise BudgetError(f"--spec {s.text!r}: rss6 budget judges the whole run only; drop "
                               f"'/{s.window}'")
 
 
