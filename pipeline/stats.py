@@ -61,7 +61,7 @@ __all__ = ["QUANTILES", "STATISTICS", "BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "quan
            "min_n_for_quantile", "quantile_estimates", "estimates", "mean_interval",
            "running_mean_interval", "std_interval", "quantile_interval", "ensemble_stats",
            "to_json", "format_stats", "MIN_POINTS_RQMC", "rqmc_intervals", "replicate_groups",
-           "interval_floor", "in_window", "windows_of"]
+           "interval_floor", "in_window", "windows_of", "json_number"]
 
 QUANTILES = {"q05": 0.05, "q50": 0.5, "q95": 0.95, "q99": 0.99}
 STATISTICS = ("mean", "std", *QUANTILES, "max")
@@ -375,7 +375,8 @@ def _attrs(ds, n: int, failed: int, confidence: float) -> dict:
             **{f"min_n_{k}": v for k, v in needed.items()}}
 
 
-def _number(v):
+def json_number(v):
+    """A float for strict JSON: None where it is NaN or infinite."""
     v = float(v)
     return v if np.isfinite(v) else None
 
@@ -402,7 +403,7 @@ def to_json(sds: xr.Dataset) -> dict:
 
 
 def _json_table(var: xr.DataArray) -> dict:
-    return {str(q): {str(d): {s: {b: _number(var.sel(statistic=s, bound=b, quantity=q, direction=d))
+    return {str(q): {str(d): {s: {b: json_number(var.sel(statistic=s, bound=b, quantity=q, direction=d))
                                   for b in BOUNDS} for s in STATISTICS}
                      for d in var.direction.values} for q in var.quantity.values}
 

@@ -109,13 +109,9 @@ def error_summary(ds) -> dict:
 
 def _table(var) -> dict:
     """{quantity: {direction: value}} of a (quantity, direction) DataArray; None for NaN (an empty window)."""
-    return {str(q): {str(d): _number(var.sel(quantity=q, direction=d)) for d in var.direction.values}
+    from .stats import json_number
+    return {str(q): {str(d): json_number(var.sel(quantity=q, direction=d)) for d in var.direction.values}
             for q in var.quantity.values}
-
-
-def _number(v):
-    v = float(v)
-    return v if np.isfinite(v) else None
 
 
 def contact_peaks(peak) -> dict:
