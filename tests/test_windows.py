@@ -163,3 +163,20 @@ def test_a_file_without_windows_is_a_one_line_error(ensemble_file, tmp_path, cap
     assert main(["stats", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "max_abs_error has no analysis windows" in err
+
+
+@pytest.mark.parametrize("tamper, message", [
+    (lambda ds: ds["max_abs_error"].loc.__setitem__({"window": "steady", "realization": 2}, np.nan),
+     "max_abs_error is not finite in finished realisation 2"),
+    (lambda ds: ds.attrs.pop("steady_after_s"), "attribute steady_after_s missing"),
+    (lambda ds: ds.attrs.__setitem__("settle_time_s", -1.0), "attribute settle_time_s is -1.0"),
+])
+def test_filecheck_checks_every_window(ensemble_file, tmp_path, capsys, tamper, message):
+    ds = open_results(ensemble_file)
+    tamper(ds)
+    path = tmp_path / "tampered.nc"
+    write_netcdf(ds, path)
+    capsys.readouterr()
+    assert main(["stats", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
