@@ -128,6 +128,9 @@ def test_stats_shows_and_selects_the_windows(ensemble_file, capsys):
     want = to_json(ensemble_stats(open_results(ensemble_file), window="steady"))
     assert js["window"] == "steady" and js["max_abs_error"] == want["max_abs_error"]
     assert js["max_abs_error"] != to_json(ensemble_stats(open_results(ensemble_file)))["max_abs_error"]
+    assert main(["stats", str(ensemble_file), "--json"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    assert js["window"] == "whole" and js["by_window"]["steady"]["max_abs_error"] == want["max_abs_error"]
 
 
 def test_require_judges_the_window_it_names(ensemble_file, tmp_path, capsys):
