@@ -99,8 +99,8 @@ State.__doc__ = """The batch's state (R, N): d, v, a and, for the alpha-weighted
 C v + K d and the generalised contact forces g; contact memory (R, 6, 4): stored impact speeds,
 in-contact flags, penetration rates."""
 Records = namedtuple("Records", "peak cpeak hist alive fail fail_t fail_h fail_size steps iters refined")
-Records.__doc__ = """Per realisation: peaks per window [startup, steady] (R, 2, 3, 6), contact force peaks (R, 18), histories (3, R, T_out, 6),
-alive, failure code (:mod:`.status`), time (s), step (s) and largest |d| (m) at failure, steps,
+Records.__doc__ = """Per realisation: peaks per window [startup, steady] (R, 2, 3, 6), contact force peaks
+(R, 18), histories (3, R, T_out, 6), alive, failure code (:mod:`.status`), time (s), step (s) and largest |d| (m) at failure, steps,
 Newton iterations, refined steps."""
 Out = namedtuple("Out", "f gl gp delta rate")
 Out.__doc__ = """Newton's results at the accepted iterate: contact forces (6, 3, 3), generalised forces on
