@@ -100,8 +100,8 @@ C v + K d and the generalised contact forces g; contact memory (R, 6, 4): stored
 in-contact flags, penetration rates."""
 Records = namedtuple("Records", "peak cpeak hist alive fail fail_t fail_h fail_size steps iters refined")
 Records.__doc__ = """Per realisation: peaks per window [startup, steady] (R, 2, 3, 6), contact force peaks
-(R, 18), histories (3, R, T_out, 6), alive, failure code (:mod:`.status`), time (s), step (s) and largest |d| (m) at failure, steps,
-Newton iterations, refined steps."""
+(R, 18), histories (3, R, T_out, 6), alive, failure code (:mod:`.status`), time (s), step (s) and
+largest |d| (m) at failure, steps, Newton iterations, refined steps."""
 Out = namedtuple("Out", "f gl gp delta rate")
 Out.__doc__ = """Newton's results at the accepted iterate: contact forces (6, 3, 3), generalised forces on
 the joint nodes (6, 12) and the platform (6,), penetrations and rates (6, 4)."""
