@@ -384,8 +384,9 @@ def _verdict_attrs(verdicts: list) -> dict:
 
 def _require_arguments(p) -> None:
     p.add_argument("--require", action="append", metavar="SPEC",
-                   help="a requirement QUANTITY:DIRECTIONS OP VALUE UNIT@STATISTIC, e.g. "
-                        "'displacement:x,y<=0.05mm@q95' (repeatable): judged pass, fail or undecided "
+                   help="a requirement QUANTITY:DIRECTIONS OP VALUE UNIT@STATISTIC[/WINDOW], e.g. "
+                        "'displacement:x,y<=0.05mm@q95' or '...@q95/steady' (window whole, startup or "
+                        "steady; default whole) (repeatable): judged pass, fail or undecided "
                         "from the statistic's confidence interval; exit 1 unless all pass (default: none)")
     p.add_argument("--undecided", choices=("fail", "pass"), default="fail",
                    help="how an undecided requirement counts for the exit code (default: fail)")
