@@ -32,6 +32,7 @@ from .run import EnsembleSpec, ensemble
 from .scene_variant import scene_variant
 from .spec import Spec
 from .stats import MIN_N_MEAN, MIN_N_STD, QUANTILES, ensemble_stats, min_n_for_quantile
+from .store import WINDOWS
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
            "BudgetError"]
@@ -104,9 +105,9 @@ def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> 
                               f"below n = {need} (-n {n}); raise -n")
         if s.op not in ("<=", "<"):
             raise BudgetError(f"--spec {s.text!r}: a budget bounds the error from above; use <= or <")
-        if s.window:
-            raise BudgetError(f"--spec {s.text!r}: ensembles store no analysis windows; drop "
-                              f"'/{s.window}'")
+        if s.window is not None and s.window not in WINDOWS:
+            raise BudgetError(f"--spec {s.text!r}: unknown window {s.window!r}; choose one of "
+                              f"{', '.join(WINDOWS)}")
 
 
 def _trial(spec: EnsembleSpec, specs, scale: float, n: int, folder: Path, confidence: float,
@@ -116,7 +117,8 @@ def _trial(spec: EnsembleSpec, specs, scale: float, n: int, folder: Path, confid
     scene = spec.scene()
     path = folder / f"{scene.name}_{spec.model}_scale{scale:.6g}.nc"
     outcome = ensemble(replace(spec, scene_text=text), n, path, workers=workers, progress=False)
-    return Trial(scale, path, tuple(judge_all(specs, ensemble_stats(outcome.dataset, confidence))))
+    return Trial(scale, path, tuple(judge_all(specs, ensemble_stats(outcome.dataset, confidence,
+                                                                      window=None))))
 
 
 def exact_scale(verdicts: list[Verdict]) -> tuple[float, str]:

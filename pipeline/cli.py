@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 
 import numpy as np
 
@@ -134,11 +135,7 @@ def _run(args) -> int:
     from .summary import failure_reasons
     specs, verdicts = _requirements(args), []
     targets = _until_targets(args)
-    for s in specs + targets:
-        if s.window:
-            flag = "--until" if s in targets else "--require"
-            raise SceneError(f"{flag} {s.text!r}: rss6 run stores no analysis windows; drop "
-                             f"'/{s.window}'")
+    _known_windows(specs + targets)
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
     _refuse_clearance_free_default(args, scene, model)
@@ -183,6 +180,15 @@ def _run(args) -> int:
         return code
     print(format_verdicts(verdicts))
     return max(code, exit_code(verdicts, args.undecided))
+
+
+def _known_windows(specs: list) -> None:
+    """A --require or --until naming a window the files do not have is a one-line error before any work."""
+    from .store import WINDOWS
+    for s in specs:
+        if s.window is not None and s.window not in WINDOWS:
+            raise SceneError(f"{s.text!r}: unknown window {s.window!r}; choose one of "
+                             f"{', '.join(WINDOWS)}")
 
 
 def _until_targets(args) -> list:
@@ -234,7 +240,7 @@ def _annotate(specs: list, verdicts: list):
         return None
 
     def annotate(ds) -> dict:
-        verdicts[:] = _judge(ensemble_stats(ds), specs)
+        verdicts[:] = _judge(ensemble_stats(ds, window=None), specs)
         return _verdict_attrs(verdicts)
     return annotate
 
@@ -340,7 +346,11 @@ def _stats(args) -> int:
     from .stats import ensemble_stats, format_stats, to_json
     from .store import write_netcdf
     specs = _requirements(args)
-    full = ensemble_stats(open_results(args.file), args.confidence)
+    _known_windows(specs)
+    full = ensemble_stats(open_results(args.file), args.confidence, window=None)
+    if args.window is not None:
+        full, specs = _window_of(full, args.window), [replace(s, window=s.window or args.window)
+                                                      for s in specs]
     verdicts = _judge(full, specs)
     sds = _selection(full, args)
     if args.output:
@@ -355,6 +365,16 @@ def _stats(args) -> int:
     return exit_code(verdicts, args.undecided) if specs else 0
 
 
+def _window_of(sds, window: str):
+    """The statistics of analysis window ``window`` only (dimension kept); SceneError names an unknown
+    one, or a file without windows."""
+    from .stats import windows_of
+    if window not in windows_of(sds):
+        raise SceneError(f"--window: unknown window {window!r}; the file has "
+                         f"{', '.join(windows_of(sds)) or 'no analysis windows'}")
+    return sds.sel(window=[window])
+
+
 def _verdict_attrs(verdicts: list) -> dict:
     """File attributes of the verdicts: the overall one and each as strict JSON (SI values)."""
     from .gate import overall, verdicts_json
@@ -364,8 +384,9 @@ def _verdict_attrs(verdicts: list) -> dict:
 
 def _require_arguments(p) -> None:
     p.add_argument("--require", action="append", metavar="SPEC",
-                   help="a requirement QUANTITY:DIRECTIONS OP VALUE UNIT@STATISTIC, e.g. "
-                        "'displacement:x,y<=0.05mm@q95' (repeatable): judged pass, fail or undecided "
+                   help="a requirement QUANTITY:DIRECTIONS OP VALUE UNIT@STATISTIC[/WINDOW], e.g. "
+                        "'displacement:x,y<=0.05mm@q95' or '...@q95/steady' (window whole, startup or "
+                        "steady; default whole) (repeatable): judged pass, fail or undecided "
                         "from the statistic's confidence interval; exit 1 unless all pass (default: none)")
     p.add_argument("--undecided", choices=("fail", "pass"), default="fail",
                    help="how an undecided requirement counts for the exit code (default: fail)")
@@ -662,6 +683,10 @@ def _stats_parser(sub) -> None:
     st.add_argument("-o", "--output", help="also write the statistics Dataset to this netCDF file")
     st.add_argument("--confidence", type=_fraction, default=0.95,
                     help="confidence of the two-sided intervals, in (0, 1) (default 0.95)")
+    st.add_argument("--window", help="analysis window: whole, startup (t < the scene's "
+                                     "steady_after_s) or steady; also the window of a --require "
+                                     "without '/WINDOW' (default: every window shown, --require "
+                                     "judged on the whole run)")
     _require_arguments(st)
     st.set_defaults(func=_stats)
 

@@ -9,7 +9,8 @@ import numpy as np
 
 from rss6core import FINISHED, STATUSES
 
-from .store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, EnsembleFileError, load_netcdf
+from .store import (DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, WINDOWS, EnsembleFileError,
+                    load_netcdf)
 
 __all__ = ["check_ensemble", "check_run", "open_results"]
 
@@ -17,7 +18,7 @@ SUMMARIES = ("max_abs_error", "mean_abs_error")
 
 
 def _labels(ds, path) -> None:
-    for dim, expected in (("quantity", QUANTITIES), ("direction", DIRECTIONS)):
+    for dim, expected in (("quantity", QUANTITIES), ("direction", DIRECTIONS), ("window", WINDOWS)):
         if dim not in ds.coords:
             raise EnsembleFileError(f"{path}: no '{dim}' coordinate")
         got = [str(v) for v in ds[dim].values]
@@ -45,13 +46,34 @@ def _dims(ds, path, expected: set) -> None:
     for name in SUMMARIES:
         if name not in ds:
             raise EnsembleFileError(f"{path}: no variable {name}")
+        if "window" not in ds[name].dims and set(ds[name].dims) == expected - {"window"}:
+            raise EnsembleFileError(f"{path}: {name} has no analysis windows (written by an rss6 "
+                                    "before 'window' was added); rerun the command that wrote it")
         if set(ds[name].dims) != expected:
             raise EnsembleFileError(f"{path}: {name} has dimensions ({', '.join(ds[name].dims)}); "
                                     f"expected {', '.join(sorted(expected))}")
 
 
+def _window_bounds(ds, path) -> tuple[float, float]:
+    """settle_time_s and steady_after_s (s) from the file's attributes, checked."""
+    out = []
+    for key in ("settle_time_s", "steady_after_s"):
+        try:
+            value = float(ds.attrs[key])
+        except (KeyError, TypeError, ValueError):
+            raise EnsembleFileError(f"{path}: attribute {key} missing or not a number "
+                                    f"(the analysis windows' bounds)") from None
+        if not (np.isfinite(value) and value >= 0):
+            raise EnsembleFileError(f"{path}: attribute {key} is {value!r}; expected a time >= 0 s")
+        out.append(value)
+    return out[0], out[1]
+
+
 def _values(ds, path, finished: np.ndarray) -> None:
-    """No negative or infinite value anywhere; finite values in every finished realisation."""
+    """No negative or infinite value anywhere; finite values in every finished realisation and
+    window (the startup window is empty, hence NaN, when steady_after_s <= settle_time_s)."""
+    settle, steady_after = _window_bounds(ds, path)
+    windows = [w for w in WINDOWS if w != "startup" or steady_after > settle]
     for name in SUMMARIES:
         x = ds[name].transpose("realization", ...).values
         with np.errstate(invalid="ignore"):
@@ -59,6 +81,7 @@ def _values(ds, path, finished: np.ndarray) -> None:
                 raise EnsembleFileError(f"{path}: {name} has negative values (it is an |error|)")
         if np.any(np.isinf(x)):
             raise EnsembleFileError(f"{path}: {name} has infinite values")
+        x = ds[name].sel(window=windows).transpose("realization", ...).values
         bad = ~np.isfinite(x[finished]).all(axis=tuple(range(1, x.ndim)))
         if bad.any():
             first = ds["realization"].values[finished][bad][0]
@@ -67,7 +90,7 @@ def _values(ds, path, finished: np.ndarray) -> None:
 
 def check_ensemble(ds, path) -> None:
     """EnsembleFileError unless ``ds`` is a well-formed rss6 ensemble (docs/model.md section 7)."""
-    _dims(ds, path, {"quantity", "realization", "direction"})
+    _dims(ds, path, {"window", "quantity", "realization", "direction"})
     _labels(ds, path)
     _units(ds, path)
     index = ds["realization"].values
@@ -88,14 +111,14 @@ def check_ensemble(ds, path) -> None:
 
 def check_run(ds, path) -> None:
     """EnsembleFileError unless ``ds`` is a well-formed single-run file (``rss6 simulate -o``)."""
-    _dims(ds, path, {"quantity", "direction"})
+    _dims(ds, path, {"window", "quantity", "direction"})
     _labels(ds, path)
     _units(ds, path)
     status = ds.attrs.get("status")
     if status not in STATUSES:
         raise EnsembleFileError(f"{path}: status attribute {status!r}; expected "
                                 f"{' or '.join(STATUSES)}")
-    one = ds[list(SUMMARIES)].expand_dims(realization=[0], axis=1)
+    one = ds[list(SUMMARIES)].expand_dims(realization=[0], axis=1).assign_attrs(ds.attrs)
     _values(one, path, np.array([status == FINISHED]))
 
 

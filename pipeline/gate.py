@@ -73,9 +73,12 @@ def _outcome(spec: Spec, lo: float, hi: float) -> str:
     return "undecided"
 
 
-def _select(stats, spec: Spec):
-    """The spec's (bound,) slice per direction; EnsembleFileError-style ValueError if a window is absent."""
+def _select(stats, spec: Spec, window: str = "whole"):
+    """The spec's (bound,) slice per direction, in the spec's window or else ``window`` (statistics
+    with a window dimension); EnsembleFileError-style ValueError if a window is absent."""
     da = stats[spec.variable].sel(statistic=spec.statistic, quantity=spec.quantity)
+    if spec.window is None and "window" in da.dims:
+        da = da.sel(window=window)
     if spec.window is not None:
         if "window" not in da.dims:
             raise ValueError(f"--require {spec.text!r}: the statistics have no analysis windows "

@@ -49,7 +49,7 @@ from scipy import stats as sps
 
 from rss6core import FINISHED
 
-from .stats import BOUNDS, MIN_N_MEAN, VARIABLES, mean_interval
+from .stats import BOUNDS, MIN_N_MEAN, VARIABLES, in_window, mean_interval
 
 __all__ = ["MIN_N_MF", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
            "variance_reduction", "estimated_variance_reduction", "adjusted_correlation",
@@ -140,10 +140,12 @@ def _finished(ds: xr.Dataset) -> np.ndarray:
     return np.asarray(ds["status"].values.astype(str) == FINISHED)
 
 
-def paired_values(high: xr.Dataset, low: xr.Dataset, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(Y, X) of variable ``name`` as (realisation, quantity, direction): Y over the realisations
-    finished at both levels among the high file's, X over every finished low realisation with
-    those pairs first (the control variate's layout)."""
+def paired_values(high: xr.Dataset, low: xr.Dataset, name: str, window: str = "whole"
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(Y, X) of variable ``name`` in analysis window ``window`` as (realisation, quantity,
+    direction): Y over the realisations finished at both levels among the high file's, X over every
+    finished low realisation with those pairs first (the control variate's layout)."""
+    high, low = in_window(high, window), in_window(low, window)
     ids_h = high["realization"].values
     ok_h = dict(zip(ids_h.tolist(), _finished(high)))
     ok_l = dict(zip(low["realization"].values.tolist(), _finished(low)))
@@ -202,12 +204,13 @@ def _estimates(high: xr.Dataset, low: xr.Dataset, name: str, confidence: float) 
 
 def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float = 0.95,
                           sources=("high", "low"), cost_high_over_low: float | None = None,
-                          width: float | None = None) -> xr.Dataset:
+                          width: float | None = None, window: str = "whole") -> xr.Dataset:
     """Multi-fidelity and high-only means of every per-realisation summary (SI units, the source
     files' layout), with correlation, variance reduction and equivalent plain-MC size per cell.
     With a cost ratio (one high realisation over one low one) also the cost-optimal M/N and the
     cost relative to plain MC for the same interval width; with a relative half-width ``width``
-    too, the realisations each method needs to reach it."""
+    too, the realisations each method needs to reach it; all in analysis window ``window``."""
+    high, low = in_window(high, window), in_window(low, window)
     _check_pairing(high, low, *sources)
     data = {}
     for name in VARIABLES:

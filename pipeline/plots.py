@@ -15,11 +15,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["plot_ensemble", "plot_run", "ensemble_figures", "run_figures", "figure_unit",
-           "draw_abs_envelope", "figure_title", "save_figure", "plain_ticks", "sensitivity_figures",
+           "draw_abs_envelope", "mark_steady", "figure_title", "save_figure", "plain_ticks", "sensitivity_figures",
            "plot_sensitivity"]
 
-from .stats import MIN_N_MEAN, estimates, quantile_estimates, running_mean_interval  # noqa: E402
+from .stats import (MIN_N_MEAN, estimates, in_window, quantile_estimates,  # noqa: E402
+                    running_mean_interval, windows_of)
 from .store import DIRECTIONS as _DIRS  # noqa: E402
+from .store import window_label  # noqa: E402
 
 QUANTITIES = ("displacement", "velocity", "acceleration")
 _BASE = {"displacement": ("m", "rad"), "velocity": ("m/s", "rad/s"),
@@ -65,6 +67,13 @@ def save_figure(fig, path: Path) -> Path:
     return path
 
 
+def mark_steady(ax, ds) -> None:
+    """A dotted vertical line at the start of the steady window (the file's steady_after_s, s)."""
+    if "steady_after_s" in ds.attrs:
+        t_s = float(ds.attrs["steady_after_s"])
+        ax.axvline(t_s, color="0.4", ls=":", lw=1.0, label=f"steady from {t_s:g} s")
+
+
 def draw_abs_envelope(ax, t, e, who: str = "", **peak_style) -> None:
     """|e| of realisations e (R, T) against time t: its 5-95 % band, median and maximum."""
     a = np.abs(e)
@@ -81,6 +90,7 @@ def _envelope(ds, q: str, finished):
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
         f, unit = figure_unit(q, d, err[..., k])
         draw_abs_envelope(ax, t, err[..., k] * f, color="k", ls="--", lw=0.8)
+        mark_steady(ax, ds)
         ax.set(xlabel="time [s]", ylabel=f"|{d} error| [{unit}]", title=d)
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
@@ -89,25 +99,38 @@ def _envelope(ds, q: str, finished):
     return fig
 
 
-def _peaks(ds, q: str, finished) -> np.ndarray:
-    return ds["max_abs_error"].sel(quantity=q).transpose("realization", "direction").values[finished]
+def _peaks(ds, q: str, finished, window: str = "whole") -> np.ndarray:
+    return in_window(ds, window)["max_abs_error"].sel(quantity=q).transpose(
+        "realization", "direction").values[finished]
 
 
 def _histograms(ds, q: str, finished):
-    peak = _peaks(ds, q, finished)                                     # (R, 6)
-    fig, axes = _grid(figure_title(f"per-realisation max |{q} error|", ds, peak.shape[0]))
+    """Per direction, histograms of the per-realisation maxima in the startup and steady windows
+    (the whole run's where the file has no windows), each with its mean."""
+    windows = [w for w in windows_of(ds) if w != "whole"] or ["whole"]
+    peaks = {w: _peaks(ds, q, finished, w) for w in windows}             # (R, 6) each
+    fig, axes = _grid(figure_title(f"per-realisation max |{q} error| per analysis window", ds,
+                                   int(finished.sum())))
+    t_s = float(ds.attrs.get("steady_after_s", np.nan))
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = figure_unit(q, d, peak[:, k])
-        x = peak[:, k] * f
-        mean, q95 = estimates(x, ("mean", "q95"))
-        ax.hist(x, bins=min(30, max(5, x.size // 4)), color="C0", alpha=0.7)
-        ax.axvline(mean, color="k", lw=1.2, label=f"mean {mean:.3g}")
-        ax.axvline(q95, color="C3", lw=1.2, ls="--", label=f"q95 {q95:.3g}")
+        f, unit = figure_unit(q, d, np.concatenate([p[:, k] for p in peaks.values()]))
+        for i, (w, peak) in enumerate(peaks.items()):
+            x = peak[:, k] * f
+            x = x[np.isfinite(x)]
+            if not x.size:                                   # an empty startup window
+                continue
+            mean = estimates(x, ("mean",))[0]
+            label = window_label(w, t_s).split(" (")[0]
+            ax.hist(x, bins=min(30, max(5, x.size // 4)), color=f"C{i}", alpha=0.5,
+                    label=f"{label}, mean {mean:.3g}")
+            ax.axvline(mean, color=f"C{i}", lw=1.2)
         ax.set(xlabel=f"max |{d} error| [{unit}]", ylabel="realisations", title=d)
         ax.legend(fontsize=7, loc="upper right")
         ax.grid(alpha=0.3)
         plain_ticks(ax)
         ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
+    if np.isfinite(t_s):
+        fig.supxlabel(f"startup: t < {t_s:g} s; steady: t >= {t_s:g} s", fontsize=9)
     return fig
 
 
@@ -115,9 +138,9 @@ def _convergence(ds, q: str, finished, confidence: float = 0.95):
     peak = _peaks(ds, q, finished)
     n = np.arange(1, peak.shape[0] + 1)
     iid = str(ds.attrs.get("sampler", "mc")) == "mc"   # a QMC prefix has no running iid interval
-    fig, axes = _grid(figure_title(f"running mean of max |{q} error| with its "
+    fig, axes = _grid(figure_title(f"running mean of max |{q} error| (whole run) with its "
                                    f"{100 * confidence:g} % interval (given from n = {MIN_N_MEAN})"
-                                   if iid else f"running mean of max |{q} error| (randomised "
+                                   if iid else f"running mean of max |{q} error| (whole run, randomised "
                                    "QMC: intervals from the replicates, rss6 stats)",
                                    ds, peak.shape[0]))
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
@@ -166,9 +189,12 @@ def _history(ds, q: str):
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
         f, unit = figure_unit(q, d, err[:, k])
         ax.plot(t, err[:, k] * f, color="C0", lw=1.0)
+        mark_steady(ax, ds)
         ax.set(xlabel="time [s]", ylabel=f"{d} error [{unit}]", title=d)
         ax.grid(alpha=0.3)
         plain_ticks(ax)
+    if "steady_after_s" in ds.attrs:
+        axes[0].legend(fontsize=8, loc="best")
     return fig
 
 

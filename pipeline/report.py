@@ -20,12 +20,12 @@ from rss6core import default_integrator, default_time_step, parse_scene, rigid_m
 
 from .run import WORKER_TIMEOUT_S, EnsembleSpec, dask_client, run_ensemble
 from .scenes import find_scene
-from .plots import draw_abs_envelope, figure_unit, plain_ticks, plt, save_figure
+from .plots import draw_abs_envelope, figure_unit, mark_steady, plain_ticks, plt, save_figure
 from . import report_text as text
 from .scene_variant import scene_variant
-from .stats import ensemble_stats, min_n_for_quantile
+from .stats import ensemble_stats, in_window, min_n_for_quantile
 from .store import (DIRECTIONS, EnsembleFileError, display_unit, load_netcdf, open_ensemble, run_dataset,
-                    write_netcdf)
+                    window_label, write_netcdf)
 
 __all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "PAPER_VALUES", "OFF"]
 
@@ -188,6 +188,7 @@ def error_figure(scene, quantity: str, runs: dict):
                         label="elastic, ideal joints")
             signed.set(title=f"{level}: {d} error", ylabel=f"[{unit}]")
             draw_abs_envelope(envelope, t, err[..., k] * f, color="k", ls="--", lw=0.7)
+            mark_steady(envelope, ds)
             envelope.set(title=f"{level}: |{d} error|, n = {err.shape[0]}", ylabel=f"[{unit}]")
             envelope.set_ylim(bottom=0)
             for ax in (signed, envelope):
@@ -281,6 +282,22 @@ def _family_table(st: dict) -> list[str]:
     return _table(head + ["elastic (no clearance)"], rows)
 
 
+def _window_table(ds) -> list[str]:
+    """Medians [95 % CI] of the contact level's per-realisation summaries in the startup and steady
+    windows and over the whole run, from one statistics Dataset per window."""
+    sds = ensemble_stats(ds, window=None)
+    t_s = float(ds.attrs["steady_after_s"])
+    windows = ("startup", "steady", "whole")
+    head = ["statistic (per realisation)", "dir", "unit"] + [
+        f"{window_label(w, t_s)}: median [95 % CI]" for w in windows]
+    rows = []
+    for stat, q, d in _ROWS:
+        f, unit = display_unit(q, d)
+        rows.append([_label(stat, q), d, unit] + [_cell(in_window(sds, w), stat, q, d, "q50", f)
+                                                  for w in windows])
+    return _table(head, rows)
+
+
 def _largest_family(st: dict, stat, q, d) -> tuple[str, float]:
     values = {f: _stat(st[f"only{f}"], stat, q, d) for f in FAMILY_KEYS}
     best = max(values, key=values.get)
@@ -337,6 +354,9 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
     md += ["", "### Which joint family contributes most (contact level)", "",
            text.FAMILY.format(off_um=OFF * 1e6, off_percent=OFF / scene.clearance.spherical_B * 100),
            ""] + _family_table(st)
+    md += ["", "### Start-up and steady operation (contact level)", "",
+           text.WINDOWS.format(steady_after=float(e["contact"].attrs["steady_after_s"])), ""]
+    md += _window_table(e["contact"])
     md += ["", "### Where we differ from the paper, and why", ""]
     return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"])) + [""]
 

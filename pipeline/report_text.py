@@ -55,3 +55,11 @@ ACCELERATION = (
     "it (README, 'Speed and accuracy': a fixed step fine enough for these peaks would have to be "
     "fine for the whole run). Of the three joint families switched on one at a time, {family} "
     "gives the largest median peak ({share:.0f} % of the three runs' sum).")
+
+WINDOWS = (
+    "The same statistics in the two analysis windows: startup, t < {steady_after:g} s, while the "
+    "joints settle from their initial state, and steady, t >= {steady_after:g} s (the scene's "
+    "`steady_after_s`; by default the time from which the paper scene's contact-level errors repeat "
+    "period after period within 5 %, docs/model.md section 6); the envelope figures mark the "
+    "boundary. The steady window is what a robot in "
+    "operation shows; the startup window measures the initial condition.")

@@ -93,7 +93,8 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
     parts = [realization_dataset(result, result.draw if result.draw is not None
                                  else stored_draw(scene, spec.model, spec.seed, r, spec.dt,
                                                   spec.design()), r,
-                                 spec.store, scene.simulation.settle_time)
+                                 spec.store, scene.simulation.settle_time,
+                                 scene.simulation.steady_after)
              for r, result in zip(realizations, results)]
     return _finish(parts, scene, spec)
 

@@ -61,7 +61,7 @@ __all__ = ["QUANTILES", "STATISTICS", "BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "quan
            "min_n_for_quantile", "quantile_estimates", "estimates", "mean_interval",
            "running_mean_interval", "std_interval", "quantile_interval", "ensemble_stats",
            "to_json", "format_stats", "MIN_POINTS_RQMC", "rqmc_intervals", "replicate_groups",
-           "interval_floor"]
+           "interval_floor", "in_window", "windows_of", "json_number"]
 
 QUANTILES = {"q05": 0.05, "q50": 0.5, "q95": 0.95, "q99": 0.99}
 STATISTICS = ("mean", "std", *QUANTILES, "max")
@@ -271,6 +271,22 @@ def interval_floor(statistic: str, confidence: float, replicates: int | None = N
 
 # --- the Dataset -------------------------------------------------------------------
 
+def windows_of(ds: xr.Dataset) -> list[str]:
+    """The analysis windows of an ensemble, run or statistics Dataset (none without a window dimension)."""
+    return [str(w) for w in ds["window"].values] if "window" in ds.dims else []
+
+
+def in_window(ds: xr.Dataset, window: str = "whole") -> xr.Dataset:
+    """``ds`` with the summaries of analysis window ``window`` (whole, startup, steady), the window
+    dimension dropped; a Dataset without windows is returned as it is.  ValueError names an unknown
+    window."""
+    if "window" not in ds.dims:
+        return ds
+    if window not in windows_of(ds):
+        raise ValueError(f"unknown window {window!r}; choose one of {', '.join(windows_of(ds))}")
+    return ds.sel(window=window, drop=True)
+
+
 def _as_ensemble(ds: xr.Dataset) -> xr.Dataset:
     """A single-run file (``rss6 simulate -o``) as a one-realisation ensemble."""
     if "realization" in ds.dims:
@@ -283,9 +299,21 @@ def _source(ds: xr.Dataset) -> str:
     return str(ds.encoding.get("source", "an in-memory Dataset"))
 
 
-def ensemble_stats(ds: xr.Dataset, confidence: float = 0.95) -> xr.Dataset:
+def ensemble_stats(ds: xr.Dataset, confidence: float = 0.95, window: str | None = "whole") -> xr.Dataset:
     """Statistics (statistic, bound, quantity, direction) of ``max_abs_error`` and
-    ``mean_abs_error`` over the finished realisations of an ensemble (or single-run) Dataset."""
+    ``mean_abs_error`` over the finished realisations of an ensemble (or single-run) Dataset, in
+    analysis window ``window``; ``window=None``: every window of the file, along a leading window
+    dimension (a file without windows gives none)."""
+    if window is None and "window" in ds.dims:
+        parts = [_window_stats(in_window(ds, w), confidence).expand_dims(window=[w])
+                 for w in windows_of(ds)]
+        out = xr.concat(parts, dim="window", combine_attrs="override")
+        return out.assign_coords(unit=parts[0]["unit"]) if "unit" in parts[0].coords else out
+    return _window_stats(in_window(ds, window or "whole"), confidence)
+
+
+def _window_stats(ds: xr.Dataset, confidence: float) -> xr.Dataset:
+    """:func:`ensemble_stats` of a Dataset without a window dimension."""
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
     from .sampler import design_of
@@ -335,7 +363,8 @@ def _rqmc_attrs(replicates: int, confidence: float) -> dict:
 
 def _attrs(ds, n: int, failed: int, confidence: float) -> dict:
     needed = {k: min_n_for_quantile(p, confidence) for k, p in QUANTILES.items()}
-    return {"n_finished": n, "n_failed": failed, "confidence": confidence,
+    steady = {"steady_after_s": ds.attrs["steady_after_s"]} if "steady_after_s" in ds.attrs else {}
+    return {**steady, "n_finished": n, "n_failed": failed, "confidence": confidence,
             "history": f"rss6 stats of {_source(ds)} (finished realisations only)",
             "interval_mean": f"union of Student t and Hall (1992) skewness-corrected t; NaN for "
                              f"n < {MIN_N_MEAN}",
@@ -346,26 +375,37 @@ def _attrs(ds, n: int, failed: int, confidence: float) -> dict:
             **{f"min_n_{k}": v for k, v in needed.items()}}
 
 
-def _number(v):
+def json_number(v):
+    """A float for strict JSON: None where it is NaN or infinite."""
     v = float(v)
     return v if np.isfinite(v) else None
 
 
 def to_json(sds: xr.Dataset) -> dict:
     """Strict-JSON view of :func:`ensemble_stats` (None for a missing number), SI units:
-    {variable: {quantity: {direction: {statistic: {bound: value}}}}} plus the attributes."""
+    {variable: {quantity: {direction: {statistic: {bound: value}}}}} plus the attributes; statistics
+    with a window dimension give the whole run's (else the first window's) there, that window's name
+    under ``window``, and every window's under ``by_window`` = {window: {variable: ...}}."""
+    if "window" in sds.dims:
+        top = "whole" if "whole" in windows_of(sds) else windows_of(sds)[0]
+        out = to_json(in_window(sds, top)) | {"window": top}
+        out["by_window"] = {w: {name: _json_table(in_window(sds, w)[name]) for name in VARIABLES}
+                            for w in windows_of(sds)}
+        return out
     out = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in sds.attrs.items()}
     out["units"] = {name: sds[name].attrs.get("units", "") for name in VARIABLES}
     if "unit" in sds.coords:
         out["unit"] = {str(q): {str(d): str(sds["unit"].sel(quantity=q, direction=d).item())
                                 for d in sds.direction.values} for q in sds.quantity.values}
     for name in VARIABLES:
-        var = sds[name]
-        out[name] = {str(q): {str(d): {s: {b: _number(var.sel(statistic=s, bound=b, quantity=q,
-                                                                direction=d))
-                                           for b in BOUNDS} for s in STATISTICS}
-                              for d in sds.direction.values} for q in sds.quantity.values}
+        out[name] = _json_table(sds[name])
     return out
+
+
+def _json_table(var: xr.DataArray) -> dict:
+    return {str(q): {str(d): {s: {b: json_number(var.sel(statistic=s, bound=b, quantity=q, direction=d))
+                                  for b in BOUNDS} for s in STATISTICS}
+                     for d in var.direction.values} for q in var.quantity.values}
 
 
 def _cell(value: float, factor: float) -> str:
@@ -390,7 +430,21 @@ def _missing_notes(sds: xr.Dataset) -> list[str]:
 def format_stats(sds: xr.Dataset) -> str:
     """A table of :func:`ensemble_stats` in the paper's display units (mm, mm/s, mm/s^2; rad,
     rad/s, rad/s^2): per quantity, direction and variable the estimates, then the lower and upper
-    confidence bounds ('-' where none is given, with the reason below the table)."""
+    confidence bounds ('-' where none is given, with the reason below the table); one table per
+    analysis window, labelled, when the statistics have several."""
+    from .store import window_label
+    if "window" not in sds.dims:
+        return "\n".join(_table_lines(sds) + ["notes:"] + [f"  {t}" for t in _missing_notes(sds)])
+    lines = []
+    for i, w in enumerate(windows_of(sds)):
+        body = _table_lines(in_window(sds, w))
+        lines += ([] if i else body[:1]) + [f"window: {window_label(w, float(sds.attrs['steady_after_s']))}"]
+        lines += body[1:]
+    return "\n".join(lines + ["notes:"] + [f"  {t}" for t in _missing_notes(sds)])
+
+
+def _table_lines(sds: xr.Dataset) -> list[str]:
+    """The lines of one window's table (the first one says what the rows are)."""
     from .store import display_unit
     a = sds.attrs
     lines = [f"{a['n_finished']} finished realisations ({a['n_failed']} failed); 'max' rows: "
@@ -408,4 +462,4 @@ def format_stats(sds: xr.Dataset) -> str:
                         else " " * 30
                     lines.append(head + f"{b:<9s}" + "".join(
                         _cell(float(v.sel(statistic=s, bound=b)), f) for s in STATISTICS))
-    return "\n".join(lines + ["notes:"] + [f"  {t}" for t in _missing_notes(sds)])
+    return lines

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
+import warnings
 
 import dask
 import numpy as np
@@ -16,11 +17,13 @@ import xarray as xr
 
 from rss6core import __version__
 
-__all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "display_unit", "error_summaries", "run_dataset",
+__all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "WINDOWS", "display_unit", "error_summaries", "window_summaries",
+           "window_masks", "window_reductions", "window_label", "run_dataset",
            "write_netcdf", "cf_encode", "cf_decode", "check_free_space", "netcdf_size"]
 
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
 QUANTITIES = ("displacement", "velocity", "acceleration")
+WINDOWS = ("whole", "startup", "steady")   # analysis windows: [0, T], [0, t_s), [t_s, T]
 UNITS = {"displacement": ("m", "rad"), "velocity": ("m s-1", "rad s-1"),
          "acceleration": ("m s-2", "rad s-2")}
 _DISPLAY = {"displacement": ("mm", "rad"), "velocity": ("mm/s", "rad/s"),
@@ -43,7 +46,8 @@ def _provenance(scene, title: str, *, model: str, integrator: str, dt: float,
     return {"Conventions": "CF-1.10", "title": title, "source": f"rss6 {__version__}",
             "rss6_version": __version__, "scene_name": scene.name, "scene_toml": scene.source_text,
             "model": model, "integrator": integrator, "time_step_s": dt,
-            "elements_per_link": elements}
+            "elements_per_link": elements, "settle_time_s": scene.simulation.settle_time,
+            "steady_after_s": scene.simulation.steady_after}
 
 
 def _unit_table() -> np.ndarray:
@@ -58,17 +62,59 @@ def _history(result) -> np.ndarray:
     return np.stack([result.displacement, result.velocity, result.acceleration])
 
 
+def window_masks(t, settle: float, steady_after: float) -> np.ndarray:
+    """(window, T) which samples t (s) each of WINDOWS holds: whole t >= settle, startup
+    settle <= t < steady_after, steady t >= max(settle, steady_after)."""
+    t = np.asarray(t)
+    kept = t >= settle - 1e-12
+    steady = t >= steady_after - 1e-12
+    return np.stack([kept, kept & ~steady, kept & steady])
+
+
+def window_reductions(err: np.ndarray, masks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Max and mean of |err| (quantity, time, direction) over each window's samples (window, time):
+    (window, quantity, direction) each; NaN where a window holds no finite value."""
+    peaks, means = [], []
+    for mask in masks:
+        e = np.abs(err)[:, mask]
+        finite = np.isfinite(e).any(axis=1)
+        with np.errstate(invalid="ignore", all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)        # empty or all-NaN windows
+            peaks.append(np.where(finite, np.max(np.where(np.isfinite(e), e, -np.inf), axis=1,
+                                                 initial=-np.inf), np.nan))
+            means.append(np.nanmean(e, axis=1) if e.shape[1] else np.full(finite.shape, np.nan))
+    return np.stack(peaks), np.stack(means)
+
+
 def error_summaries(result, settle: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Max and mean over t >= ``settle`` (s) of |error| (quantity, direction); NaN where nothing finite
-    was computed.  The contact level's maxima come from every internal step after ``settle``."""
-    err = np.abs(_history(result))[:, np.asarray(result.t) >= settle - 1e-12]
-    finite = np.isfinite(err).any(axis=1)
-    with np.errstate(invalid="ignore", all="ignore"):
-        peak = np.where(finite, np.nanmax(np.where(np.isfinite(err), err, -np.inf), axis=1), np.nan)
-        mean = np.nanmean(err, axis=1)
+    """Max and mean over t >= ``settle`` (s) of |error| (quantity, direction): the whole window of
+    :func:`window_summaries`."""
+    peak, mean = window_summaries(result, settle, settle)
+    return peak[0], mean[0]
+
+
+def window_summaries(result, settle: float = 0.0, steady_after: float = 0.0
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Max and mean of |error| per window of WINDOWS (t >= ``settle`` s, split at ``steady_after`` s):
+    (window, quantity, direction) each, NaN where nothing finite was computed.  The contact level's
+    maxima come from every internal step (its peak_abs_error per startup and steady window)."""
+    masks = window_masks(result.t, settle, steady_after)
+    peak, mean = window_reductions(_history(result), masks)
     if result.peak_abs_error is not None:  # taken over every internal step, finer than the output
-        peak = np.where(finite, result.peak_abs_error, np.nan)
+        finer = np.asarray(result.peak_abs_error)                  # (startup, steady)
+        finer = np.concatenate([finer.max(axis=0)[None], finer])
+        peak = np.where(np.isfinite(peak), finer, np.nan)
     return peak, mean
+
+
+def window_label(window: str, steady_after: float) -> str:
+    """How a window reads in tables and figures, e.g. 'steady (t >= 0.5 s)'."""
+    return {"whole": "whole run", "startup": f"startup (t < {steady_after:g} s)",
+            "steady": f"steady (t >= {steady_after:g} s)"}[window]
+
+
+_WINDOW_ATTRS = {"long_name": "analysis window: whole run, startup t < steady_after_s, "
+                              "steady t >= steady_after_s (global attribute, s)"}
 
 
 def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elements: int,
@@ -76,7 +122,7 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
     """One simulation as a self-describing Dataset: error histories, summaries, provenance."""
     err = _history(result)
     summary_attrs = {"units": MIXED_UNITS, "cell_methods": "time: maximum"}
-    peak, mean = error_summaries(result, scene.simulation.settle_time)
+    peak, mean = window_summaries(result, scene.simulation.settle_time, scene.simulation.steady_after)
     extra = {}
     if result.contact_force_peak is not None:
         extra["max_contact_force"] = (("joint",), result.contact_force_peak, _CONTACT_ATTRS)
@@ -85,9 +131,9 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
             "error": (("quantity", "time", "direction"), err,
                       {"long_name": "platform pose error, actual minus ideal rigid pose",
                        "units": MIXED_UNITS}),
-            "max_abs_error": (("quantity", "direction"), peak,
+            "max_abs_error": (("window", "quantity", "direction"), peak,
                               {"long_name": "maximum over time of |error|", **summary_attrs}),
-            "mean_abs_error": (("quantity", "direction"), mean,
+            "mean_abs_error": (("window", "quantity", "direction"), mean,
                                {"long_name": "mean over time of |error|", "units": MIXED_UNITS,
                                 "cell_methods": "time: mean"}),
             **extra,
@@ -96,6 +142,7 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
             "time": ("time", result.t, {"units": "s", "long_name": "time", "axis": "T",
                                         "standard_name": "time"}),
             **({"joint": ("joint", list(JOINTS))} if extra else {}),
+            "window": ("window", list(WINDOWS), _WINDOW_ATTRS),
             "direction": ("direction", list(DIRECTIONS),
                           {"long_name": "platform pose direction in the base frame"}),
             "quantity": ("quantity", list(QUANTITIES)),
@@ -303,18 +350,19 @@ class EnsembleFileError(ValueError):
     """A file that is not a complete rss6 ensemble, or one from a different run."""
 
 
-def realization_dataset(result, draw, realization: int, store: str, settle: float = 0.0) -> xr.Dataset:
+def realization_dataset(result, draw, realization: int, store: str, settle: float = 0.0,
+                        steady_after: float = 0.0) -> xr.Dataset:
     """One realisation as a length-1 slice of the ensemble file (docs/model.md section 7); its summaries
-    leave out t < ``settle`` (s)."""
-    peak, mean = error_summaries(result, settle)
+    leave out t < ``settle`` (s) and are split into WINDOWS at ``steady_after`` (s)."""
+    peak, mean = window_summaries(result, settle, steady_after)
     size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
     axial = np.concatenate([draw.axial_size, np.full(12, np.nan)])
     ecc = np.concatenate([draw.e_A, draw.e_C, draw.e_B])
     data = {
-        "max_abs_error": (("quantity", "realization", "direction"), peak[:, None],
+        "max_abs_error": (("window", "quantity", "realization", "direction"), peak[:, :, None],
                           {"long_name": "per-realisation maximum over time of |platform pose error|",
                            "units": MIXED_UNITS, "cell_methods": "time: maximum"}),
-        "mean_abs_error": (("quantity", "realization", "direction"), mean[:, None],
+        "mean_abs_error": (("window", "quantity", "realization", "direction"), mean[:, :, None],
                            {"long_name": "per-realisation mean over time of |platform pose error|",
                             "units": MIXED_UNITS, "cell_methods": "time: mean"}),
         "clearance_size": (("realization", "joint"), size[None],
@@ -358,7 +406,8 @@ def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: s
         quantity=("quantity", list(QUANTITIES)),
         joint=("joint", list(JOINTS), {"long_name": "clearance joint"}),
         component=("component", ["x", "y", "z"], {"long_name": "base-frame vector component"}),
-        unit=(("quantity", "direction"), _unit_table(), {"long_name": "SI unit of each element"}))
+        unit=(("quantity", "direction"), _unit_table(), {"long_name": "SI unit of each element"}),
+        window=("window", list(WINDOWS), _WINDOW_ATTRS))
     ds.attrs = {
         **_provenance(scene, f"rss6 ensemble: {model} level, scene {scene.name!r}", model=model,
                       integrator=integrator, dt=dt, elements=elements),

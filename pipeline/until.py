@@ -140,6 +140,8 @@ def widths(targets: list[Target], sds) -> list[Width]:
     out = []
     for t in targets:
         da = sds[t.variable].sel(statistic=t.statistic, quantity=t.quantity)
+        if "window" in da.dims:                     # statistics of every window of the file
+            da = da.sel(window=t.window or "whole")
         for d in t.directions:
             est, lo, hi = (float(da.sel(direction=d, bound=b)) for b in ("estimate", "lower", "upper"))
             half = (hi - lo) / 2 if np.isfinite(lo) and np.isfinite(hi) else None
@@ -218,7 +220,7 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
 
     def judge(ds) -> dict:
         n = ds.sizes["realization"]
-        found.update(n=n, widths=widths(targets, ensemble_stats(ds, CONFIDENCE)))
+        found.update(n=n, widths=widths(targets, ensemble_stats(ds, CONFIDENCE, window=None)))
         extra = until_attrs(targets, found["widths"], n, points, cap)
         return extra | (annotate(ds) if annotate else {})
 

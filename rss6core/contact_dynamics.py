@@ -45,7 +45,7 @@ from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Re
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
 from .elastic import quasi_static_state
-from .results import ContactBatch, time_grid
+from .results import PEAK_WINDOWS, ContactBatch, time_grid
 from .integrators import Integrator, StepWeights, correct, make_integrator, predict
 from .kinematics import crank_axes, rigid_motion
 from .quasi_static import closure_matrix
@@ -514,6 +514,7 @@ class _Setup:
     t: np.ndarray           # base-step instants, s
     every: int              # base steps per output sample
     settle_at: float        # s: peaks from here on
+    steady_at: float        # s: peaks of the steady window from here on, of the startup window before
     tolerance: float        # m, local error per step (0: refine only where Newton fails)
     limit: float            # m, divergence limit
     refinements: int
@@ -548,7 +549,8 @@ def _setup(scene, draws, elements, integrator, dt, output_step, model, divergenc
                                abs(integrator.beta - 1.0 / 6.0) * hl * hl))
     settle_at = (sim.settle_time if settle is None else settle) - 1e-9 * h
     return _Setup(scene, jm, _joints(scene, draws), integrator, tuple(sizes),
-                  time_grid(scene.trajectory.duration, h), every, settle_at, float(tolerance),
+                  time_grid(scene.trajectory.duration, h), every, settle_at,
+                  sim.steady_after - 1e-9 * h, float(tolerance),
                   float(divergence_limit), int(refinements))
 
 
@@ -563,7 +565,7 @@ class _Workspace:
         self.d = self.v = self.a = self.Ma = self.rest = self.g = None
         self.contacts = _Contacts((R,), floor)
         self.hist = np.full((3, R, n_out, 6), np.nan)
-        self.peak = np.zeros((R, 3, 6))
+        self.peak = np.zeros((R, len(PEAK_WINDOWS), 3, 6))
         self.cpeak = np.zeros((R, 18))
         self.alive = np.ones(R, bool)
         self.status, self.message = [FINISHED] * R, [""] * R
@@ -585,10 +587,11 @@ class _Workspace:
         live = self.alive
         self.hist[:, live, k] = np.stack([self.d[live, -6:], self.v[live, -6:], self.a[live, -6:]])
 
-    def peaks(self, idx, d, v, a, f):
-        """Peaks of |platform error| and |contact force| of realisations idx updated with a step."""
+    def peaks(self, idx, window, d, v, a, f):
+        """Peaks of |platform error| in ``window`` (index into PEAK_WINDOWS) and of |contact force| of
+        realisations idx updated with a step."""
         p = np.stack([d[..., -6:], v[..., -6:], a[..., -6:]], 1)     # (R, 3, 6)
-        self.peak[idx] = np.maximum(self.peak[idx], np.abs(p))
+        self.peak[idx, window] = np.maximum(self.peak[idx, window], np.abs(p))
         mags = np.swapaxes(np.linalg.norm(f, axis=-1), -1, -2).reshape(len(idx), 18)
         self.cpeak[idx] = np.maximum(self.cpeak[idx], mags)
 
@@ -629,7 +632,7 @@ class ContactStepper(abc.ABC):
         ws.contacts.update(everyone, delta, rate, used)
         ws.Ma, ws.rest = _mass(su.jm, ch.Mp[0], ws.a), rest
         if 0.0 >= su.settle_at:
-            ws.peaks(everyone, ws.d, ws.v, ws.a, f)
+            ws.peaks(everyone, int(0.0 >= su.steady_at), ws.d, ws.v, ws.a, f)
         ws.history(0)
 
     @abc.abstractmethod
@@ -744,7 +747,7 @@ class NumpyStepper(ContactStepper):
             ws.rest[kept] = _internal(su.jm, ch.Mp[k1], d, v)
             ws.g[kept] = g
         if ch.t[k1] >= su.settle_at:
-            ws.peaks(kept, d, v, a, f)
+            ws.peaks(kept, int(ch.t[k1] >= su.steady_at), d, v, a, f)
 
 
 class CompiledStepper(ContactStepper):
@@ -769,7 +772,7 @@ class CompiledStepper(ContactStepper):
                              crank_boundary=jm.crank_boundary.astype(np.int64))
         self.settings = Settings(mass_damping=float(jm.mass_damping), stiffness_damping=float(jm.stiffness_damping),
                                  alpha_m=float(it.alpha_m), alpha_f=float(it.alpha_f),
-                                 settle_at=float(su.settle_at),
+                                 settle_at=float(su.settle_at), steady_at=float(su.steady_at),
                                  impact_floor=float(su.scene.contact.impact_speed_floor), tolerance=su.tolerance,
                                  divergence_limit=su.limit, tol_d=float(TOL_DISPLACEMENT),
                                  tol_v=float(TOL_VELOCITY), max_iterations=int(MAX_ITERATIONS),

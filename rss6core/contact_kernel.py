@@ -76,9 +76,10 @@ recovery [y, x_b] -> x (L, n_i + 6, n) maps (:meth:`.contact_dynamics._Condensed
 Layout = namedtuple("Layout", "crank_dofs crank_MK rod_MK crank_M rod_M crank_boundary")
 Layout.__doc__ = """The links' layout: crank DOFs, [M; K] of crank and rod, M of crank and rod, the crank's
 joint-node indices (6,)."""
-Settings = namedtuple("Settings", "mass_damping stiffness_damping alpha_m alpha_f settle_at impact_floor "
-                      "tolerance divergence_limit tol_d tol_v max_iterations refinements")
-Settings.__doc__ = """Rayleigh lambda_1 (1/s), lambda_2 (s); alpha_m, alpha_f; settle time (s); impact speed
+Settings = namedtuple("Settings", "mass_damping stiffness_damping alpha_m alpha_f settle_at steady_at "
+                      "impact_floor tolerance divergence_limit tol_d tol_v max_iterations refinements")
+Settings.__doc__ = """Rayleigh lambda_1 (1/s), lambda_2 (s); alpha_m, alpha_f; settle time (s); start of the
+steady window (s, peaks of steps ending from then on go to window 1, earlier ones to 0); impact speed
 floor (m/s); local error tolerance (m); divergence limit (m); Newton's tolerances on displacement (m)
 and velocity (m/s) and its iteration cap; step refinements allowed."""
 ChunkArrays = namedtuple("ChunkArrays", "F Mp G J Rr omega t")
@@ -98,9 +99,9 @@ State.__doc__ = """The batch's state (R, N): d, v, a and, for the alpha-weighted
 C v + K d and the generalised contact forces g; contact memory (R, 6, 4): stored impact speeds,
 in-contact flags, penetration rates."""
 Records = namedtuple("Records", "peak cpeak hist alive fail fail_t fail_h fail_size steps iters refined")
-Records.__doc__ = """Per realisation: peaks (R, 3, 6), contact force peaks (R, 18), histories (3, R, T_out, 6),
-alive, failure code (:mod:`.status`), time (s), step (s) and largest |d| (m) at failure, steps,
-Newton iterations, refined steps."""
+Records.__doc__ = """Per realisation: peaks per window [startup, steady] (R, 2, 3, 6), contact force peaks
+(R, 18), histories (3, R, T_out, 6), alive, failure code (:mod:`.status`), time (s), step (s) and
+largest |d| (m) at failure, steps, Newton iterations, refined steps."""
 Out = namedtuple("Out", "f gl gp delta rate")
 Out.__doc__ = """Newton's results at the accepted iterate: contact forces (6, 3, 3), generalised forces on
 the joint nodes (6, 12) and the platform (6,), penetrations and rates (6, 4)."""
@@ -854,17 +855,18 @@ def _accept(r, k1, layout, cfg, ch, st, rec, work):
         for b in range(6):
             st.g[r, N - 6 + b] = work.gp[b]
     if ch.t[k1] >= cfg.settle_at:
-        _peaks(r, work, rec)
+        _peaks(r, 1 if ch.t[k1] >= cfg.steady_at else 0, work, rec)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _peaks(r, work, rec):
-    """Realisation r's peaks of |platform error| and |contact force| updated with the candidate step."""
+def _peaks(r, w, work, rec):
+    """Realisation r's peaks of |platform error| in window w and of |contact force| updated with the
+    candidate step."""
     N = work.d_new.shape[0]
     for b in range(6):
-        rec.peak[r, 0, b] = max(rec.peak[r, 0, b], abs(work.d_new[N - 6 + b]))
-        rec.peak[r, 1, b] = max(rec.peak[r, 1, b], abs(work.v_new[N - 6 + b]))
-        rec.peak[r, 2, b] = max(rec.peak[r, 2, b], abs(work.a_new[N - 6 + b]))
+        rec.peak[r, w, 0, b] = max(rec.peak[r, w, 0, b], abs(work.d_new[N - 6 + b]))
+        rec.peak[r, w, 1, b] = max(rec.peak[r, w, 1, b], abs(work.v_new[N - 6 + b]))
+        rec.peak[r, w, 2, b] = max(rec.peak[r, w, 2, b], abs(work.a_new[N - 6 + b]))
     f = work.f
     for leg in range(6):
         for j in range(3):

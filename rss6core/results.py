@@ -5,7 +5,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SimulationResult", "ContactBatch", "time_grid"]
+__all__ = ["SimulationResult", "ContactBatch", "time_grid", "PEAK_WINDOWS"]
+
+PEAK_WINDOWS = ("startup", "steady")   # axis 0 of the peaks: t < steady_after, t >= steady_after
 
 
 @dataclass(frozen=True)
@@ -19,7 +21,8 @@ class SimulationResult:
     message: str              # why it failed (:func:`.status.failure_message`), else ""
     steps: int                # steps taken
     states: tuple | None = None  # full (d, v, a) histories (T, N) when asked for
-    peak_abs_error: np.ndarray | None = None      # (3, 6) max |error| over internal steps, if finer
+    peak_abs_error: np.ndarray | None = None      # (2, 3, 6) max |error| over internal steps, if
+                                                  # finer, per window of PEAK_WINDOWS
     contact_force_peak: np.ndarray | None = None  # (18,) N, joints A1..A6, C1..C6, B1..B6
     iterations: int = 0                           # Newton iterations (contact level)
     draw: object | None = None  # the ClearanceDraw an ensemble file records (clearance levels)
@@ -32,7 +35,7 @@ class ContactBatch:
     displacement: np.ndarray      # (R, T, 6)
     velocity: np.ndarray
     acceleration: np.ndarray
-    peak: np.ndarray              # (R, 3, 6) max |error| over every internal step
+    peak: np.ndarray              # (R, 2, 3, 6) max |error| over every internal step per PEAK_WINDOWS
     contact_peak: np.ndarray      # (R, 18) max |contact force| per joint A1..A6, C1..C6, B1..B6, N
     status: list
     message: list

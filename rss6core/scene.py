@@ -152,6 +152,7 @@ class Simulation:
     contact_time_step: float = 1e-4  # s, internal step of the contact level (L4)
     contact_integrator: str = "generalized-alpha"  # its integrator: damps unresolved contact chatter
     settle_time: float = 0.0  # s, start-up transient left out of the error summaries (maxima, means)
+    steady_after: float = 0.0  # s, boundary t_s of the analysis windows startup [0, t_s), steady [t_s, T]
     contact_tolerance: float = 0.0   # m, local error bound of the adaptive contact step (0: none)
     contact_refinements: int = 0     # halvings of contact_time_step the adaptive step may take
 
@@ -215,6 +216,19 @@ class _Key:
 
 
 _POS, _NONNEG = "positive", "nonnegative"
+_UNSET = float("nan")   # a key whose default depends on other keys
+STEADY_AFTER = 0.75     # s: default window boundary, measured on paper's contact level (docs/model.md)
+
+
+def _steady_after(value: float, duration: float) -> float:
+    """The window boundary t_s (s): the key's value, checked to lie in [0, duration), or by default
+    STEADY_AFTER, at most half the duration (a short scene keeps a start-up and a steady window)."""
+    if np.isnan(value):
+        return min(STEADY_AFTER, duration / 2)
+    if value >= duration:
+        raise SceneError(f"[simulation] steady_after_s: must be shorter than [trajectory] duration_s "
+                         f"= {duration!r}, got {value!r}")
+    return value
 _SCHEMA: dict = {
     "name": _Key(str),
     "geometry": {
@@ -256,6 +270,7 @@ _SCHEMA: dict = {
         "contact_time_step_s": _Key(float, default=1e-4, check=_POS),
         "contact_integrator": _Key(str, default="generalized-alpha", choices=INTEGRATORS),
         "settle_time_s": _Key(float, default=0.0, check=_NONNEG),
+        "steady_after_s": _Key(float, default=_UNSET, check=_NONNEG),
         "contact_tolerance_m": _Key(float, default=0.0, check=_NONNEG),
         "contact_refinements": _Key(int, default=0, bounds=(0, MAX_CONTACT_REFINEMENTS)),
     },
@@ -380,6 +395,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
     if v["simulation"]["settle_time_s"] >= duration:
         raise SceneError(f"[simulation] settle_time_s: must be shorter than [trajectory] duration_s "
                          f"= {duration!r}, got {v['simulation']['settle_time_s']!r}")
+    v["simulation"]["steady_after_s"] = _steady_after(v["simulation"]["steady_after_s"], duration)
     ratio = dt / v["simulation"]["contact_time_step_s"]
     if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
         raise SceneError(f"[simulation] contact_time_step_s: must divide time_step_s = {dt!r} "

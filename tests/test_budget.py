@@ -120,7 +120,7 @@ def test_paper_level_sweep(tmp_path, configs, capsys):
 @pytest.mark.parametrize("spec, message", [
     ("displacement:x>=0.1mm@q95", "use <= or <"),
     ("displacement:x<=0.1@q95", "--spec 'displacement:x<=0.1@q95': missing unit"),
-    ("displacement:x<=0.1mm@q95/steady", "no analysis windows"),
+    ("displacement:x<=0.1mm@q95/warmup", "unknown window 'warmup'; choose one of whole, startup, steady"),
 ])
 def test_bad_specs_get_one_line(spec, message, configs, tmp_path, capsys):
     code = main(["budget", str(configs / "smoke.toml"), "--spec", spec, "-o", str(tmp_path / "b")])

@@ -73,7 +73,12 @@ def test_simulate_json_and_netcdf(configs, tmp_path, capsys):
         stored = nc.variables["max_abs_error"][:]
         assert "elements_per_link" in nc.scene_toml
     # the file's summaries are the JSON's numbers
-    assert stored[0, 2] == pytest.approx(out["max_abs_error"]["displacement"]["z"], rel=1e-12)
+    assert stored[0, 0, 2] == pytest.approx(out["max_abs_error"]["displacement"]["z"], rel=1e-12)
+    by_window = out["max_abs_error_by_window"]       # windows whole, startup, steady in the file
+    assert set(by_window) == {"startup", "steady"}
+    for k, window in ((1, "startup"), (2, "steady")):
+        assert stored[k, 0, 2] == by_window[window]["displacement"]["z"]
+    assert np.array_equal(stored[0], np.maximum(stored[1], stored[2]))
 
 
 def test_simulate_rigid_is_the_reference(capsys):

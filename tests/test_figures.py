@@ -181,13 +181,17 @@ def test_histogram_markers_and_convergence_interval_come_from_stats(full_ensembl
     ds = open_ensemble(full_ensemble)
     figs = ensemble_figures(ds)
     try:
-        si = ds["max_abs_error"].sel(quantity="acceleration", direction="z").values
-        f, unit = figure_unit("acceleration", "z", si)
-        peak = si * f
+        si = ds["max_abs_error"].sel(quantity="acceleration", direction="z")
+        f, unit = figure_unit("acceleration", "z", si.sel(window=["startup", "steady"]).values)
         hist = figs["hist_max_acceleration.png"].axes[2]
-        lines = [ln.get_xdata()[0] for ln in hist.get_lines()]
-        np.testing.assert_allclose(lines, estimates(peak, ("mean", "q95")), rtol=1e-12)
+        lines = [ln.get_xdata()[0] for ln in hist.get_lines()]      # one mean per window
+        want = [estimates(si.sel(window=w).values * f, ("mean",))[0] for w in ("startup", "steady")]
+        np.testing.assert_allclose(lines, want, rtol=1e-12)
+        assert want[0] != want[1]
+        assert [t.get_text().split(",")[0] for t in hist.get_legend().get_texts()] == ["startup", "steady"]
         assert f"[{unit}]" in hist.get_xlabel()
+        f, unit = figure_unit("acceleration", "z", si.sel(window="whole").values)
+        peak = si.sel(window="whole").values * f
         conv = figs["convergence_acceleration.png"].axes[2]
         band = conv.collections[0].get_paths()[0].vertices[:, 0]
         assert band.min() == MIN_N_MEAN

@@ -60,7 +60,7 @@ CASES = {
     "nan in a finished run": (_set("max_abs_error", {"realization": 4}, np.nan),
                               "max_abs_error is not finite in finished realisation 4"),
     "renamed dimension": (lambda ds: ds.rename({"direction": "axis"}),
-                          r"max_abs_error has dimensions \(quantity, realization, axis\)"),
+                          r"max_abs_error has dimensions \(window, quantity, realization, axis\)"),
     "relabelled quantity": (lambda ds: ds.assign_coords(quantity=["displacement", "speed",
                                                                   "acceleration"]),
                             "'quantity' labels are displacement, speed, acceleration"),
@@ -106,7 +106,8 @@ def test_stats_of_a_simulate_file_gives_estimates_without_intervals(single_run, 
     capsys.readouterr()
     assert main(["stats", str(single_run), "--json"]) == 0
     js = json.loads(capsys.readouterr().out)
-    stored = load_netcdf(single_run)["max_abs_error"].sel(quantity="displacement", direction="z")
+    stored = load_netcdf(single_run)["max_abs_error"].sel(window="whole", quantity="displacement",
+                                                          direction="z")
     cell = js["max_abs_error"]["displacement"]["z"]
     assert js["n_finished"] == 1 and js["n_failed"] == 0
     for stat in ("mean", "q05", "q50", "q95", "q99", "max"):

@@ -123,13 +123,13 @@ def test_dataset_from_a_smoke_pair_and_pairing_check(configs):
     mean = mds["max_abs_error_mean"]
     assert mean.dims == ("estimator", "bound", "quantity", "direction")
     np.testing.assert_allclose(mean.sel(estimator="high_only", bound="estimate"),
-                               high["max_abs_error"].mean("realization").transpose(
+                               high["max_abs_error"].sel(window="whole").mean("realization").transpose(
                                    "quantity", "direction"))
     assert np.isnan(mean.sel(estimator="multifidelity", bound="lower")).all()
     assert mds.attrs["n_high"] == 3 and mds.attrs["n_low"] == 6
     assert "mean_abs_error_cost_ratio" in mds and "max_abs_error_plain_n_for_width" not in mds
     sized = multifidelity_dataset(high, low, CONF, cost_high_over_low=4.0, width=0.05)
-    y = high["max_abs_error"].transpose("realization", ...).values          # all finished
+    y = high["max_abs_error"].sel(window="whole").transpose("realization", ...).values  # all finished
     mf = sized["max_abs_error_mean"].sel(estimator="multifidelity", bound="estimate").values
     n_plain = (1.959964 * y.std(axis=0, ddof=1) / (0.05 * mf)) ** 2          # independent formula
     np.testing.assert_allclose(sized["max_abs_error_plain_n_for_width"], np.ceil(n_plain), atol=1)

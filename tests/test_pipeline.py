@@ -67,7 +67,9 @@ def test_file_reads_correctly_with_netcdf4_directly(reference):
         assert nc.Conventions == "CF-1.10" and nc.model == "quasi-static" and nc.seed == 3
         assert "[simulation]" in nc.scene_toml
         var = nc.variables["max_abs_error"]
-        assert var.dimensions == ("quantity", "realization", "direction")
+        assert var.dimensions == ("window", "quantity", "realization", "direction")
+        assert list(nc.variables["window_label"][:]) == ["whole", "startup", "steady"]
+        assert nc.steady_after_s == 0.1 and nc.settle_time_s == 0.0   # default: half of 0.2 s
         assert "m or rad" in var.rss6_units  # CF units must be UDUNITS: per element in 'unit'
         assert nc.variables["unit"][:].tolist()[0] == ["m"] * 3 + ["rad"] * 3
         assert nc.variables["realization"].rss6_axis == "E"
@@ -81,7 +83,7 @@ def test_statistics_dataset_of_an_ensemble_file(reference):
     coverage in test_stats.py); 10 realisations: no interval for q05/q95/q99, std or max."""
     ref, path = reference
     out = ensemble_stats(open_ensemble(path))
-    x = ref["max_abs_error"].sel(quantity="velocity", direction="y").values
+    x = ref["max_abs_error"].sel(window="whole", quantity="velocity", direction="y").values
     s = out["max_abs_error"].sel(quantity="velocity", direction="y")
     est = s.sel(bound="estimate")
     assert float(est.sel(statistic="mean")) == pytest.approx(np.mean(x), rel=1e-14)

@@ -53,11 +53,20 @@ def test_report_numbers_come_from_its_files(report):
     contact = open_ensemble(data / "smoke_contact.nc")
     assert contact.sizes["realization"] == 3
     # the contact median of the per-realisation max |z displacement| in mm, as the table prints it
-    z = contact["max_abs_error"].sel(quantity="displacement", direction="z").values
+    z = contact["max_abs_error"].sel(window="whole", quantity="displacement", direction="z").values
     row = next(line for line in md.splitlines() if line.startswith("| max \\|displacement error\\| | z |"))
     cells = [c.strip() for c in row.strip("|").split(" | ")]
     assert cells[3] == "0.0047"                                   # the paper's value
     assert float(cells[8].split(" [")[0]) == pytest.approx(np.median(z) * 1e3, rel=5e-3)
+    # the window table: startup, steady and whole medians of the same statistic, labelled
+    windows = md.split("### Start-up and steady operation (contact level)")[1]
+    assert "steady (t >= 0.1 s): median [95 % CI]" in windows
+    row = next(line for line in windows.splitlines() if line.startswith("| max \\|displacement error\\| | z |"))
+    cells = [c.strip() for c in row.strip("|").split(" | ")]
+    for k, window in ((3, "startup"), (4, "steady"), (5, "whole")):
+        want = np.median(contact["max_abs_error"].sel(window=window, quantity="displacement",
+                                                      direction="z").values) * 1e3
+        assert float(cells[k].split(" [")[0]) == pytest.approx(want, rel=5e-3)
     # family runs: the other families at OFF, this one at the scene's clearance
     only_c = open_ensemble(data / "smoke_contact_onlyC.nc")
     sizes = only_c["clearance_size"].values

@@ -12,7 +12,7 @@ from scipy import stats as sps
 
 from pipeline.cli import main
 from pipeline.run import EnsembleSpec, run_ensemble
-from pipeline.stats import (MIN_N_MEAN, MIN_N_STD, QUANTILES, STATISTICS, ensemble_stats,
+from pipeline.stats import (in_window, MIN_N_MEAN, MIN_N_STD, QUANTILES, STATISTICS, ensemble_stats,
                             mean_interval, min_n_for_quantile, quantile_interval, quantile_ranks,
                             std_interval, to_json)
 from pipeline.store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, load_netcdf
@@ -105,6 +105,14 @@ def _synthetic(values: np.ndarray, status=None) -> xr.Dataset:
                               "unit": (("quantity", "direction"), unit)})
 
 
+def _file(ds: xr.Dataset) -> xr.Dataset:
+    """``ds`` as rss6 writes it: summaries per analysis window (here the same values in each)."""
+    windowed = {name: xr.concat([ds[name]] * 3, dim="window") for name in ("max_abs_error",
+                                                                          "mean_abs_error")}
+    return ds.assign(windowed).assign_coords(window=["whole", "startup", "steady"]).assign_attrs(
+        rss6_version="test", settle_time_s=0.0, steady_after_s=0.5)
+
+
 def test_dataset_layout_and_attributes():
     sds = ensemble_stats(_synthetic(np.random.default_rng(1).gamma(2.0, size=(3, 40, 6))))
     for name in ("max_abs_error", "mean_abs_error"):
@@ -130,7 +138,7 @@ def test_mixed_file_uses_finished_realisations_only(tmp_path, capsys):
     assert mixed.attrs["n_finished"] == 37 and mixed.attrs["n_failed"] == 3
     xr.testing.assert_identical(mixed.drop_attrs(), clean.drop_attrs())
     path = tmp_path / "mixed.nc"
-    _synthetic(values, status).assign_attrs(rss6_version="test").to_netcdf(path)
+    _file(_synthetic(values, status)).to_netcdf(path)
     assert main(["stats", str(path), "--quantity", "velocity"]) == 0
     assert "37 finished realisations (3 failed)" in capsys.readouterr().out
 
@@ -141,8 +149,7 @@ def _raise(name):
 
 def test_json_is_strict_with_null_for_missing_numbers(tmp_path, capsys):
     path = tmp_path / "small.nc"
-    _synthetic(np.random.default_rng(3).gamma(2.0, size=(3, 12, 6))).assign_attrs(
-        rss6_version="test").to_netcdf(path)
+    _file(_synthetic(np.random.default_rng(3).gamma(2.0, size=(3, 12, 6)))).to_netcdf(path)
     assert main(["stats", str(path), "--json", "-o", str(tmp_path / "s.nc")]) == 0
     js = json.loads(capsys.readouterr().out, parse_constant=_raise)
     cell = js["max_abs_error"]["displacement"]["z"]
@@ -150,16 +157,17 @@ def test_json_is_strict_with_null_for_missing_numbers(tmp_path, capsys):
     assert cell["q50"]["lower"] <= cell["q50"]["estimate"] <= cell["q50"]["upper"]
     assert js["n_finished"] == 12 and js["min_n_q99"] == 299
     written = load_netcdf(tmp_path / "s.nc")          # the CF file mapped back to rss6's layout
-    assert float(written["max_abs_error"].sel(statistic="q50", bound="estimate", quantity=
+    assert float(written["max_abs_error"].sel(window="whole", statistic="q50", bound="estimate", quantity=
                                               "displacement", direction="z")) == cell["q50"]["estimate"]
+    assert js["window"] == "whole" and set(js["by_window"]) == {"whole", "startup", "steady"}
+    assert js["by_window"]["whole"]["max_abs_error"] == js["max_abs_error"]
     assert "small.nc" in written.attrs["history"]
     json.dumps(to_json(ensemble_stats(_synthetic(np.zeros((3, 1, 6))))), allow_nan=False)
 
 
 def test_text_table_shows_dashes_and_the_n_needed(tmp_path, capsys):
     path = tmp_path / "small.nc"
-    _synthetic(np.random.default_rng(4).gamma(2.0, size=(3, 32, 6))).assign_attrs(
-        rss6_version="test").to_netcdf(path)
+    _file(_synthetic(np.random.default_rng(4).gamma(2.0, size=(3, 32, 6)))).to_netcdf(path)
     assert main(["stats", str(path), "--direction", "z"]) == 0
     out = capsys.readouterr().out
     assert "q95: no 95 % interval below n = 59 (n = 32 here)" in out
@@ -180,6 +188,7 @@ def _paper_ensemble(path, n, client=None):
 def _subsample_coverage(ds, n: int, draws: int, statistic: str, seed: int) -> np.ndarray:
     """Coverage per (variable, quantity, direction) of the full ensemble's estimate by the
     intervals of ``draws`` random sub-samples of size n (without replacement), vectorised."""
+    ds = in_window(ds, "whole")
     full = ensemble_stats(ds)
     rng = np.random.default_rng(seed)
     x = np.stack([ds[v].transpose("realization", ...).values
