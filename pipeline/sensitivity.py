@@ -22,7 +22,7 @@ import numpy as np
 import xarray as xr
 from scipy.special import ndtr, ndtri
 
-from rss6core import FINISHED, ClearanceDraw, prepare_level
+from rss6core import FINISHED, ClearanceDraw, prepare_level, size_band
 
 from .store import DIRECTIONS, JOINTS, QUANTITIES, _provenance, _unit_table, error_summaries
 
@@ -64,8 +64,7 @@ class ClearanceInputs:
 
 def clearance_inputs(scene) -> ClearanceInputs:
     """The scene's inputs: sizes only where they vary (size tolerance > 0 and a nonzero size)."""
-    cl, tol = scene.clearance, scene.sampling.size_tolerance
-    sized = {f: tol > 0 and getattr(cl, f) > 0 for f in FAMILIES}
+    sized = {f: size_band(scene, f) is not None for f in FAMILIES}
     rows = []
     for leg in range(1, 7):
         a = f"A{leg}"
@@ -93,12 +92,15 @@ def _truncated_normal_ppf(u, mean, std, low, high) -> np.ndarray:
     return np.clip(np.where(std > 0, x, mean), low, high)
 
 
-def _sizes(inputs, u, joints, what, nominal: float, tol: float) -> np.ndarray:
-    """(R, 6) clearance sizes: nominal, or nominal times Normal(1, tol) truncated to [0, 2]."""
+def _sizes(inputs, u, joints, what, nominal: float, band) -> np.ndarray:
+    """(R, 6) clearance sizes (m): nominal, or from the family's size band (rss6core.size_band)."""
     cols = [inputs.column(u, j, what) for j in joints]
     if cols[0] is None:
         return np.full((u.shape[0], 6), nominal)
-    return nominal * _truncated_normal_ppf(np.stack(cols, -1), 1.0, tol, 0.0, 2.0)
+    c = np.stack(cols, -1)
+    if band.law == "uniform":
+        return band.low + (band.high - band.low) * c
+    return _truncated_normal_ppf(c, nominal, band.std, band.low, band.high)
 
 
 def _spherical(inputs, u, kind: str, size: np.ndarray, law: str) -> np.ndarray:
@@ -119,13 +121,14 @@ def clearance_draws_from_uniforms(scene, inputs: ClearanceInputs, u: np.ndarray)
     realisation's stream (tests check both give the same draw from the same uniforms); to be
     merged with the core's uniforms-to-draw path used for quasi-Monte Carlo.
     """
-    cl, law, tol = scene.clearance, scene.sampling, scene.sampling.size_tolerance
+    cl, law = scene.clearance, scene.sampling
     u = np.atleast_2d(np.asarray(u, float))
     legs_a = [f"A{leg}" for leg in range(1, 7)]
-    dr = _sizes(inputs, u, legs_a, "radial_size", cl.revolute_radial, tol)
-    da = _sizes(inputs, u, legs_a, "axial_size", cl.revolute_axial, tol)
-    dC = _sizes(inputs, u, [f"C{leg}" for leg in range(1, 7)], "size", cl.spherical_C, tol)
-    dB = _sizes(inputs, u, [f"B{leg}" for leg in range(1, 7)], "size", cl.spherical_B, tol)
+    band = {f: size_band(scene, f) for f in FAMILIES}
+    dr = _sizes(inputs, u, legs_a, "radial_size", cl.revolute_radial, band["revolute_radial"])
+    da = _sizes(inputs, u, legs_a, "axial_size", cl.revolute_axial, band["revolute_axial"])
+    dC = _sizes(inputs, u, [f"C{leg}" for leg in range(1, 7)], "size", cl.spherical_C, band["spherical_C"])
+    dB = _sizes(inputs, u, [f"B{leg}" for leg in range(1, 7)], "size", cl.spherical_B, band["spherical_B"])
     col = {w: np.stack([inputs.column(u, j, w) for j in legs_a], -1)
            for w in ("radial_magnitude", "radial_angle", "axial")}
     radial = _truncated_normal_ppf(col["radial_magnitude"], law.radial_mean * dr, law.radial_std * dr,

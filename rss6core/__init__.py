@@ -31,6 +31,7 @@ Clearance draws
 - draw_clearances: one realisation's clearance sizes and eccentricities (m), from its seeded stream.
 - clearances_from_uniforms: the same draw as a function of a vector of uniforms (quasi-Monte Carlo).
 - uniform_dimension: how many uniforms one draw uses at most.
+- size_band: a joint family's clearance-size band ([tolerance.<family>] or [sampling] size_tolerance), or None.
 - SIZE_UNIFORMS: how many of them (the first) set the clearance sizes.
 
 The elastic level's parts (the stability study's explicit sweep)
@@ -49,7 +50,8 @@ from .elastic import quasi_static_state, simulate_elastic
 from .results import ContactBatch, SimulationResult, time_grid
 from .assembly import build_elastic_model
 from .beam import BEAM_THEORIES, BeamTheory
-from .clearance import SIZE_UNIFORMS, ClearanceDraw, clearances_from_uniforms, draw_clearances, uniform_dimension
+from .clearance import (SIZE_UNIFORMS, ClearanceDraw, clearances_from_uniforms, draw_clearances, size_band,
+                        uniform_dimension)
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
 from .kinematics import rigid_motion
@@ -65,6 +67,7 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
            "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom",
-           "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "SIZE_UNIFORMS",
-           "Integrator", "build_elastic_model", "BeamTheory", "BEAM_THEORIES", "quasi_static_state", "simulate_elastic",
+           "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "size_band",
+           "SIZE_UNIFORMS", "Integrator", "build_elastic_model", "BeamTheory", "BEAM_THEORIES",
+           "quasi_static_state", "simulate_elastic",
            "rigid_motion", "inverse_dynamics", "crank_inertia", "rod_inertia", "__version__"]

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr, ndtri
 
-__all__ = ["SIZE_UNIFORMS", "ClearanceDraw", "UniformVector", "realization_rng", "truncated_normal",
+__all__ = ["SIZE_UNIFORMS", "FAMILIES", "size_band", "SizeBand", "ClearanceDraw", "UniformVector", "realization_rng", "truncated_normal",
            "sphere_directions", "draw_clearances", "clearances_from_uniforms", "uniform_dimension"]
 
 
@@ -70,6 +70,16 @@ def sphere_directions(rng: np.random.Generator, size: int, law: str = "uniform")
 
 
 @dataclass(frozen=True)
+class SizeBand:
+    """A joint family's clearance-size tolerance band (m): uniform on [low, high], or the family's
+    nominal size + Normal(0, std) truncated to [low, high]."""
+    law: str      # 'normal' or 'uniform'
+    low: float    # m
+    high: float   # m
+    std: float    # m, the normal law's standard deviation (0 for 'uniform')
+
+
+@dataclass(frozen=True)
 class ClearanceDraw:
     """The clearance sizes (m) and eccentricity vectors (m, base frame) of one realisation."""
     radial_size: np.ndarray   # (6,) delta_r of A_i
@@ -81,15 +91,28 @@ class ClearanceDraw:
     e_B: np.ndarray           # (6, 3)
 
 
-def _sizes(rng, nominal: float, tolerance: float) -> np.ndarray:
-    """Six clearance sizes: nominal, or Normal(nominal, tolerance nominal) truncated to [0, 2 nominal]."""
-    if tolerance == 0.0 or nominal == 0.0:
+def size_band(scene, family: str):
+    """The family's size band: its [tolerance.<family>], else the relative [sampling] size_tolerance
+    as Normal(nominal, tolerance nominal) truncated to [0, 2 nominal], else None (nominal sizes)."""
+    band, nominal = getattr(scene.tolerance, family), getattr(scene.clearance, family)
+    tol = scene.sampling.size_tolerance
+    if band is None and tol > 0.0 and nominal > 0.0:
+        return SizeBand("normal", 0.0, 2.0 * nominal, tol * nominal)
+    return band
+
+
+def _sizes(rng, nominal: float, band) -> np.ndarray:
+    """Six clearance sizes (m) of one family from six uniforms: nominal, or drawn from ``band``."""
+    if band is None:
         rng.uniform(size=6)  # keep the stream's layout the same with and without tolerances
         return np.full(6, nominal)
-    return truncated_normal(rng, nominal, tolerance * nominal, 0.0, 2.0 * nominal, 6)
+    if band.law == "uniform":
+        return rng.uniform(band.low, band.high, size=6)
+    return truncated_normal(rng, nominal, band.std, band.low, band.high, 6)
 
 
 SIZE_UNIFORMS = 24   # a draw takes its uniforms for the 4 x 6 clearance sizes first
+FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")   # in that order
 
 
 def uniform_dimension(steps: int | None = None) -> int:
@@ -120,9 +143,7 @@ def clearances_from_uniforms(scene, u, steps: int | None = None) -> ClearanceDra
 def _draw(scene, rng, steps: int | None) -> ClearanceDraw:
     """The draw from ``rng`` (a Generator or a :class:`UniformVector`), uniforms taken in a fixed order."""
     cl, law = scene.clearance, scene.sampling
-    tol = law.size_tolerance
-    dr, da = _sizes(rng, cl.revolute_radial, tol), _sizes(rng, cl.revolute_axial, tol)
-    dC, dB = _sizes(rng, cl.spherical_C, tol), _sizes(rng, cl.spherical_B, tol)
+    dr, da, dC, dB = (_sizes(rng, getattr(cl, f), size_band(scene, f)) for f in FAMILIES)
     shape = (6,) if steps is None else (steps, 6)
     radial = truncated_normal(rng, law.radial_mean * dr, law.radial_std * dr, 0.0, dr, shape)
     theta = rng.uniform(0.0, 2.0 * np.pi, size=shape)

@@ -11,7 +11,11 @@ Faithful to the paper (sec. 2-5), with each step's draw from the realisation's o
 - the contact force of eq. 17-19 uses the penetration e - delta of eq. 6, 8, 10.
 The platform error is the elastic error of eq. 32 plus the kinematic error;
 velocity and acceleration of the kinematic part are its time derivatives on the
-step grid (central differences), as the method defines no other.
+step grid (central differences), as the method defines no other.  The same central
+differences hold at t = 0 and t = T: the draw has CENTRAL_PAD extra steps beyond
+each end, from their own seeded stream (one-sided differences there weighed the
+white noise differently and put 40-60 % of the velocity and 70-80 % of the
+acceleration maxima on the first or last sample).
 
 Where the method is ill-posed (measured in the tests and the README):
 - the drawn eccentricities lie inside the clearance by construction (|e| <= delta),
@@ -27,46 +31,56 @@ Where the method is ill-posed (measured in the tests and the README):
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .assembly import link_frames
-from .clearance import draw_clearances
+from .clearance import (SIZE_UNIFORMS, ClearanceDraw, clearances_from_uniforms, draw_clearances, realization_rng,
+                        uniform_dimension)
 from .contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
-from .kinematics import RigidMotion
-from .quasi_static import closure_matrix, time_derivatives
+from .kinematics import rigid_motion
+from .quasi_static import CENTRAL_PAD, closure_matrix, padded_grid, time_derivatives
 from .results import SimulationResult
 from .status import FINISHED, check_history
 
-__all__ = ["PaperClosure", "paper_contact_forces", "paper_draw", "paper_result"]
+__all__ = ["PaperClosure", "paper_contact_forces", "paper_draw", "paper_result", "output_step", "END_TAG"]
+
+END_TAG = 7340033   # third SeedSequence word of the stream of the steps drawn beyond the ends
 
 
 class PaperClosure:
-    """Link axes and the linearised leg closure along one motion, shared by every realisation's draws."""
+    """Link axes and the linearised leg closure along the ideal motion at times t (s) and CENTRAL_PAD
+    steps beyond each end, shared by every realisation's draws."""
 
-    def __init__(self, scene, motion: RigidMotion):
+    def __init__(self, scene, t: np.ndarray):
+        motion = rigid_motion(scene, padded_grid(t, CENTRAL_PAD))
         crank, rod = link_frames(motion, scene.geometry)
-        self.x_c, self.x_r = crank[..., 0], rod[..., 0]   # unit link axes (T, 6, 3)
+        self.x_c, self.x_r = crank[..., 0], rod[..., 0]   # unit link axes (T + 2 pad, 6, 3)
         self.G, n = closure_matrix(motion)
         self.n_dot_xc = np.einsum("tli,tli->tl", n, self.x_c)
         self.t = motion.t
 
     def virtual_lengths(self, draw) -> tuple[np.ndarray, np.ndarray]:
-        """Crank and rod virtual lengths dl_ac, dl_cb (T, 6), m (eq. 33) for per-step draws (T, 6, 3)."""
+        """Crank and rod virtual lengths dl_ac, dl_cb (T + 2 pad, 6), m (eq. 33) for a
+        :func:`paper_draw` (T + 2 pad, 6, 3)."""
         return (np.einsum("tli,tli->tl", self.x_c, draw.e_A),
                 np.einsum("tli,tli->tl", self.x_r, draw.e_C - draw.e_B))
 
     def error(self, draw):
-        """Platform error (T, 6) of the virtual lengths, and its first and second time derivatives."""
+        """Platform error (T, 6) of the virtual lengths, and its first and second time derivatives,
+        the same central differences at every output step (the pads cut off)."""
         dl_ac, dl_cb = self.virtual_lengths(draw)
         rhs = self.n_dot_xc * dl_ac - dl_cb
-        return time_derivatives(np.linalg.solve(self.G, rhs[..., None])[..., 0], self.t)
+        return time_derivatives(np.linalg.solve(self.G, rhs[..., None])[..., 0], self.t, CENTRAL_PAD)
 
 
 def paper_contact_forces(scene, draw, dt: float) -> np.ndarray:
-    """Normal contact force magnitudes (T, 18) N of eq. 17 for the per-step draws, joints A, C, B.
+    """Normal contact force magnitudes (T, 18) N of eq. 17 for a :func:`paper_draw`, joints A, C, B.
 
-    The penetration rate is the change of |e| between steps; the initial contact
-    speed is the joint's first positive rate (the scene's floor otherwise).
+    The penetration rate is the central difference of |e| between steps (the pads make it central
+    at the ends too); the initial contact speed is the joint's first positive rate (the scene's
+    floor otherwise).
     """
     ct, mat = scene.contact, scene.material
     nu = poisson_ratio(mat.youngs_modulus, mat.shear_modulus)
@@ -78,15 +92,40 @@ def paper_contact_forces(scene, draw, dt: float) -> np.ndarray:
     size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
     radius = np.repeat([ct.journal_radius, ct.sphere_radius, ct.sphere_radius], 6)
     K = hertz_stiffness(radius, radius + size, E, nu, E, nu)
-    rate = np.gradient(rho, dt, axis=0)
+    rate = np.gradient(rho, dt, axis=0)[CENTRAL_PAD:-CENTRAL_PAD]
+    rho = rho[CENTRAL_PAD:-CENTRAL_PAD]
     impact = np.maximum(np.max(rate, axis=0), ct.impact_speed_floor)
     return lankarani_nikravesh(rho - size, rate, impact, K, ct.exponent, ct.restitution)[0]
 
 
-def paper_draw(scene, seed: int, realization: int, steps: int, uniforms=None):
-    """The realisation's per-step draw (sizes once, eccentricities ``steps`` times); ``uniforms``
-    as in :func:`.clearance.draw_clearances`."""
-    return draw_clearances(scene, seed, realization, steps=steps, uniforms=uniforms)
+def paper_draw(scene, seed: int, realization: int, steps: int, uniforms=None) -> ClearanceDraw:
+    """The realisation's per-step draw: sizes once, eccentricities at the ``steps`` output steps and
+    at CENTRAL_PAD steps beyond each end (leading axis steps + 2 CENTRAL_PAD, in time order).
+
+    The output steps draw from the realisation's stream (or ``uniforms``, as in
+    :func:`.clearance.draw_clearances`) exactly as without pads; the pads from their own stream
+    SeedSequence([seed, realization, END_TAG]) with the same sizes (the first SIZE_UNIFORMS
+    uniforms set them), so neither chunking nor workers change them.
+    """
+    if uniforms is None:
+        inner = draw_clearances(scene, seed, realization, steps=steps)
+        size_uniforms = realization_rng(seed, realization).uniform(size=SIZE_UNIFORMS)
+    else:
+        u = uniforms(realization, uniform_dimension(steps))
+        inner, size_uniforms = clearances_from_uniforms(scene, u, steps), u[:SIZE_UNIFORMS]
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(realization), END_TAG]))
+    fresh = rng.uniform(size=uniform_dimension(2 * CENTRAL_PAD) - SIZE_UNIFORMS)
+    ends = clearances_from_uniforms(scene, np.concatenate([size_uniforms, fresh]), 2 * CENTRAL_PAD)
+    pad = {e: np.concatenate([getattr(ends, e)[:CENTRAL_PAD], getattr(inner, e), getattr(ends, e)[CENTRAL_PAD:]])
+           for e in ("e_A", "e_C", "e_B")}
+    return dataclasses.replace(inner, **pad)
+
+
+def output_step(draw: ClearanceDraw, step: int = 0) -> ClearanceDraw:
+    """A :func:`paper_draw`'s sizes with output step ``step``'s eccentricities, copied: a view would
+    keep every step's draw (0.9 MB per realisation at 2001 steps) alive with the result."""
+    k = CENTRAL_PAD + step
+    return dataclasses.replace(draw, e_A=draw.e_A[k].copy(), e_C=draw.e_C[k].copy(), e_B=draw.e_B[k].copy())
 
 
 def paper_result(elastic: SimulationResult, closure: PaperClosure, draw, force, stored_draw):

@@ -6,7 +6,8 @@ is six linear equations in the platform error (dp, dtheta).  The eccentricities
 are the realisation's draw, or sit at the clearance boundary along the rigid
 joint reaction force (a loaded joint pushed to its wall).  Velocity and
 acceleration errors are the time derivatives of the quasi-static error
-(second-order central differences on the time grid).
+(second-order central differences on the time grid; one-sided, of the same
+order, at its two ends, where this smooth signal needs nothing beyond the grid).
 """
 from __future__ import annotations
 
@@ -19,7 +20,9 @@ from .results import SimulationResult
 from .status import check_history
 
 __all__ = ["closure_matrix", "reaction_eccentricities", "quasi_static_error", "quasi_static_result",
-           "time_derivatives"]
+           "time_derivatives", "padded_grid", "CENTRAL_PAD"]
+
+CENTRAL_PAD = 2   # samples beyond each end that give every sample time_derivatives' central differences
 
 
 def closure_matrix(motion: RigidMotion) -> tuple[np.ndarray, np.ndarray]:
@@ -77,7 +80,24 @@ def quasi_static_result(scene, motion: RigidMotion, draw: ClearanceDraw, mode: s
     return SimulationResult(motion.t, d, v, a, status, message, steps, draw=draw)
 
 
-def time_derivatives(d: np.ndarray, t: np.ndarray):
-    """d (T, ...) with its first and second time derivatives, second-order central differences."""
+def padded_grid(t: np.ndarray, pad: int) -> np.ndarray:
+    """The uniform time grid t (s) extended by ``pad`` steps before its start and after its end."""
+    steps = np.arange(1, pad + 1) * (t[1] - t[0])
+    return np.concatenate([t[0] - steps[::-1], t, t[-1] + steps])
+
+
+def time_derivatives(d: np.ndarray, t: np.ndarray, pad: int = 0):
+    """d (T, ...) on times t (s) with its first and second time derivatives: the central difference
+    f'_k = (f_k+1 - f_k-1) / 2h applied twice, so a_k spans the samples k-2 .. k+2.
+
+    With ``pad`` = 0 the first and last samples take second-order one-sided differences: as exact as
+    the central ones for a smooth signal (error h^2 f^(3) / 3 against h^2 f^(3) / 6), but for a signal
+    redrawn every step they weigh its noise more and put most maxima at the ends.  With ``pad`` =
+    :data:`CENTRAL_PAD` d and t also hold that many samples beyond each end: every other sample
+    gets the same central differences, and the pads are cut off the result.
+    """
     v = np.gradient(d, t, axis=0, edge_order=2)
-    return d, v, np.gradient(v, t, axis=0, edge_order=2)
+    a = np.gradient(v, t, axis=0, edge_order=2)
+    if pad:
+        d, v, a = d[pad:-pad], v[pad:-pad], a[pad:-pad]
+    return d, v, a

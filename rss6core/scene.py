@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .beam import BEAM_THEORIES, MASS_MODELS, BeamTheory
+from .clearance import SizeBand
 from .contact_dynamics import MAX_CONTACT_REFINEMENTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
@@ -25,7 +26,7 @@ from .models import MODELS
 from .sections import RectangleSection, TubeSection
 
 __all__ = [
-    "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping", "Clearances", "ContactLaw",
+    "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping", "Clearances", "ContactLaw", "Tolerances",
     "load_scene", "parse_scene",
 ]
 
@@ -169,6 +170,15 @@ class Sampling:
 
 
 @dataclass(frozen=True)
+class Tolerances:
+    """Per joint family the size band of [tolerance.<family>], or None (nominal or size_tolerance)."""
+    revolute_radial: SizeBand | None = None
+    revolute_axial: SizeBand | None = None
+    spherical_C: SizeBand | None = None
+    spherical_B: SizeBand | None = None
+
+
+@dataclass(frozen=True)
 class Scene:
     """Everything one run of rss6 needs to know, immutable."""
     name: str
@@ -185,6 +195,7 @@ class Scene:
     sampling: Sampling
     contact: ContactLaw
     beam: BeamTheory = BeamTheory()   # [beam]: the links' beam theory (default Euler-Bernoulli)
+    tolerance: Tolerances = Tolerances()
     source_text: str = field(default="", repr=False, compare=False)
     source_path: str = field(default="", repr=False, compare=False)
 
@@ -301,6 +312,35 @@ _SCHEMA: dict = {
                 "impact_speed_floor_m_s": _Key(float, default=1e-3, check=_POS),
                 "stiffness_scale": _Key(float, default=1.0, check=_POS)},
 }
+
+
+_BAND = {"law": _Key(str, choices=("normal", "uniform")), "low_m": _Key(float, check=_NONNEG),
+         "high_m": _Key(float, check=_NONNEG), "std_m": _Key(float, default=0.0, check=_NONNEG)}
+
+
+def _tolerances(table, clearance: dict, size_tolerance: float) -> Tolerances:
+    """The [tolerance] section: per family a size band around the [clearance] nominal size."""
+    if not isinstance(table, dict):
+        raise SceneError("[tolerance] must be a table")
+    if table and size_tolerance > 0:
+        raise SceneError("[tolerance]: give either [tolerance] bands or [sampling] size_tolerance, not both")
+    bands = {}
+    for family, raw in table.items():
+        if family not in Tolerances.__dataclass_fields__:
+            near = difflib.get_close_matches(family, list(Tolerances.__dataclass_fields__), n=1)
+            raise SceneError(f"unknown key [tolerance] {family}" + (f" (did you mean {near[0]!r}?)" if near else ""))
+        if not isinstance(raw, dict):
+            raise SceneError(f"[tolerance.{family}] must be a table")
+        b = _read_table(raw, _BAND, ("tolerance", family))
+        where, nominal = f"[tolerance.{family}]", clearance[f"{family}_m"]
+        if not b["low_m"] < b["high_m"]:
+            raise SceneError(f"{where} low_m: must be smaller than high_m, got {b['low_m']!r} >= {b['high_m']!r}")
+        if b["law"] == "normal" and not b["low_m"] <= nominal <= b["high_m"]:
+            raise SceneError(f"{where} low_m, high_m: must enclose the [clearance] {family}_m = {nominal!r}")
+        if (b["law"] == "normal") != (b["std_m"] > 0):
+            raise SceneError(f"{where} std_m: must be positive for law 'normal' and absent for 'uniform'")
+        bands[family] = SizeBand(b["law"], b["low_m"], b["high_m"], b["std_m"])
+    return Tolerances(**bands)
 
 
 def _where(path: tuple[str, ...]) -> str:
@@ -429,6 +469,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
                            ct["slip_velocity_m_s"], ct["impact_speed_floor_m_s"],
                            ct["stiffness_scale"]),
         beam=BeamTheory(v["beam"]["theory"], v["beam"]["rotary_inertia"], v["beam"]["mass"]),
+        tolerance=_tolerances(v.get("tolerance", {}), v["clearance"], v["sampling"]["size_tolerance"]),
         source_text=text, source_path=source)
 
 
@@ -439,7 +480,8 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: not valid TOML: {exc}") from None
     try:
-        scene = _build(_read_table(raw, _SCHEMA), text, source)
+        tolerance = raw.pop("tolerance", {})
+        scene = _build(_read_table(raw, _SCHEMA) | {"tolerance": tolerance}, text, source)
         check_workspace(scene)
     except (SceneError, WorkspaceError) as exc:
         raise SceneError(f"{source}: {exc}") from None

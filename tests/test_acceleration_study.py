@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline.acceleration_study import (BURSTS, TIMOSHENKO, Variant, converged, default_variants,
+from pipeline.acceleration_study import (BURSTS, TIMOSHENKO, converged, default_variants,
                                          high_pass, main, markdown, window_maxima)
 from pipeline.study import Setting, _scene_for, default_settings
 from rss6core import BeamTheory, natural_frequencies
