@@ -621,10 +621,15 @@ class ContactStepper(abc.ABC):
                              setup.scene.contact.impact_speed_floor)
 
     def start(self):
-        """The initial state (:func:`initial_state`) and its accelerations at t = 0, output sample 0."""
+        """The initial state (:func:`.contact_start.contact_initial_state`, the scene's
+        ``contact_start``) and its accelerations at t = 0, output sample 0."""
         su, ws = self.setup, self.ws
         ch = _Chunk(su.scene, su.jm, su.t[:1])
-        ws.d, ws.v = initial_state(su.scene, su.jm, su.joints)
+        from .contact_start import contact_initial_state   # it builds on this module's functions
+        first = contact_initial_state(su.scene, su.jm, su.joints, su.scene.simulation.contact_start)
+        ws.d, ws.v = first.d, first.v
+        for r in np.flatnonzero([bool(m) for m in first.message]):
+            ws.alive[r], ws.status[r], ws.message[r] = False, FAILED, first.message[r]
         everyone = np.arange(len(ws.d))
         rest = _internal(su.jm, ch.Mp[0], ws.d, ws.v)
         ws.a, f, ws.g, _, _, delta, rate, used = self._newton(

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .contact_dynamics import MAX_CONTACT_REFINEMENTS
+from .contact_start import CONTACT_STARTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
 from .models import MODELS
@@ -153,6 +154,7 @@ class Simulation:
     settle_time: float = 0.0  # s, start-up transient left out of the error summaries (maxima, means)
     contact_tolerance: float = 0.0   # m, local error bound of the adaptive contact step (0: none)
     contact_refinements: int = 0     # halvings of contact_time_step the adaptive step may take
+    contact_start: str = "drawn"     # contact level's initial state: 'drawn' offset or 'equilibrium'
 
 
 @dataclass(frozen=True)
@@ -256,6 +258,7 @@ _SCHEMA: dict = {
         "settle_time_s": _Key(float, default=0.0, check=_NONNEG),
         "contact_tolerance_m": _Key(float, default=0.0, check=_NONNEG),
         "contact_refinements": _Key(int, default=0, bounds=(0, MAX_CONTACT_REFINEMENTS)),
+        "contact_start": _Key(str, default="drawn", choices=CONTACT_STARTS),
     },
     "sampling": {  # docs/model.md section 4; mean and std as fractions of the clearance size
         "radial_mean": _Key(float, default=0.5, bounds=(0.0, 1.0)),
