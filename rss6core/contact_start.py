@@ -27,8 +27,8 @@ import numpy as np
 
 from .assembly import join, split
 from .clearance import ClearanceDraw
-from .contact_dynamics import (_Chunk, _Condensed, _contacts, _evaluate, _full_contact, _generalized, _internal,
-                               _joint_nodes, _relative, _solve_arrow, _tangent, initial_state)
+from .contact_dynamics import (_Chunk, _Condensed, _evaluate, _full_contact, _generalized, _internal,
+                               _joint_nodes, _solve_arrow, _tangent, initial_state)
 from .dynamics import inverse_dynamics
 from .kinematics import rigid_motion
 from .quasi_static import reaction_eccentricities
@@ -43,7 +43,6 @@ CONTACT_STARTS = ("drawn", "equilibrium")
 # anything the level reports, and ~100x above the round-off of K d (terms of ~1e4 N, 1e-16 relative)
 RESIDUAL_TOLERANCE = 1e-9
 MAX_ITERATIONS = 50
-FD_STEP = 1e-10   # m, see _forces
 
 StartState = namedtuple("StartState", "d v residual iterations message")
 StartState.__doc__ = """An initial state of a contact batch: displacements and velocities (R, N) in the
@@ -100,24 +99,6 @@ def static_residual(scene, jm, joints, d, v):
     return ch.F[0] - _internal(jm, ch.Mp[0], d, v) + g
 
 
-def _forces(scene, ch, joints, impact, e, de):
-    """Contact forces (R, 6, 3, 3) at t = 0 and their Jacobians d f/d e (R, 6, 3, 3, 3) by central
-    differences of the force law.  The step kernel's analytic Jacobian leaves out how the friction
-    force turns with the contact normal (second order in a time step, h^2); at rest the kinetic
-    friction mu F_N is a first-order part of the stiffness, and without it Newton needs ~30 damped
-    iterations more.  Each joint's force depends on its own e only, so perturbing one
-    component of every joint at once gives one Jacobian column of all 18; the step, FD_STEP, is
-    1e-4 of the ~1 um Hertz penetrations (central-difference error ~1e-8 relative)."""
-    def law(x):
-        return _contacts(x, de, scene.geometry.w, joints, impact, scene.contact, ch.omega[0], ch.radius)[0]
-    columns = []
-    for k in range(3):
-        step = np.zeros(3)
-        step[k] = FD_STEP
-        columns.append((law(e + step) - law(e - step)) / (2.0 * FD_STEP))
-    return law(e), np.stack(columns, -1)
-
-
 _Static = namedtuple("_Static", "ch cond rb rp keep shapes vb vp impact tol")
 _Static.__doc__ = """The static problem at t = 0: the chunk of t = 0, the links' stiffness condensed onto their
 joint nodes and the condensed loads F(0) - C v0, what recovers the links' interiors, the joint
@@ -127,7 +108,8 @@ nodes' velocities, the (unused: zero rate) impact speeds and the force tolerance
 def equilibrium_state(scene, jm, joints) -> StartState:
     """The static contact equilibrium at t = 0 (module docstring), by damped Newton.  Without
     friction it converges in 2 iterations from the reaction start; the kinetic friction, which turns
-    with the contact normal, makes it ~25 damped iterations on the paper scenes (0.2 s for 4)."""
+    with the contact normal (a dependence the step kernel's Jacobian leaves out), makes it ~30,
+    most of them halved steps, then quadratic (0.1 s for 4 realisations of the smoke scene)."""
     d0, v = initial_state(scene, jm, _penetrated(scene, joints))
     ch = _Chunk(scene, jm, np.array([0.0]))
     cond = _Condensed(jm, 0.0, 1.0)
@@ -150,8 +132,7 @@ def _newton(scene, joints, pb: _Static, xb, xp):
     ``pb``: a step is halved where it does not reduce the squared imbalance (contact kinks).
     Returns xb, xp, the largest imbalance (R,), N, and the iterations taken (R,)."""
     def residual(xb, xp):
-        f, De = _forces(scene, pb.ch, joints, pb.impact, _relative(pb.ch, 0, xb, xp),
-                        _relative(pb.ch, 0, pb.vb, pb.vp))
+        f, De = _evaluate(scene, pb.ch, 0, joints, pb.impact, xb, xp, pb.vb, pb.vp)[:2]
         gl, gp = _generalized(pb.ch, 0, f)
         res_l, res_p = xb @ pb.cond.legs.T - pb.rb - gl, -pb.rp - gp
         size = np.maximum(np.abs(res_l).max((-1, -2)), np.abs(res_p).max(-1))
