@@ -43,7 +43,8 @@ def _provenance(scene, title: str, *, model: str, integrator: str, dt: float,
     return {"Conventions": "CF-1.10", "title": title, "source": f"rss6 {__version__}",
             "rss6_version": __version__, "scene_name": scene.name, "scene_toml": scene.source_text,
             "model": model, "integrator": integrator, "time_step_s": dt,
-            "elements_per_link": elements}
+            "elements_per_link": elements,
+            **({"contact_start": scene.simulation.contact_start} if model == "contact" else {})}
 
 
 def _unit_table() -> np.ndarray:
