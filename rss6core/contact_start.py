@@ -28,13 +28,14 @@ import numpy as np
 from .assembly import join, split
 from .clearance import ClearanceDraw
 from .contact_dynamics import (_Chunk, _Condensed, _evaluate, _full_contact, _generalized, _internal,
-                               _joint_nodes, _solve_arrow, _tangent, initial_state)
+                               _joint_nodes, _solve_arrow, _tangent, StartState,
+                               drawn_start, initial_state)
 from .dynamics import inverse_dynamics
 from .kinematics import rigid_motion
 from .quasi_static import reaction_eccentricities
 from .status import failure_message
 
-__all__ = ["CONTACT_STARTS", "StartState", "contact_initial_state", "equilibrium_state", "static_residual"]
+__all__ = ["CONTACT_STARTS", "contact_initial_state", "equilibrium_state", "static_residual"]
 
 CONTACT_STARTS = ("drawn", "equilibrium")
 # converged when no generalised force is out of balance by more than RESIDUAL_TOLERANCE times the
@@ -44,21 +45,15 @@ CONTACT_STARTS = ("drawn", "equilibrium")
 RESIDUAL_TOLERANCE = 1e-9
 MAX_ITERATIONS = 50
 
-StartState = namedtuple("StartState", "d v residual iterations message")
-StartState.__doc__ = """An initial state of a contact batch: displacements and velocities (R, N) in the
-contact level's layout, the largest force imbalance per realisation (N; 0 for the drawn start), the
-Newton iterations taken, and a failure message per realisation ('' where it holds)."""
-
-
-def contact_initial_state(scene, jm, joints, start: str) -> StartState:
-    """The initial state ``start`` ('drawn' or 'equilibrium') of a batch with joints ``joints``."""
+def contact_initial_state(scene, jm, joints) -> StartState:
+    """The scene's ``contact_start`` ('drawn' or 'equilibrium') of a batch with joints ``joints``:
+    what :func:`.contact_dynamics.simulate_contact` takes as ``initial``."""
+    start = scene.simulation.contact_start
     if start not in CONTACT_STARTS:
         raise ValueError(f"contact start must be one of {', '.join(CONTACT_STARTS)}, not {start!r}")
     if start == "equilibrium":
         return equilibrium_state(scene, jm, joints)
-    d, v = initial_state(scene, jm, joints)
-    R = len(d)
-    return StartState(d, v, np.zeros(R), np.zeros(R, np.int64), [""] * R)
+    return drawn_start(scene, jm, joints)
 
 
 def _penetrated(scene, joints):

@@ -38,7 +38,7 @@ def test_equilibrium_balances_the_t0_loads(smoke, friction):
     load = np.abs(static_residual(scene, jm, joints, np.zeros_like(st.d), st.v)).max()   # |F - C v|
     imbalance = np.abs(static_residual(scene, jm, joints, st.d, st.v)).max(-1)
     assert np.all(imbalance <= 20 * RESIDUAL_TOLERANCE * load)    # round-off of the uncondensed sum
-    drawn = contact_initial_state(scene, jm, joints, "drawn")
+    drawn = contact_initial_state(scene, jm, joints)
     assert np.all(np.abs(static_residual(scene, jm, joints, drawn.d, drawn.v)).max(-1) > 1e6 * imbalance)
 
 
@@ -91,11 +91,13 @@ def test_equilibrium_start_has_no_startup_impact(smoke):
     draws = [draw_clearances(smoke, 0, r) for r in range(2)]
     first = {}
     for start in ("drawn", "equilibrium"):
-        batch = simulate_contact(_with_start(smoke, start), draws, engine="compiled")
+        batch = simulate_contact(_with_start(smoke, start), draws, engine="compiled",
+                                 initial=contact_initial_state)
         early = batch.t <= 0.05 + 1e-12
         first[start] = np.abs(batch.acceleration[:, early]).max((1, 2))
         if start == "equilibrium":
             assert np.abs(batch.acceleration[:, 0]).max() < 1e-6
-            ref = simulate_contact(_with_start(smoke, start), draws, engine="numpy")
+            ref = simulate_contact(_with_start(smoke, start), draws, engine="numpy",
+                                   initial=contact_initial_state)
             np.testing.assert_allclose(ref.displacement[:, 0], batch.displacement[:, 0], rtol=0, atol=1e-15)
     assert np.all(first["equilibrium"] <= 0.1 * first["drawn"])
