@@ -101,3 +101,14 @@ def test_equilibrium_start_has_no_startup_impact(smoke):
                                    initial=contact_initial_state)
             np.testing.assert_allclose(ref.displacement[:, 0], batch.displacement[:, 0], rtol=0, atol=1e-15)
     assert np.all(first["equilibrium"] <= 0.1 * first["drawn"])
+
+
+def test_cli_start_is_checked_before_work_and_shown_by_check(capsys):
+    from pipeline.cli import main
+    with pytest.raises(SystemExit) as stop:
+        main(["simulate", "smoke", "--model", "contact", "--start", "rest"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--start" in err and "'rest'" in err
+    assert main(["check", "smoke"]) == 0
+    assert "start drawn" in capsys.readouterr().out
