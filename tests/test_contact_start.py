@@ -112,3 +112,12 @@ def test_cli_start_is_checked_before_work_and_shown_by_check(capsys):
     assert len(err.splitlines()) == 1 and "--start" in err and "'rest'" in err
     assert main(["check", "smoke"]) == 0
     assert "start drawn" in capsys.readouterr().out
+
+
+def test_an_unconverged_equilibrium_is_a_one_line_failure(smoke, monkeypatch):
+    import rss6core.contact_start as cs
+    monkeypatch.setattr(cs, "MAX_ITERATIONS", 3)     # ~28 are needed with friction
+    jm, joints = _batch(smoke, n=1)
+    message = cs.equilibrium_state(smoke, jm, joints).message[0]
+    assert "static contact equilibrium did not converge in 3 Newton iterations" in message
+    assert "at t = 0 s, step 0" in message and "\n" not in message
