@@ -12,7 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from rss6core import INTEGRATORS, MODELS, SceneError, __version__
+from rss6core import CONTACT_STARTS, INTEGRATORS, MODELS, SceneError, __version__
 
 from .scenes import find_scene
 from .summary import contact_peaks, error_summary, format_errors, format_summary, scene_summary
@@ -77,6 +77,19 @@ def _settings(args, scene) -> tuple[str, str, float, int]:
             args.elements or sim.elements_per_link)
 
 
+def _with_start(args, scene):
+    """The scene with the command line's --start as its [simulation] contact_start (recorded in the
+    scene text, so an ensemble's workers and its file see it)."""
+    if args.start is None or args.start == scene.simulation.contact_start:
+        return scene
+    from rss6core import parse_scene
+
+    from .scene_variant import scene_variant
+    text = scene_variant(scene.source_text, {"simulation": {"contact_start": args.start}},
+                         scene.source_path, add=True)
+    return parse_scene(text, scene.source_path)
+
+
 def _refuse_clearance_free_default(args, scene, model: str) -> None:
     """An ensemble of a level without clearances is N identical runs: only on explicit request."""
     from .summary import CLEARANCE_LEVELS, run_default_level
@@ -93,7 +106,7 @@ def _simulate(args) -> int:
 
     from .store import run_dataset, write_netcdf
     from .outputs import check_output_path
-    scene = find_scene(args.config)
+    scene = _with_start(args, find_scene(args.config))
     model, integrator, dt, elements = _settings(args, scene)
     if args.output:
         check_output_path(args.output, args.parents)
@@ -136,7 +149,7 @@ def _run(args) -> int:
     specs, verdicts = _requirements(args), []
     targets = _until_targets(args)
     _known_windows(specs + targets)
-    scene = find_scene(args.config)
+    scene = _with_start(args, find_scene(args.config))
     model, integrator, dt, elements = _settings(args, scene)
     _refuse_clearance_free_default(args, scene, model)
     replicates = _replicates(args, scene, model, dt)
@@ -700,6 +713,9 @@ INTEGRATOR_HELP = ("time integrator: newmark, hht, generalized-alpha or central-
 DT_HELP = ("time step, s; must divide the trajectory's duration (default: the scene's "
            "time_step_s, contact_time_step_s at the contact level)")
 ELEMENTS_HELP = "beam elements per crank and per rod (default: the scene's elements_per_link)"
+START_HELP = ("contact level's initial state: 'drawn' (links offset by the drawn eccentricities, "
+              "joints open) or 'equilibrium' (the static contact equilibrium at t = 0, every loaded "
+              "joint resting on its wall); default: the scene's [simulation] contact_start")
 SCHEDULER_HELP = ("address of a running dask.distributed scheduler, e.g. tcp://10.0.0.5:8786 "
                   "(default: none, a local cluster of --workers processes)")
 
@@ -720,6 +736,7 @@ def _simulate_parser(sub) -> None:
     sim.add_argument("--integrator", choices=INTEGRATORS, help=INTEGRATOR_HELP)
     sim.add_argument("--dt", type=_positive_float, help=DT_HELP)
     sim.add_argument("--elements", type=_positive_int, help=ELEMENTS_HELP)
+    sim.add_argument("--start", choices=CONTACT_STARTS, help=START_HELP)
     sim.add_argument("--seed", type=_nonnegative_int, default=0,
                      help="random seed of the run, 0 or more (default 0)")
     sim.add_argument("--realization", type=_nonnegative_int, default=0,
@@ -748,6 +765,7 @@ def _run_parser(sub) -> None:
     run.add_argument("--integrator", choices=INTEGRATORS, help=INTEGRATOR_HELP)
     run.add_argument("--dt", type=_positive_float, help=DT_HELP)
     run.add_argument("--elements", type=_positive_int, help=ELEMENTS_HELP)
+    run.add_argument("--start", choices=CONTACT_STARTS, help=START_HELP)
     run.add_argument("--workers", type=_positive_int, default=2,
                      help="local dask workers, one thread each (default 2)")
     _scheduler_options(run)

@@ -44,16 +44,17 @@ def dump_scene_toml(data: dict, header: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
-def scene_variant(text: str, overrides: dict[str, dict], source: str = "<variant>") -> str:
-    """The scene ``text`` with ``overrides`` {table: {key: value}} set (keys must exist), as TOML
-    text whose first line records the override; checked by parsing it as a scene."""
+def scene_variant(text: str, overrides: dict[str, dict], source: str = "<variant>", add: bool = False) -> str:
+    """The scene ``text`` with ``overrides`` {table: {key: value}} set (keys must exist, unless
+    ``add``: then a key the text leaves at its default may be set), as TOML text whose first line
+    records the override; checked by parsing it as a scene."""
     data = tomllib.loads(text)
     for table, values in overrides.items():
         present = data.get(table)
         if not isinstance(present, dict):
             raise ValueError(f"{source}: no [{table}] table to override")
         missing = sorted(set(values) - set(present))
-        if missing:
+        if missing and not add:
             raise ValueError(f"{source}: [{table}] has no {', '.join(missing)} to set")
         present.update(values)
     note = "; ".join(f"[{t}] " + ", ".join(f"{k} = {v!r}" for k, v in vals.items())

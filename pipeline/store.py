@@ -47,7 +47,8 @@ def _provenance(scene, title: str, *, model: str, integrator: str, dt: float,
             "rss6_version": __version__, "scene_name": scene.name, "scene_toml": scene.source_text,
             "model": model, "integrator": integrator, "time_step_s": dt,
             "elements_per_link": elements, "settle_time_s": scene.simulation.settle_time,
-            "steady_after_s": scene.simulation.steady_after}
+            "steady_after_s": scene.simulation.steady_after,
+            **({"contact_start": scene.simulation.contact_start} if model == "contact" else {})}
 
 
 def _unit_table() -> np.ndarray:

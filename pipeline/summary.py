@@ -46,7 +46,8 @@ def clearance_summary(scene) -> dict:
             "sampling": dataclasses.asdict(scene.sampling),
             "contact": {**dataclasses.asdict(scene.contact),
                         "time_step_s": scene.simulation.contact_time_step,
-                        "integrator": scene.simulation.contact_integrator},
+                        "integrator": scene.simulation.contact_integrator,
+                        "start": scene.simulation.contact_start},
             "run_default_level": run_default_level(scene)}
 
 

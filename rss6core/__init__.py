@@ -12,6 +12,7 @@ Scenes
 Running a level
 - MODELS: the model levels, cheapest first (rigid, quasi-static, elastic, paper, contact).
 - INTEGRATORS: the time integrators a level accepts by name.
+- CONTACT_STARTS: the contact level's initial states by name (drawn, equilibrium).
 - simulate: one realisation of a level along the scene's trajectory.
 - simulate_batch: many realisations of one level, sharing what they share.
 - prepare_level: a level on a scene with what all its realisations share computed once.
@@ -52,6 +53,7 @@ from .assembly import build_elastic_model
 from .beam import BEAM_THEORIES, BeamTheory
 from .clearance import (SIZE_UNIFORMS, ClearanceDraw, clearances_from_uniforms, draw_clearances, size_band,
                         uniform_dimension)
+from .contact_start import CONTACT_STARTS
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
 from .kinematics import rigid_motion
@@ -63,7 +65,7 @@ from .sections import crank_inertia, rod_inertia
 
 __version__ = "0.1.0"
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
-           "MODELS", "INTEGRATORS", "simulate", "simulate_batch", "prepare_level", "Level",
+           "MODELS", "INTEGRATORS", "CONTACT_STARTS", "simulate", "simulate_batch", "prepare_level", "Level",
            "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom",

@@ -52,7 +52,7 @@ from .quasi_static import closure_matrix
 from .status import DIVERGED, DIVERGENCE_LIMIT, FAILED, FINISHED, NEWTON_FAILED, contact_failure
 
 __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactStepper", "NumpyStepper",
-           "CompiledStepper", "Progress"]
+           "CompiledStepper", "Progress", "StartState", "drawn_start"]
 
 TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
 TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
@@ -465,13 +465,33 @@ def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
     return offset + _lift(jm, maps, d_el), np.broadcast_to(_lift(jm, maps, v_el), offset.shape).copy()
 
 
+StartState = namedtuple("StartState", "d v residual iterations message")
+StartState.__doc__ = """An initial state of a contact batch: displacements and velocities (R, N) in the
+contact level's layout, the largest force imbalance per realisation (N; not computed, NaN, for the
+drawn start), the Newton iterations taken, and a failure message per realisation ('' where it holds)."""
+
+
+def drawn_start(scene, jm: JointModel, joints: _Joints) -> StartState:
+    """The drawn start (:func:`initial_state`) as a :class:`StartState`; refuses a scene that asks for
+    another start, which :func:`.contact_start.contact_initial_state` makes."""
+    if scene.simulation.contact_start != "drawn":
+        raise ValueError(f"the scene's contact_start is {scene.simulation.contact_start!r}: pass "
+                         "initial=rss6core.contact_start.contact_initial_state to simulate_contact")
+    d, v = initial_state(scene, jm, joints)
+    R = len(d)
+    return StartState(d, v, np.full(R, np.nan), np.zeros(R, np.int64), [""] * R)
+
+
 def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | None = None,
                      dt: float | None = None, output_step: float | None = None,
                      model: JointModel | None = None, chunk: int = 200,
                      divergence_limit: float = DIVERGENCE_LIMIT, settle: float | None = None,
                      engine: str = "compiled", tolerance: float | None = None,
-                     refinements: int | None = None) -> ContactBatch:
+                     refinements: int | None = None, initial=None) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (see :func:`_simulate_contact`).
+
+    ``initial(scene, jm, joints)`` makes the batch's :class:`StartState` (default :func:`drawn_start`;
+    :func:`.contact_start.contact_initial_state` makes the scene's ``contact_start``).
 
     Overflow in a diverging realisation is detected and reported as its failure, not warned about.
     ``engine`` runs the steps "compiled" (numba, :mod:`.contact_kernel`) or
@@ -489,7 +509,8 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
                          f"got {refinements!r}")
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         return _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
-                                 divergence_limit, settle, engine, tolerance, refinements)
+                                 divergence_limit, settle, engine, tolerance, refinements,
+                                 initial or drawn_start)
 
 
 @dataclass(frozen=True)
@@ -518,6 +539,7 @@ class _Setup:
     tolerance: float        # m, local error per step (0: refine only where Newton fails)
     limit: float            # m, divergence limit
     refinements: int
+    initial: object = None  # (scene, jm, joints) -> StartState: the batch's initial state
 
     @property
     def fine(self) -> int:
@@ -620,10 +642,13 @@ class ContactStepper(abc.ABC):
                              setup.scene.contact.impact_speed_floor)
 
     def start(self):
-        """The initial state (:func:`initial_state`) and its accelerations at t = 0, output sample 0."""
+        """The initial state (the setup's ``initial``) and its accelerations at t = 0, output sample 0."""
         su, ws = self.setup, self.ws
         ch = _Chunk(su.scene, su.jm, su.t[:1])
-        ws.d, ws.v = initial_state(su.scene, su.jm, su.joints)
+        first = su.initial(su.scene, su.jm, su.joints)
+        ws.d, ws.v = first.d, first.v
+        for r in np.flatnonzero([bool(m) for m in first.message]):
+            ws.alive[r], ws.status[r], ws.message[r] = False, FAILED, first.message[r]
         everyone = np.arange(len(ws.d))
         rest = _internal(su.jm, ch.Mp[0], ws.d, ws.v)
         ws.a, f, ws.g, _, _, delta, rate, used = self._newton(
@@ -820,7 +845,7 @@ class CompiledStepper(ContactStepper):
 
 
 def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
-                      divergence_limit, settle, engine, tolerance, refinements) -> ContactBatch:
+                      divergence_limit, settle, engine, tolerance, refinements, initial) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (one realisation each).
 
     ``dt`` is the base step and ``integrator`` the method (default: the scene's
@@ -834,8 +859,8 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     scene's settle time, the start-up transient left out).  A realisation whose Newton
     iteration fails at the finest step or whose state diverges is marked failed; the others go on.
     """
-    setup = _setup(scene, draws, elements, integrator, dt, output_step, model, divergence_limit, settle,
-                   tolerance, refinements)
+    setup = dataclasses.replace(_setup(scene, draws, elements, integrator, dt, output_step, model,
+                                       divergence_limit, settle, tolerance, refinements), initial=initial)
     stepper = (CompiledStepper if engine == "compiled" else NumpyStepper)(setup)
     stepper.start()
     t, fine, h = setup.t, setup.fine, setup.sizes[0].weights.h

@@ -25,6 +25,7 @@ import scipy.linalg
 from .assembly import build_elastic_model, dense_matrices, end_maps
 from .clearance import draw_clearances
 from .contact_dynamics import build_joint_model, simulate_contact
+from .contact_start import contact_initial_state
 from .elastic import simulate_elastic
 from .integrators import Integrator, make_integrator
 from .kinematics import RigidMotion, rigid_motion
@@ -127,7 +128,8 @@ class Level:
         if self.model != "contact":
             raise ValueError(f"the {self.model} level takes no given draws (quasi-static or contact do)")
         batch = simulate_contact(self.scene, draws, self.elements, self.integrator, self.dt,
-                                 tolerance=self.tolerance, refinements=self.refinements)
+                                 tolerance=self.tolerance, refinements=self.refinements,
+                                 initial=contact_initial_state)
         return [dataclasses.replace(batch.result(k), draw=draw) for k, draw in enumerate(draws)]
 
     def _paper(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:

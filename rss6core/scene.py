@@ -20,6 +20,7 @@ import numpy as np
 from .beam import BEAM_THEORIES, MASS_MODELS, BeamTheory
 from .clearance import SizeBand
 from .contact_dynamics import MAX_CONTACT_REFINEMENTS
+from .contact_start import CONTACT_STARTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
 from .models import MODELS
@@ -156,6 +157,7 @@ class Simulation:
     steady_after: float = 0.0  # s, boundary t_s of the analysis windows startup [0, t_s), steady [t_s, T]
     contact_tolerance: float = 0.0   # m, local error bound of the adaptive contact step (0: none)
     contact_refinements: int = 0     # halvings of contact_time_step the adaptive step may take
+    contact_start: str = "drawn"     # contact level's initial state: 'drawn' offset or 'equilibrium'
 
 
 @dataclass(frozen=True)
@@ -284,6 +286,7 @@ _SCHEMA: dict = {
         "steady_after_s": _Key(float, default=_UNSET, check=_NONNEG),
         "contact_tolerance_m": _Key(float, default=0.0, check=_NONNEG),
         "contact_refinements": _Key(int, default=0, bounds=(0, MAX_CONTACT_REFINEMENTS)),
+        "contact_start": _Key(str, default="drawn", choices=CONTACT_STARTS),
     },
     "sampling": {  # docs/model.md section 4; mean and std as fractions of the clearance size
         "radial_mean": _Key(float, default=0.5, bounds=(0.0, 1.0)),
