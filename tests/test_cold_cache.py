@@ -1,0 +1,109 @@
+"""The contact level gives the same bits whether numba compiles its kernel or loads it from the
+cache: one realisation run cold then cached, and an ensemble interrupted while its worker compiles
+then resumed on the filled cache, against one run without interruption.
+
+The two cold compiles run at once, each into its own empty cache, so the test pays one compile."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+SMOKE = Path(__file__).resolve().parent.parent / "configs" / "smoke.toml"
+N = 60      # one-realisation chunks: far more than finish between the first stored part and SIGINT
+RUN = ["run", "smoke", "--model", "contact", "-n", str(N), "--chunk", "1", "--workers", "1", "--seed", "2"]
+
+# one contact realisation; every number of its result as float.hex, which is exact
+_ONE = """
+import json, sys
+import numpy as np
+from rss6core import load_scene
+from rss6core.models import simulate
+res = simulate(load_scene(sys.argv[1]), "contact", realization=3)
+arrays = dict(displacement=res.displacement, velocity=res.velocity, acceleration=res.acceleration,
+              peak=res.peak_abs_error, contact_peak=res.contact_force_peak)
+print(json.dumps({k: [float(x).hex() for x in np.ravel(v)] for k, v in arrays.items()}
+                 | dict(status=res.status, steps=res.steps, iterations=res.iterations)))
+"""
+
+
+def _env(cache: Path) -> dict:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    env.pop("NUMBA_DISABLE_JIT", None)
+    return env
+
+
+def _one_realisation(cache: Path) -> subprocess.Popen:
+    """Realisation 3 of the smoke scene at the contact level, in a new process using ``cache``."""
+    return subprocess.Popen([sys.executable, "-c", _ONE, str(SMOKE)], env=_env(cache),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _finished_json(proc: subprocess.Popen) -> dict:
+    out, err = proc.communicate(timeout=1200)
+    assert proc.returncode == 0, err
+    return json.loads(out)
+
+
+def _ensemble(out: Path, cache: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "pipeline.cli", *RUN, "-o", str(out)], env=_env(cache),
+                            cwd=out.parent, start_new_session=True, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _interrupt_after_first_part(out: Path, cache: Path) -> None:
+    """Run the ensemble on the cold ``cache`` and SIGINT it once its first chunk is stored."""
+    parts = Path(str(out) + ".parts")
+    proc = _ensemble(out, cache)
+    try:
+        deadline = time.monotonic() + 1200          # compiling the kernel: minutes on shared cores
+        while not list(parts.glob("chunk-*.nc")) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert proc.poll() is None, f"the run ended before it could be interrupted: {proc.stderr.read()}"
+        os.kill(proc.pid, signal.SIGINT)
+        try:
+            _, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:             # a lost first Ctrl-C (test_sigint.py): again
+            os.kill(proc.pid, signal.SIGINT)
+            _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert 1 <= len(list(parts.glob("chunk-*.nc"))) < N and not out.exists()
+
+
+def _complete(out: Path, cache: Path) -> None:
+    proc = _ensemble(out, cache)
+    _, err = proc.communicate(timeout=1200)
+    assert proc.returncode == 0, err
+
+
+def _assert_same_bits(cold: dict, warm: dict) -> None:
+    assert cold["status"] == "finished" and cold["steps"] > 0
+    differ = {k: sum(a != b for a, b in zip(cold[k], warm[k])) for k in cold if isinstance(cold[k], list)}
+    assert all(len(cold[k]) == len(warm[k]) for k in differ)
+    assert differ == dict.fromkeys(differ, 0), f"numbers differing cold vs cached: {differ}"
+    assert (cold["steps"], cold["iterations"]) == (warm["steps"], warm["iterations"])
+
+
+@pytest.mark.slow   # compiles the contact kernel twice at once into empty caches: minutes
+def test_compiled_and_cached_kernels_agree_bit_for_bit(tmp_path):
+    one_cache, run_cache = tmp_path / "cache_one", tmp_path / "cache_run"
+    one_cache.mkdir()
+    run_cache.mkdir()
+    cold_one = _one_realisation(one_cache)            # compiles in its own process, meanwhile...
+    resumed, whole = tmp_path / "resumed.nc", tmp_path / "whole.nc"
+    _interrupt_after_first_part(resumed, run_cache)   # ...the ensemble's worker compiles too
+    cold = _finished_json(cold_one)
+    assert any(one_cache.rglob("*contact_kernel.advance_chunk*.nbc")), "the cold run wrote no cache"
+    assert any(run_cache.rglob("*.nbc")), "the cold ensemble wrote no compiled kernel to the cache"
+    _assert_same_bits(cold, _finished_json(_one_realisation(one_cache)))
+    _complete(resumed, run_cache)                     # the stored chunks, then the rest, warm
+    _complete(whole, run_cache)                       # every chunk warm
+    assert resumed.read_bytes() == whole.read_bytes()
