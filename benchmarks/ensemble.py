@@ -14,7 +14,11 @@ Measures, in one run and on this machine:
   longer the same tasks took with 2 workers than with 1;
 - peak resident memory of a whole ``rss6 run`` (main process and its workers,
   sampled every 0.05 s) for N = 100 and N = 1000 with ``--store summary``
-  (`paper` level), and that run's wall time.
+  (`paper` level), and that run's wall time;
+- the wall time of a whole ``rss6 run -n 1000 --model contact --store summary`` on
+  2 workers (start-up and fine-grid precompute included), and the four issue-20
+  targets on one line: contact 1000 <= 120 s, paper 1000 <= 10 s, batched >= 10x,
+  2 workers >= 1.8x one.
 ``--quick`` uses configs/smoke.toml (0.2 s) and small counts, and finishes in
 under a minute once the contact steps are compiled (the first run on a machine compiles for
 about a minute); ``--profile`` adds the top entries of a profile of each batched run.
@@ -48,9 +52,9 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 # throughput is that of the 1000-realisation ensemble its time target names (16 chunks of 63): a
 # run's fixed costs (the first task's start, the final merge) are then amortised as in real runs
 FULL = {"config": "paper.toml", "paper": (10, 200, 1000), "contact": (2, 64, 128), "memory": (100, 1000),
-        "reference": 6000}
+        "reference": 6000, "contact_run": 1000}
 QUICK = {"config": "smoke.toml", "paper": (3, 50, 100), "contact": (1, 6, 4), "memory": (100, 1000),
-         "reference": 1500}
+         "reference": 1500, "contact_run": 8}
 
 
 def _per_realization(scene, model, counts):
@@ -153,10 +157,11 @@ def _tree_rss(pid: int) -> int:
     return total
 
 
-def _peak_rss(config, n, tmp):
-    """Peak resident MiB and wall seconds of ``rss6 run CONFIG -n N --model paper --store summary``."""
-    cmd = [sys.executable, "-m", "pipeline.cli", "run", str(config), "-n", str(n), "--model", "paper",
-           "--store", "summary", "-o", str(Path(tmp) / f"memory-{n}.nc")]
+def _peak_rss(config, n, tmp, model="paper"):
+    """Peak resident MiB and wall seconds of ``rss6 run CONFIG -n N --model MODEL --store summary``
+    on 2 workers."""
+    cmd = [sys.executable, "-m", "pipeline.cli", "run", str(config), "-n", str(n), "--model", model,
+           "--store", "summary", "--workers", "2", "-o", str(Path(tmp) / f"{model}-{n}.nc")]
     peak, start = 0, time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     stop = threading.Event()
@@ -205,6 +210,8 @@ def measure(quick: bool, profile: bool, repeat: int = 1) -> dict:
             peak, wall = _peak_rss(config, n, tmp)
             out["peak_rss_MiB"][str(n)] = peak
             out["run_wall_s"][str(n)] = wall
+        out["contact_run_wall_s"] = {str(plan["contact_run"]): _peak_rss(config, plan["contact_run"], tmp,
+                                                                         "contact")[1]}
     lo, hi = (str(n) for n in plan["memory"])
     out["memory_growth"] = out["peak_rss_MiB"][hi] / out["peak_rss_MiB"][lo] - 1.0
     out["projected_1000_s_2_workers"] = {m: 1000 / r["2"] for m, r in out["realizations_per_s"].items()}
@@ -246,6 +253,13 @@ def main(argv=None) -> int:
     print("rss6 run --model paper --store summary: " + ", ".join(
         f"N = {n}: peak {out['peak_rss_MiB'][n]:.0f} MiB, {out['run_wall_s'][n]:.1f} s"
         for n in out["peak_rss_MiB"]) + f"; growth {100 * out['memory_growth']:.1f} %")
+    (n_contact, contact_wall), = out["contact_run_wall_s"].items()
+    hi = max(out["run_wall_s"], key=int)
+    print(f"targets (issue 20): contact {n_contact} wall {contact_wall:.1f} s (<= 120 s for 1000); "
+          f"paper {hi} wall {out['run_wall_s'][hi]:.1f} s (<= 10 s); batched / one at a time "
+          + ", ".join(f"{m} {out['batched_speedup'][m]:.1f}x" for m in out["batched_speedup"])
+          + " (>= 10x); 2 workers / 1 " + ", ".join(f"{m} {2 * out['parallel_efficiency'][m]:.2f}x"
+                                                    for m in out["parallel_efficiency"]) + " (>= 1.8x)")
     for m, lines in out.get("profile", {}).items():
         print(f"\nprofile of one batched {m} run (top entries by own time):")
         print("\n".join(lines))

@@ -771,7 +771,7 @@ def _run_parser(sub) -> None:
     _scheduler_options(run)
     run.add_argument("--chunk", type=_positive_int,
                      help="realisations per task (default: n cut into a multiple of the workers "
-                          "nearly equal chunks of at most 64; each task integrates its realisations "
+                          "nearly equal chunks of at most 64, 128 for contact; each task integrates its realisations "
                           "as one batch)")
     run.add_argument("--store", choices=("summary", "full"), default="summary",
                      help="summary: per-realisation maxima and means; full: also time histories "

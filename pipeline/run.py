@@ -363,16 +363,20 @@ def _gathered(client, pending: set):
 
 
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
+# the contact level computes its fine-grid loads and joint maps once per batch (1.9 s CPU, as much
+# as 8 realisations' steps): twice the batch halves that share (docs/performance.md, section 14)
+MAX_AUTO_CHUNK_BY_MODEL = {"contact": 128}
 
 
-def default_chunk(n: int, workers: int) -> int:
+def default_chunk(n: int, workers: int, model: str | None = None) -> int:
     """Realisations per task: every worker busy, batches large, little work lost on an interrupt.
 
     The n realisations are cut into a multiple of ``workers`` chunks of nearly equal size (at most
-    MAX_AUTO_CHUNK), so that the workers finish together: 400 on two workers are 8 chunks of 50,
-    not 6 of 64 and one of 16.
+    MAX_AUTO_CHUNK, or the model's entry in MAX_AUTO_CHUNK_BY_MODEL), so that the workers finish
+    together: 400 on two workers are 8 chunks of 50, not 6 of 64 and one of 16.
     """
-    rounds = -(-n // (workers * MAX_AUTO_CHUNK))
+    largest = MAX_AUTO_CHUNK_BY_MODEL.get(model, MAX_AUTO_CHUNK)
+    rounds = -(-n // (workers * largest))
     return max(1, -(-n // (rounds * workers)))
 
 
@@ -399,7 +403,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
     whether it is external); without one, a cluster is started for this call and closed after."""
     if n < 1:
         raise ValueError(f"the number of realisations must be at least 1, got {n}")
-    chunk = default_chunk(n, workers) if chunk is None else chunk
+    chunk = default_chunk(n, workers, spec.model) if chunk is None else chunk
     if chunk < 1 or workers < 1:
         raise ValueError("--chunk and --workers must be at least 1")
     if not worker_timeout > 0:

@@ -236,7 +236,7 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
     outcome, computed = None, 0
     try:
         for n in plan:
-            size = default_chunk(max(n - done, 1), workers) if chunk is None else chunk
+            size = default_chunk(max(n - done, 1), workers, spec.model) if chunk is None else chunk
             outcome = ensemble(spec, n, output, workers, address, size, progress, judge,
                                worker_timeout or WORKER_TIMEOUT_S)
             computed, done = computed + outcome.computed, n

@@ -580,10 +580,11 @@ class _Workspace:
     """The batch's state between steps (every array has the realisation axis first) and its records.
 
     d, v, a: displacements, velocities, accelerations (R, N); for the alpha-weighted integrators
-    also M a, C v + K d and the generalised contact forces at the last instant (R, N).
+    also M a, C v + K d and the generalised contact forces at the last instant (R, N); a_past, h_past
+    the accepted accelerations before a and their steps, for Newton's first iterate.
     """
 
-    def __init__(self, R, n_out, floor):
+    def __init__(self, R, N, n_out, floor):
         self.d = self.v = self.a = self.Ma = self.rest = self.g = None
         self.contacts = _Contacts((R,), floor)
         self.hist = np.full((3, R, n_out, 6), np.nan)
@@ -595,6 +596,8 @@ class _Workspace:
         self.refined = np.zeros(R, np.int64)
         self.fail = np.zeros(R, np.int64)          # :mod:`.status` failure code
         self.fail_t, self.fail_h, self.fail_size = np.zeros(R), np.zeros(R), np.zeros(R)   # s, s, m
+        self.a_past = np.zeros((R, 2, N))      # Newton's predictor: the two accelerations before a,
+        self.h_past = np.zeros((R, 2))         # the steps between them (s; 0: not yet known)
 
     def failed(self, r, code, t, h, size, limit):
         """Mark realisation r failed (``code`` from :mod:`.status`) in its next step, ending at t (s),
@@ -638,7 +641,7 @@ class ContactStepper(abc.ABC):
 
     def __init__(self, setup: _Setup):
         self.setup = setup
-        self.ws = _Workspace(len(setup.joints.radial), len(setup.t[::setup.every]),
+        self.ws = _Workspace(len(setup.joints.radial), setup.jm.dofs, len(setup.t[::setup.every]),
                              setup.scene.contact.impact_speed_floor)
 
     def start(self):
@@ -735,7 +738,7 @@ class NumpyStepper(ContactStepper):
                       np.abs(d_new[i]).max(), su.limit)
         keep = accept & sound
         if keep.any():
-            self._keep(idx[keep], ch, k1, a_new[keep], d_new[keep], v_new[keep], f[keep], g[keep],
+            self._keep(idx[keep], ch, k1, sz.weights.h, a_new[keep], d_new[keep], v_new[keep], f[keep], g[keep],
                        delta[keep], rate[keep], used[keep])
         retry = idx[~accept]
         if len(retry):
@@ -755,15 +758,25 @@ class NumpyStepper(ContactStepper):
         r = (1.0 - af) * (ch.F[k1] - _internal(su.jm, ch.Mp[k1], dp, vp))
         if su.weighted:
             r += af * (ch.F[k0] + ws.g[idx] - ws.rest[idx]) - am * ws.Ma[idx]
-        a_new, f, g, ok, count, delta, rate, used = self._newton(
-            idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp, a, sz.weights.d_corr, sz.weights.v_corr, 1.0 - af)
-        ws.iters[idx] += count
+        guess = _extrapolated(w.h, a, ws.a_past[idx], ws.h_past[idx])
+        out = list(self._newton(idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp, guess, w.d_corr, w.v_corr, 1.0 - af))
+        ws.iters[idx] += out[4]
+        again = ~out[3] & (ws.h_past[idx, 0] > 0.0)   # retry from a where Newton failed from the guess
+        if again.any():
+            retry = self._newton(idx[again], ch, k1, sz.cond, sz.coef_p, r[again], dp[again], vp[again],
+                                 a[again], w.d_corr, w.v_corr, 1.0 - af)
+            ws.iters[idx[again]] += retry[4]
+            for q, x in zip(out, retry):
+                q[again] = x
+        a_new, f, g, ok, count, delta, rate, used = out
         d_new, v_new = correct(dp, vp, a_new, w.d_corr, w.v_corr)
         return a_new, d_new, v_new, f, g, ok, delta, rate, used
 
-    def _keep(self, kept, ch, k1, a, d, v, f, g, delta, rate, used):
-        """Make an accepted step the state of realisations ``kept``."""
+    def _keep(self, kept, ch, k1, h, a, d, v, f, g, delta, rate, used):
+        """Make an accepted step of h (s) to fine instant k1 the state of realisations ``kept``."""
         su, ws = self.setup, self.ws
+        ws.a_past[kept, 1], ws.a_past[kept, 0] = ws.a_past[kept, 0], ws.a[kept]
+        ws.h_past[kept, 1], ws.h_past[kept, 0] = ws.h_past[kept, 0], h
         ws.d[kept], ws.v[kept], ws.a[kept] = d, v, a
         ws.contacts.update(kept, delta, rate, used)
         ws.steps[kept] += 1
@@ -832,7 +845,8 @@ class CompiledStepper(ContactStepper):
             self.work = make_work(N, nc, (N - 6) // 6 - nc, lv.crank_T.shape[2] - 6, lv.rod_T.shape[2] - 6)
         before = ws.alive.copy()
         state = State(d=ws.d, v=ws.v, a=ws.a, Ma=ws.Ma, rest=ws.rest, g=ws.g, stored=ws.contacts.stored,
-                      in_contact=ws.contacts.in_contact, crate=ws.contacts.rate)
+                      in_contact=ws.contacts.in_contact, crate=ws.contacts.rate, a_past=ws.a_past,
+                      h_past=ws.h_past)
         records = Records(peak=ws.peak, cpeak=ws.cpeak, hist=ws.hist, alive=ws.alive, fail=ws.fail,
                           fail_t=ws.fail_t, fail_h=ws.fail_h, fail_size=ws.fail_size, steps=ws.steps,
                           iters=ws.iters, refined=ws.refined)
@@ -871,6 +885,21 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
         if stepper.advance(ch, s0, s1 - s0).reason == ALL_FAILED:
             break
     return stepper.batch()
+
+
+def _extrapolated(h, a, a_past, h_past):
+    """Newton's first iterate for a step of h (s): the accelerations a (R, N) extrapolated by the
+    polynomial through them and a_past (R, 2, N), h_past (R, 2) s apart (0: not yet known), of
+    degree 2, 1 or 0 as far as known (the compiled twin: :func:`.contact_kernel._predict`)."""
+    h1, h2 = h_past[:, 0], h_past[:, 1]
+    w = np.zeros((len(a), 3))
+    w[:, 0] = 1.0
+    lin, quad = (h1 > 0.0) & (h2 <= 0.0), h2 > 0.0
+    w[lin, 0], w[lin, 1] = 1.0 + h / h1[lin], -h / h1[lin]
+    h1, h2 = h1[quad], h2[quad]      # Lagrange weights at t + h of the nodes t, t - h1, t - h1 - h2
+    w[quad] = np.stack([(h + h1) * (h + h1 + h2) / (h1 * (h1 + h2)), -h * (h + h1 + h2) / (h1 * h2),
+                        h * (h + h1) / (h2 * (h1 + h2))], -1)
+    return w[:, 0, None] * a + w[:, 1, None] * a_past[:, 0] + w[:, 2, None] * a_past[:, 1]
 
 
 def _subset(joints: _Joints, idx) -> _Joints:

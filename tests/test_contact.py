@@ -188,6 +188,32 @@ def _law(exponent=1.5):
     return ContactLaw(0.01, 0.01, 0.9, exponent, 0.1, 1e-4, 1e-2)
 
 
+def test_newton_predictor_extrapolates_polynomials_exactly_in_both_engines():
+    """The first Newton iterate of a step is the polynomial through the last accepted accelerations,
+    at uneven steps: exact for a quadratic history (degree 2 once two steps are known), a line after
+    one step, the last value before any; the compiled twin gives the same at the joint nodes."""
+    from rss6core.contact_dynamics import _extrapolated
+    from rss6core.contact_kernel import _predict
+    rng = np.random.default_rng(7)
+    N, nc = 6 * 52 + 6, 27
+    cb = np.r_[0:3, 21:24].astype(np.int64)       # the crank's joint nodes, 4 elements
+    c0, c1, c2 = rng.normal(size=(3, N))
+    poly = lambda t, degree: c0 + (degree > 0) * c1 * t + (degree > 1) * c2 * t * t  # noqa: E731
+    h, h1, h2 = 1.25e-5, 5e-5, 2e-4      # the next step, the last two accepted ones (s)
+    for degree, h_past in ((2, [h1, h2]), (1, [h1, 0.0]), (0, [0.0, 0.0])):
+        a = poly(0.0, degree)[None]
+        past = np.stack([poly(-h1, degree), poly(-h1 - h2, degree)])[None] if degree else rng.normal(size=(1, 2, N))
+        want = poly(h, degree)
+        tol = 1e-12 * np.abs(want).max()
+        got = _extrapolated(h, a, past, np.array([h_past]))[0]
+        np.testing.assert_allclose(got, want, rtol=0, atol=tol)
+        ab, ap = np.empty((6, 12)), np.empty(6)
+        _predict(0, h, a, past, np.array([h_past]), cb, nc, ab, ap)
+        legs = want[:-6].reshape(6, 52)
+        np.testing.assert_allclose(ab, np.concatenate([legs[:, cb], legs[:, -6:]], -1), rtol=0, atol=tol)
+        np.testing.assert_allclose(ap, want[-6:], rtol=0, atol=tol)
+
+
 @pytest.mark.parametrize("depth, spin, exponent", [(-1e-6, 1.0, 1.5), (3e-7, 0.0, 1.5), (3e-7, 1e-3, 1.5),
                                                    (3e-7, 0.5, 1.5), (3e-7, 50.0, 1.5), (3e-7, 0.5, 1.3)])
 def test_compiled_contact_pair_matches_the_vectorised_one(depth, spin, exponent):
@@ -333,19 +359,22 @@ def test_adaptive_step_converges_where_the_fixed_base_step_does_not(smoke):
     assert np.all(run.steps < 0.5 * 0.03 / 12.5e-6)   # it refined only where it had to
 
 
-def test_refinement_rescues_a_step_where_newton_fails(smoke):
+@pytest.mark.parametrize("engine", ["compiled", "numpy"])
+def test_refinement_rescues_a_step_where_newton_fails(smoke, engine):
     """1 ms is beyond Newton's reach at the smoke scene's start-up; with refinements allowed the
     failing steps are retried as halves, and the run, mostly at 1 ms, is no further from a fine
-    fixed-step run than the fixed 0.5 ms run (twice the steps) is."""
+    fixed-step run than the fixed 0.5 ms run (twice the steps) is.  Newton's extrapolated first
+    iterate, retried from the last accelerations where it fails, must not cost steps here: without
+    that retry the rescue took 34 steps and the fixed 0.5 ms run failed."""
     scene = _with(smoke, trajectory=dict(duration=0.02))
     draws = [draw_clearances(scene, 1, r) for r in range(2)]
-    fixed = simulate_contact(scene, draws, dt=1e-3, refinements=0)
+    fixed = simulate_contact(scene, draws, dt=1e-3, refinements=0, engine=engine)
     assert fixed.status == ["failed"] * 2 and "Newton" in fixed.message[0]
-    rescued = simulate_contact(scene, draws, dt=1e-3, tolerance=0.0, refinements=3)
+    rescued = simulate_contact(scene, draws, dt=1e-3, tolerance=0.0, refinements=3, engine=engine)
     assert rescued.status == ["finished"] * 2 and np.all(rescued.refined > 0)
     assert np.all(rescued.steps < 1.5 * 0.02 / 1e-3)
-    fine = simulate_contact(scene, draws, dt=1.25e-4, refinements=0)
-    half = simulate_contact(scene, draws, dt=5e-4, refinements=0)
+    fine = simulate_contact(scene, draws, dt=1.25e-4, refinements=0, engine=engine)
+    half = simulate_contact(scene, draws, dt=5e-4, refinements=0, engine=engine)
     assert half.status == ["finished"] * 2
     assert (np.abs(rescued.displacement - fine.displacement)[..., :3].max()
             < np.abs(half.displacement - fine.displacement)[..., :3].max())
@@ -357,7 +386,7 @@ def test_compiled_and_numpy_contact_engines_agree(smoke, integrator, adaptive):
     """The compiled steps (contact_stepper, contact_kernel: BLAS products, a block-tridiagonal
     elimination per leg) against the numpy ones (vectorised over the batch, dense solves): the
     same arithmetic in another order, so equal to round-off (1e-9 of each history's largest value)
-    with the same Newton iteration counts and the same adaptive steps, on a run whose joints are
+    with Newton iteration counts within 0.5 % and the same adaptive steps, on a run whose joints are
     in contact and sliding; with the alpha-weighted integrator at a fixed step and with Newmark
     (no weighted terms) refining its step."""
     from rss6core.integrators import make_integrator
@@ -367,7 +396,10 @@ def test_compiled_and_numpy_contact_engines_agree(smoke, integrator, adaptive):
     compiled = simulate_contact(scene, draws, integrator=method, **adaptive)
     reference = simulate_contact(scene, draws, integrator=method, engine="numpy", **adaptive)
     assert compiled.status == reference.status == ["finished"] * 2
-    assert np.array_equal(compiled.iterations, reference.iterations)
+    # Newton's first iterate is extrapolated from three accelerations, which the compiled code
+    # (fused multiply-adds) and numpy round differently; where the stopping test is that close, one
+    # engine takes one more update: counts agree to 0.5 %, steps exactly
+    np.testing.assert_allclose(compiled.iterations, reference.iterations, rtol=5e-3)
     assert np.array_equal(compiled.steps, reference.steps)
     assert np.array_equal(compiled.refined, reference.refined)
     assert np.all(compiled.refined > 0) == bool(adaptive)

@@ -13,7 +13,7 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.outputs import PartsManifest
-from pipeline.run import MAX_AUTO_CHUNK, EnsembleSpec, default_chunk, run_ensemble
+from pipeline.run import MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL, EnsembleSpec, default_chunk, run_ensemble
 from pipeline.stats import ensemble_stats
 from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
 from pipeline.scenes import scene_text
@@ -31,18 +31,22 @@ def error_summaries(ds):
                            ds["eccentricity"].values.ravel()])
 
 
+@pytest.mark.parametrize("model", [None, "paper", "contact"])
 @pytest.mark.parametrize("n, workers", [(1, 2), (5, 4), (10, 2), (128, 2), (129, 2), (400, 2),
-                                        (1000, 2), (1000, 3), (65, 1)])
-def test_default_chunks_are_equal_and_a_multiple_of_the_workers(n, workers):
-    """At most MAX_AUTO_CHUNK per chunk, as few rounds of one chunk per worker as that allows, and
-    the chunks of one size but the last, which is short by less than one realisation per chunk."""
-    size = default_chunk(n, workers)
+                                        (1000, 2), (1000, 3), (65, 1), (257, 2)])
+def test_default_chunks_are_equal_and_a_multiple_of_the_workers(n, workers, model):
+    """At most MAX_AUTO_CHUNK per chunk (the contact level: its own, larger cap), as few rounds of
+    one chunk per worker as that allows, and the chunks of one size but the last, which is short by
+    less than one realisation per chunk."""
+    size = default_chunk(n, workers, model)
+    largest = MAX_AUTO_CHUNK_BY_MODEL.get(model, MAX_AUTO_CHUNK)
     chunks = -(-n // size)
-    rounds = -(-n // (workers * MAX_AUTO_CHUNK))
-    assert 1 <= size <= MAX_AUTO_CHUNK
+    rounds = -(-n // (workers * largest))
+    assert 1 <= size <= largest
     assert chunks <= rounds * workers and (chunks == rounds * workers or n < rounds * workers * size)
     assert n - (chunks - 1) * size > size - chunks     # the short last chunk
     assert default_chunk(400, 2) == 50 and default_chunk(1000, 2) == 63 and default_chunk(128, 2) == 64
+    assert default_chunk(1000, 2, "contact") == 125 and default_chunk(256, 2, "contact") == 128
 
 
 @pytest.fixture(scope="module")
