@@ -75,9 +75,9 @@ def window_masks(t, settle: float, steady_after: float) -> np.ndarray:
 def window_reductions(err: np.ndarray, masks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Max and mean of |err| (quantity, time, direction) over each window's samples (window, time):
     (window, quantity, direction) each; NaN where a window holds no finite value."""
-    peaks, means = [], []
+    peaks, means, magnitude = [], [], np.abs(err)
     for mask in masks:
-        e = np.abs(err)[:, mask]
+        e = magnitude[:, mask]
         finite = np.isfinite(e).any(axis=1)
         with np.errstate(invalid="ignore", all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)        # empty or all-NaN windows
