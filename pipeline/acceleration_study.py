@@ -3,7 +3,8 @@
 Issue 21, "accelerations you can defend": the same realisations (same seed) of the contact level
 are run for each variant (elements per link; Euler-Bernoulli, or Timoshenko beams with rotary
 inertia and consistent or lumped mass; the scene's contact step or half of it) and each realisation's max |acceleration error|
-is taken per direction over the steady window t >= STEADY_START on the output histories.  The
+is taken per direction over the scene's steady window (t >= ``[simulation] steady_after_s``, the
+boundary every ensemble file uses) on the output histories.  The
 friction-excited ~100 Hz bursts are measured as the max over each burst window (BURSTS) of the
 acceleration minus its running mean over BURST_PERIOD (which removes the slow trajectory-rate part).  One command reruns it::
 
@@ -27,10 +28,9 @@ from rss6core import BeamTheory, SceneError, simulate_batch
 
 from .store import DIRECTIONS
 
-__all__ = ["STEADY_START", "BURSTS", "Variant", "default_variants", "window_maxima", "measure",
+__all__ = ["BURSTS", "Variant", "default_variants", "window_maxima", "measure",
            "converged", "study", "markdown", "main"]
 
-STEADY_START = 0.3                     # s, the steady window starts here (issue 21)
 BURSTS = ((0.9, 1.1), (1.9, 2.0))      # s, windows of the ~100 Hz friction-excited bursts
 BURST_PERIOD = 0.01                    # s, one period of the ~100 Hz bursts
 CONVERGED = 0.05                       # relative change between the two finest settings
@@ -89,11 +89,12 @@ def measure(scene, variant: Variant, n: int, seed: int = 0) -> dict:
     acc = np.stack([r.acceleration for r in results])
     bad = np.array([r.status != "finished" for r in results])
     t = results[0].t
-    steady = window_maxima(t, acc, STEADY_START)
+    steady = window_maxima(t, acc, scene.simulation.steady_after)
     fast = high_pass(t, acc)
     bursts = np.stack([window_maxima(t, fast, a, b) for a, b in BURSTS], 1)
     steady[bad], bursts[bad] = np.nan, np.nan
-    return {"steady": steady, "bursts": bursts, "seconds_per_realization": wall, "failed": int(bad.sum())}
+    return {"steady": steady, "bursts": bursts, "seconds_per_realization": wall, "failed": int(bad.sum()),
+            "steady_after": scene.simulation.steady_after}
 
 
 def converged(coarse: np.ndarray, fine: np.ndarray, tolerance: float = CONVERGED) -> np.ndarray:
@@ -149,8 +150,9 @@ def markdown(runs: dict, scene_name: str, n: int, seed: int) -> str:
         rows.append(f"| {v.label} | " + " | ".join(_cell(r["steady"][:, k]) for k in range(6))
                     + f" | {_cell(r['bursts'][:, 0, 4])} | {_cell(r['bursts'][:, 1, 4])}"
                     + f" | {r['seconds_per_realization']:.3g} |")
+    steady_after = next(iter(runs.values()))["steady_after"]
     intro = (f"Scene {scene_name}, contact level, realisations 0-{n - 1} of seed {seed}; max |acceleration "
-             f"error| over t >= {STEADY_START:g} s on the output grid (x, y, z in m/s^2; rx, ry, rz in "
+             f"error| over the steady window t >= {steady_after:g} s on the output grid (x, y, z in m/s^2; rx, ry, rz in "
              f"rad/s^2), median [min-max] over the realisations; bursts: max |ry - its {1e3 * BURST_PERIOD:g} ms "
              f"running mean| over " + " and ".join(f"{a:g}-{b:g} s" for a, b in BURSTS) + ".")
     return "\n".join([intro, "", *rows, "", *_verdict(runs)]) + "\n"

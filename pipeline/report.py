@@ -73,9 +73,11 @@ def with_clearance(text: str, values: dict[str, float], source: str = "<report>"
 
 
 def _only(text: str, family: str, source: str) -> str:
-    """The scene with every joint family but ``family`` switched off (OFF)."""
-    return with_clearance(text, {k: OFF for f, keys in FAMILY_KEYS.items() if f != family
-                                 for k in keys}, source)
+    """The scene with every joint family but ``family`` switched off (OFF, and without its
+    [tolerance.<family>] band, which would otherwise set its sizes)."""
+    off = [k for f, keys in FAMILY_KEYS.items() if f != family for k in keys]
+    return scene_variant(text, {"clearance": {k: OFF for k in off}}, source,
+                         drop={"tolerance": [k.removesuffix("_m") for k in off]})
 
 
 def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store, client):

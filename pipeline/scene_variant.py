@@ -33,21 +33,31 @@ def _value(v) -> str:
 
 
 def dump_scene_toml(data: dict, header: str = "") -> str:
-    """TOML text of a scene's data: top-level keys, then one [table] per nested dict."""
+    """TOML text of a scene's data: top-level keys, then one [table] per nested dict (sub-tables
+    such as [tolerance.spherical_B] as dotted headers)."""
     lines = [f"# {line}" for line in header.splitlines()]
     lines += [f"{k} = {_value(v)}" for k, v in data.items() if not isinstance(v, dict)]
-    for table, values in data.items():
+    return "\n".join(lines + _tables("", data)) + "\n"
+
+
+def _tables(prefix: str, data: dict) -> list[str]:
+    """The [prefix.name] tables of ``data``'s dict values, each followed by its own sub-tables."""
+    lines = []
+    for name, values in data.items():
         if isinstance(values, dict):
-            if any(isinstance(v, dict) for v in values.values()):
-                raise ValueError(f"[{table}]: nested tables are not scene tables")
-            lines += ["", f"[{table}]"] + [f"{k} = {_value(v)}" for k, v in values.items()]
-    return "\n".join(lines) + "\n"
+            plain = [f"{k} = {_value(v)}" for k, v in values.items() if not isinstance(v, dict)]
+            if plain or not values:
+                lines += ["", f"[{prefix}{name}]"] + plain
+            lines += _tables(f"{prefix}{name}.", values)
+    return lines
 
 
-def scene_variant(text: str, overrides: dict[str, dict], source: str = "<variant>", add: bool = False) -> str:
+def scene_variant(text: str, overrides: dict[str, dict], source: str = "<variant>", add: bool = False,
+                  drop: dict[str, list[str]] | None = None) -> str:
     """The scene ``text`` with ``overrides`` {table: {key: value}} set (keys must exist, unless
-    ``add``: then a key the text leaves at its default may be set), as TOML text whose first line
-    records the override; checked by parsing it as a scene."""
+    ``add``: then a key the text leaves at its default may be set) and the sub-tables ``drop``
+    {table: [name, ...]} removed where present, as TOML text whose first line records the change;
+    checked by parsing it as a scene."""
     data = tomllib.loads(text)
     for table, values in overrides.items():
         present = data.get(table)
@@ -57,8 +67,10 @@ def scene_variant(text: str, overrides: dict[str, dict], source: str = "<variant
         if missing and not add:
             raise ValueError(f"{source}: [{table}] has no {', '.join(missing)} to set")
         present.update(values)
-    note = "; ".join(f"[{t}] " + ", ".join(f"{k} = {v!r}" for k, v in vals.items())
-                     for t, vals in overrides.items())
+    dropped = [f"[{t}.{n}]" for t, names in (drop or {}).items() for n in names
+               if data.get(t, {}).pop(n, None) is not None]
+    note = "; ".join([f"[{t}] " + ", ".join(f"{k} = {v!r}" for k, v in vals.items())
+                      for t, vals in overrides.items()] + [f"without {', '.join(dropped)}"] * bool(dropped))
     out = dump_scene_toml(data, f"rss6 variant of {source}: {note}")
     parse_scene(out, source)
     return out

@@ -44,8 +44,9 @@ def test_markdown_states_the_verdict_and_the_band():
     for v in default_variants((8, 16)):
         scale = 1.03 if v.beam == TIMOSHENKO else 1.0
         runs[v] = {"steady": scale * (1 + 0.01 * rng.random((4, 6))), "bursts": np.ones((4, 2, 6)),
-                   "seconds_per_realization": 1.0, "failed": 0}
+                   "seconds_per_realization": 1.0, "failed": 0, "steady_after": 0.75}
     text = markdown(runs, "paper", 4, 0)
+    assert "steady window t >= 0.75 s" in text
     assert "8 -> 16 elements" in text and "converged (within 5 %) in every direction" in text
     assert "model-form band" in text and "ry 3." in text
     assert text.count("| 16 el,") == 5            # three beam models, two of them at half the step

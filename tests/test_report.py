@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from pipeline.report import OFF, PAPER_VALUES, with_clearance
+from pipeline.report import OFF, PAPER_VALUES, _only, with_clearance
 from pipeline.store import EnsembleFileError, open_ensemble
 from rss6core import parse_scene
 
@@ -26,6 +26,21 @@ def test_with_clearance_sets_only_the_clearance_keys(smoke):
                                     "revolute_axial_m = 2e-05")
     with pytest.raises(ValueError, match="spherical_D_m"):
         with_clearance(smoke.source_text, {"spherical_D_m": 1e-5})
+
+
+def test_family_runs_of_a_tolerance_scene_switch_the_other_bands_off(configs):
+    """A switched-off family must lose its [tolerance.<family>] band too, or the band would still
+    draw its sizes (0.15-0.35 mm) and the 'only B' run would measure every family."""
+    from rss6core.clearance import draw_clearances
+    tolerance = parse_scene((configs / "paper_tolerance.toml").read_text())
+    only_b = parse_scene(_only(tolerance.source_text, "B", "paper_tolerance"))
+    assert only_b.tolerance.spherical_B == tolerance.tolerance.spherical_B
+    assert (only_b.tolerance.revolute_radial, only_b.tolerance.revolute_axial,
+            only_b.tolerance.spherical_C) == (None, None, None)
+    draw = draw_clearances(only_b, 0, 3)
+    assert np.all(draw.radial_size == OFF) and np.all(draw.axial_size == OFF) and np.all(draw.size_C == OFF)
+    assert np.array_equal(draw.size_B, draw_clearances(tolerance, 0, 3).size_B)   # same stream, same B sizes
+    assert "without [tolerance.revolute_radial]" in _only(tolerance.source_text, "B", "x").splitlines()[0]
 
 
 @pytest.fixture(scope="module")
