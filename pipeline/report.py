@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import default_integrator, default_time_step, parse_scene, rigid_motion, simulate
+from rss6core import default_integrator, default_time_step, parse_scene, rigid_motion, simulate, size_band
 
 from .run import WORKER_TIMEOUT_S, EnsembleSpec, dask_client, run_ensemble
 from .scenes import find_scene
@@ -134,6 +134,16 @@ def _cell(sds, stat, q, d, statistic: str, f: float) -> str:
 
 def _clearance_mm(scene) -> float:
     return round(scene.clearance.spherical_B * 1e3, 3)
+
+
+def _banded(scene) -> bool:
+    """Whether any joint family draws its clearance sizes from a tolerance band."""
+    return any(size_band(scene, k.removesuffix("_m")) is not None for keys in FAMILY_KEYS.values() for k in keys)
+
+
+def _clearance_words(scene) -> str:
+    mm = _clearance_mm(scene)
+    return f"{mm} mm nominal clearances drawn from tolerance bands" if _banded(scene) else f"{mm} mm clearances"
 
 
 # --- figures ------------------------------------------------------------------
@@ -262,7 +272,8 @@ def _label(stat: str, quantity: str) -> str:
 
 
 def _growth_table(scenes: list, st: dict) -> list[str]:
-    (s1, e1), (s2, e2) = sorted(((s, st[s.name]) for s in scenes), key=lambda p: _clearance_mm(p[0]))[:2]
+    fixed = sorted((s for s in scenes if not _banded(s)), key=_clearance_mm)
+    (s1, e1), (s2, e2) = ((s, st[s.name]) for s in (fixed[0], fixed[-1]))
     m1, m2 = _clearance_mm(s1), _clearance_mm(s2)
     head = ["statistic", "dir", f"paper {m2}/{m1} mm"] + [f"{lv} median {m2}/{m1} mm" for lv in _LEVELS]
     rows = []
@@ -291,12 +302,14 @@ def _window_table(ds) -> list[str]:
     t_s = float(ds.attrs["steady_after_s"])
     windows = ("startup", "steady", "whole")
     head = ["statistic (per realisation)", "dir", "unit"] + [
-        f"{window_label(w, t_s)}: median [95 % CI]" for w in windows]
+        f"{window_label(w, t_s)}: median [95 % CI]" for w in windows] + ["steady: 5 % - 95 % quantile"]
     rows = []
     for stat, q, d in _ROWS:
         f, unit = display_unit(q, d)
+        steady = in_window(sds, "steady")
+        spread = " - ".join(_fmt(_stat(steady, stat, q, d, p), f) for p in ("q05", "q95"))
         rows.append([_label(stat, q), d, unit] + [_cell(in_window(sds, w), stat, q, d, "q50", f)
-                                                  for w in windows])
+                                                  for w in windows] + [spread])
     return _table(head, rows)
 
 
@@ -347,7 +360,7 @@ def _open_scene(config, data: Path, plan: ReportPlan, client) -> dict:
 
 
 def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
-    md = [f"## Scene `{scene.name}` ({_clearance_mm(scene)} mm clearances)", "",
+    md = [f"## Scene `{scene.name}` ({_clearance_words(scene)})", "",
           "Runs: " + "; ".join(_setting_line(e[k], st[k]) for k in _LEVELS) + ".", ""]
     md += [f"![rigid motion]({rel(_rigid_figure(scene, e['contact']['time'].values, figs))})", ""]
     for q in ("displacement", "velocity", "acceleration"):
@@ -386,7 +399,7 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
                             min_n_q95=min_n_for_quantile(0.95, 0.95)), ""]
     for scene in scenes:
         md += _scene_section(scene, ens[scene.name], st[scene.name], figs, rel)
-    if len(scenes) >= 2:
+    if len({_clearance_mm(s) for s in scenes if not _banded(s)}) >= 2:
         md += ["## How the errors grow with the clearance", "", text.GROWTH, ""]
         md += _growth_table(scenes, st) + [""]
     path = out / "results.md"

@@ -82,6 +82,9 @@ def test_report_numbers_come_from_its_files(report):
         want = np.median(contact["max_abs_error"].sel(window=window, quantity="displacement",
                                                       direction="z").values) * 1e3
         assert float(cells[k].split(" [")[0]) == pytest.approx(want, rel=5e-3)
+    steady = contact["max_abs_error"].sel(window="steady", quantity="displacement", direction="z").values * 1e3
+    lo, hi = (float(c) for c in cells[6].split(" - "))           # the steady spread, 5 % - 95 %
+    assert steady.min() * 0.995 <= lo <= np.median(steady) * 1.005 <= hi * 1.01 <= steady.max() * 1.015
     # family runs: the other families at OFF, this one at the scene's clearance
     only_c = open_ensemble(data / "smoke_contact_onlyC.nc")
     sizes = only_c["clearance_size"].values
