@@ -48,7 +48,8 @@ def _dims(ds, path, expected: set) -> None:
             raise EnsembleFileError(f"{path}: no variable {name}")
         if "window" not in ds[name].dims and set(ds[name].dims) == expected - {"window"}:
             raise EnsembleFileError(f"{path}: {name} has no analysis windows (written by an rss6 "
-                                    "before 'window' was added); rerun the command that wrote it")
+                                    "before 'window' was added); rerun the command that wrote it "
+                                    "with a new output, or after deleting this file")
         if set(ds[name].dims) != expected:
             raise EnsembleFileError(f"{path}: {name} has dimensions ({', '.join(ds[name].dims)}); "
                                     f"expected {', '.join(sorted(expected))}")
