@@ -236,6 +236,8 @@ def _setting_line(ds, sds) -> str:
         finest = dt / 2 ** sim.contact_refinements
         step = (f"adaptive step {dt * 1e3:g} ms, halved down to {finest * 1e6:g} us where"
                 f" the local error estimate exceeds {sim.contact_tolerance:g} m")
+    if a["model"] == "contact":
+        step += f", {sim.contact_start} start"
     return (f"{a['model']}: {a['integrator']}, {step}, "
             f"{a['elements_per_link']} elements per link, {_count(sds)} realisations, seed {a['seed']}")
 
@@ -370,7 +372,8 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
            text.FAMILY.format(off_um=OFF * 1e6, off_percent=OFF / scene.clearance.spherical_B * 100),
            ""] + _family_table(st)
     md += ["", "### Start-up and steady operation (contact level)", "",
-           text.WINDOWS.format(steady_after=float(e["contact"].attrs["steady_after_s"])), ""]
+           text.WINDOWS.format(steady_after=float(e["contact"].attrs["steady_after_s"])) + " "
+           + text.START[parse_scene(e["contact"].attrs["scene_toml"]).simulation.contact_start], ""]
     md += _window_table(e["contact"])
     md += ["", "### Where we differ from the paper, and why", ""]
     return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"])) + [""]

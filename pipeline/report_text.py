@@ -56,6 +56,18 @@ ACCELERATION = (
     "fine for the whole run). Of the three joint families switched on one at a time, {family} "
     "gives the largest median peak ({share:.0f} % of the three runs' sum).")
 
+START = {
+    "drawn": ("This scene's contact level starts from the drawn eccentricities (`contact_start = "
+              "\"drawn\"`), at rest, no joint touching: the start-up window holds the joints' fall onto "
+              "their walls. It does not start at rest on the static contact equilibrium "
+              "(`\"equilibrium\"`) because its clearance sizes are fixed: from there every "
+              "realisation would be the same to the last bit, each joint resting where its load "
+              "pushes it whatever eccentricity was drawn."),
+    "equilibrium": ("This scene's contact level starts at rest on the static contact equilibrium "
+                    "(`contact_start = \"equilibrium\"`): no start-up impacts, and the realisations "
+                    "differ by their drawn clearance sizes."),
+}
+
 WINDOWS = (
     "The same statistics in the two analysis windows: startup, t < {steady_after:g} s, while the "
     "joints settle from their initial state, and steady, t >= {steady_after:g} s (the scene's "
