@@ -30,7 +30,7 @@ realisation, a refined base step follows the same attempts as ``NumpyStepper._st
 recursion: a failed attempt at level l is retried at level l + 1 from the same
 instant; after an accepted step the next attempt takes the coarsest level
 whose step starts at the instant reached.  The dense products (six legs at a
-time per link type) go to BLAS through ``np.dot``.
+time per link type) go to BLAS's dgemm (:func:`_product`).
 
 Everything the kernel reads is a named structure read by name (:class:`Levels`,
 :class:`Layout`, :class:`Settings`, :class:`ChunkArrays`, :class:`Joints`, :class:`State`,
@@ -39,14 +39,19 @@ scalars in nopython mode, and a reordered field is then a renamed field, not a s
 
 Small helpers take scalars and whole arrays with indices rather than views, and
 are inlined: each array argument costs two atomic reference-count updates,
-which had been a third of the run time.
+which had been a third of the run time.  The entry points :func:`advance_chunk` and
+:func:`newton_step` allocate nothing and are compiled without numba's reference counting
+(``_nrt=False``): the caller's arrays outlive the call, and the counting that inlining
+left (views, named structures) was still a fifth of the steps' time.
 """
 from __future__ import annotations
 
 from collections import namedtuple
 
+import llvmlite.binding as llvm
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import get_cython_function_address
 
 from .status import DIVERGED, NEWTON_FAILED   # the failure codes written to ``fail``
 
@@ -63,6 +68,11 @@ __all__ = ["newton_step", "advance_chunk", "ball", "predict_one", "correct_one",
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
 # non-zero 3x3 blocks of a leg's joint map G: relative displacement j <- joint-node block c
 _PATTERN = np.array([[0, 0], [1, 1], [1, 2], [2, 3]], np.int64)
+# BLAS's dgemm (SciPy's, as np.dot in numba uses) called by its symbol name, so the kernel stays
+# cacheable; np.dot's three-argument form needs numba's reference counting, which the entry
+# points leave out.  Arguments: addresses of Fortran's character, integer (int32) and double arguments.
+llvm.add_symbol("rss6_dgemm", get_cython_function_address("scipy.linalg.cython_blas", "dgemm"))
+_dgemm = types.ExternalFunction("rss6_dgemm", types.void(*[types.uintp] * 13))
 
 
 # --- named structures: every array and constant the kernel reads, by name ---
@@ -107,7 +117,7 @@ Out = namedtuple("Out", "f gl gp delta rate")
 Out.__doc__ = """Newton's results at the accepted iterate: contact forces (6, 3, 3), generalised forces on
 the joint nodes (6, 12) and the platform (6,), penetrations and rates (6, 4)."""
 Work = namedtuple("Work", "Zc Zr Ic Ir Ac Ar Yc Yr dp vp rhs tmp a_new d_new v_new rb db vb ab dpp vpp ap "
-                  "impact Sp f gl gp delta rate e jb jp")
+                  "impact Sp f gl gp delta rate e jb jp dims scale op")
 Scratch = namedtuple("Scratch", "e de De Dv D pair xb ub xp up res_l res_p dl dp base_l base_p A Ainv Up "
                      "rhat M top top0 tb z schur ypiv y border lower DG DJ DR")
 
@@ -119,7 +129,8 @@ def make_work(N, nc, nr, ni_c, ni_r) -> Work:
     return Work(e((6, 2 * nc)), e((6, 2 * nr)), e((6, nc)), e((6, nr)), e((6, nc)), e((6, nr)),
                 e((6, ni_c + 6)), e((6, ni_r + 6)), e(N), e(N), e(N), e(N), e(N), e(N), e(N),
                 e((6, 12)), e((6, 12)), e((6, 12)), e((6, 12)), e(6), e(6), e(6), e((6, 4)), e((6, 6)),
-                e((6, 3, 3)), e((6, 12)), e(6), e((6, 4)), e((6, 4)), e((6, 3, 3)), e((6, 12)), e(6))
+                e((6, 3, 3)), e((6, 12)), e(6), e((6, 4)), e((6, 4)), e((6, 3, 3)), e((6, 12)), e(6),
+                e(3, np.int32), np.array([1.0, 0.0]), np.array([ord("N")], np.uint8))
 
 
 def make_scratch() -> Scratch:
@@ -426,7 +437,7 @@ def _back_substitute(s):
     _lu(s.schur, s.ypiv)
     for a in range(6):
         dp[a] = s.y[a]
-    _lu_solve(s.schur, s.ypiv, dp.reshape((6, 1)), 1)
+    _lu_solve(s.schur, s.ypiv, dp)
     for leg in range(6):
         for a in range(3):
             q = s.top0[leg, a]
@@ -573,7 +584,7 @@ def newton_one(fr, jt, r, sy, a_l, a_p, bh2, gh, wf, cfg, out, s):
     return ok, n_it
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, fastmath=_FAST, _nrt=False)
 def newton_step(fr, jt, sy, ab, ap, bh2, gh, wf, cfg, out, done, count, scratch):
     """:func:`newton_one` for every realisation of a batch (leading axis R of ``jt``'s and ``sy``'s
     per-realisation arrays, ``out``'s, ab (R, 6, 12) and ap (R, 6)), one after another; ab and ap are
@@ -609,29 +620,25 @@ def _lu(A, piv):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _lu_solve(A, piv, X, m):
-    """Solve A X = X in place for the first m columns of X, A as left by _lu."""
+def _lu_solve(A, piv, x):
+    """Solve A x = x in place for the vector x, A as left by _lu."""
     n = A.shape[0]
     for k in range(n):
         p = piv[k]
         if p != k:
-            for c in range(m):
-                X[k, c], X[p, c] = X[p, c], X[k, c]
+            x[k], x[p] = x[p], x[k]
     for i in range(n):
         for k in range(i):
             a = A[i, k]
             if a != 0.0:
-                for c in range(m):
-                    X[i, c] -= a * X[k, c]
+                x[i] -= a * x[k]
     for i in range(n - 1, -1, -1):
         inv = 1.0 / A[i, i]
         for k in range(i + 1, n):
             a = A[i, k]
             if a != 0.0:
-                for c in range(m):
-                    X[i, c] -= a * X[k, c]
-        for c in range(m):
-            X[i, c] *= inv
+                x[i] -= a * x[k]
+        x[i] *= inv
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -674,6 +681,16 @@ def _scatter(Xc, Xr, out):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _product(X, A, out, work):
+    """out = X @ A for C-contiguous X (m, k), A (k, n), out (m, n), by BLAS's column-major dgemm as
+    out^T = A^T X^T (what np.dot(X, A, out) calls, so the same bits)."""
+    m, k = X.shape
+    work.dims[0], work.dims[1], work.dims[2] = A.shape[1], m, k
+    d, op, one = work.dims.ctypes.data, work.op.ctypes.data, work.scale.ctypes.data
+    _dgemm(op, op, d, d + 4, d + 8, one, A.ctypes.data, d, X.ctypes.data, d + 8, one + 8, out.ctypes.data, d)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _platform(Mp, x, scale, out):
     """The platform's part of out (N,): scale Mp x over the last six entries."""
     N = out.shape[0]
@@ -701,8 +718,8 @@ def _internal(x, u, layout, cfg, Mp, work, out):
         for c in range(nr):
             Zr[leg, c] = l1 * u[base + nc + c]
             Zr[leg, nr + c] = x[base + nc + c] + l2 * u[base + nc + c]
-    np.dot(Zc, layout.crank_MK, work.Ic)
-    np.dot(Zr, layout.rod_MK, work.Ir)
+    _product(Zc, layout.crank_MK, work.Ic, work)
+    _product(Zr, layout.rod_MK, work.Ir, work)
     _scatter(work.Ic, work.Ir, out)
     _platform(Mp, u, l1, out)
 
@@ -714,8 +731,8 @@ def _mass(acc, layout, Mp, work, out):
     step = (out.shape[0] - 6) // 6
     _gather(acc, 0, nc, work.Ac, 0)
     _gather(acc, nc, step - nc, work.Ar, 0)
-    np.dot(work.Ac, layout.crank_M, work.Ic)
-    np.dot(work.Ar, layout.rod_M, work.Ir)
+    _product(work.Ac, layout.crank_M, work.Ic, work)
+    _product(work.Ar, layout.rod_M, work.Ir, work)
     _scatter(work.Ic, work.Ir, out)
     _platform(Mp, acc, 1.0, out)
 
@@ -795,8 +812,8 @@ def _prepare(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, st, work):
     # condensation onto the joint nodes: [r_i inv, r_b - r_i P] per link type
     _gather(work.rhs, 0, nc, work.Ac, 0)
     _gather(work.rhs, nc, nr, work.Ar, 0)
-    np.dot(work.Ac, lv.crank_T[level], work.Yc)
-    np.dot(work.Ar, lv.rod_T[level], work.Yr)
+    _product(work.Ac, lv.crank_T[level], work.Yc, work)
+    _product(work.Ar, lv.rod_T[level], work.Yr, work)
     for leg in range(6):
         for q in range(6):
             work.rb[leg, q] = work.Yc[leg, ni_c + q]
@@ -826,8 +843,8 @@ def _recover(level, lv, work):
         for q in range(6):
             work.Yc[leg, ni_c + q] = work.ab[leg, q]
             work.Yr[leg, ni_r + q] = work.ab[leg, 6 + q]
-    np.dot(work.Yc, lv.crank_U[level], work.Ac)
-    np.dot(work.Yr, lv.rod_U[level], work.Ar)
+    _product(work.Yc, lv.crank_U[level], work.Ac, work)
+    _product(work.Yr, lv.rod_U[level], work.Ar, work)
     _scatter(work.Ac, work.Ar, work.a_new)
     for b in range(6):
         work.a_new[N - 6 + b] = work.ap[b]
@@ -972,7 +989,7 @@ def _base_step(r, k_start, lv, layout, cfg, ch, jt, st, rec, work, scratch):
     return True
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, fastmath=_FAST, _nrt=False)
 def advance_chunk(live, first, n_base, every, lv, layout, cfg, ch, jt, st, rec, work, scratch):
     """Carry realisations ``live`` through base steps first .. first + n_base - 1 (the chunk's
     instants on the finest grid start at the first one's start), in place; a realisation that fails

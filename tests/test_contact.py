@@ -237,6 +237,33 @@ def test_compiled_contact_pair_matches_the_vectorised_one(depth, spin, exponent)
     assert (np.abs(f).max() > 0) == (depth > 0)
 
 
+@pytest.mark.parametrize("shape", [(6, 54, 27), (6, 25, 31), (1, 3, 2)])
+def test_kernel_blas_product_equals_numpy_bit_for_bit(shape):
+    """The steps' dgemm called by symbol (contact_kernel._product: column-major, so out^T = A^T X^T)
+    gives numpy's X @ A exactly, for the link products' shapes and a tiny one."""
+    from numba import njit
+
+    from rss6core.contact_kernel import _product, make_work
+    m, k, n = shape
+    rng = np.random.default_rng(4)
+    X, A = rng.normal(size=(m, k)), rng.normal(size=(k, n))
+    out = np.full((m, n), np.nan)
+
+    @njit(_nrt=False)
+    def product(X, A, out, work):
+        _product(X, A, out, work)
+    product(X, A, out, make_work(18, 1, 1, 1, 1))
+    assert np.array_equal(out, X @ A)
+
+
+def test_compiled_steps_run_without_reference_counting():
+    """The entry points that run the steps allocate nothing and skip numba's atomic reference counts
+    (a fifth of the steps' time, docs/performance.md section 15); an allocation there fails to compile."""
+    from rss6core.contact_kernel import advance_chunk, newton_step
+    assert advance_chunk.targetoptions.get("_nrt") is False
+    assert newton_step.targetoptions.get("_nrt") is False
+
+
 # --- paper level (L3) -------------------------------------------------------
 
 def test_paper_level_keeps_every_leg_closed_with_its_virtual_lengths(paper):
