@@ -34,7 +34,7 @@ from rss6core import FAILED, SimulationResult, parse_scene, prepare_level, store
 
 from .outputs import OutputLock, PartsManifest
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
-                    realization_dataset, sigint_deferred, write_netcdf)
+                    chunk_dataset, sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
            "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable"]
@@ -90,13 +90,12 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
     except NUMERICAL_FAILURES:
         results = [_alone(scene, spec, r) for r in realizations]
     # the clearance levels hand back their draws; drawn here only without clearances or on failure
-    parts = [realization_dataset(result, result.draw if result.draw is not None
-                                 else stored_draw(scene, spec.model, spec.seed, r, spec.dt,
-                                                  spec.design()), r,
-                                 spec.store, scene.simulation.settle_time,
-                                 scene.simulation.steady_after)
+    draws = [result.draw if result.draw is not None
+             else stored_draw(scene, spec.model, spec.seed, r, spec.dt, spec.design())
              for r, result in zip(realizations, results)]
-    return _finish(parts, scene, spec)
+    chunk = chunk_dataset(results, draws, realizations, spec.store, scene.simulation.settle_time,
+                          scene.simulation.steady_after)
+    return _finish([chunk], scene, spec)
 
 
 def _finish(parts: list, scene, spec: EnsembleSpec):
