@@ -37,7 +37,7 @@ from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
                     chunk_dataset, sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
-           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable"]
+           "local_cluster", "start_worker_server", "dask_client", "BLAS_ENV", "SchedulerUnavailable"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -232,6 +232,18 @@ def local_cluster(workers: int):
 WORKER_IMPORTS = ["distributed", "pipeline.run"]   # what a worker needs: rss6core, numpy, xarray, ...
 
 
+def start_worker_server() -> None:
+    """Start now, in its own process, the fork server local workers are forked from: its imports
+    (WORKER_IMPORTS, 1-2 s) then overlap what this process does before it starts the cluster
+    (reading the scene and the stored parts, starting the scheduler). It starts as
+    :func:`local_cluster` would start it: one BLAS thread, SIGINT ignored."""
+    import multiprocessing.forkserver
+    os.environ.update(BLAS_ENV)  # inherited by the worker processes
+    with _workers_ignore_ctrl_c():
+        multiprocessing.get_context("forkserver").set_forkserver_preload(WORKER_IMPORTS)
+        multiprocessing.forkserver.ensure_running()
+
+
 def _preload_worker_imports() -> None:
     """Make the fork server that starts the workers import WORKER_IMPORTS first (effective until it
     starts, at the first worker: it then lives as long as this process and forks every worker).
@@ -417,8 +429,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
             bar = _Progress(n, n - len(todo)) if progress else None
             if bar:
                 bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
-            written = _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout, client)
-            pieces += [open_ensemble(path, lazy=True) for path in written]
+            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout, client)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
         merged = pieces[0] if up_to_date else _merged(pieces, spec)
         extra = annotate(merged) if annotate else {}
@@ -440,7 +451,8 @@ def _merged(pieces: list, spec: EnsembleSpec):
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
              scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S, client=None) -> list:
     """Run the chunks on dask (on ``client``, else on a cluster of this call); each finished chunk
-    is stored as a part at once. Returns the parts' paths (the chunks are not kept in memory)."""
+    is stored as a part at once, and opened from there while the workers compute the others.
+    Returns the parts as read back (histories on disk: the chunks are not kept in memory)."""
     written, shared = [], client is not None
     with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
@@ -448,7 +460,8 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
             with sigint_deferred() as interrupted:   # Ctrl-C is acted on in _finished
                 for ds in _finished(client, futures, scheduler, worker_timeout, interrupted):
                     first, last = int(ds.realization[0]), int(ds.realization[-1])
-                    written.append(manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc"))
+                    path = manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
+                    written.append(open_ensemble(path, lazy=True))
                     if bar:
                         bar.advance(ds.sizes["realization"])
         except BaseException:

@@ -66,7 +66,11 @@ def sphere_directions(rng: np.random.Generator, size: int, law: str = "uniform")
     u1, u2 = rng.uniform(size=size), rng.uniform(size=size)
     eta1 = np.arccos(1.0 - 2.0 * u1) if law == "uniform" else np.pi * u1
     eta2 = 2.0 * np.pi * u2
-    return np.stack([np.sin(eta1) * np.cos(eta2), np.sin(eta1) * np.sin(eta2), np.cos(eta1)], -1)
+    sin1, out = np.sin(eta1), np.empty((size, 3))   # filled in place: no temporaries to stack
+    np.multiply(sin1, np.cos(eta2), out=out[:, 0])
+    np.multiply(sin1, np.sin(eta2), out=out[:, 1])
+    np.cos(eta1, out=out[:, 2])
+    return out
 
 
 @dataclass(frozen=True)
