@@ -47,18 +47,20 @@ def _eq17(scene, draw, dt):
     return lankarani_nikravesh(rho - size, rate, impact, K, ct.exponent, ct.restitution)[0]
 
 
-@pytest.mark.parametrize("scale", [1.0, 1.0 - 1e-12, 1.02])
+@pytest.mark.parametrize("scale", [None, 1.0 - 1e-12, 1.0, 1.02])
 def test_paper_contact_forces_skip_eq17_only_where_nothing_penetrates(paper, scale):
-    """Drawn eccentricities (inside), ones pushed to within rounding of the wall, and ones pushed
-    2 % beyond the largest: the forces are eq. 17's in every case (zero only inside)."""
-    draw = paper_draw(paper, 0, 2, 60)
-    if scale != 1.0:   # every spherical C eccentricity to `scale` times its clearance
+    """Drawn eccentricities (inside), ones pushed to within rounding of the wall or onto it (where
+    rounding decides whether |e| - size is positive), and ones pushed 2 % beyond it: the forces are
+    eq. 17's in every case (zero only inside)."""
+    draw = paper_draw(paper, 0, 2, 600)
+    if scale is not None:   # every spherical C eccentricity to `scale` times its clearance
         unit = draw.e_C / np.linalg.norm(draw.e_C, axis=-1, keepdims=True)
         draw = dataclasses.replace(draw, e_C=unit * (scale * draw.size_C)[:, None])
     got, want = paper_contact_forces(paper, draw, 1e-3), _eq17(paper, draw, 1e-3)
-    assert got.shape == want.shape == (60, 18)
+    assert got.shape == want.shape == (600, 18)
     np.testing.assert_array_equal(got, want)
-    assert (want[:, 6:12] > 0).all() == (scale > 1.0)
+    assert (want[:, 6:12] > 0).all() == (scale is not None and scale > 1.0)
+    assert (want[:, 6:12] > 0).any() == (scale is not None and scale >= 1.0)   # on the wall: some
 
 
 def test_window_reductions_of_scattered_samples_are_those_of_the_samples():
