@@ -6,6 +6,10 @@ system) of the whole process tree (main process, fork server, workers; each proc
 /proc every 0.02 s, its last sample counted). On a shared 2-core machine the wall time follows the
 other load; the CPU seconds much less. ``--rss6`` names another install's executable (A/B runs).
 
+``python benchmarks/paper_run.py phases [-n N]`` runs the same command inside this process (the
+``rss6`` of this interpreter) and prints the wall-clock time of its phases: imports, settings,
+cluster start, first and last chunk back, merge, final write, statistics.
+
 ``python benchmarks/paper_run.py parts`` prints the CPU milliseconds per realisation (median of
 three chunks of 63) of the paper level's parts in one process: the per-step draw, the contact
 forces of eq. 17, the error (leg closure, central differences, elastic part added) and the chunk's
@@ -14,6 +18,8 @@ Dataset (window reductions, provenance). Run it with each install's interpreter 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import os
 import statistics
@@ -77,6 +83,44 @@ def whole_run(rss6: str, n: int) -> dict:
             "rc": proc.returncode, "load": round(os.getloadavg()[0], 2)}
 
 
+def phases(n: int) -> list:
+    """Wall-clock seconds at each phase of `rss6 run` (run in this process, its steps wrapped)."""
+    start, marks = time.perf_counter(), []
+
+    def mark(what: str) -> None:
+        marks.append((what, round(time.perf_counter() - start, 2)))
+
+    import pipeline.cli as cli
+    import pipeline.run as run
+    mark("imports done")
+    client, finished = run._client, run._finished
+
+    def timed_client(*args, **kw):
+        mark("settings and stored parts done; cluster starts")
+        out = client(*args, **kw)
+        mark("cluster up")
+        return out
+
+    def timed_finished(*args, **kw):
+        for k, ds in enumerate(finished(*args, **kw)):
+            if k == 0:
+                mark("first chunk back")
+            yield ds
+        mark("last chunk back")
+
+    def timed_write(ds, path, write=run.write_netcdf):
+        mark("merged; final write starts")
+        write(ds, path)
+        mark("final write done")
+
+    run._client, run._finished, run.write_netcdf = timed_client, timed_finished, timed_write
+    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
+        code = cli.main(["run", str(CONFIG), "-n", str(n), "--model", "paper", "--store", "summary",
+                         "--workers", "2", "-o", f"{tmp}/p.nc"])
+    mark(f"statistics printed (exit {code})")
+    return marks
+
+
 def parts() -> dict:
     """CPU ms per realisation of the paper level's parts (median of three chunks of 63)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
@@ -112,12 +156,15 @@ def parts() -> dict:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("what", choices=("run", "parts"))
+    parser.add_argument("what", choices=("run", "phases", "parts"))
     parser.add_argument("--rss6", default=str(Path(sys.executable).with_name("rss6")),
                         help="the rss6 executable to time (default: this interpreter's)")
     parser.add_argument("-n", type=int, default=1000)
     args = parser.parse_args(argv)
-    print(json.dumps(whole_run(args.rss6, args.n) if args.what == "run" else parts()))
+    if args.what == "phases":
+        print(json.dumps(phases(args.n)))
+    else:
+        print(json.dumps(whole_run(args.rss6, args.n) if args.what == "run" else parts()))
 
 
 if __name__ == "__main__":
