@@ -121,6 +121,27 @@ def phases(n: int) -> list:
     return marks
 
 
+def _cpu_ms(f, items) -> tuple[float, list]:
+    """CPU milliseconds per item of ``f`` over ``items``, and its results."""
+    start = time.process_time()
+    out = [f(i) for i in items]
+    return (time.process_time() - start) / len(items) * 1e3, out
+
+
+def _chunk_parts(scene, level, spec, realizations: list) -> dict:
+    """CPU ms per realisation of each part of the paper level for one chunk."""
+    from pipeline.run import run_chunk
+    from rss6core.paper_method import output_step, paper_contact_forces, paper_draw, paper_result
+    steps, k = len(level.elastic.t), range(len(realizations))
+    t_draw, draws = _cpu_ms(lambda r: paper_draw(scene, 0, r, steps), realizations)
+    t_force, forces = _cpu_ms(lambda i: paper_contact_forces(scene, draws[i], level.dt), k)
+    t_error, _ = _cpu_ms(lambda i: paper_result(level.elastic, level.closure, draws[i], forces[i],
+                                                output_step(draws[i])), k)
+    t_chunk, _ = _cpu_ms(lambda _: run_chunk(spec, realizations), [0])
+    return {"draw": t_draw, "forces": t_force, "error": t_error,   # chunk: the rest of run_chunk
+            "chunk": t_chunk / len(realizations) - t_draw - t_force - t_error}
+
+
 def parts() -> dict:
     """CPU ms per realisation of the paper level's parts (median of three chunks of 63)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
@@ -128,30 +149,12 @@ def parts() -> dict:
     from pipeline.run import EnsembleSpec, run_chunk
     from rss6core import load_scene
     from rss6core.models import prepare_level
-    from rss6core.paper_method import output_step, paper_contact_forces, paper_draw, paper_result
     scene = load_scene(CONFIG)
     level = prepare_level(scene, "paper")
     spec = EnsembleSpec(scene.source_text, str(CONFIG), "paper", "newmark", level.dt, level.elements, 0)
-    steps, times = len(level.elastic.t), {k: [] for k in ("draw", "forces", "error", "chunk")}
     run_chunk(spec, [0])   # the worker's one-off level preparation, off the clock
-
-    def cpu(f, items):
-        start = time.process_time()
-        out = [f(i) for i in items]
-        return (time.process_time() - start) / len(items) * 1e3, out
-
-    for k in range(3):
-        rs = list(range(63 * k, 63 * k + 63))
-        t_draw, draws = cpu(lambda r: paper_draw(scene, 0, r, steps), rs)
-        t_force, forces = cpu(lambda i: paper_contact_forces(scene, draws[i], level.dt), range(63))
-        t_error, _ = cpu(lambda i: paper_result(level.elastic, level.closure, draws[i], forces[i],
-                                                output_step(draws[i])), range(63))
-        t_chunk, _ = cpu(lambda _: run_chunk(spec, rs), [0])
-        times["draw"].append(t_draw)
-        times["forces"].append(t_force)
-        times["error"].append(t_error)
-        times["chunk"].append(t_chunk / 63 - t_draw - t_force - t_error)   # the rest of run_chunk
-    return {k: round(statistics.median(v), 2) for k, v in times.items()}
+    runs = [_chunk_parts(scene, level, spec, list(range(63 * k, 63 * k + 63))) for k in range(3)]
+    return {key: round(statistics.median(r[key] for r in runs), 2) for key in runs[0]}
 
 
 def main(argv=None) -> None:
