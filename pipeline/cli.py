@@ -142,7 +142,7 @@ def _simulate(args) -> int:
 
 def _run(args) -> int:
     from .outputs import check_output_path
-    from .run import EnsembleSpec, SchedulerUnavailable, ensemble, start_worker_server
+    from .run import EnsembleSpec, SchedulerUnavailable, ensemble
     from .summary import failure_reasons
     specs, verdicts = _requirements(args), []
     targets = _until_targets(args)
@@ -153,8 +153,6 @@ def _run(args) -> int:
     replicates = _replicates(args, scene, model, dt)
     output = check_output_path(args.output or f"{scene.name}_{model}.nc", args.parents)
     _warn_oversubscription(args.workers, args.scheduler)
-    if not args.scheduler:   # the settings are checked: the workers will be wanted
-        start_worker_server()
     _import_meanwhile("distributed", "pipeline.gate")   # gate imports stats (scipy.stats)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements,
                         args.seed, args.store, qmc_replicates=replicates)

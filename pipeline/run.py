@@ -37,7 +37,7 @@ from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
                     chunk_dataset, sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
-           "local_cluster", "start_worker_server", "dask_client", "BLAS_ENV", "SchedulerUnavailable"]
+           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -230,18 +230,6 @@ def local_cluster(workers: int):
 
 
 WORKER_IMPORTS = ["distributed", "pipeline.run"]   # what a worker needs: rss6core, numpy, xarray, ...
-
-
-def start_worker_server() -> None:
-    """Start now, in its own process, the fork server local workers are forked from: its imports
-    (WORKER_IMPORTS, 1-2 s) then overlap what this process does before it starts the cluster
-    (reading the scene and the stored parts, starting the scheduler). It starts as
-    :func:`local_cluster` would start it: one BLAS thread, SIGINT ignored."""
-    import multiprocessing.forkserver
-    os.environ.update(BLAS_ENV)  # inherited by the worker processes
-    with _workers_ignore_ctrl_c():
-        multiprocessing.get_context("forkserver").set_forkserver_preload(WORKER_IMPORTS)
-        multiprocessing.forkserver.ensure_running()
 
 
 def _preload_worker_imports() -> None:
