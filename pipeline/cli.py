@@ -143,8 +143,6 @@ def _simulate(args) -> int:
 def _run(args) -> int:
     from .outputs import check_output_path
     from .run import EnsembleSpec, SchedulerUnavailable, ensemble
-    from .stats import ensemble_stats, format_stats
-    from .gate import exit_code, format_verdicts
     from .summary import failure_reasons
     specs, verdicts = _requirements(args), []
     targets = _until_targets(args)
@@ -155,6 +153,7 @@ def _run(args) -> int:
     replicates = _replicates(args, scene, model, dt)
     output = check_output_path(args.output or f"{scene.name}_{model}.nc", args.parents)
     _warn_oversubscription(args.workers, args.scheduler)
+    _import_meanwhile("distributed", "pipeline.gate")   # gate imports stats (scipy.stats)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements,
                         args.seed, args.store, qmc_replicates=replicates)
     until = None
@@ -179,6 +178,8 @@ def _run(args) -> int:
         print(f"rss6: interrupted; finished chunks are kept in {output}.parts; rerun the same "
               "command to continue", file=sys.stderr)
         return 130
+    from .stats import ensemble_stats, format_stats
+    from .gate import exit_code, format_verdicts
     ds = outcome.dataset
     print(_outcome_line(outcome, output, args.n if until is None else until.n, model))
     reasons = failure_reasons(ds)
@@ -245,14 +246,31 @@ def _until_verdict(until, cap: int) -> int:
     return 1
 
 
+def _import_meanwhile(*modules: str) -> None:
+    """Import ``modules`` (needed only once the realisations are computed) in a thread, in order,
+    while this one starts the workers and waits for them: the statistics' scipy.stats alone took
+    0.6-0.9 s of a 10 s run when imported first. An import that fails there is retried, and then
+    reported, where the module is used."""
+    import importlib
+    import threading
+
+    def load() -> None:
+        for name in modules:
+            try:
+                importlib.import_module(name)
+            except Exception:   # noqa: BLE001 (the caller's own import reports it)
+                return
+    threading.Thread(target=load, name="rss6-imports", daemon=True).start()
+
+
 def _annotate(specs: list, verdicts: list):
     """The hook that judges the finished ensemble and puts the verdicts in its attributes; the
     verdicts are also appended to ``verdicts`` for the caller."""
-    from .stats import ensemble_stats
     if not specs:
         return None
 
     def annotate(ds) -> dict:
+        from .stats import ensemble_stats
         verdicts[:] = _judge(ensemble_stats(ds, window=None), specs)
         return _verdict_attrs(verdicts)
     return annotate

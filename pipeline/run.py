@@ -34,7 +34,7 @@ from rss6core import FAILED, SimulationResult, parse_scene, prepare_level, store
 
 from .outputs import OutputLock, PartsManifest
 from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
-                    realization_dataset, sigint_deferred, write_netcdf)
+                    chunk_dataset, sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
            "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable"]
@@ -90,13 +90,12 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
     except NUMERICAL_FAILURES:
         results = [_alone(scene, spec, r) for r in realizations]
     # the clearance levels hand back their draws; drawn here only without clearances or on failure
-    parts = [realization_dataset(result, result.draw if result.draw is not None
-                                 else stored_draw(scene, spec.model, spec.seed, r, spec.dt,
-                                                  spec.design()), r,
-                                 spec.store, scene.simulation.settle_time,
-                                 scene.simulation.steady_after)
+    draws = [result.draw if result.draw is not None
+             else stored_draw(scene, spec.model, spec.seed, r, spec.dt, spec.design())
              for r, result in zip(realizations, results)]
-    return _finish(parts, scene, spec)
+    chunk = chunk_dataset(results, draws, realizations, spec.store, scene.simulation.settle_time,
+                          scene.simulation.steady_after)
+    return _finish([chunk], scene, spec)
 
 
 def _finish(parts: list, scene, spec: EnsembleSpec):
@@ -418,8 +417,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
             bar = _Progress(n, n - len(todo)) if progress else None
             if bar:
                 bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
-            written = _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout, client)
-            pieces += [open_ensemble(path, lazy=True) for path in written]
+            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout, client)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
         merged = pieces[0] if up_to_date else _merged(pieces, spec)
         extra = annotate(merged) if annotate else {}
@@ -441,7 +439,8 @@ def _merged(pieces: list, spec: EnsembleSpec):
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
              scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S, client=None) -> list:
     """Run the chunks on dask (on ``client``, else on a cluster of this call); each finished chunk
-    is stored as a part at once. Returns the parts' paths (the chunks are not kept in memory)."""
+    is stored as a part at once, and opened from there while the workers compute the others.
+    Returns the parts as read back (histories on disk: the chunks are not kept in memory)."""
     written, shared = [], client is not None
     with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
@@ -449,7 +448,8 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
             with sigint_deferred() as interrupted:   # Ctrl-C is acted on in _finished
                 for ds in _finished(client, futures, scheduler, worker_timeout, interrupted):
                     first, last = int(ds.realization[0]), int(ds.realization[-1])
-                    written.append(manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc"))
+                    path = manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
+                    written.append(open_ensemble(path, lazy=True))
                     if bar:
                         bar.advance(ds.sizes["realization"])
         except BaseException:

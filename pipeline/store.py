@@ -18,7 +18,7 @@ import xarray as xr
 from rss6core import __version__
 
 __all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "WINDOWS", "display_unit", "error_summaries", "window_summaries",
-           "window_masks", "window_reductions", "window_label", "run_dataset",
+           "window_masks", "window_reductions", "window_label", "run_dataset", "chunk_dataset",
            "write_netcdf", "cf_encode", "cf_decode", "check_free_space", "netcdf_size"]
 
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
@@ -77,7 +77,7 @@ def window_reductions(err: np.ndarray, masks: np.ndarray) -> tuple[np.ndarray, n
     (window, quantity, direction) each; NaN where a window holds no finite value."""
     peaks, means, magnitude = [], [], np.abs(err)
     for mask in masks:
-        e = magnitude[:, mask]
+        e = magnitude[:, _samples(mask)]
         finite = np.isfinite(e).any(axis=1)
         with np.errstate(invalid="ignore", all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)        # empty or all-NaN windows
@@ -85,6 +85,15 @@ def window_reductions(err: np.ndarray, masks: np.ndarray) -> tuple[np.ndarray, n
                                                  initial=-np.inf), np.nan))
             means.append(np.nanmean(e, axis=1) if e.shape[1] else np.full(finite.shape, np.nan))
     return np.stack(peaks), np.stack(means)
+
+
+def _samples(mask: np.ndarray):
+    """The samples a window's mask holds: a slice where they are consecutive (every window of
+    :func:`window_masks` is), so they are read in place rather than copied; else the mask."""
+    where = np.flatnonzero(mask)
+    if where.size and where[-1] - where[0] + 1 == where.size:
+        return slice(int(where[0]), int(where[-1]) + 1)
+    return mask
 
 
 def error_summaries(result, settle: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -351,47 +360,54 @@ class EnsembleFileError(ValueError):
     """A file that is not a complete rss6 ensemble, or one from a different run."""
 
 
-def realization_dataset(result, draw, realization: int, store: str, settle: float = 0.0,
-                        steady_after: float = 0.0) -> xr.Dataset:
-    """One realisation as a length-1 slice of the ensemble file (docs/model.md section 7); its summaries
-    leave out t < ``settle`` (s) and are split into WINDOWS at ``steady_after`` (s)."""
-    peak, mean = window_summaries(result, settle, steady_after)
-    size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
-    axial = np.concatenate([draw.axial_size, np.full(12, np.nan)])
-    ecc = np.concatenate([draw.e_A, draw.e_C, draw.e_B])
+def chunk_dataset(results: list, draws: list, realizations: list[int], store: str,
+                  settle: float = 0.0, steady_after: float = 0.0) -> xr.Dataset:
+    """Realisations ``realizations`` (their results and the draws the file records) as one slice of
+    the ensemble file (docs/model.md section 7), built at once rather than concatenated from one
+    Dataset per realisation; the summaries leave out t < ``settle`` (s) and are split into WINDOWS
+    at ``steady_after`` (s). A realisation without contact forces among others that have them
+    (a failed one) gets NaN there."""
+    summaries = [window_summaries(result, settle, steady_after) for result in results]
+    peak = np.stack([p for p, _ in summaries], axis=2)          # (window, quantity, realization, dir)
+    mean = np.stack([m for _, m in summaries], axis=2)
+    size = np.stack([np.concatenate([d.radial_size, d.size_C, d.size_B]) for d in draws])
+    axial = np.stack([np.concatenate([d.axial_size, np.full(12, np.nan)]) for d in draws])
+    ecc = np.stack([np.concatenate([d.e_A, d.e_C, d.e_B]) for d in draws])
     data = {
-        "max_abs_error": (("window", "quantity", "realization", "direction"), peak[:, :, None],
+        "max_abs_error": (("window", "quantity", "realization", "direction"), peak,
                           {"long_name": "per-realisation maximum over time of |platform pose error|",
                            "units": MIXED_UNITS, "cell_methods": "time: maximum"}),
-        "mean_abs_error": (("window", "quantity", "realization", "direction"), mean[:, :, None],
+        "mean_abs_error": (("window", "quantity", "realization", "direction"), mean,
                            {"long_name": "per-realisation mean over time of |platform pose error|",
                             "units": MIXED_UNITS, "cell_methods": "time: mean"}),
-        "clearance_size": (("realization", "joint"), size[None],
+        "clearance_size": (("realization", "joint"), size,
                            {"long_name": "drawn clearance size (radial for A_i, spherical for C_i, B_i)",
                             "units": "m"}),
-        "axial_clearance_size": (("realization", "joint"), axial[None],
+        "axial_clearance_size": (("realization", "joint"), axial,
                                  {"long_name": "drawn axial clearance size of the revolute A_i",
                                   "units": "m"}),
-        "eccentricity": (("realization", "joint", "component"), ecc[None],
+        "eccentricity": (("realization", "joint", "component"), ecc,
                          {"long_name": "drawn eccentricity, distal minus proximal joint element, base frame",
                           "units": "m"}),
-        "status": (("realization",), np.array([result.status], dtype=object),
+        "status": (("realization",), np.array([r.status for r in results], dtype=object),
                    {"long_name": "solver status (finished or failed)"}),
-        "status_message": (("realization",), np.array([result.message], dtype=object),
+        "status_message": (("realization",), np.array([r.message for r in results], dtype=object),
                            {"long_name": "solver message"}),
-        "steps": (("realization",), np.array([result.steps], dtype=np.int64),
+        "steps": (("realization",), np.array([r.steps for r in results], dtype=np.int64),
                   {"long_name": "time steps completed", "units": "1"}),
     }
-    if result.contact_force_peak is not None:
-        data["max_contact_force"] = (("realization", "joint"), result.contact_force_peak[None],
-                                     _CONTACT_ATTRS)
-    coords = {"realization": ("realization", np.array([realization], dtype=np.int64),
+    if any(r.contact_force_peak is not None for r in results):
+        data["max_contact_force"] = (("realization", "joint"), np.stack(
+            [np.full(18, np.nan) if r.contact_force_peak is None else r.contact_force_peak
+             for r in results]), _CONTACT_ATTRS)
+    coords = {"realization": ("realization", np.asarray(realizations, dtype=np.int64),
                               {"long_name": "realisation index", "axis": "E"})}
     if store == "full":
-        data["error"] = (("realization", "quantity", "time", "direction"), _history(result)[None],
+        data["error"] = (("realization", "quantity", "time", "direction"),
+                         np.stack([_history(r) for r in results]),
                          {"long_name": "platform pose error, actual minus ideal rigid pose",
                           "units": MIXED_UNITS})
-        coords["time"] = ("time", result.t, {"units": "s", "standard_name": "time", "axis": "T"})
+        coords["time"] = ("time", results[0].t, {"units": "s", "standard_name": "time", "axis": "T"})
     return xr.Dataset(data, coords=coords)
 
 
@@ -442,12 +458,15 @@ def load_netcdf(path, lazy: bool = False) -> xr.Dataset:
         raise EnsembleFileError(f"{path}: no such file")
     try:
         if lazy:
-            ds = xr.open_dataset(path, engine="netcdf4", decode_times=False,
-                                 chunks={"realization": HISTORY_BLOCK})
+            # opened without dask: only the histories become dask arrays (loading each small
+            # variable through dask took 3x as long as reading it)
+            ds = xr.open_dataset(path, engine="netcdf4", decode_times=False)
+            histories = {name: var.chunk({"realization": HISTORY_BLOCK})
+                         for name, var in ds.data_vars.items() if _ELAPSED in var.dims}
             for var in ds.variables.values():
                 if _ELAPSED not in var.dims:
                     var.load()
-            return _forget_string_widths(cf_decode(ds))
+            return _forget_string_widths(cf_decode(ds.assign(histories)))
         with xr.open_dataset(path, engine="netcdf4", decode_times=False) as ds:
             return _forget_string_widths(cf_decode(ds.load()))
     except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...

@@ -66,7 +66,11 @@ def sphere_directions(rng: np.random.Generator, size: int, law: str = "uniform")
     u1, u2 = rng.uniform(size=size), rng.uniform(size=size)
     eta1 = np.arccos(1.0 - 2.0 * u1) if law == "uniform" else np.pi * u1
     eta2 = 2.0 * np.pi * u2
-    return np.stack([np.sin(eta1) * np.cos(eta2), np.sin(eta1) * np.sin(eta2), np.cos(eta1)], -1)
+    sin1, out = np.sin(eta1), np.empty((size, 3))   # filled in place: no temporaries to stack
+    np.multiply(sin1, np.cos(eta2), out=out[:, 0])
+    np.multiply(sin1, np.sin(eta2), out=out[:, 1])
+    np.cos(eta1, out=out[:, 2])
+    return out
 
 
 @dataclass(frozen=True)
@@ -140,6 +144,15 @@ def clearances_from_uniforms(scene, u, steps: int | None = None) -> ClearanceDra
     return _draw(scene, UniformVector(u), steps)
 
 
+def _combine(a, u, b, v, c, w) -> np.ndarray:
+    """a u + b v + c w (..., 6, 3) for coefficients (..., 6) and leg vectors (6, 3), one component at
+    a time (the same operations in the same order as broadcasting, without its 3-long inner loops)."""
+    out = np.empty(a.shape + (3,))
+    for k in range(3):
+        np.add(a * u[:, k] + b * v[:, k], c * w[:, k], out=out[..., k])
+    return out
+
+
 def _draw(scene, rng, steps: int | None) -> ClearanceDraw:
     """The draw from ``rng`` (a Generator or a :class:`UniformVector`), uniforms taken in a fixed order."""
     cl, law = scene.clearance, scene.sampling
@@ -152,8 +165,8 @@ def _draw(scene, rng, steps: int | None) -> ClearanceDraw:
     # the plane normal to w_i is spanned by the horizontal radial direction and Z
     plane_x = np.stack([np.cos(u), np.sin(u), 0 * u], -1)
     plane_y = np.broadcast_to([0.0, 0.0, 1.0], (6, 3))
-    e_A = ((radial * np.cos(theta))[..., None] * plane_x + (radial * np.sin(theta))[..., None] * plane_y
-           + axial[..., None] * scene.geometry.w)
+    e_A = _combine(radial * np.cos(theta), plane_x, radial * np.sin(theta), plane_y, axial,
+                   scene.geometry.w)
     count = int(np.prod(shape))
     e_C = ((rng.uniform(size=shape) * dC)[..., None]
            * sphere_directions(rng, count, law.direction).reshape(shape + (3,)))

@@ -1,0 +1,174 @@
+"""Benchmark: where a paper-level `rss6 run` spends its time, robust to a loaded machine.
+
+``python benchmarks/paper_run.py run [--rss6 PATH] [-n N]`` runs ``rss6 run configs/paper.toml -n N
+--model paper --store summary --workers 2`` once and prints its wall time and the CPU seconds (user +
+system) of the whole process tree (main process, fork server, workers; each process sampled from
+/proc every 0.02 s, its last sample counted). On a shared 2-core machine the wall time follows the
+other load; the CPU seconds much less. ``--rss6`` names another install's executable (A/B runs).
+
+``python benchmarks/paper_run.py phases [-n N]`` runs the same command inside this process (the
+``rss6`` of this interpreter) and prints the wall-clock time of its phases: imports, settings,
+cluster start, first and last chunk back, merge, final write, statistics.
+
+``python benchmarks/paper_run.py parts`` prints the CPU milliseconds per realisation (median of
+three chunks of 63) of the paper level's parts in one process: the per-step draw, the contact
+forces of eq. 17, the error (leg closure, central differences, elastic part added) and the chunk's
+Dataset (window reductions, provenance). Run it with each install's interpreter for an A/B.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+CONFIG = Path(__file__).resolve().parent.parent / "configs" / "paper.toml"
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def _cpu_by_parent() -> dict:
+    """{parent pid: [(pid, CPU s)]} of every process (Linux /proc)."""
+    out = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            out.setdefault(int(fields[1]), []).append(
+                (int(stat.parent.name), (int(fields[11]) + int(fields[12])) / TICK))
+        except (OSError, IndexError, ValueError):
+            continue
+    return out
+
+
+def _sample(root: int, seen: dict, stop: threading.Event) -> None:
+    """Record the CPU seconds of ``root``'s descendants in ``seen`` until ``stop`` is set."""
+    while not stop.is_set():
+        children, todo = _cpu_by_parent(), [root]
+        while todo:
+            for pid, cpu in children.get(todo.pop(), []):
+                seen[pid] = max(seen.get(pid, 0.0), cpu)
+                todo.append(pid)
+        time.sleep(0.02)
+
+
+def whole_run(rss6: str, n: int) -> dict:
+    """Wall time (s) and process-tree CPU (s) of one `rss6 run` of the paper level."""
+    with tempfile.TemporaryDirectory() as tmp:
+        seen, stop = {}, threading.Event()
+        start = time.perf_counter()
+        proc = subprocess.Popen([rss6, "run", str(CONFIG), "-n", str(n), "--model", "paper",
+                                 "--store", "summary", "--workers", "2", "-o", f"{tmp}/p.nc"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        sampler = threading.Thread(target=_sample, args=(proc.pid, seen, stop))
+        sampler.start()
+        own = 0.0
+        while proc.poll() is None:   # the main process's own CPU, read until it exits
+            try:
+                fields = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+                own = (int(fields[11]) + int(fields[12])) / TICK
+            except OSError:
+                pass
+            time.sleep(0.02)
+        wall = time.perf_counter() - start
+        stop.set()
+        sampler.join()
+    return {"n": n, "wall_s": round(wall, 2), "cpu_s": round(own + sum(seen.values()), 2),
+            "rc": proc.returncode, "load": round(os.getloadavg()[0], 2)}
+
+
+def phases(n: int) -> list:
+    """Wall-clock seconds at each phase of `rss6 run` (run in this process, its steps wrapped)."""
+    start, marks = time.perf_counter(), []
+
+    def mark(what: str) -> None:
+        marks.append((what, round(time.perf_counter() - start, 2)))
+
+    import pipeline.cli as cli
+    import pipeline.run as run
+    mark("imports done")
+    client, finished = run._client, run._finished
+
+    def timed_client(*args, **kw):
+        mark("settings and stored parts done; cluster starts")
+        out = client(*args, **kw)
+        mark("cluster up")
+        return out
+
+    def timed_finished(*args, **kw):
+        for k, ds in enumerate(finished(*args, **kw)):
+            if k == 0:
+                mark("first chunk back")
+            yield ds
+        mark("last chunk back")
+
+    def timed_write(ds, path, write=run.write_netcdf):
+        mark("merged; final write starts")
+        write(ds, path)
+        mark("final write done")
+
+    run._client, run._finished, run.write_netcdf = timed_client, timed_finished, timed_write
+    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
+        code = cli.main(["run", str(CONFIG), "-n", str(n), "--model", "paper", "--store", "summary",
+                         "--workers", "2", "-o", f"{tmp}/p.nc"])
+    mark(f"statistics printed (exit {code})")
+    return marks
+
+
+def _cpu_ms(f, items) -> tuple[float, list]:
+    """CPU milliseconds per item of ``f`` over ``items``, and its results."""
+    start = time.process_time()
+    out = [f(i) for i in items]
+    return (time.process_time() - start) / len(items) * 1e3, out
+
+
+def _chunk_parts(scene, level, spec, realizations: list) -> dict:
+    """CPU ms per realisation of each part of the paper level for one chunk."""
+    from pipeline.run import run_chunk
+    from rss6core.paper_method import output_step, paper_contact_forces, paper_draw, paper_result
+    steps, k = len(level.elastic.t), range(len(realizations))
+    t_draw, draws = _cpu_ms(lambda r: paper_draw(scene, 0, r, steps), realizations)
+    t_force, forces = _cpu_ms(lambda i: paper_contact_forces(scene, draws[i], level.dt), k)
+    t_error, _ = _cpu_ms(lambda i: paper_result(level.elastic, level.closure, draws[i], forces[i],
+                                                output_step(draws[i])), k)
+    t_chunk, _ = _cpu_ms(lambda _: run_chunk(spec, realizations), [0])
+    return {"draw": t_draw, "forces": t_force, "error": t_error,   # chunk: the rest of run_chunk
+            "chunk": t_chunk / len(realizations) - t_draw - t_force - t_error}
+
+
+def parts() -> dict:
+    """CPU ms per realisation of the paper level's parts (median of three chunks of 63)."""
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = "1"
+    from pipeline.run import EnsembleSpec, run_chunk
+    from rss6core import load_scene
+    from rss6core.models import prepare_level
+    scene = load_scene(CONFIG)
+    level = prepare_level(scene, "paper")
+    spec = EnsembleSpec(scene.source_text, str(CONFIG), "paper", "newmark", level.dt, level.elements, 0)
+    run_chunk(spec, [0])   # the worker's one-off level preparation, off the clock
+    runs = [_chunk_parts(scene, level, spec, list(range(63 * k, 63 * k + 63))) for k in range(3)]
+    return {key: round(statistics.median(r[key] for r in runs), 2) for key in runs[0]}
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("what", choices=("run", "phases", "parts"))
+    parser.add_argument("--rss6", default=str(Path(sys.executable).with_name("rss6")),
+                        help="the rss6 executable to time (default: this interpreter's)")
+    parser.add_argument("-n", type=int, default=1000)
+    args = parser.parse_args(argv)
+    if args.what == "phases":
+        print(json.dumps(phases(args.n)))
+    else:
+        print(json.dumps(whole_run(args.rss6, args.n) if args.what == "run" else parts()))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,109 @@
+"""The paper level's and the pipeline's shortcuts (docs/performance.md section 15b) against the
+straightforward computations they replace: the same bits, or the same values where eq. 17 acts."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from pipeline.store import chunk_dataset, load_netcdf, window_masks, window_reductions, write_netcdf
+from rss6core import SimulationResult
+from rss6core.clearance import _combine, draw_clearances, realization_rng, sphere_directions
+from rss6core.contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
+from rss6core.paper_method import paper_contact_forces, paper_draw
+from rss6core.quasi_static import CENTRAL_PAD
+
+
+def test_draws_equal_the_broadcast_formulas_bit_for_bit():
+    """The sphere directions, and e_A = r cos(theta) x + r sin(theta) y + a w, equal the broadcast
+    expressions they replace (filled in place, one component at a time) bit for bit."""
+    rng = realization_rng(0, 7)
+    direct = sphere_directions(rng, 500)
+    rng = realization_rng(0, 7)
+    u1, u2 = rng.uniform(size=500), rng.uniform(size=500)
+    eta1, eta2 = np.arccos(1.0 - 2.0 * u1), 2.0 * np.pi * u2
+    broadcast = np.stack([np.sin(eta1) * np.cos(eta2), np.sin(eta1) * np.sin(eta2), np.cos(eta1)], -1)
+    assert direct.tobytes() == broadcast.tobytes()
+
+    rng = np.random.default_rng(3)
+    a, b, c = rng.normal(size=(3, 40, 6))
+    u, v, w = rng.normal(size=(3, 6, 3))
+    broadcast = a[..., None] * u + b[..., None] * v + c[..., None] * w
+    assert _combine(a, u, b, v, c, w).tobytes() == broadcast.tobytes()
+
+
+def _eq17(scene, draw, dt):
+    """Eq. 17's force history (T, 18) N written out on the padded draw, without any shortcut."""
+    w = scene.geometry.w
+    e_r = draw.e_A - np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
+    rho = np.concatenate([np.linalg.norm(e, axis=-1) for e in (e_r, draw.e_C, draw.e_B)], -1)
+    size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
+    ct, mat = scene.contact, scene.material
+    nu = poisson_ratio(mat.youngs_modulus, mat.shear_modulus)
+    radius = np.repeat([ct.journal_radius, ct.sphere_radius, ct.sphere_radius], 6)
+    K = hertz_stiffness(radius, radius + size, mat.youngs_modulus, nu, mat.youngs_modulus, nu)
+    rate = np.gradient(rho, dt, axis=0)[CENTRAL_PAD:-CENTRAL_PAD]
+    rho = rho[CENTRAL_PAD:-CENTRAL_PAD]
+    impact = np.maximum(rate.max(axis=0), ct.impact_speed_floor)
+    return lankarani_nikravesh(rho - size, rate, impact, K, ct.exponent, ct.restitution)[0]
+
+
+@pytest.mark.parametrize("scale", [None, 1.0 - 1e-12, 1.0, 1.02])
+def test_paper_contact_forces_skip_eq17_only_where_nothing_penetrates(paper, scale):
+    """Drawn eccentricities (inside), ones pushed to within rounding of the wall or onto it (where
+    rounding decides whether |e| - size is positive), and ones pushed 2 % beyond it: the forces are
+    eq. 17's in every case (zero only inside)."""
+    draw = paper_draw(paper, 0, 2, 600)
+    if scale is not None:   # every spherical C eccentricity to `scale` times its clearance
+        unit = draw.e_C / np.linalg.norm(draw.e_C, axis=-1, keepdims=True)
+        draw = dataclasses.replace(draw, e_C=unit * (scale * draw.size_C)[:, None])
+    got, want = paper_contact_forces(paper, draw, 1e-3), _eq17(paper, draw, 1e-3)
+    assert got.shape == want.shape == (600, 18)
+    np.testing.assert_array_equal(got, want)
+    assert (want[:, 6:12] > 0).all() == (scale is not None and scale > 1.0)
+    assert (want[:, 6:12] > 0).any() == (scale is not None and scale >= 1.0)   # on the wall: some
+
+
+def test_window_reductions_of_scattered_samples_are_those_of_the_samples():
+    """A window whose samples are not consecutive is reduced over exactly those samples."""
+    err = np.random.default_rng(1).normal(size=(3, 9, 6))
+    masks = np.array([[True, False, True, True, False, False, True, False, False],
+                      [False, True, True, True, True, False, False, False, False]])
+    peak, mean = window_reductions(err, masks)
+    for k, mask in enumerate(masks):
+        np.testing.assert_array_equal(peak[k], np.abs(err[:, mask]).max(axis=1))
+        np.testing.assert_allclose(mean[k], np.abs(err[:, mask]).mean(axis=1), rtol=1e-15)
+
+
+def _result(t, seed, peak=None):
+    hist = np.random.default_rng(seed).normal(size=(3, len(t), 6))
+    return SimulationResult(t, *hist, "finished", "", len(t) - 1, contact_force_peak=peak)
+
+
+def test_a_chunk_is_its_realisations_one_by_one(paper):
+    """chunk_dataset over three realisations equals it over each alone, stacked; a realisation
+    without contact forces among others that have them gets NaN."""
+    t = np.arange(11) * 0.1
+    results = [_result(t, 0, np.arange(18.0)), _result(t, 1), _result(t, 2, -np.arange(18.0))]
+    draws = [draw_clearances(paper, 0, r) for r in range(3)]
+    chunk = chunk_dataset(results, draws, [4, 5, 6], "full", 0.2, 0.5)
+    for k, r in enumerate((4, 5, 6)):
+        alone = chunk_dataset([results[k]], [draws[k]], [r], "full", 0.2, 0.5)
+        for name in ("max_abs_error", "mean_abs_error", "eccentricity", "clearance_size", "error"):
+            assert chunk[name].sel(realization=[r]).equals(alone[name]), name
+    force = chunk["max_contact_force"].values
+    assert np.isnan(force[1]).all() and (force[[0, 2]] == [np.arange(18.0), -np.arange(18.0)]).all()
+    np.testing.assert_array_equal(chunk["realization"], [4, 5, 6])
+    assert window_masks(t, 0.2, 0.5).sum(axis=1).tolist() == [9, 3, 6]
+
+
+def test_a_lazy_ensemble_keeps_only_its_histories_on_disk(paper, tmp_path):
+    """load_netcdf(lazy=True): the histories as dask arrays in blocks of realisations, every other
+    variable in memory, and the values those of an eager read."""
+    from pipeline.run import EnsembleSpec, run_chunk
+    spec = EnsembleSpec(paper.source_text, "paper.toml", "quasi-static", "newmark", 0.01, 2, 0,
+                        store="full")
+    write_netcdf(run_chunk(spec, [0, 1, 2]), tmp_path / "q.nc")
+    lazy, eager = load_netcdf(tmp_path / "q.nc", lazy=True), load_netcdf(tmp_path / "q.nc")
+    assert lazy["error"].chunks is not None and lazy["error"].chunks[0] == (3,)
+    assert all(lazy[name].chunks is None for name in lazy.variables if name != "error")
+    assert lazy.load().identical(eager)
