@@ -333,9 +333,10 @@ def _displacement_fields(scene, st: dict, paper_dx: float) -> dict:
             "contact_z": _stat(st["contact"], "max", "displacement", "z") * 1e3}
 
 
-def _explanations(scene, st: dict, dt: float) -> list[str]:
+def _explanations(scene, st: dict, dt: float, contact) -> list[str]:
     """The physical reasons for the large differences from the paper, filled from this run's
-    statistics (templates in pipeline.report_text); ``dt``: the paper level's step, s."""
+    statistics (templates in pipeline.report_text); ``dt``: the paper level's step, s;
+    ``contact``: the contact level's ensemble (for its windows)."""
     mm = _clearance_mm(scene)
     out = []
     paper_dx = max(v.get(mm, np.nan) for (_, q, _), v in PAPER_VALUES.items() if q == "displacement")
@@ -350,8 +351,13 @@ def _explanations(scene, st: dict, dt: float) -> list[str]:
     if pa is not None:
         la, ca = (_stat(st[lv], "max", "acceleration", "z") for lv in ("paper", "contact"))
         fam, share = _largest_family(st, "max", "acceleration", "z")
-        out.append(text.ACCELERATION.format(paper_a=pa * 1e3, paper_level_a=la * 1e3,
-                                            contact_a=ca * 1e3, family=fam, share=100 * share))
+        by_window = ensemble_stats(contact, window=None)
+        startup, steady = (_stat(in_window(by_window, w), "max", "acceleration", "z") for w in ("startup", "steady"))
+        start = parse_scene(contact.attrs["scene_toml"]).simulation.contact_start
+        out.append(text.ACCELERATION.format(paper_a=pa * 1e3, paper_level_a=la * 1e3, contact_a=ca * 1e3,
+                                            startup_a=startup * 1e3, steady_a=steady * 1e3,
+                                            steady_after=float(contact.attrs["steady_after_s"]),
+                                            start=text.START_PEAKS[start], family=fam, share=100 * share))
     return out
 
 
@@ -376,7 +382,7 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
            + text.START[parse_scene(e["contact"].attrs["scene_toml"]).simulation.contact_start], ""]
     md += _window_table(e["contact"])
     md += ["", "### Where we differ from the paper, and why", ""]
-    return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"])) + [""]
+    return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"]), e["contact"]) + [""]
 
 
 def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None = None) -> Path:
