@@ -53,7 +53,7 @@ from .assembly import build_elastic_model
 from .beam import BEAM_THEORIES, BeamTheory
 from .clearance import (SIZE_UNIFORMS, ClearanceDraw, clearances_from_uniforms, draw_clearances, size_band,
                         uniform_dimension)
-from .contact_start import CONTACT_STARTS
+from .contact_options import CONTACT_STARTS
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
 from .kinematics import rigid_motion

@@ -27,6 +27,7 @@ import numpy as np
 
 from .assembly import join, split
 from .clearance import ClearanceDraw
+from .contact_options import CONTACT_STARTS
 from .contact_dynamics import (_Chunk, _Condensed, _evaluate, _full_contact, _generalized, _internal,
                                _joint_nodes, _solve_arrow, _tangent, StartState,
                                drawn_start, initial_state)
@@ -35,9 +36,8 @@ from .kinematics import rigid_motion
 from .quasi_static import reaction_eccentricities
 from .status import failure_message
 
-__all__ = ["CONTACT_STARTS", "contact_initial_state", "equilibrium_state", "static_residual"]
+__all__ = ["contact_initial_state", "equilibrium_state", "static_residual"]
 
-CONTACT_STARTS = ("drawn", "equilibrium")
 # converged when no generalised force is out of balance by more than RESIDUAL_TOLERANCE times the
 # largest t = 0 load: 1e-9 x ~20 N is 2e-8 N, an acceleration below 1e-7 m/s^2 on the 1.4 kg
 # platform and a displacement below 1e-14 m at the joints' contact stiffness (> 1e6 N/m): far under

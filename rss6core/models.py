@@ -24,8 +24,6 @@ import scipy.linalg
 
 from .assembly import build_elastic_model, dense_matrices, end_maps
 from .clearance import draw_clearances
-from .contact_dynamics import build_joint_model, simulate_contact
-from .contact_start import contact_initial_state
 from .elastic import simulate_elastic
 from .integrators import Integrator, make_integrator
 from .kinematics import RigidMotion, rigid_motion
@@ -127,9 +125,10 @@ class Level:
             return [quasi_static_result(self.scene, self.motion, draw, mode) for draw in draws]
         if self.model != "contact":
             raise ValueError(f"the {self.model} level takes no given draws (quasi-static or contact do)")
-        batch = simulate_contact(self.scene, draws, self.elements, self.integrator, self.dt,
-                                 tolerance=self.tolerance, refinements=self.refinements,
-                                 initial=contact_initial_state)
+        dynamics, start = _contact_solver()
+        batch = dynamics.simulate_contact(self.scene, draws, self.elements, self.integrator, self.dt,
+                                          tolerance=self.tolerance, refinements=self.refinements,
+                                          initial=start.contact_initial_state)
         return [dataclasses.replace(batch.result(k), draw=draw) for k, draw in enumerate(draws)]
 
     def _paper(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
@@ -140,6 +139,14 @@ class Level:
             out.append(paper_result(elastic, self.closure, draw,
                                     paper_contact_forces(self.scene, draw, self.dt), output_step(draw)))
         return out
+
+
+def _contact_solver():
+    """The modules contact_dynamics and contact_start, imported on first use: the contact level's
+    compiled kernel brings numba (0.3 s of import per process), which reading a scene and running
+    the other levels do without (a paper-level ensemble's main process and workers)."""
+    from . import contact_dynamics, contact_start
+    return contact_dynamics, contact_start
 
 
 def prepare_level(scene, model: str | None = None, integrator: str | None = None,
@@ -180,5 +187,5 @@ def degrees_of_freedom(scene, model: str, elements: int | None = None) -> int:
     if model in ("rigid", "quasi-static"):
         return 6
     elements = elements or scene.simulation.elements_per_link
-    build = build_joint_model if model == "contact" else build_elastic_model
+    build = _contact_solver()[0].build_joint_model if model == "contact" else build_elastic_model
     return build(scene, elements).dofs

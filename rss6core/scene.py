@@ -19,8 +19,7 @@ import numpy as np
 
 from .beam import BEAM_THEORIES, MASS_MODELS, BeamTheory
 from .clearance import SizeBand
-from .contact_dynamics import MAX_CONTACT_REFINEMENTS
-from .contact_start import CONTACT_STARTS
+from .contact_options import CONTACT_STARTS, MAX_CONTACT_REFINEMENTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
 from .models import MODELS
