@@ -93,6 +93,18 @@ def _min_n(statistic: str, confidence: float) -> int:
     return {"mean": MIN_N_MEAN, "std": MIN_N_STD}[statistic]
 
 
+def _check_scene(spec: EnsembleSpec) -> None:
+    """BudgetError for a scene whose sizes a [clearance] scale would not move: a family whose
+    [tolerance.<family>] band (absolute limits, m) draws them. A relative [sampling] size_tolerance
+    scales with the nominal size, so it does not stop a budget."""
+    tolerance = spec.scene().tolerance
+    banded = [k.removesuffix("_m") for k in FAMILY_KEYS if getattr(tolerance, k.removesuffix("_m")) is not None]
+    if banded:
+        raise BudgetError(f"{spec.source}: [tolerance.{banded[0]}] draws its clearance sizes from a band "
+                          "of fixed limits, which a clearance budget (a scale on the [clearance] sizes) "
+                          "cannot move; budget the scene without its [tolerance.*] tables")
+
+
 def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> None:
     """BudgetError for a request no budget can answer, before any ensemble runs."""
     if model in ("rigid", "elastic"):
@@ -162,6 +174,7 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
            workers: int = 2, tolerance: float = 0.05) -> Budget:
     """The largest common clearance scale factor for which every spec passes (module doc)."""
     _check_request(spec.model, specs, n, confidence)
+    _check_scene(spec)
     folder = Path(folder)
     folder.mkdir(exist_ok=True)
 

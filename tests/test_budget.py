@@ -143,3 +143,15 @@ def test_too_few_realisations_for_the_interval(configs, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and "q95 has no 95 % interval below n = 59 (-n 20)" in err, err
     assert not (tmp_path / "b").exists()   # refused before any ensemble ran
+
+
+def test_a_scene_with_tolerance_bands_is_refused_in_one_line_before_any_work(configs, tmp_path, capsys):
+    """A [tolerance.<family>] band has fixed limits, so scaling [clearance] would not move those
+    sizes: the budget would report a scale that changes nothing. Exit 2, one line, no folder."""
+    from pipeline.cli import main
+    out = tmp_path / "b"
+    code = main(["budget", str(configs / "paper_tolerance.toml"), "--model", "quasi-static", "-n", "8",
+                 "--spec", "displacement:z<=1mm@q50", "-o", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and "[tolerance.revolute_radial]" in err and "paper_tolerance.toml" in err
+    assert not out.exists()
