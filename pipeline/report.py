@@ -297,18 +297,15 @@ def _family_table(st: dict) -> list[str]:
     return _table(head + ["elastic (no clearance)"], rows)
 
 
-def _window_table(ds) -> list[str]:
+def _window_table(sds, t_s: float) -> list[str]:
     """Medians [95 % CI] of the contact level's per-realisation summaries in the startup and steady
-    windows and over the whole run, from one statistics Dataset per window."""
-    sds = ensemble_stats(ds, window=None)
-    t_s = float(ds.attrs["steady_after_s"])
+    windows and over the whole run, from its statistics by window ``sds``; ``t_s``: the boundary, s."""
     windows = ("startup", "steady", "whole")
     head = ["statistic (per realisation)", "dir", "unit"] + [
         f"{window_label(w, t_s)}: median [95 % CI]" for w in windows] + ["steady: 5 % - 95 % quantile"]
-    rows = []
+    rows, steady = [], in_window(sds, "steady")
     for stat, q, d in _ROWS:
         f, unit = display_unit(q, d)
-        steady = in_window(sds, "steady")
         spread = " - ".join(_fmt(_stat(steady, stat, q, d, p), f) for p in ("q05", "q95"))
         rows.append([_label(stat, q), d, unit] + [_cell(in_window(sds, w), stat, q, d, "q50", f)
                                                   for w in windows] + [spread])
@@ -333,10 +330,11 @@ def _displacement_fields(scene, st: dict, paper_dx: float) -> dict:
             "contact_z": _stat(st["contact"], "max", "displacement", "z") * 1e3}
 
 
-def _explanations(scene, st: dict, dt: float, contact) -> list[str]:
+def _explanations(scene, st: dict, dt: float, by_window, start: str, t_s: float) -> list[str]:
     """The physical reasons for the large differences from the paper, filled from this run's
     statistics (templates in pipeline.report_text); ``dt``: the paper level's step, s;
-    ``contact``: the contact level's ensemble (for its windows)."""
+    ``by_window``: the contact level's statistics by window, ``start`` its initial state and
+    ``t_s`` its window boundary, s."""
     mm = _clearance_mm(scene)
     out = []
     paper_dx = max(v.get(mm, np.nan) for (_, q, _), v in PAPER_VALUES.items() if q == "displacement")
@@ -351,12 +349,9 @@ def _explanations(scene, st: dict, dt: float, contact) -> list[str]:
     if pa is not None:
         la, ca = (_stat(st[lv], "max", "acceleration", "z") for lv in ("paper", "contact"))
         fam, share = _largest_family(st, "max", "acceleration", "z")
-        by_window = ensemble_stats(contact, window=None)
         startup, steady = (_stat(in_window(by_window, w), "max", "acceleration", "z") for w in ("startup", "steady"))
-        start = parse_scene(contact.attrs["scene_toml"]).simulation.contact_start
         out.append(text.ACCELERATION.format(paper_a=pa * 1e3, paper_level_a=la * 1e3, contact_a=ca * 1e3,
-                                            startup_a=startup * 1e3, steady_a=steady * 1e3,
-                                            steady_after=float(contact.attrs["steady_after_s"]),
+                                            startup_a=startup * 1e3, steady_a=steady * 1e3, steady_after=t_s,
                                             start=text.START_PEAKS[start], family=fam, share=100 * share))
     return out
 
@@ -377,12 +372,14 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
     md += ["", "### Which joint family contributes most (contact level)", "",
            text.FAMILY.format(off_um=OFF * 1e6, off_percent=OFF / scene.clearance.spherical_B * 100),
            ""] + _family_table(st)
+    contact = e["contact"]
+    by_window, t_s = ensemble_stats(contact, window=None), float(contact.attrs["steady_after_s"])
+    start = parse_scene(contact.attrs["scene_toml"]).simulation.contact_start
     md += ["", "### Start-up and steady operation (contact level)", "",
-           text.WINDOWS.format(steady_after=float(e["contact"].attrs["steady_after_s"])) + " "
-           + text.START[parse_scene(e["contact"].attrs["scene_toml"]).simulation.contact_start], ""]
-    md += _window_table(e["contact"])
+           text.WINDOWS.format(steady_after=t_s) + " " + text.START[start], ""]
+    md += _window_table(by_window, t_s)
     md += ["", "### Where we differ from the paper, and why", ""]
-    return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"]), e["contact"]) + [""]
+    return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"]), by_window, start, t_s) + [""]
 
 
 def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None = None) -> Path:
