@@ -45,14 +45,18 @@ for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 from rss6core import load_scene  # noqa: E402
+from pipeline.run import default_chunk  # noqa: E402
 from rss6core.models import default_integrator, default_time_step, simulate_batch  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
-# counts per model: loop (one at a time), batched (one batch), workers (per throughput run); paper's
-# throughput is that of the 1000-realisation ensemble its time target names (16 chunks of 63): a
-# run's fixed costs (the first task's start, the final merge) are then amortised as in real runs
-FULL = {"config": "paper.toml", "paper": (10, 200, 1000), "contact": (2, 64, 128), "memory": (100, 1000),
-        "reference": 6000, "contact_run": 1000}
+# counts per model: loop (one at a time), batched (one batch), workers (per throughput run). The
+# batch is the one `rss6 run -n 1000` makes on 2 workers (default_chunk: 125 for both levels);
+# paper's throughput is that of the 1000-realisation ensemble its time target names (8 chunks of
+# 125): a run's fixed costs (the first task's start, the final merge) are then amortised as in real
+# runs
+BATCH = default_chunk(1000, 2, "paper"), default_chunk(1000, 2, "contact")
+FULL = {"config": "paper.toml", "paper": (10, BATCH[0], 1000), "contact": (2, BATCH[1], 128),
+        "memory": (100, 1000), "reference": 6000, "contact_run": 1000}
 QUICK = {"config": "smoke.toml", "paper": (3, 50, 100), "contact": (1, 6, 4), "memory": (100, 1000),
          "reference": 1500, "contact_run": 8}
 
@@ -83,11 +87,11 @@ def _profile(scene, model, n, top=8):
 
 def _throughput(scene, config, model, n, workers, tmp):
     """Realisations per second of run_ensemble on a local cluster of ``workers`` workers, in the
-    chunks ``rss6 run -n N`` makes for two workers (the same batches for 1 and 2 workers), and the
+    chunks ``rss6 run -n N --model MODEL`` makes for two workers (the same batches for 1 and 2), and the
     seconds its tasks computed (dask's task stream): how busy the pipeline kept the workers."""
     from dask.distributed import Client, get_task_stream
 
-    from pipeline.run import EnsembleSpec, default_chunk, local_cluster, run_ensemble
+    from pipeline.run import EnsembleSpec, local_cluster, run_ensemble
     spec = EnsembleSpec(scene.source_text, str(config), model, default_integrator(scene, model),
                         default_time_step(scene, model), scene.simulation.elements_per_link, 0)
     with local_cluster(workers) as cluster, Client(cluster) as client:
@@ -96,7 +100,7 @@ def _throughput(scene, config, model, n, workers, tmp):
         with get_task_stream(client) as stream:
             start = time.perf_counter()
             run_ensemble(spec, n, fresh, scheduler=cluster.scheduler_address,
-                         chunk=default_chunk(n, 2), progress=False)
+                         chunk=default_chunk(n, 2, model), progress=False)
             elapsed = time.perf_counter() - start
         task_s = sum(s["stop"] - s["start"] for task in stream.data for s in task["startstops"]
                      if s["action"] == "compute")

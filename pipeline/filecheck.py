@@ -34,12 +34,16 @@ def _units(ds, path) -> None:
             raise EnsembleFileError(f"{path}: {name} has units {got!r}; rss6 writes {MIXED_UNITS!r}")
     if "unit" not in ds.coords:
         raise EnsembleFileError(f"{path}: no 'unit' coordinate (the SI unit of each element)")
-    for q in QUANTITIES:
-        for d in DIRECTIONS:
-            want = UNITS[q][0 if d in ("x", "y", "z") else 1]
-            got = str(ds["unit"].sel(quantity=q, direction=d).item())
-            if got != want:
-                raise EnsembleFileError(f"{path}: unit of {q} {d} is {got!r}; expected {want!r}")
+    if set(ds["unit"].dims) != {"quantity", "direction"}:
+        raise EnsembleFileError(f"{path}: 'unit' has dimensions ({', '.join(ds['unit'].dims)}); "
+                                "expected quantity, direction")
+    # the labels are checked (in QUANTITIES and DIRECTIONS order): compare the table at once
+    got = ds["unit"].transpose("quantity", "direction").values.astype(str)
+    want = np.array([[UNITS[q][0 if d in ("x", "y", "z") else 1] for d in DIRECTIONS]
+                     for q in QUANTITIES])
+    for i, j in np.argwhere(got != want)[:1]:
+        raise EnsembleFileError(f"{path}: unit of {QUANTITIES[i]} {DIRECTIONS[j]} is {str(got[i, j])!r}; "
+                                f"expected {str(want[i, j])!r}")
 
 
 def _dims(ds, path, expected: set) -> None:

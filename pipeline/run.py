@@ -33,7 +33,7 @@ import numpy as np
 from rss6core import FAILED, SimulationResult, parse_scene, prepare_level, stored_draw, time_grid
 
 from .outputs import OutputLock, PartsManifest
-from .store import (EnsembleFileError, finish_ensemble, identity, open_ensemble,
+from .store import (EnsembleFileError, finish_ensemble, identity, load_netcdf, open_ensemble,
                     chunk_dataset, sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
@@ -363,8 +363,11 @@ def _gathered(client, pending: set):
 
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
 # the contact level computes its fine-grid loads and joint maps once per batch (1.9 s CPU, as much
-# as 8 realisations' steps): twice the batch halves that share (docs/performance.md, section 14)
-MAX_AUTO_CHUNK_BY_MODEL = {"contact": 128}
+# as 8 realisations' steps): twice the batch halves that share (docs/performance.md, section 14);
+# a paper-level chunk of 128 is about 1 s of work, and the main process's cost per chunk (write the
+# part, read it back: about 50 ms CPU, taken from the workers' cores) is then half as often paid
+# (section 17)
+MAX_AUTO_CHUNK_BY_MODEL = {"contact": 128, "paper": 128}
 
 
 def default_chunk(n: int, workers: int, model: str | None = None) -> int:
@@ -439,8 +442,10 @@ def _merged(pieces: list, spec: EnsembleSpec):
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
              scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S, client=None) -> list:
     """Run the chunks on dask (on ``client``, else on a cluster of this call); each finished chunk
-    is stored as a part at once, and opened from there while the workers compute the others.
-    Returns the parts as read back (histories on disk: the chunks are not kept in memory)."""
+    is stored as a part at once. Returns the parts: a chunk of summaries as it came (a few hundred
+    kB; the merged file has the same bytes as from the part read back, tests/test_pipeline.py), a
+    chunk with histories as read back from its part, lazily, while the workers compute the others
+    (histories stay on disk). The merged file is checked (:func:`ensemble`), the parts are not."""
     written, shared = [], client is not None
     with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
@@ -449,7 +454,7 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
                 for ds in _finished(client, futures, scheduler, worker_timeout, interrupted):
                     first, last = int(ds.realization[0]), int(ds.realization[-1])
                     path = manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
-                    written.append(open_ensemble(path, lazy=True))
+                    written.append(load_netcdf(path, lazy=True) if "time" in ds.dims else ds)
                     if bar:
                         bar.advance(ds.sizes["realization"])
         except BaseException:

@@ -38,10 +38,12 @@ def _attr(name, units):
     return change
 
 
-def _unit(ds):
-    table = ds["unit"].values.copy()
-    table[0, 0] = "mm"
-    return ds.assign_coords(unit=(("quantity", "direction"), table))
+def _unit(i, j, unit):
+    def change(ds):
+        table = ds["unit"].transpose("quantity", "direction").values.copy()
+        table[i, j] = unit
+        return ds.assign_coords(unit=(("quantity", "direction"), table))
+    return change
 
 
 def _failed_with_nan(ds):
@@ -67,7 +69,11 @@ CASES = {
     "relabelled direction": (lambda ds: ds.assign_coords(direction=["x", "y", "z", "a", "b", "c"]),
                              "'direction' labels are x, y, z, a, b, c"),
     "variable units": (_attr("mean_abs_error", "mm"), "mean_abs_error has units 'mm'"),
-    "element unit": (_unit, "unit of displacement x is 'mm'; expected 'm'"),
+    "element unit": (_unit(0, 0, "mm"), "unit of displacement x is 'mm'; expected 'm'"),
+    "element unit inside the table": (_unit(2, 4, "m s-2"), "unit of acceleration ry is 'm s-2'; "
+                                                            "expected 'rad s-2'"),
+    "unit over one dimension": (lambda ds: ds.assign_coords(unit=(("quantity",), ["m", "m s-1", "m s-2"])),
+                                r"'unit' has dimensions \(quantity\); expected quantity, direction"),
     "no unit coordinate": (lambda ds: ds.drop_vars("unit"), "no 'unit' coordinate"),
     "unknown status": (_set("status", {"realization": 2}, "done"), "unknown status 'done'"),
 }

@@ -35,7 +35,7 @@ def error_summaries(ds):
 @pytest.mark.parametrize("n, workers", [(1, 2), (5, 4), (10, 2), (128, 2), (129, 2), (400, 2),
                                         (1000, 2), (1000, 3), (65, 1), (257, 2)])
 def test_default_chunks_are_equal_and_a_multiple_of_the_workers(n, workers, model):
-    """At most MAX_AUTO_CHUNK per chunk (the contact level: its own, larger cap), as few rounds of
+    """At most MAX_AUTO_CHUNK per chunk (the contact and paper levels: their own, larger cap), as few rounds of
     one chunk per worker as that allows, and the chunks of one size but the last, which is short by
     less than one realisation per chunk."""
     size = default_chunk(n, workers, model)
@@ -47,6 +47,7 @@ def test_default_chunks_are_equal_and_a_multiple_of_the_workers(n, workers, mode
     assert n - (chunks - 1) * size > size - chunks     # the short last chunk
     assert default_chunk(400, 2) == 50 and default_chunk(1000, 2) == 63 and default_chunk(128, 2) == 64
     assert default_chunk(1000, 2, "contact") == 125 and default_chunk(256, 2, "contact") == 128
+    assert default_chunk(1000, 2, "paper") == 125 and default_chunk(1000, 2, "elastic") == 63
 
 
 @pytest.fixture(scope="module")
