@@ -216,19 +216,28 @@ def local_cluster(workers: int):
 
     The workers are forked from a server process that imports rss6 and its libraries once
     (:func:`_preload_worker_imports`), not started afresh: each fresh worker spent seconds importing
-    them, and closing the cluster took seconds more.
+    them, and closing the cluster took seconds more. The cluster has no dashboard, so what only
+    feeds one is off or slowed (QUIET_CLUSTER).
     """
     import dask
     from dask.distributed import LocalCluster
     os.environ.update(BLAS_ENV)  # inherited by the worker processes
     settings = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
-                "distributed.worker.multiprocessing-method": "forkserver"}
+                "distributed.worker.multiprocessing-method": "forkserver", **QUIET_CLUSTER}
     with dask.config.set(settings), _workers_ignore_ctrl_c():
         _preload_worker_imports()
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                             dashboard_address=None, host="127.0.0.1", silence_logs=logging.CRITICAL)
 
 
+# a local cluster without a dashboard: no statistical profiler in the workers (a stack sample of
+# the running task every 10 ms: about 8 % of a paper-level worker's CPU), and the monitors that
+# feed the dashboard (event-loop tick, system and memory) at a tenth of their rates; idle, the
+# cluster then takes 0.1 s of CPU per 10 s instead of 0.8 s (docs/performance.md, section 17)
+QUIET_CLUSTER = {"distributed.worker.profile.enabled": False,
+                 "distributed.admin.tick.interval": "200ms",
+                 "distributed.admin.system-monitor.interval": "2s",
+                 "distributed.worker.memory.monitor-interval": "1s"}
 WORKER_IMPORTS = ["distributed", "pipeline.run"]   # what a worker needs: rss6core, numpy, xarray, ...
 
 

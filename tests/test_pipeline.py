@@ -187,11 +187,12 @@ def test_scheduler_address_runs_on_an_existing_cluster(reference, tmp_path):
 def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(reference, tmp_path,
                                                                          monkeypatch):
     """rss6's own workers start without dask's MALLOC_TRIM_THRESHOLD_ (with it glibc maps and
-    faults in every array over 128 KiB afresh) and with one BLAS thread; with a client open, a
+    faults in every array over 128 KiB afresh), with one BLAS thread and without the profiler; with a client open, a
     netCDF write takes no distributed lock (a scheduler round trip per variable)."""
+    import dask
     from dask.distributed import Client, Lock
 
-    from pipeline.run import local_cluster
+    from pipeline.run import QUIET_CLUSTER, local_cluster
     ref, _ = reference
     monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
     taken = []
@@ -200,8 +201,10 @@ def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(referen
     keys = ("MALLOC_TRIM_THRESHOLD_", "OPENBLAS_NUM_THREADS")
     with local_cluster(1) as cluster, Client(cluster) as client:
         env = list(client.run(lambda: {k: os.environ.get(k) for k in keys}).values())
+        quiet = list(client.run(lambda: {k: dask.config.get(k) for k in QUIET_CLUSTER}).values())
         write_netcdf(ref, tmp_path / "with-client.nc")
     assert env == [{"MALLOC_TRIM_THRESHOLD_": None, "OPENBLAS_NUM_THREADS": "1"}]
+    assert quiet == [QUIET_CLUSTER]   # no profiler, slower monitors: in the worker processes
     assert taken == []
     assert np.array_equal(error_summaries(open_ensemble(tmp_path / "with-client.nc")),
                           error_summaries(ref))
