@@ -233,12 +233,14 @@ def local_cluster(workers: int):
 # a local cluster without a dashboard: no statistical profiler in the workers (a stack sample of
 # the running task every 10 ms: about 8 % of a paper-level worker's CPU), and the monitors that
 # feed the dashboard (event-loop tick, system and memory) at a tenth of their rates; idle, the
-# cluster then takes 0.1 s of CPU per 10 s instead of 0.8 s (docs/performance.md, section 17)
+# cluster then takes 0.1 s of CPU per 10 s instead of 0.8 s (docs/performance.md, section 18)
 QUIET_CLUSTER = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.tick.interval": "200ms",
                  "distributed.admin.system-monitor.interval": "2s",
                  "distributed.worker.memory.monitor-interval": "1s"}
-WORKER_IMPORTS = ["distributed", "pipeline.run"]   # what a worker needs: rss6core, numpy, xarray, ...
+# what a worker needs: rss6core, numpy, xarray, ... through pipeline.run; xarray imports dask.array
+# at its first Dataset, the level's design pipeline.sampler (0.2-0.3 s per worker in its first task)
+WORKER_IMPORTS = ["distributed", "pipeline.run", "dask.array", "pipeline.sampler"]
 
 
 def _preload_worker_imports() -> None:
@@ -375,7 +377,7 @@ MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run lo
 # as 8 realisations' steps): twice the batch halves that share (docs/performance.md, section 14);
 # a paper-level chunk of 128 is about 1 s of work, and the main process's cost per chunk (write the
 # part, read it back: about 50 ms CPU, taken from the workers' cores) is then half as often paid
-# (section 17)
+# (section 18)
 MAX_AUTO_CHUNK_BY_MODEL = {"contact": 128, "paper": 128}
 
 

@@ -13,7 +13,8 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.outputs import PartsManifest
-from pipeline.run import MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL, EnsembleSpec, default_chunk, run_ensemble
+from pipeline.run import (MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL, EnsembleSpec, default_chunk, run_chunk,
+                          run_ensemble)
 from pipeline.stats import ensemble_stats
 from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
 from pipeline.scenes import scene_text
@@ -184,6 +185,13 @@ def test_scheduler_address_runs_on_an_existing_cluster(reference, tmp_path):
     assert np.array_equal(error_summaries(ds), error_summaries(ref))
 
 
+def _imports_of_a_first_chunk() -> list:
+    """The modules a worker imports in its first paper-level task (run in the worker)."""
+    before = set(sys.modules)
+    run_chunk(_spec(model="paper"), [0])
+    return sorted(set(sys.modules) - before)
+
+
 def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(reference, tmp_path,
                                                                          monkeypatch):
     """rss6's own workers start without dask's MALLOC_TRIM_THRESHOLD_ (with it glibc maps and
@@ -202,9 +210,11 @@ def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(referen
     with local_cluster(1) as cluster, Client(cluster) as client:
         env = list(client.run(lambda: {k: os.environ.get(k) for k in keys}).values())
         quiet = list(client.run(lambda: {k: dask.config.get(k) for k in QUIET_CLUSTER}).values())
+        imported = list(client.run(_imports_of_a_first_chunk).values())
         write_netcdf(ref, tmp_path / "with-client.nc")
     assert env == [{"MALLOC_TRIM_THRESHOLD_": None, "OPENBLAS_NUM_THREADS": "1"}]
     assert quiet == [QUIET_CLUSTER]   # no profiler, slower monitors: in the worker processes
+    assert imported == [[]]           # the fork server imported everything a task needs
     assert taken == []
     assert np.array_equal(error_summaries(open_ensemble(tmp_path / "with-client.nc")),
                           error_summaries(ref))
