@@ -11,7 +11,8 @@ Measures, in one run and on this machine:
   processes of a fixed single-threaded BLAS load, what the machine itself gives
   compute-bound work on two cores at that time; and, from dask's task stream,
   how busy the workers were kept (task seconds / workers x wall) and how much
-  longer the same tasks took with 2 workers than with 1;
+  longer the same tasks took with 2 workers than with 1, and how much longer a
+  worker's first task took than its others (the level's preparation);
 - peak resident memory of a whole ``rss6 run`` (main process and its workers,
   sampled every 0.05 s) for N = 100 and N = 1000 with ``--store summary``
   (`paper` level), and that run's wall time;
@@ -102,9 +103,21 @@ def _throughput(scene, config, model, n, workers, tmp):
             run_ensemble(spec, n, fresh, scheduler=cluster.scheduler_address,
                          chunk=default_chunk(n, 2, model), progress=False)
             elapsed = time.perf_counter() - start
-        task_s = sum(s["stop"] - s["start"] for task in stream.data for s in task["startstops"]
-                     if s["action"] == "compute")
-        return n / elapsed, task_s, task_s / (workers * elapsed)
+        tasks = [(task["worker"], s["start"], s["stop"] - s["start"]) for task in stream.data
+                 for s in task["startstops"] if s["action"] == "compute"]
+        task_s = sum(t[2] for t in tasks)
+        return n / elapsed, task_s, task_s / (workers * elapsed), _first_task_extra(tasks)
+
+
+def _first_task_extra(tasks: list) -> float:
+    """Seconds each worker's first task took beyond the median of its others (the level's
+    preparation and anything else done once per worker), the median over the workers."""
+    extra = []
+    for worker in {t[0] for t in tasks}:
+        own = [t[2] for t in sorted(t for t in tasks if t[0] == worker)]
+        if len(own) > 1:
+            extra.append(own[0] - statistics.median(own[1:]))
+    return statistics.median(extra) if extra else float("nan")
 
 
 # a fixed single-threaded compute load (products of 256 x 256 matrices, 0.6 ms each here); prints
@@ -135,7 +148,8 @@ def _pairs(scene, config, model, n, repeat, products, tmp) -> list[dict]:
         pair = {str(w): _throughput(scene, config, model, n, w, tmp) for w in ((1, 2), (2, 1))[i % 2]}
         runs.append({"1": pair["1"][0], "2": pair["2"][0], "machine": _machine_ratio(products),
                      "task_s": {w: m[1] for w, m in pair.items()},
-                     "busy": {w: m[2] for w, m in pair.items()}})
+                     "busy": {w: m[2] for w, m in pair.items()},
+                     "first_task_extra_s": {w: m[3] for w, m in pair.items()}})
     return runs
 
 
@@ -192,7 +206,8 @@ def measure(quick: bool, profile: bool, repeat: int = 1) -> dict:
     scene = load_scene(config)
     out = {"config": f"configs/{plan['config']}", "per_realization_s": {}, "batched_speedup": {},
            "realizations_per_s": {}, "parallel_efficiency": {}, "peak_rss_MiB": {}, "run_wall_s": {},
-           "runs": {}, "machine_ratio": {}, "workers_busy": {}, "task_time_ratio": {}, "profile": {}}
+           "runs": {}, "machine_ratio": {}, "workers_busy": {}, "task_time_ratio": {},
+           "first_task_extra_s": {}, "profile": {}}
     with tempfile.TemporaryDirectory() as tmp:
         for model in ("paper", "contact"):
             loop, batched = _per_realization(scene, model, plan[model])
@@ -208,6 +223,8 @@ def measure(quick: bool, profile: bool, repeat: int = 1) -> dict:
                                           for w in ("1", "2")}
             out["task_time_ratio"][model] = statistics.median(r["task_s"]["2"] / r["task_s"]["1"]
                                                               for r in rates)
+            out["first_task_extra_s"][model] = {w: statistics.median(r["first_task_extra_s"][w] for r in rates)
+                                                for w in ("1", "2")}
             if profile:
                 out["profile"][model] = _profile(scene, model, plan[model][1])
         for n in plan["memory"]:
@@ -254,6 +271,9 @@ def main(argv=None) -> int:
         busy = out["workers_busy"][m]
         print(f"{'':8s} workers busy (task seconds / workers x wall): {busy['1']:.3f} with 1, "
               f"{busy['2']:.3f} with 2; the same tasks took {out['task_time_ratio'][m]:.2f}x as long with 2")
+        first = out["first_task_extra_s"][m]
+        print(f"{'':8s} a worker's first task took {first['1']:.2f} s (1 worker), {first['2']:.2f} s "
+              "(2 workers) longer than its others (the level's preparation, once per worker)")
     print("rss6 run --model paper --store summary: " + ", ".join(
         f"N = {n}: peak {out['peak_rss_MiB'][n]:.0f} MiB, {out['run_wall_s'][n]:.1f} s"
         for n in out["peak_rss_MiB"]) + f"; growth {100 * out['memory_growth']:.1f} %")
