@@ -39,7 +39,8 @@ def _measure(quiet: bool, tmp: str) -> dict:
     import pipeline.run as run
     from rss6core import load_scene
     from rss6core.models import default_integrator, default_time_step
-    settings, run.QUIET_CLUSTER = run.QUIET_CLUSTER, (run.QUIET_CLUSTER if quiet else {})
+    settings = getattr(run, "QUIET_CLUSTER", {})   # {} in an rss6 before it: both arms are dask's
+    run.QUIET_CLUSTER = settings if quiet else {}
     try:
         with run.local_cluster(2) as cluster, Client(cluster) as client:
             pids = list(client.run(os.getpid).values())
