@@ -455,7 +455,7 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
              scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S, client=None) -> list:
     """Run the chunks on dask (on ``client``, else on a cluster of this call); each finished chunk
     is stored as a part at once. Returns the parts: a chunk of summaries as it came (a few hundred
-    kB; the merged file has the same bytes as from the part read back, tests/test_pipeline.py), a
+    kB; the merged file has the same bytes as from the part read back, tests/test_merge.py), a
     chunk with histories as read back from its part, lazily, while the workers compute the others
     (histories stay on disk). The merged file is checked (:func:`ensemble`), the parts are not."""
     written, shared = [], client is not None
