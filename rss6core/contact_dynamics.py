@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import functools
 from collections import namedtuple
 from dataclasses import dataclass
 
@@ -260,19 +261,24 @@ class _Chunk:
         legs[..., :3], legs[..., 3:jm.crank_dofs], legs[..., jm.crank_dofs:] = fc[..., :3], fc[..., 6:], fr
         F[:, -6:] = fp
         self.J = np.ascontiguousarray(platform_point_map(motion.r))   # (T, 6, 3, 6)
-        G = np.zeros(Rc.shape[:2] + (9, 12))                   # joint nodes -> [e_A, e_C, e_B]
-        G[..., 0:3, 0:3], G[..., 3:6, 3:6], G[..., 3:6, 6:9], G[..., 6:9, 9:12] = Rc, -Rc, Rr, Rr
-        self.G = G
-        self.Rr = np.ascontiguousarray(Rr)
+        self.Rc, self.Rr = np.ascontiguousarray(Rc), np.ascontiguousarray(Rr)
         w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
         w_rod = rod_angular_motion(motion)[1]
         self.omega = np.stack([w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :]], -2)
         law = scene.contact
         self.radius = np.array([[law.journal_radius], [law.sphere_radius], [law.sphere_radius]])
 
+    @functools.cached_property
+    def G(self) -> np.ndarray:
+        """Joint maps (T, 6, 9, 12): joint nodes -> [e_A, e_C, e_B], blocks Rc, -Rc, Rr, Rr (the numpy
+        engine's; the compiled one reads Rc and Rr, so a compiled run never makes these 16 MB)."""
+        G = np.zeros(self.Rc.shape[:2] + (9, 12))
+        G[..., 0:3, 0:3], G[..., 3:6, 3:6], G[..., 3:6, 6:9], G[..., 6:9, 9:12] = self.Rc, -self.Rc, self.Rr, self.Rr
+        return G
+
     def arrays(self) -> ChunkArrays:
         """What :func:`.contact_kernel.advance_chunk` reads of the chunk."""
-        return ChunkArrays(F=self.F, Mp=self.Mp, G=self.G, J=self.J, Rr=self.Rr, omega=self.omega, t=self.t)
+        return ChunkArrays(F=self.F, Mp=self.Mp, Rc=self.Rc, J=self.J, Rr=self.Rr, omega=self.omega, t=self.t)
 
 
 def _platform_mass(jm: JointModel, Ip: np.ndarray) -> np.ndarray:
@@ -834,7 +840,7 @@ class CompiledStepper(ContactStepper):
         out = Out(f=np.empty((R, 6, 3, 3)), gl=np.empty((R, 6, 12)), gp=np.empty((R, 6)),
                   delta=np.empty((R, 6, 4)), rate=np.empty((R, 6, 4)))
         done, count = np.zeros(R, np.bool_), np.zeros(R, np.int64)
-        newton_step(Frame(G=ch.G[j], J=ch.J[j], Rr=ch.Rr[j], omega=ch.omega[j]), self._joints_of(idx), sy, ab, ap,
+        newton_step(Frame(Rc=ch.Rc[j], J=ch.J[j], Rr=ch.Rr[j], omega=ch.omega[j]), self._joints_of(idx), sy, ab, ap,
                     float(bh2), float(gh), float(wf), self.settings, out, done, count, self.scratch)
         return ab, ap, out.f, out.gl, out.gp, done, count, out.delta, out.rate
 
