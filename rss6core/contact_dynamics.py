@@ -117,16 +117,14 @@ class _Condensed:
         self.legs = S   # (12, 12): crank node 0, crank tip, rod C end, rod B end (link frames)
 
     def maps(self):
-        """Condensation and recovery as matrices per link [crank, rod]: r (n,) -> [r_i inv, r_b - r_i P]
-        (n, n_i + 6), and [y, x_b] -> x with x_i = y - P x_b (n_i + 6, n)."""
+        """Condensation as a matrix per link [crank, rod]: r (n,) -> [r_i inv, r_b - r_i P] (n, n_i + 6),
+        and P (n_i, 6), with which :meth:`recover` makes x_i = y - x_b P^T."""
         out = []
         for i, b, inv, _, P, _ in (self.crank, self.rod):
             ni, n = len(i), len(i) + len(b)
-            T, U = np.zeros((n, ni + 6)), np.zeros((ni + 6, n))
+            T = np.zeros((n, ni + 6))
             T[i, :ni], T[i, ni:], T[b, ni + np.arange(6)] = inv, -P, 1.0
-            U[np.arange(ni), i] = 1.0
-            U[ni:, i], U[ni + np.arange(6), b] = -P.T, 1.0
-            out.append((T, U))
+            out.append((T, np.ascontiguousarray(P)))
         return out
 
     def condense(self, rc, rr):
@@ -807,13 +805,14 @@ class CompiledStepper(ContactStepper):
                              coef_p=np.array([sz.coef_p for sz in su.sizes]),
                              error=np.array([sz.error for sz in su.sizes]),
                              legs=np.stack([sz.cond.legs for sz in su.sizes]),
-                             crank_T=np.stack([m[0][0] for m in stack]), crank_U=np.stack([m[0][1] for m in stack]),
-                             rod_T=np.stack([m[1][0] for m in stack]), rod_U=np.stack([m[1][1] for m in stack]),
+                             crank_T=np.stack([m[0][0] for m in stack]), crank_P=np.stack([m[0][1] for m in stack]),
+                             rod_T=np.stack([m[1][0] for m in stack]), rod_P=np.stack([m[1][1] for m in stack]),
                              **per_level)
         self.layout = Layout(crank_dofs=int(jm.crank_dofs), crank_MK=np.concatenate([jm.crank_M, jm.crank_K]),
                              rod_MK=np.concatenate([jm.rod_M, jm.rod_K]), crank_M=np.ascontiguousarray(jm.crank_M),
                              rod_M=np.ascontiguousarray(jm.rod_M),
-                             crank_boundary=jm.crank_boundary.astype(np.int64))
+                             crank_boundary=jm.crank_boundary.astype(np.int64),
+                             crank_interior=su.sizes[0].cond.crank[0].astype(np.int64))
         self.settings = Settings(mass_damping=float(jm.mass_damping), stiffness_damping=float(jm.stiffness_damping),
                                  alpha_m=float(it.alpha_m), alpha_f=float(it.alpha_f),
                                  settle_at=float(su.settle_at), steady_at=float(su.steady_at),

@@ -51,8 +51,10 @@ from collections import namedtuple
 
 import llvmlite.binding as llvm
 import numpy as np
+from llvmlite import ir
 from numba import njit, types
-from numba.extending import get_cython_function_address
+from numba.core import cgutils
+from numba.extending import get_cython_function_address, intrinsic
 
 from .status import DIVERGED, NEWTON_FAILED   # the failure codes written to ``fail``
 
@@ -77,17 +79,32 @@ llvm.add_symbol("rss6_dgemm", get_cython_function_address("scipy.linalg.cython_b
 _dgemm = types.ExternalFunction("rss6_dgemm", types.void(*[types.uintp] * 13))
 
 
+@intrinsic
+def _prefetch(typingctx, address):
+    """Ask the CPU to bring the cache line at ``address`` (an integer) in for reading (llvm.prefetch):
+    no arithmetic, so no change to any result."""
+    def codegen(context, builder, signature, args):
+        i32 = ir.IntType(32)
+        ptr = builder.inttoptr(args[0], ir.IntType(8).as_pointer())
+        fnty = ir.FunctionType(ir.VoidType(), [ptr.type, i32, i32, i32])
+        builder.call(cgutils.get_or_insert_function(builder.module, fnty, "llvm.prefetch.p0"),
+                     [ptr, i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
+    return types.void(types.uintp), codegen
+
+
 # --- named structures: every array and constant the kernel reads, by name ---
 
-Levels = namedtuple("Levels", "span h coef_p d_pred v_pred d_corr v_corr error legs crank_T crank_U rod_T rod_U")
+Levels = namedtuple("Levels", "span h coef_p d_pred v_pred d_corr v_corr error legs crank_T crank_P rod_T rod_P")
 Levels.__doc__ = """Step levels l = 0 (the base step) .. L - 1 (finest): fine-grid intervals per step, h (s),
 the platform mass weight of the step matrix, the predictor/corrector weights
 (:class:`.integrators.StepWeights`), |beta - 1/6| h^2 (s^2) (L,); the condensed leg matrices
 (L, 12, 12) and per link type the condensation r -> [r_i E_ii^-1, r_b - r_i P] (L, n, n_i + 6) and
-recovery [y, x_b] -> x (L, n_i + 6, n) maps (:meth:`.contact_dynamics._Condensed.maps`)."""
-Layout = namedtuple("Layout", "crank_dofs crank_MK rod_MK crank_M rod_M crank_boundary")
+P = E_ii^-1 E_ib (L, n_i, 6), which recovers the interior x_i = y - x_b P^T
+(:meth:`.contact_dynamics._Condensed.maps`)."""
+Layout = namedtuple("Layout", "crank_dofs crank_MK rod_MK crank_M rod_M crank_boundary crank_interior")
 Layout.__doc__ = """The links' layout: crank DOFs, [M; K] of crank and rod, M of crank and rod, the crank's
-joint-node indices (6,)."""
+joint-node indices (6,) and the others (n_i,) in order (a rod's joint nodes are its last six DOFs)."""
 Settings = namedtuple("Settings", "mass_damping stiffness_damping alpha_m alpha_f settle_at steady_at "
                       "impact_floor tolerance divergence_limit tol_d tol_v max_iterations refinements")
 Settings.__doc__ = """Rayleigh lambda_1 (1/s), lambda_2 (s); alpha_m, alpha_f; settle time (s); start of the
@@ -497,12 +514,15 @@ displacements db, dpp and velocities vb, vpp (joint nodes (6, 12), platform (6,)
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _residual(sy, a_l, a_p, wf, out, s):
-    """Newton's residual Sl a_l - rb - wf gl, Sp a_p - rp - wf gp into s.res_l, s.res_p; its norm."""
+    """Newton's residual Sl a_l - rb - wf gl, Sp a_p - rp - wf gp into s.res_l, s.res_p; its norm.
+    Sl is block diagonal (crank, rod: :class:`.contact_dynamics._Condensed`): its zero blocks are
+    skipped (adding 0 x changes no bit)."""
     norm2 = 0.0
     for leg in range(6):
         for a in range(12):
             q = -sy.rb[leg, a] - wf * out.gl[leg, a]
-            for b in range(12):
+            first = 6 * (a // 6)
+            for b in range(first, first + 6):
                 q += sy.Sl[a, b] * a_l[leg, b]
             s.res_l[leg, a] = q
             norm2 += q * q
@@ -848,18 +868,31 @@ def _prepare(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, st, work):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _recover(level, lv, work):
-    """The link interiors from the joint nodes' new accelerations ([y, x_b] -> link vectors), then
-    the corrector: the candidate a_new, d_new, v_new in work."""
+def _recover(level, lv, layout, work):
+    """The link vectors from the joint nodes' new accelerations x_b: the interiors x_i = y - x_b P^T
+    (y from the condensation; :meth:`.contact_dynamics._Condensed.recover`; a loop over P, where a
+    product with the whole recovery map [y, x_b] -> x multiplied its identity blocks too), then the
+    corrector: the candidate a_new, d_new, v_new in work."""
     N = work.a_new.shape[0]
-    ni_c, ni_r = work.Yc.shape[1] - 6, work.Yr.shape[1] - 6
+    step = (N - 6) // 6
+    nc, cb, ci = layout.crank_dofs, layout.crank_boundary, layout.crank_interior
+    Pc, Pr = lv.crank_P[level], lv.rod_P[level]
+    ni_r = Pr.shape[0]
     for leg in range(6):
+        base = leg * step
+        for m in range(ci.shape[0]):
+            x = work.Yc[leg, m]
+            for q in range(6):
+                x -= Pc[m, q] * work.ab[leg, q]
+            work.a_new[base + ci[m]] = x
+        for m in range(ni_r):
+            x = work.Yr[leg, m]
+            for q in range(6):
+                x -= Pr[m, q] * work.ab[leg, 6 + q]
+            work.a_new[base + nc + m] = x
         for q in range(6):
-            work.Yc[leg, ni_c + q] = work.ab[leg, q]
-            work.Yr[leg, ni_r + q] = work.ab[leg, 6 + q]
-    _product(work.Yc, lv.crank_U[level], work.Ac, work)
-    _product(work.Yr, lv.rod_U[level], work.Ar, work)
-    _scatter(work.Ac, work.Ar, work.a_new)
+            work.a_new[base + cb[q]] = work.ab[leg, q]
+            work.a_new[base + nc + ni_r + q] = work.ab[leg, 6 + q]
     for b in range(6):
         work.a_new[N - 6 + b] = work.ap[b]
     d_corr, v_corr = lv.d_corr[level], lv.v_corr[level]
@@ -868,11 +901,33 @@ def _recover(level, lv, work):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _fetch(x, k):
+    """Prefetch the 64-byte cache lines of x[k] (C-contiguous x, k on its first axis)."""
+    start = x.ctypes.data + k * x.strides[0]
+    for line in range(start >> 6, (start + x.strides[0] + 63) >> 6):
+        _prefetch(line << 6)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _fetch_instant(ch, k):
+    """Prefetch what a step ending at fine instant k reads of the chunk (about 5 KB): a chunk's
+    3201 instants take 18 MB, so a step's instant comes from memory, not the caches, and the products
+    and the predictor before its first use hide the wait."""
+    _fetch(ch.F, k)
+    _fetch(ch.Mp, k)
+    _fetch(ch.Rc, k)
+    _fetch(ch.Rr, k)
+    _fetch(ch.J, k)
+    _fetch(ch.omega, k)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _attempt(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, jt, st, work, scratch):
     """One step of realisation r from instant k0 to k1 with level ``level``'s step: predictor,
     right-hand side, condensation, Newton (from the extrapolated accelerations or the last ones),
     recovery, corrector.  Leaves the candidate state in work and returns (converged, Newton
     iterations)."""
+    _fetch_instant(ch, k1)
     _prepare(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, st, work)
     N = st.d.shape[1]
     fr = Frame(ch.Rc[k1], ch.J[k1], ch.Rr[k1], ch.omega[k1])
@@ -881,7 +936,7 @@ def _attempt(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, jt, st, work, s
     out = Out(work.f, work.gl, work.gp, work.delta, work.rate)
     ok, count = newton_one(fr, jt, r, sy, work.ab, work.ap, lv.d_corr[level], lv.v_corr[level],
                            1.0 - cfg.alpha_f, cfg, out, scratch)
-    _recover(level, lv, work)
+    _recover(level, lv, layout, work)
     return ok, count
 
 
