@@ -51,10 +51,8 @@ from collections import namedtuple
 
 import llvmlite.binding as llvm
 import numpy as np
-from llvmlite import ir
 from numba import njit, types
-from numba.core import cgutils
-from numba.extending import get_cython_function_address, intrinsic
+from numba.extending import get_cython_function_address
 
 from .status import DIVERGED, NEWTON_FAILED   # the failure codes written to ``fail``
 
@@ -77,20 +75,6 @@ _PATTERN = np.array([[0, 0], [1, 1], [1, 2], [2, 3]], np.int64)
 # points leave out.  Arguments: addresses of Fortran's character, integer (int32) and double arguments.
 llvm.add_symbol("rss6_dgemm", get_cython_function_address("scipy.linalg.cython_blas", "dgemm"))
 _dgemm = types.ExternalFunction("rss6_dgemm", types.void(*[types.uintp] * 13))
-
-
-@intrinsic
-def _prefetch(typingctx, address):
-    """Ask the CPU to bring the cache line at ``address`` (an integer) in for reading (llvm.prefetch):
-    no arithmetic, so no change to any result."""
-    def codegen(context, builder, signature, args):
-        i32 = ir.IntType(32)
-        ptr = builder.inttoptr(args[0], ir.IntType(8).as_pointer())
-        fnty = ir.FunctionType(ir.VoidType(), [ptr.type, i32, i32, i32])
-        builder.call(cgutils.get_or_insert_function(builder.module, fnty, "llvm.prefetch.p0"),
-                     [ptr, i32(0), i32(3), i32(1)])
-        return context.get_dummy_value()
-    return types.void(types.uintp), codegen
 
 
 # --- named structures: every array and constant the kernel reads, by name ---
@@ -901,33 +885,11 @@ def _recover(level, lv, layout, work):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _fetch(x, k):
-    """Prefetch the 64-byte cache lines of x[k] (C-contiguous x, k on its first axis)."""
-    start = x.ctypes.data + k * x.strides[0]
-    for line in range(start >> 6, (start + x.strides[0] + 63) >> 6):
-        _prefetch(line << 6)
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _fetch_instant(ch, k):
-    """Prefetch what a step ending at fine instant k reads of the chunk (about 5 KB): a chunk's
-    3201 instants take 18 MB, so a step's instant comes from memory, not the caches, and the products
-    and the predictor before its first use hide the wait."""
-    _fetch(ch.F, k)
-    _fetch(ch.Mp, k)
-    _fetch(ch.Rc, k)
-    _fetch(ch.Rr, k)
-    _fetch(ch.J, k)
-    _fetch(ch.omega, k)
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
 def _attempt(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, jt, st, work, scratch):
     """One step of realisation r from instant k0 to k1 with level ``level``'s step: predictor,
     right-hand side, condensation, Newton (from the extrapolated accelerations or the last ones),
     recovery, corrector.  Leaves the candidate state in work and returns (converged, Newton
     iterations)."""
-    _fetch_instant(ch, k1)
     _prepare(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, st, work)
     N = st.d.shape[1]
     fr = Frame(ch.Rc[k1], ch.J[k1], ch.Rr[k1], ch.omega[k1])
