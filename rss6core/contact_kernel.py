@@ -257,7 +257,8 @@ def ball(e, de, size, k, impact, law, omega, radius, f, De, Dv):
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _gmap(Rc, Rr, leg, q, a, b):
     """Entry (a, b) of leg ``leg``'s joint-map block q (``_PATTERN``): Rc, -Rc, Rr, Rr for q = 0..3
-    (:class:`.contact_dynamics._Chunk`'s G), read from the link frames (a third of G's memory)."""
+    (:class:`.contact_dynamics._Chunk`'s G), read from the link frames: Rc is a twelfth of G's memory
+    and Rr is read anyway."""
     if q == 0:
         return Rc[leg, a, b]
     if q == 1:
@@ -372,7 +373,6 @@ def _leg_chain(Rc, Rr, Sl, D, res_l, leg, s):
                                + D[leg, j, u, 2] * _gmap(Rc, Rr, leg, q, 2, b))
     # diagonal blocks Sl_cc - G_c^T DG_c, off-diagonal: Sl (links) and - G_1^T D_C G_2 (joint C)
     for c in range(4):
-        j = _PATTERN[c, 0]
         for a in range(3):
             g0, g1, g2 = _gmap(Rc, Rr, leg, c, 0, a), _gmap(Rc, Rr, leg, c, 1, a), _gmap(Rc, Rr, leg, c, 2, a)
             for b in range(3):
