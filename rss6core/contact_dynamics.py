@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import functools
 from collections import namedtuple
 from dataclasses import dataclass
 
@@ -116,16 +117,14 @@ class _Condensed:
         self.legs = S   # (12, 12): crank node 0, crank tip, rod C end, rod B end (link frames)
 
     def maps(self):
-        """Condensation and recovery as matrices per link [crank, rod]: r (n,) -> [r_i inv, r_b - r_i P]
-        (n, n_i + 6), and [y, x_b] -> x with x_i = y - P x_b (n_i + 6, n)."""
+        """Condensation as a matrix per link [crank, rod]: r (n,) -> [r_i inv, r_b - r_i P] (n, n_i + 6),
+        and P (n_i, 6), with which :meth:`recover` makes x_i = y - x_b P^T."""
         out = []
         for i, b, inv, _, P, _ in (self.crank, self.rod):
             ni, n = len(i), len(i) + len(b)
-            T, U = np.zeros((n, ni + 6)), np.zeros((ni + 6, n))
+            T = np.zeros((n, ni + 6))
             T[i, :ni], T[i, ni:], T[b, ni + np.arange(6)] = inv, -P, 1.0
-            U[np.arange(ni), i] = 1.0
-            U[ni:, i], U[ni + np.arange(6), b] = -P.T, 1.0
-            out.append((T, U))
+            out.append((T, np.ascontiguousarray(P)))
         return out
 
     def condense(self, rc, rr):
@@ -260,19 +259,24 @@ class _Chunk:
         legs[..., :3], legs[..., 3:jm.crank_dofs], legs[..., jm.crank_dofs:] = fc[..., :3], fc[..., 6:], fr
         F[:, -6:] = fp
         self.J = np.ascontiguousarray(platform_point_map(motion.r))   # (T, 6, 3, 6)
-        G = np.zeros(Rc.shape[:2] + (9, 12))                   # joint nodes -> [e_A, e_C, e_B]
-        G[..., 0:3, 0:3], G[..., 3:6, 3:6], G[..., 3:6, 6:9], G[..., 6:9, 9:12] = Rc, -Rc, Rr, Rr
-        self.G = G
-        self.Rr = np.ascontiguousarray(Rr)
+        self.Rc, self.Rr = np.ascontiguousarray(Rc), np.ascontiguousarray(Rr)
         w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
         w_rod = rod_angular_motion(motion)[1]
         self.omega = np.stack([w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :]], -2)
         law = scene.contact
         self.radius = np.array([[law.journal_radius], [law.sphere_radius], [law.sphere_radius]])
 
+    @functools.cached_property
+    def G(self) -> np.ndarray:
+        """Joint maps (T, 6, 9, 12): joint nodes -> [e_A, e_C, e_B], blocks Rc, -Rc, Rr, Rr (the numpy
+        engine's; the compiled one reads Rc and Rr, so a compiled run never makes these 16 MB)."""
+        G = np.zeros(self.Rc.shape[:2] + (9, 12))
+        G[..., 0:3, 0:3], G[..., 3:6, 3:6], G[..., 3:6, 6:9], G[..., 6:9, 9:12] = self.Rc, -self.Rc, self.Rr, self.Rr
+        return G
+
     def arrays(self) -> ChunkArrays:
         """What :func:`.contact_kernel.advance_chunk` reads of the chunk."""
-        return ChunkArrays(F=self.F, Mp=self.Mp, G=self.G, J=self.J, Rr=self.Rr, omega=self.omega, t=self.t)
+        return ChunkArrays(F=self.F, Mp=self.Mp, Rc=self.Rc, J=self.J, Rr=self.Rr, omega=self.omega, t=self.t)
 
 
 def _platform_mass(jm: JointModel, Ip: np.ndarray) -> np.ndarray:
@@ -801,13 +805,14 @@ class CompiledStepper(ContactStepper):
                              coef_p=np.array([sz.coef_p for sz in su.sizes]),
                              error=np.array([sz.error for sz in su.sizes]),
                              legs=np.stack([sz.cond.legs for sz in su.sizes]),
-                             crank_T=np.stack([m[0][0] for m in stack]), crank_U=np.stack([m[0][1] for m in stack]),
-                             rod_T=np.stack([m[1][0] for m in stack]), rod_U=np.stack([m[1][1] for m in stack]),
+                             crank_T=np.stack([m[0][0] for m in stack]), crank_P=np.stack([m[0][1] for m in stack]),
+                             rod_T=np.stack([m[1][0] for m in stack]), rod_P=np.stack([m[1][1] for m in stack]),
                              **per_level)
         self.layout = Layout(crank_dofs=int(jm.crank_dofs), crank_MK=np.concatenate([jm.crank_M, jm.crank_K]),
                              rod_MK=np.concatenate([jm.rod_M, jm.rod_K]), crank_M=np.ascontiguousarray(jm.crank_M),
                              rod_M=np.ascontiguousarray(jm.rod_M),
-                             crank_boundary=jm.crank_boundary.astype(np.int64))
+                             crank_boundary=jm.crank_boundary.astype(np.int64),
+                             crank_interior=su.sizes[0].cond.crank[0].astype(np.int64))
         self.settings = Settings(mass_damping=float(jm.mass_damping), stiffness_damping=float(jm.stiffness_damping),
                                  alpha_m=float(it.alpha_m), alpha_f=float(it.alpha_f),
                                  settle_at=float(su.settle_at), steady_at=float(su.steady_at),
@@ -834,7 +839,7 @@ class CompiledStepper(ContactStepper):
         out = Out(f=np.empty((R, 6, 3, 3)), gl=np.empty((R, 6, 12)), gp=np.empty((R, 6)),
                   delta=np.empty((R, 6, 4)), rate=np.empty((R, 6, 4)))
         done, count = np.zeros(R, np.bool_), np.zeros(R, np.int64)
-        newton_step(Frame(G=ch.G[j], J=ch.J[j], Rr=ch.Rr[j], omega=ch.omega[j]), self._joints_of(idx), sy, ab, ap,
+        newton_step(Frame(Rc=ch.Rc[j], J=ch.J[j], Rr=ch.Rr[j], omega=ch.omega[j]), self._joints_of(idx), sy, ab, ap,
                     float(bh2), float(gh), float(wf), self.settings, out, done, count, self.scratch)
         return ab, ap, out.f, out.gl, out.gp, done, count, out.delta, out.rate
 

@@ -15,7 +15,8 @@ The Newton iteration (:func:`newton_one`):
 - joint maps G (per leg, 9x12) take the joint-node vector [crank node 0,
   crank tip, rod C end, rod B end] (link frames) to the relative
   displacements [e_A, e_C, e_B] (base frame); only the blocks (row j, column
-  block c) listed in ``_PATTERN`` are non-zero;
+  block c) listed in ``_PATTERN`` are non-zero, and they are the link frames
+  [Rc, -Rc, Rr, Rr] (:func:`_gmap`), so the kernel reads Rc and Rr, not G;
 - Lankarani-Nikravesh normal force (eq. 17) and modified Coulomb friction
   (eq. 18) with their Jacobians, as in :mod:`.contact_laws`;
 - a block-arrow Newton matrix: six leg blocks bordered by the 6 platform DOFs.
@@ -66,7 +67,8 @@ __all__ = ["newton_step", "advance_chunk", "ball", "predict_one", "correct_one",
 # round-off, and which copy a call binds to depended on which was loaded first, so a process
 # that compiled the kernel and one that loaded it from numba's cache differed at 1e-11.
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
-# non-zero 3x3 blocks of a leg's joint map G: relative displacement j <- joint-node block c
+# non-zero 3x3 blocks of a leg's joint map G: relative displacement j <- joint-node block c; block q
+# is Rc, -Rc, Rr, Rr (:func:`_gmap`)
 _PATTERN = np.array([[0, 0], [1, 1], [1, 2], [2, 3]], np.int64)
 # BLAS's dgemm (SciPy's, as np.dot in numba uses) called by its symbol name, so the kernel stays
 # cacheable; np.dot's three-argument form needs numba's reference counting, which the entry
@@ -77,27 +79,29 @@ _dgemm = types.ExternalFunction("rss6_dgemm", types.void(*[types.uintp] * 13))
 
 # --- named structures: every array and constant the kernel reads, by name ---
 
-Levels = namedtuple("Levels", "span h coef_p d_pred v_pred d_corr v_corr error legs crank_T crank_U rod_T rod_U")
+Levels = namedtuple("Levels", "span h coef_p d_pred v_pred d_corr v_corr error legs crank_T crank_P rod_T rod_P")
 Levels.__doc__ = """Step levels l = 0 (the base step) .. L - 1 (finest): fine-grid intervals per step, h (s),
 the platform mass weight of the step matrix, the predictor/corrector weights
 (:class:`.integrators.StepWeights`), |beta - 1/6| h^2 (s^2) (L,); the condensed leg matrices
 (L, 12, 12) and per link type the condensation r -> [r_i E_ii^-1, r_b - r_i P] (L, n, n_i + 6) and
-recovery [y, x_b] -> x (L, n_i + 6, n) maps (:meth:`.contact_dynamics._Condensed.maps`)."""
-Layout = namedtuple("Layout", "crank_dofs crank_MK rod_MK crank_M rod_M crank_boundary")
+P = E_ii^-1 E_ib (L, n_i, 6), which recovers the interior x_i = y - x_b P^T
+(:meth:`.contact_dynamics._Condensed.maps`)."""
+Layout = namedtuple("Layout", "crank_dofs crank_MK rod_MK crank_M rod_M crank_boundary crank_interior")
 Layout.__doc__ = """The links' layout: crank DOFs, [M; K] of crank and rod, M of crank and rod, the crank's
-joint-node indices (6,)."""
+joint-node indices (6,) and the others (n_i,) in order (a rod's joint nodes are its last six DOFs)."""
 Settings = namedtuple("Settings", "mass_damping stiffness_damping alpha_m alpha_f settle_at steady_at "
                       "impact_floor tolerance divergence_limit tol_d tol_v max_iterations refinements")
 Settings.__doc__ = """Rayleigh lambda_1 (1/s), lambda_2 (s); alpha_m, alpha_f; settle time (s); start of the
 steady window (s, peaks of steps ending from then on go to window 1, earlier ones to 0); impact speed
 floor (m/s); local error tolerance (m); divergence limit (m); Newton's tolerances on displacement (m)
 and velocity (m/s) and its iteration cap; step refinements allowed."""
-ChunkArrays = namedtuple("ChunkArrays", "F Mp G J Rr omega t")
+ChunkArrays = namedtuple("ChunkArrays", "F Mp Rc J Rr omega t")
 ChunkArrays.__doc__ = """A chunk's instants on the finest grid (T): loads F (T, N), platform mass matrices
-(T, 6, 6), joint maps G (T, 6, 9, 12), platform point maps J (T, 6, 3, 6), rod frames Rr (T, 6, 3, 3),
+(T, 6, 6), crank frames Rc (T, 6, 3, 3) (with Rr the joint maps' blocks, :func:`_gmap`), platform point
+maps J (T, 6, 3, 6), rod frames Rr (T, 6, 3, 3),
 ideal relative angular velocities omega (T, 6, 3, 3) rad/s, t (T,) s."""
-Frame = namedtuple("Frame", "G J Rr omega")
-Frame.__doc__ = """One instant of a chunk: G (6, 9, 12), J (6, 3, 6), Rr (6, 3, 3), omega (6, 3, 3)."""
+Frame = namedtuple("Frame", "Rc J Rr omega")
+Frame.__doc__ = """One instant of a chunk: Rc (6, 3, 3), J (6, 3, 6), Rr (6, 3, 3), omega (6, 3, 3)."""
 Law = namedtuple("Law", "exponent restitution mu v0 v1")
 Law.__doc__ = """Contact law: force exponent, restitution, mu_d, stick and slip velocities (m/s)."""
 Joints = namedtuple("Joints", "size axial stiffness w radius law")
@@ -251,7 +255,19 @@ def ball(e, de, size, k, impact, law, omega, radius, f, De, Dv):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def relative(G, J, xb, xp, e):
+def _gmap(Rc, Rr, leg, q, a, b):
+    """Entry (a, b) of leg ``leg``'s joint-map block q (``_PATTERN``): Rc, -Rc, Rr, Rr for q = 0..3
+    (:class:`.contact_dynamics._Chunk`'s G), read from the link frames: Rc is a twelfth of G's memory
+    and Rr is read anyway."""
+    if q == 0:
+        return Rc[leg, a, b]
+    if q == 1:
+        return -Rc[leg, a, b]
+    return Rr[leg, a, b]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def relative(Rc, Rr, J, xb, xp, e):
     """Relative displacements [e_A, e_C, e_B] (6, 3, 3) of the joint elements (base frame) into e,
     from the joint-node vector xb (6, 12) (link frames) and the platform's xp (6,)."""
     for leg in range(6):
@@ -263,7 +279,7 @@ def relative(G, J, xb, xp, e):
             for a in range(3):
                 s = 0.0
                 for b in range(3):
-                    s += G[leg, 3 * j + a, 3 * c + b] * xb[leg, 3 * c + b]
+                    s += _gmap(Rc, Rr, leg, q, a, b) * xb[leg, 3 * c + b]
                 e[leg, j, a] += s
         for a in range(3):
             s = 0.0
@@ -277,9 +293,9 @@ def _evaluate(fr, jt, r, impact, xb, xp, ub, up, s, out):
     """Contact forces, Jacobians (into s), penetrations and generalised forces (into out) of
     realisation r at joint-node displacements xb, xp and velocities ub, up."""
     e, de, De, Dv, f, delta, rate = s.e, s.de, s.De, s.Dv, out.f, out.delta, out.rate
-    G, J, w, omega, radius = fr.G, fr.J, jt.w, fr.omega, jt.radius
-    relative(G, J, xb, xp, e)
-    relative(G, J, ub, up, de)
+    Rc, Rr, J, w, omega, radius = fr.Rc, fr.Rr, fr.J, jt.w, fr.omega, jt.radius
+    relative(Rc, Rr, J, xb, xp, e)
+    relative(Rc, Rr, J, ub, up, de)
     exponent, restitution, mu, v0, v1 = jt.law.exponent, jt.law.restitution, jt.law.mu, jt.law.v0, jt.law.v1
     for leg in range(6):
         w0, w1, w2 = w[leg, 0], w[leg, 1], w[leg, 2]
@@ -318,11 +334,11 @@ def _evaluate(fr, jt, r, impact, xb, xp, ub, up, s, out):
                           omega[leg, j, 2], radius[j], s.pair)
             _store(s.pair, f, De, Dv, leg, j)
             delta[leg, 1 + j], rate[leg, 1 + j] = d, rt
-    _generalized(G, J, f, out.gl, out.gp)
+    _generalized(Rc, Rr, J, f, out.gl, out.gp)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _generalized(G, J, f, gl, gp):
+def _generalized(Rc, Rr, J, f, gl, gp):
     """Generalised contact forces: G^T f on the joint nodes (6, 12), -sum J^T f_B on the platform (6,)."""
     for leg in range(6):
         for c in range(12):
@@ -332,7 +348,7 @@ def _generalized(G, J, f, gl, gp):
             for b in range(3):
                 s = 0.0
                 for a in range(3):
-                    s += G[leg, 3 * j + a, 3 * c + b] * f[leg, j, a]
+                    s += _gmap(Rc, Rr, leg, q, a, b) * f[leg, j, a]
                 gl[leg, 3 * c + b] += s
     for b in range(6):
         s = 0.0
@@ -343,7 +359,7 @@ def _generalized(G, J, f, gl, gp):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _leg_chain(G, Sl, D, res_l, leg, s):
+def _leg_chain(Rc, Rr, Sl, D, res_l, leg, s):
     """Eliminate leg ``leg``'s block-tridiagonal chain L = Sl - G^T diag(D) G down to its B end:
     the pivots' inverses s.Ainv, the upper blocks s.Up and the reduced right-hand sides s.rhat."""
     A, Ainv, Up, rhat, M, top, DG = s.A, s.Ainv, s.Up, s.rhat, s.M, s.top, s.DG
@@ -352,18 +368,17 @@ def _leg_chain(G, Sl, D, res_l, leg, s):
         j, c = _PATTERN[q, 0], _PATTERN[q, 1]
         for u in range(3):
             for b in range(3):
-                DG[q, u, b] = (D[leg, j, u, 0] * G[leg, 3 * j, 3 * c + b]
-                               + D[leg, j, u, 1] * G[leg, 3 * j + 1, 3 * c + b]
-                               + D[leg, j, u, 2] * G[leg, 3 * j + 2, 3 * c + b])
+                DG[q, u, b] = (D[leg, j, u, 0] * _gmap(Rc, Rr, leg, q, 0, b)
+                               + D[leg, j, u, 1] * _gmap(Rc, Rr, leg, q, 1, b)
+                               + D[leg, j, u, 2] * _gmap(Rc, Rr, leg, q, 2, b))
     # diagonal blocks Sl_cc - G_c^T DG_c, off-diagonal: Sl (links) and - G_1^T D_C G_2 (joint C)
     for c in range(4):
-        j = _PATTERN[c, 0]
         for a in range(3):
-            g0, g1, g2 = G[leg, 3 * j, 3 * c + a], G[leg, 3 * j + 1, 3 * c + a], G[leg, 3 * j + 2, 3 * c + a]
+            g0, g1, g2 = _gmap(Rc, Rr, leg, c, 0, a), _gmap(Rc, Rr, leg, c, 1, a), _gmap(Rc, Rr, leg, c, 2, a)
             for b in range(3):
                 A[c, a, b] = Sl[3 * c + a, 3 * c + b] - (g0 * DG[c, 0, b] + g1 * DG[c, 1, b] + g2 * DG[c, 2, b])
     for a in range(3):
-        g0, g1, g2 = G[leg, 3, 3 + a], G[leg, 4, 3 + a], G[leg, 5, 3 + a]          # G_1 (tip)
+        g0, g1, g2 = -Rc[leg, 0, a], -Rc[leg, 1, a], -Rc[leg, 2, a]          # G_1 (tip)
         for b in range(3):
             Up[leg, 0, a, b] = Sl[a, 3 + b]
             Up[leg, 1, a, b] = -(g0 * DG[2, 0, b] + g1 * DG[2, 1, b] + g2 * DG[2, 2, b])
@@ -377,8 +392,8 @@ def _leg_chain(G, Sl, D, res_l, leg, s):
         for a in range(3):
             for b in range(3):
                 if k == 1:
-                    M[a, b] = -(G[leg, 3, 6 + a] * DG[1, 0, b] + G[leg, 4, 6 + a] * DG[1, 1, b]
-                                + G[leg, 5, 6 + a] * DG[1, 2, b])
+                    M[a, b] = -(Rr[leg, 0, a] * DG[1, 0, b] + Rr[leg, 1, a] * DG[1, 1, b]
+                                + Rr[leg, 2, a] * DG[1, 2, b])
                 else:
                     M[a, b] = Sl[3 * (k + 1) + a, 3 * k + b]
         for a in range(3):                      # W_k Ahat_k^-1
@@ -470,7 +485,7 @@ def _newton_update(fr, Sl, Sp, s):
             s.schur[a, b] = Sp[a, b]
         s.y[a] = s.res_p[a]
     for leg in range(6):
-        _leg_chain(fr.G, Sl, s.D, s.res_l, leg, s)
+        _leg_chain(fr.Rc, fr.Rr, Sl, s.D, s.res_l, leg, s)
         _leg_border(fr.J, fr.Rr, s.D, leg, s)
     _back_substitute(s)
 
@@ -483,12 +498,15 @@ displacements db, dpp and velocities vb, vpp (joint nodes (6, 12), platform (6,)
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _residual(sy, a_l, a_p, wf, out, s):
-    """Newton's residual Sl a_l - rb - wf gl, Sp a_p - rp - wf gp into s.res_l, s.res_p; its norm."""
+    """Newton's residual Sl a_l - rb - wf gl, Sp a_p - rp - wf gp into s.res_l, s.res_p; its norm.
+    Sl is block diagonal (crank, rod: :class:`.contact_dynamics._Condensed`): its zero blocks are
+    skipped (adding 0 x changes no bit)."""
     norm2 = 0.0
     for leg in range(6):
         for a in range(12):
             q = -sy.rb[leg, a] - wf * out.gl[leg, a]
-            for b in range(12):
+            first = 6 * (a // 6)
+            for b in range(first, first + 6):
                 q += sy.Sl[a, b] * a_l[leg, b]
             s.res_l[leg, a] = q
             norm2 += q * q
@@ -834,18 +852,31 @@ def _prepare(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, st, work):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _recover(level, lv, work):
-    """The link interiors from the joint nodes' new accelerations ([y, x_b] -> link vectors), then
-    the corrector: the candidate a_new, d_new, v_new in work."""
+def _recover(level, lv, layout, work):
+    """The link vectors from the joint nodes' new accelerations x_b: the interiors x_i = y - x_b P^T
+    (y from the condensation; :meth:`.contact_dynamics._Condensed.recover`; a loop over P, where a
+    product with the whole recovery map [y, x_b] -> x multiplied its identity blocks too), then the
+    corrector: the candidate a_new, d_new, v_new in work."""
     N = work.a_new.shape[0]
-    ni_c, ni_r = work.Yc.shape[1] - 6, work.Yr.shape[1] - 6
+    step = (N - 6) // 6
+    nc, cb, ci = layout.crank_dofs, layout.crank_boundary, layout.crank_interior
+    Pc, Pr = lv.crank_P[level], lv.rod_P[level]
+    ni_r = Pr.shape[0]
     for leg in range(6):
+        base = leg * step
+        for m in range(ci.shape[0]):
+            x = work.Yc[leg, m]
+            for q in range(6):
+                x -= Pc[m, q] * work.ab[leg, q]
+            work.a_new[base + ci[m]] = x
+        for m in range(ni_r):
+            x = work.Yr[leg, m]
+            for q in range(6):
+                x -= Pr[m, q] * work.ab[leg, 6 + q]
+            work.a_new[base + nc + m] = x
         for q in range(6):
-            work.Yc[leg, ni_c + q] = work.ab[leg, q]
-            work.Yr[leg, ni_r + q] = work.ab[leg, 6 + q]
-    _product(work.Yc, lv.crank_U[level], work.Ac, work)
-    _product(work.Yr, lv.rod_U[level], work.Ar, work)
-    _scatter(work.Ac, work.Ar, work.a_new)
+            work.a_new[base + cb[q]] = work.ab[leg, q]
+            work.a_new[base + nc + ni_r + q] = work.ab[leg, 6 + q]
     for b in range(6):
         work.a_new[N - 6 + b] = work.ap[b]
     d_corr, v_corr = lv.d_corr[level], lv.v_corr[level]
@@ -861,13 +892,13 @@ def _attempt(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, jt, st, work, s
     iterations)."""
     _prepare(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, st, work)
     N = st.d.shape[1]
-    fr = Frame(ch.G[k1], ch.J[k1], ch.Rr[k1], ch.omega[k1])
+    fr = Frame(ch.Rc[k1], ch.J[k1], ch.Rr[k1], ch.omega[k1])
     sy = System(lv.legs[level], work.Sp, work.impact, work.rb, work.rhs[N - 6:], work.db, work.dpp,
                 work.vb, work.vpp)
     out = Out(work.f, work.gl, work.gp, work.delta, work.rate)
     ok, count = newton_one(fr, jt, r, sy, work.ab, work.ap, lv.d_corr[level], lv.v_corr[level],
                            1.0 - cfg.alpha_f, cfg, out, scratch)
-    _recover(level, lv, work)
+    _recover(level, lv, layout, work)
     return ok, count
 
 
@@ -881,7 +912,7 @@ def _jump(r, k1, a, layout, ch, work):
             jb[leg, q] = work.ab[leg, q] - jb[leg, q]
     for b in range(6):
         jp[b] = work.ap[b] - jp[b]
-    relative(ch.G[k1], ch.J[k1], jb, jp, e)
+    relative(ch.Rc[k1], ch.Rr[k1], ch.J[k1], jb, jp, e)
     big = 0.0
     for leg in range(6):
         for j in range(3):

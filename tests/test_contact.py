@@ -256,6 +256,67 @@ def test_kernel_blas_product_equals_numpy_bit_for_bit(shape):
     assert np.array_equal(out, X @ A)
 
 
+def test_compiled_joint_maps_from_link_frames_equal_the_chunks_G(paper):
+    """The kernel reads the joint maps' blocks from the link frames Rc, Rr (contact_kernel._gmap:
+    Rc, -Rc, Rr, Rr) instead of the chunk's G (9x12 per leg, the numpy engine's): relative
+    displacements and generalised forces agree with the products with G to round-off."""
+    from numba import njit
+
+    from rss6core.contact_dynamics import _Chunk, _generalized, _relative, build_joint_model
+    from rss6core.contact_kernel import _generalized as generalized_c
+    from rss6core.contact_kernel import relative
+
+    @njit(_nrt=False)
+    def both(Rc, Rr, J, xb, xp, f, e, gl, gp):
+        relative(Rc, Rr, J, xb, xp, e)
+        generalized_c(Rc, Rr, J, f, gl, gp)
+    ch = _Chunk(paper, build_joint_model(paper, 4), np.linspace(0.1, 0.3, 3))
+    rng = np.random.default_rng(11)
+    xb, xp, f = rng.normal(size=(6, 12)), rng.normal(size=6), rng.normal(size=(6, 3, 3))
+    e, gl, gp = np.empty((6, 3, 3)), np.empty((6, 12)), np.empty(6)
+    for k in range(3):
+        both(ch.Rc[k], ch.Rr[k], ch.J[k], xb, xp, f, e, gl, gp)
+        want_gl, want_gp = _generalized(ch, k, f)
+        for got, want in ((e, _relative(ch, k, xb, xp)), (gl, want_gl), (gp, want_gp)):
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-14 * np.abs(want).max())
+
+
+def test_compiled_recovery_equals_the_condensed_links_recover(paper):
+    """The kernel's recovery of the link interiors, x_i = y - x_b P^T from P alone (contact_kernel
+    _recover), gives what _Condensed.recover (the numpy engine's) gives, and the corrector on it."""
+    from numba import njit
+
+    from rss6core.assembly import join
+    from rss6core.contact_dynamics import _Condensed, build_joint_model
+    from rss6core.contact_kernel import Layout, Levels, _recover, make_work
+
+    @njit(_nrt=False)
+    def recover(lv, layout, work):
+        _recover(0, lv, layout, work)
+    jm = build_joint_model(paper, 4)
+    cond = _Condensed(jm, 2.0e6, 3.0)
+    (Tc, Pc), (Tr, Pr) = cond.maps()
+    one, nc, nr = np.ones(1), jm.crank_dofs, jm.rod_dofs
+    lv = Levels(span=np.ones(1, np.int64), h=one, coef_p=one, d_pred=one, v_pred=one, d_corr=0.25 * one,
+                v_corr=0.5 * one, error=one, legs=cond.legs[None], crank_T=Tc[None], crank_P=Pc[None],
+                rod_T=Tr[None], rod_P=Pr[None])
+    layout = Layout(crank_dofs=nc, crank_MK=np.zeros((2 * nc, nc)), rod_MK=np.zeros((2 * nr, nr)),
+                    crank_M=jm.crank_M, rod_M=jm.rod_M, crank_boundary=jm.crank_boundary.astype(np.int64),
+                    crank_interior=cond.crank[0].astype(np.int64))
+    N = 6 * (nc + nr) + 6
+    work = make_work(N, nc, nr, Tc.shape[1] - 6, Tr.shape[1] - 6)
+    rng = np.random.default_rng(12)
+    _, keep = cond.condense(rng.normal(size=(6, nc)), rng.normal(size=(6, nr)))
+    work.Yc[:, :-6], work.Yr[:, :-6] = keep
+    work.ab[:], work.ap[:], work.dp[:], work.vp[:] = (rng.normal(size=x.shape) for x in (work.ab, work.ap,
+                                                                                       work.dp, work.vp))
+    recover(lv, layout, work)
+    want = join(*cond.recover(work.ab, keep, (6, nc), (6, nr)), work.ap)
+    np.testing.assert_allclose(work.a_new, want, rtol=0, atol=1e-13 * np.abs(want).max())
+    np.testing.assert_allclose(work.d_new, work.dp + 0.25 * work.a_new, rtol=1e-15, atol=0)
+    np.testing.assert_allclose(work.v_new, work.vp + 0.5 * work.a_new, rtol=1e-15, atol=0)
+
+
 def test_compiled_steps_run_without_reference_counting():
     """The entry points that run the steps allocate nothing and skip numba's atomic reference counts
     (a fifth of the steps' time, docs/performance.md section 15); an allocation there fails to compile."""
