@@ -185,6 +185,18 @@ def test_scheduler_address_runs_on_an_existing_cluster(reference, tmp_path):
     assert np.array_equal(error_summaries(ds), error_summaries(ref))
 
 
+def _in_the_workers(client, function) -> list:
+    """``function()`` run in every worker, sent by value: the workers cannot import this test module
+    (the tests run from a temporary folder against the installed package)."""
+    import cloudpickle
+    module = sys.modules[__name__]
+    cloudpickle.register_pickle_by_value(module)
+    try:
+        return list(client.run(function).values())
+    finally:
+        cloudpickle.unregister_pickle_by_value(module)
+
+
 def _imports_of_a_first_chunk() -> list:
     """The modules a worker imports in its first paper-level task (run in the worker)."""
     before = set(sys.modules)
@@ -210,7 +222,7 @@ def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(referen
     with local_cluster(1) as cluster, Client(cluster) as client:
         env = list(client.run(lambda: {k: os.environ.get(k) for k in keys}).values())
         quiet = list(client.run(lambda: {k: dask.config.get(k) for k in QUIET_CLUSTER}).values())
-        imported = list(client.run(_imports_of_a_first_chunk).values())
+        imported = _in_the_workers(client, _imports_of_a_first_chunk)
         write_netcdf(ref, tmp_path / "with-client.nc")
     assert env == [{"MALLOC_TRIM_THRESHOLD_": None, "OPENBLAS_NUM_THREADS": "1"}]
     assert quiet == [QUIET_CLUSTER]   # no profiler, slower monitors: in the worker processes
