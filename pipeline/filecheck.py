@@ -9,7 +9,7 @@ import numpy as np
 
 from rss6core import FINISHED, STATUSES
 
-from .store import (DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, WINDOWS, EnsembleFileError,
+from .store import (DIRECTIONS, MIXED_UNITS, QUANTITIES, WINDOWS, EnsembleFileError, _unit_table,
                     load_netcdf)
 
 __all__ = ["check_ensemble", "check_run", "open_results"]
@@ -39,8 +39,7 @@ def _units(ds, path) -> None:
                                 "expected quantity, direction")
     # the labels are checked (in QUANTITIES and DIRECTIONS order): compare the table at once
     got = ds["unit"].transpose("quantity", "direction").values.astype(str)
-    want = np.array([[UNITS[q][0 if d in ("x", "y", "z") else 1] for d in DIRECTIONS]
-                     for q in QUANTITIES])
+    want = _unit_table()   # the table rss6 writes
     for i, j in np.argwhere(got != want)[:1]:
         raise EnsembleFileError(f"{path}: unit of {QUANTITIES[i]} {DIRECTIONS[j]} is {str(got[i, j])!r}; "
                                 f"expected {str(want[i, j])!r}")
