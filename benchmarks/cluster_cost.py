@@ -22,14 +22,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from paper_run import process_cpu as _cpu   # this folder is the script's first import path
+
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "paper.toml"
-TICK = os.sysconf("SC_CLK_TCK")
 IDLE_S = 10.0
-
-
-def _cpu(pid) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / TICK
 
 
 def _measure(quiet: bool, tmp: str) -> dict:

@@ -34,14 +34,29 @@ CONFIG = Path(__file__).resolve().parent.parent / "configs" / "paper.toml"
 TICK = os.sysconf("SC_CLK_TCK")
 
 
+def _stat_fields(stat: Path) -> list[str]:
+    """The fields of a /proc/PID/stat file after the command name (state, ppid, ...)."""
+    return stat.read_text().rsplit(")", 1)[1].split()
+
+
+def _cpu_s(fields: list[str]) -> float:
+    """User + system CPU seconds from a process's stat fields."""
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
+def process_cpu(pid: int) -> float:
+    """User + system CPU seconds of process ``pid`` so far (Linux /proc; also used by
+    benchmarks/cluster_cost.py)."""
+    return _cpu_s(_stat_fields(Path(f"/proc/{pid}/stat")))
+
+
 def _cpu_by_parent() -> dict:
     """{parent pid: [(pid, CPU s)]} of every process (Linux /proc)."""
     out = {}
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-            out.setdefault(int(fields[1]), []).append(
-                (int(stat.parent.name), (int(fields[11]) + int(fields[12])) / TICK))
+            fields = _stat_fields(stat)
+            out.setdefault(int(fields[1]), []).append((int(stat.parent.name), _cpu_s(fields)))
         except (OSError, IndexError, ValueError):
             continue
     return out
@@ -71,8 +86,7 @@ def whole_run(rss6: str, n: int) -> dict:
         own = 0.0
         while proc.poll() is None:   # the main process's own CPU, read until it exits
             try:
-                fields = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
-                own = (int(fields[11]) + int(fields[12])) / TICK
+                own = process_cpu(proc.pid)
             except OSError:
                 pass
             time.sleep(0.02)
