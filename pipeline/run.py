@@ -376,9 +376,9 @@ def _gathered(client, pending: set):
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
 # the contact level computes its fine-grid loads and joint maps once per batch (1.9 s CPU, as much
 # as 8 realisations' steps): twice the batch halves that share (docs/performance.md, section 14);
-# a paper-level chunk of 128 is about 1 s of work, and the main process's cost per chunk (write the
-# part, read it back: about 50 ms CPU, taken from the workers' cores) is then half as often paid
-# (section 18)
+# a paper-level chunk of 128 is about 1 s of work, and the main process's work per chunk (writing
+# its part, 15-20 ms CPU, and dask's messages), taken from the workers' cores, is then half as
+# often paid (section 18)
 MAX_AUTO_CHUNK_BY_MODEL = {"contact": 128, "paper": 128}
 
 
