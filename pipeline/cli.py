@@ -175,9 +175,7 @@ def _run(args) -> int:
         print(f"rss6: error: {exc}{kept}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"rss6: interrupted; finished chunks are kept in {output}.parts; rerun the same "
-              "command to continue", file=sys.stderr)
-        return 130
+        return _interrupted(f"finished chunks are kept in {output}.parts")
     from .stats import ensemble_stats, format_stats
     from .gate import exit_code, format_verdicts
     ds = outcome.dataset
@@ -288,6 +286,16 @@ def _outcome_line(outcome, output, n: int, model: str) -> str:
     return f"wrote {output}: {total} realisations of the {model} level ({failed} failed{kept})"
 
 
+def _interrupted(kept: str | None) -> int:
+    """Exit code 130 after Ctrl-C, with one line in one wording for every command: what is kept
+    (``kept``, e.g. "finished chunks are kept in X.parts") and that the same command continues,
+    or, for a command that does not resume (``kept`` None), that nothing was written."""
+    what = (f"{kept}; rerun the same command to continue" if kept
+            else "nothing written (this command does not resume)")
+    print(f"rss6: interrupted; {what}", file=sys.stderr)
+    return 130
+
+
 def _warn_oversubscription(workers: int, scheduler: str | None) -> None:
     import os
     cores = os.cpu_count() or 1
@@ -334,9 +342,7 @@ def _report(args) -> int:
               "to continue", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("rss6: interrupted; finished ensembles and chunks are kept; rerun the same command "
-              "to continue", file=sys.stderr)
-        return 130
+        return _interrupted(f"finished ensembles and chunks are kept in {args.data or out / 'results-data'}")
     print(f"wrote {path}")
     return 0
 
@@ -483,9 +489,7 @@ def _multifidelity(args) -> int:
             print(f"rss6: error: {exc}; finished chunks are kept; rerun to resume", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
-            print(f"rss6: interrupted; finished chunks are kept in {path}.parts; rerun the same "
-                  "command to continue", file=sys.stderr)
-            return 130
+            return _interrupted(f"finished chunks are kept in {path}.parts")
         data.append(out.dataset.sel(realization=out.dataset["realization"].values < n))
     try:
         mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio, args.width)
@@ -598,8 +602,7 @@ def _sensitivity(args) -> int:
         except SensitivityError as exc:
             raise SceneError(str(exc)) from None
         except KeyboardInterrupt:
-            print("rss6: interrupted; nothing written (rss6 sensitivity does not resume)", file=sys.stderr)
-            return 130
+            return _interrupted(None)
         write_netcdf(ds, output)
     plots = Path(args.plots or output.with_name(output.stem + "_plots"))
     paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
@@ -632,9 +635,7 @@ def _budget(args) -> int:
     except BudgetError as exc:
         raise SceneError(str(exc)) from None
     except KeyboardInterrupt:
-        print(f"rss6: interrupted; finished ensembles and chunks are kept in {folder}; rerun the same "
-              "command to continue", file=sys.stderr)
-        return 130
+        return _interrupted(f"finished ensembles and chunks are kept in {folder}")
     print(format_budget(b, scene.name, model))
     return 0
 
