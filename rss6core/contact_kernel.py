@@ -122,7 +122,8 @@ Out.__doc__ = """Newton's results at the accepted iterate: contact forces (6, 3,
 the joint nodes (6, 12) and the platform (6,), penetrations and rates (6, 4)."""
 Work = namedtuple("Work", "Zc Zr Ic Ir Ac Ar Yc Yr dp vp rhs tmp a_new d_new v_new rb db vb ab dpp vpp ap "
                   "impact Sp f gl gp delta rate e jb jp dims scale op")
-Scratch = namedtuple("Scratch", "e de De Dv pair xb ub xp up res_l res_p dl dp base_l base_p schur ypiv lanes")
+Scratch = namedtuple("Scratch", "e de De Dv D pair xb ub xp up res_l res_p dl dp base_l base_p A Ainv Up "
+                     "rhat M top top0 tb z schur ypiv y border lower DG DJ DR")
 
 
 def make_work(N, nc, nr, ni_c, ni_r) -> Work:
@@ -137,15 +138,13 @@ def make_work(N, nc, nr, ni_c, ni_r) -> Work:
 
 
 def make_scratch() -> Scratch:
-    """Work arrays of one realisation's Newton iteration (see :func:`newton_one`); the lane buffer's
-    padding lanes hold identity frames and zero Jacobians, so they compute finite numbers nobody reads."""
+    """Work arrays of one realisation's Newton iteration (see :func:`newton_one`)."""
     e = np.empty
-    lanes = np.zeros(_SLOTS * _LANES)
-    for slot in (_RC, _RC + 4, _RC + 8, _RR, _RR + 4, _RR + 8):
-        lanes[slot * _LANES + 6:(slot + 1) * _LANES] = 1.0
-    return Scratch(e((6, 3, 3)), e((6, 3, 3)), e((6, 3, 3, 3)), e((6, 3, 3, 3)), e(21), e((6, 12)), e((6, 12)),
-                   e(6), e(6), e((6, 12)), e(6), e((6, 12)), e(6), e((6, 12)), e(6), e((6, 6)), e(6, np.int64),
-                   lanes)
+    return Scratch(e((6, 3, 3)), e((6, 3, 3)), e((6, 3, 3, 3)), e((6, 3, 3, 3)), e((6, 3, 3, 3)), e(21),
+                   e((6, 12)), e((6, 12)), e(6), e(6), e((6, 12)), e(6), e((6, 12)), e(6), e((6, 12)), e(6),
+                   e((4, 3, 3)), e((6, 4, 3, 3)), e((6, 3, 3, 3)), e((6, 4, 3)), e((3, 3)), e((3, 3)),
+                   e((6, 3)), e((6, 3, 6)), e(3), e((6, 6)), e(6, np.int64), e(6), e((3, 6)), e((6, 3)),
+                   e((_PATTERN.shape[0], 3, 3)), e((3, 6)), e((3, 3)))
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -359,202 +358,120 @@ def _generalized(Rc, Rr, J, f, gl, gp):
         gp[b] = -s
 
 
-# --- the Newton update, six legs side by side (:func:`_newton_update`) ---
-# Every leg does the same 3x3 block arithmetic, so the update runs it for all legs at once: each
-# quantity is a "slot" of _LANES numbers (one per leg; lanes 6, 7 are padding) in one flat buffer
-# (Scratch.lanes), and each helper loops over the lanes, outermost, around its small fixed loops.
-# One buffer with constant offsets and unsigned indices lets LLVM prove the slots apart, so it
-# vectorises the lane loop without run-time alias checks (numba leaves the SLP vectoriser off, and
-# LLVM refuses checks for loops this short).  Slots (3x3 blocks row-major): D_j (3 blocks: A, C, B),
-# Rc, Rr, J (3x6), Sl's blocks (S_00, S_11, S_22, S_33, U_0 = S_01, W_0 = S_10, U_2 = S_23,
-# W_2 = S_32), the chain's pivots A_c and their inverses (4 blocks each), reduced right-hand sides
-# rhat (4x3), D_j G_c (4 blocks), U_1 = Rc^T D_C Rr, W_1 = Rr^T D_C Rc, W_k Ahat_k^-1, Rr^T D_B,
-# X = Ahat_3^-1 Rr^T D_B, E = D_B + D_B Rr X, E J (3x6), J^T E J (6x6), top0 = Ahat_3^-1 rhat_3,
-# D_B Rr top0, J^T of that (6), J dp, a work vector, and the leg's update (4x3).
-_LANES = 8
-(_D, _RC, _RR, _J, _SL, _A, _AINV, _RHAT, _DG, _U1, _W1, _T, _RD, _X, _E, _EJ, _C, _TOP0, _V, _YL, _JDP, _Z,
- _DL, _SLOTS) = np.cumsum([0, 27, 9, 9, 18, 72, 36, 36, 12, 36, 9, 9, 9, 9, 9, 9, 18, 36, 3, 3, 6, 3, 3,
-                           12]).tolist()
-# Sl's 3x3 blocks in the _SL slots: (row block, column block), in slot order
-_SL_BLOCKS = ((0, 0), (1, 1), (2, 2), (3, 3), (0, 1), (1, 0), (2, 3), (3, 2))
-
-
-@njit(cache=True, inline="always")
-def _ix(slot, lane):
-    """Index of a slot's lane in the lane buffer; unsigned, so numba adds no negative-index wrap that
-    would hide the lanes' consecutive addresses from LLVM."""
-    return np.uint64(slot * _LANES + lane)
-
-
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _lmm(W, x, xr, xc, y, yr, yc, out, n, m, sign, acc):
-    """Per lane, out (n x m, row-major) = [out +] sign X Y with inner dimension 3, X(a, u) in slot
-    x + a xr + u xc and Y(u, b) in slot y + u yr + b yc (strides give transposes).  The lane loop is
-    the outer one: LLVM unrolls the small inner ones and vectorises it (with the lanes innermost, it
-    unrolled the lane loop into scalar code first)."""
-    for lane in range(_LANES):
-        for a in range(n):
-            for b in range(m):
-                o, x0, y0 = out + a * m + b, x + a * xr, y + b * yc
-                p = (W[_ix(x0, lane)] * W[_ix(y0, lane)] + W[_ix(x0 + xc, lane)] * W[_ix(y0 + yr, lane)]
-                     + W[_ix(x0 + 2 * xc, lane)] * W[_ix(y0 + 2 * yr, lane)])
-                W[_ix(o, lane)] = (W[_ix(o, lane)] if acc else 0.0) + sign * p
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _lcopy(W, src, dst, n):
-    """Slots src .. src + n - 1 into dst .. dst + n - 1."""
-    for lane in range(_LANES):
-        for i in range(n):
-            W[_ix(dst + i, lane)] = W[_ix(src + i, lane)]
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _linv3(W, src, dst):
-    """Per lane, the 3x3 block in slot dst = inverse of the one in src, by the adjugate (the pivots are
-    the links' SPD condensed blocks plus the contact stiffness)."""
-    for lane in range(_LANES):
-        a00, a01, a02 = W[_ix(src, lane)], W[_ix(src + 1, lane)], W[_ix(src + 2, lane)]
-        a10, a11, a12 = W[_ix(src + 3, lane)], W[_ix(src + 4, lane)], W[_ix(src + 5, lane)]
-        a20, a21, a22 = W[_ix(src + 6, lane)], W[_ix(src + 7, lane)], W[_ix(src + 8, lane)]
-        c00 = a11 * a22 - a12 * a21
-        c01 = a12 * a20 - a10 * a22
-        c02 = a10 * a21 - a11 * a20
-        inv = np.reciprocal(a00 * c00 + a01 * c01 + a02 * c02)
-        W[_ix(dst, lane)], W[_ix(dst + 3, lane)], W[_ix(dst + 6, lane)] = c00 * inv, c01 * inv, c02 * inv
-        W[_ix(dst + 1, lane)] = (a02 * a21 - a01 * a22) * inv
-        W[_ix(dst + 4, lane)] = (a00 * a22 - a02 * a20) * inv
-        W[_ix(dst + 7, lane)] = (a01 * a20 - a00 * a21) * inv
-        W[_ix(dst + 2, lane)] = (a01 * a12 - a02 * a11) * inv
-        W[_ix(dst + 5, lane)] = (a02 * a10 - a00 * a12) * inv
-        W[_ix(dst + 8, lane)] = (a00 * a11 - a01 * a10) * inv
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _load_legs(fr, Sl, res_l, W):
-    """The instant's link frames Rc, Rr, platform maps J and the legs' residuals (into rhat) into
-    their slots, leg ``leg`` in lane ``leg``; Sl's blocks (the same for every leg) into every lane."""
-    for leg in range(6):
+def _leg_chain(Rc, Rr, Sl, D, res_l, leg, s):
+    """Eliminate leg ``leg``'s block-tridiagonal chain L = Sl - G^T diag(D) G down to its B end:
+    the pivots' inverses s.Ainv, the upper blocks s.Up and the reduced right-hand sides s.rhat."""
+    A, Ainv, Up, rhat, M, top, DG = s.A, s.Ainv, s.Up, s.rhat, s.M, s.top, s.DG
+    # DG_q = D_j G_jc for the pattern's blocks; joint-node block c has pattern entry q = c
+    for q in range(_PATTERN.shape[0]):
+        j, c = _PATTERN[q, 0], _PATTERN[q, 1]
+        for u in range(3):
+            for b in range(3):
+                DG[q, u, b] = (D[leg, j, u, 0] * _gmap(Rc, Rr, leg, q, 0, b)
+                               + D[leg, j, u, 1] * _gmap(Rc, Rr, leg, q, 1, b)
+                               + D[leg, j, u, 2] * _gmap(Rc, Rr, leg, q, 2, b))
+    # diagonal blocks Sl_cc - G_c^T DG_c, off-diagonal: Sl (links) and - G_1^T D_C G_2 (joint C)
+    for c in range(4):
+        for a in range(3):
+            g0, g1, g2 = _gmap(Rc, Rr, leg, c, 0, a), _gmap(Rc, Rr, leg, c, 1, a), _gmap(Rc, Rr, leg, c, 2, a)
+            for b in range(3):
+                A[c, a, b] = Sl[3 * c + a, 3 * c + b] - (g0 * DG[c, 0, b] + g1 * DG[c, 1, b] + g2 * DG[c, 2, b])
+    for a in range(3):
+        g0, g1, g2 = -Rc[leg, 0, a], -Rc[leg, 1, a], -Rc[leg, 2, a]          # G_1 (tip)
+        for b in range(3):
+            Up[leg, 0, a, b] = Sl[a, 3 + b]
+            Up[leg, 1, a, b] = -(g0 * DG[2, 0, b] + g1 * DG[2, 1, b] + g2 * DG[2, 2, b])
+            Up[leg, 2, a, b] = Sl[6 + a, 9 + b]
+    # forward elimination down the chain: Ahat_{k+1} = A_{k+1} - W_k Ahat_k^-1 U_k
+    for a in range(3):
+        rhat[leg, 0, a] = res_l[leg, a]
+    _inv3(A, 0, Ainv, leg, 0)
+    for k in range(3):
+        # W_k, the block below the diagonal: Sl (k = 0, 2) or - G_2^T D_C G_1 (k = 1)
         for a in range(3):
             for b in range(3):
-                W[_ix(_RC + 3 * a + b, leg)] = fr.Rc[leg, a, b]
-                W[_ix(_RR + 3 * a + b, leg)] = fr.Rr[leg, a, b]
-            for b in range(6):
-                W[_ix(_J + 6 * a + b, leg)] = fr.J[leg, a, b]
-        for c in range(12):
-            W[_ix(_RHAT + c, leg)] = res_l[leg, c]
-    for q in range(len(_SL_BLOCKS)):
-        r0, c0 = 3 * _SL_BLOCKS[q][0], 3 * _SL_BLOCKS[q][1]
-        for a in range(3):
+                if k == 1:
+                    M[a, b] = -(Rr[leg, 0, a] * DG[1, 0, b] + Rr[leg, 1, a] * DG[1, 1, b]
+                                + Rr[leg, 2, a] * DG[1, 2, b])
+                else:
+                    M[a, b] = Sl[3 * (k + 1) + a, 3 * k + b]
+        for a in range(3):                      # W_k Ahat_k^-1
             for b in range(3):
-                v = Sl[r0 + a, c0 + b]
-                for lane in range(_LANES):
-                    W[_ix(_SL + 9 * q + 3 * a + b, lane)] = v
+                top[a, b] = M[a, 0] * Ainv[leg, k, 0, b] + M[a, 1] * Ainv[leg, k, 1, b] \
+                    + M[a, 2] * Ainv[leg, k, 2, b]
+        for a in range(3):
+            q = res_l[leg, 3 * (k + 1) + a]
+            for b in range(3):
+                q -= top[a, b] * rhat[leg, k, b]
+                A[k + 1, a, b] -= (top[a, 0] * Up[leg, k, 0, b] + top[a, 1] * Up[leg, k, 1, b]
+                                   + top[a, 2] * Up[leg, k, 2, b])
+            rhat[leg, k + 1, a] = q
+        _inv3(A, k + 1, Ainv, leg, k + 1)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _pivot(W, c, j, g):
-    """Every leg's pivot A_c = Sl_cc - G_c^T D_j G_c, G_c = +-(the frame in slot g), via D_j G_c
-    (sign dropped) in slot _DG + 9 c."""
-    _lmm(W, _D + 9 * j, 3, 1, g, 3, 1, _DG + 9 * c, 3, 3, 1.0, False)
-    _lcopy(W, _SL + 9 * c, _A + 9 * c, 9)
-    _lmm(W, g, 1, 3, _DG + 9 * c, 3, 1, _A + 9 * c, 3, 3, -1.0, True)
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _chain_blocks(W):
-    """The chain L = Sl - G^T diag(D) G of every leg: pivots (G blocks Rc, -Rc, Rr, Rr for
-    c = 0..3, joints A, C, C, B) and the joint C coupling U_1 = Rc^T D_C Rr (above the diagonal),
-    W_1 = Rr^T D_C Rc (below); the links' couplings are Sl's blocks."""
-    _pivot(W, 0, 0, _RC)
-    _pivot(W, 1, 1, _RC)
-    _pivot(W, 2, 1, _RR)
-    _pivot(W, 3, 2, _RR)
-    _lmm(W, _RC, 1, 3, _DG + 18, 3, 1, _U1, 3, 3, 1.0, False)                 # Rc^T (D_C Rr)
-    _lmm(W, _RR, 1, 3, _DG + 9, 3, 1, _W1, 3, 3, 1.0, False)                  # Rr^T (D_C Rc)
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _chain_step(W, k):
-    """Eliminate pivot k of every leg's chain: T = W_k Ahat_k^-1, rhat_{k+1} -= T rhat_k,
-    A_{k+1} -= T U_k, then Ahat_{k+1}^-1 (W_k, U_k: Sl's blocks, or W_1, U_1 for joint C)."""
-    lower, upper = (_SL + 45, _W1, _SL + 63)[k], (_SL + 36, _U1, _SL + 54)[k]
-    _lmm(W, lower, 3, 1, _AINV + 9 * k, 3, 1, _T, 3, 3, 1.0, False)
-    _lmm(W, _T, 3, 1, _RHAT + 3 * k, 1, 0, _RHAT + 3 * k + 3, 3, 1, -1.0, True)
-    _lmm(W, _T, 3, 1, upper, 3, 1, _A + 9 * k + 9, 3, 3, -1.0, True)
-    _linv3(W, _A + 9 * k + 9, _AINV + 9 * k + 9)
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _border(W):
-    """Every leg's share of the platform's Schur complement and right-hand side: with the border
-    B = Rr^T D_B J and C = J^T D_B Rr, J^T D_B J + C Ahat_3^-1 B = J^T E J,
-    E = D_B + (D_B Rr) X, X = Ahat_3^-1 Rr^T D_B, and C Ahat_3^-1 rhat_3 = J^T (D_B Rr) top0,
-    top0 = Ahat_3^-1 rhat_3."""
-    _lmm(W, _RR, 1, 3, _D + 18, 3, 1, _RD, 3, 3, 1.0, False)                  # Rr^T D_B
-    _lmm(W, _AINV + 27, 3, 1, _RD, 3, 1, _X, 3, 3, 1.0, False)
-    _lcopy(W, _D + 18, _E, 9)
-    _lmm(W, _DG + 27, 3, 1, _X, 3, 1, _E, 3, 3, 1.0, True)                     # D_B + (D_B Rr) X
-    _lmm(W, _E, 3, 1, _J, 6, 1, _EJ, 3, 6, 1.0, False)
-    _lmm(W, _J, 1, 6, _EJ, 6, 1, _C, 3, 6, 1.0, False)                         # J^T E J, rows 0-2
-    _lmm(W, _J + 3, 1, 6, _EJ, 6, 1, _C + 18, 3, 6, 1.0, False)                # rows 3-5
-    _lmm(W, _AINV + 27, 3, 1, _RHAT + 9, 1, 0, _TOP0, 3, 1, 1.0, False)
-    _lmm(W, _DG + 27, 3, 1, _TOP0, 1, 0, _V, 3, 1, 1.0, False)
-    _lmm(W, _J, 1, 6, _V, 1, 0, _YL, 6, 1, 1.0, False)
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _platform_solve(Sp, s):
-    """The platform update s.dp: Schur complement Sp - sum_legs J^T E J, right-hand side
-    res_p - sum_legs J^T (D_B Rr) top0, solved with pivoting."""
-    W = s.lanes
+def _leg_border(J, Rr, D, leg, s):
+    """Leg ``leg``'s border B = Rr^T D_B J (3x6), its partner C = J^T D_B Rr (6x3), P -= J^T D_B J, and
+    its share of the platform's Schur complement P - C Ahat_3^-1 B and right-hand side in s."""
+    DJ, DR, border, lower, schur, y, top0, tb, Ainv, rhat = (s.DJ, s.DR, s.border, s.lower, s.schur, s.y,
+                                                             s.top0, s.tb, s.Ainv, s.rhat)
+    for u in range(3):
+        for b in range(6):
+            DJ[u, b] = D[leg, 2, u, 0] * J[leg, 0, b] + D[leg, 2, u, 1] * J[leg, 1, b] \
+                + D[leg, 2, u, 2] * J[leg, 2, b]
+        for b in range(3):
+            DR[u, b] = D[leg, 2, u, 0] * Rr[leg, 0, b] + D[leg, 2, u, 1] * Rr[leg, 1, b] \
+                + D[leg, 2, u, 2] * Rr[leg, 2, b]
+    for a in range(3):
+        for b in range(6):
+            border[a, b] = Rr[leg, 0, a] * DJ[0, b] + Rr[leg, 1, a] * DJ[1, b] + Rr[leg, 2, a] * DJ[2, b]
+    for a in range(6):
+        for b in range(3):
+            lower[a, b] = J[leg, 0, a] * DR[0, b] + J[leg, 1, a] * DR[1, b] + J[leg, 2, a] * DR[2, b]
+        for b in range(6):
+            schur[a, b] -= J[leg, 0, a] * DJ[0, b] + J[leg, 1, a] * DJ[1, b] + J[leg, 2, a] * DJ[2, b]
+    # the B end: x_3 = Ahat_3^-1 (rhat_3 - border dp) = top0 - tb dp
+    for a in range(3):
+        top0[leg, a] = (Ainv[leg, 3, a, 0] * rhat[leg, 3, 0] + Ainv[leg, 3, a, 1] * rhat[leg, 3, 1]
+                        + Ainv[leg, 3, a, 2] * rhat[leg, 3, 2])
+        for b in range(6):
+            tb[leg, a, b] = (Ainv[leg, 3, a, 0] * border[0, b] + Ainv[leg, 3, a, 1] * border[1, b]
+                             + Ainv[leg, 3, a, 2] * border[2, b])
     for a in range(6):
         for b in range(6):
-            q = Sp[a, b]
-            for leg in range(6):
-                q -= W[_ix(_C + 6 * a + b, leg)]
-            s.schur[a, b] = q
-        q = s.res_p[a]
-        for leg in range(6):
-            q -= W[_ix(_YL + a, leg)]
-        s.dp[a] = q
-    _lu(s.schur, s.ypiv)
-    _lu_solve(s.schur, s.ypiv, s.dp)
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _back_step(W, k):
-    """Every leg's x_k = Ahat_k^-1 (rhat_k - U_k x_{k+1}) (U_k: Sl's block, or U_1 for joint C)."""
-    upper = (_SL + 36, _U1, _SL + 54)[k]
-    _lcopy(W, _RHAT + 3 * k, _Z, 3)
-    _lmm(W, upper, 3, 1, _DL + 3 * k + 3, 1, 0, _Z, 3, 1, -1.0, True)
-    _lmm(W, _AINV + 9 * k, 3, 1, _Z, 1, 0, _DL + 3 * k, 3, 1, 1.0, False)
+            schur[a, b] -= lower[a, 0] * tb[leg, 0, b] + lower[a, 1] * tb[leg, 1, b] + lower[a, 2] * tb[leg, 2, b]
+        y[a] -= lower[a, 0] * top0[leg, 0] + lower[a, 1] * top0[leg, 1] + lower[a, 2] * top0[leg, 2]
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _back_substitute(s):
-    """Every leg's update s.dl up its chain: x_3 = top0 - X (J dp), x_k = Ahat_k^-1 (rhat_k - U_k x_{k+1})."""
-    W, dp = s.lanes, s.dp
-    p0, p1, p2, p3, p4, p5 = dp[0], dp[1], dp[2], dp[3], dp[4], dp[5]
-    for lane in range(_LANES):
-        for a in range(3):
-            W[_ix(_JDP + a, lane)] = (W[_ix(_J + 6 * a, lane)] * p0 + W[_ix(_J + 6 * a + 1, lane)] * p1
-                                      + W[_ix(_J + 6 * a + 2, lane)] * p2 + W[_ix(_J + 6 * a + 3, lane)] * p3
-                                      + W[_ix(_J + 6 * a + 4, lane)] * p4 + W[_ix(_J + 6 * a + 5, lane)] * p5)
-    _lcopy(W, _TOP0, _DL + 9, 3)
-    _lmm(W, _X, 3, 1, _JDP, 1, 0, _DL + 9, 3, 1, -1.0, True)
-    _back_step(W, 2)          # constant k: the slots' offsets stay constants LLVM can tell apart
-    _back_step(W, 1)
-    _back_step(W, 0)
+    """The platform update s.dp from the Schur complement, then each leg's s.dl up its chain:
+    x_3 = top0 - tb dp, x_k = Ahat_k^-1 (rhat_k - U_k x_{k+1})."""
+    dl, dp, z, Ainv, Up, rhat = s.dl, s.dp, s.z, s.Ainv, s.Up, s.rhat
+    _lu(s.schur, s.ypiv)
+    for a in range(6):
+        dp[a] = s.y[a]
+    _lu_solve(s.schur, s.ypiv, dp)
     for leg in range(6):
-        for c in range(12):
-            s.dl[leg, c] = W[_ix(_DL + c, leg)]
+        for a in range(3):
+            q = s.top0[leg, a]
+            for b in range(6):
+                q -= s.tb[leg, a, b] * dp[b]
+            dl[leg, 9 + a] = q
+        for k in range(2, -1, -1):
+            for a in range(3):
+                q = rhat[leg, k, a]
+                for b in range(3):
+                    q -= Up[leg, k, a, b] * dl[leg, 3 * (k + 1) + b]
+                z[a] = q
+            for a in range(3):
+                dl[leg, 3 * k + a] = Ainv[leg, k, a, 0] * z[0] + Ainv[leg, k, a, 1] * z[1] + Ainv[leg, k, a, 2] * z[2]
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _newton_update(fr, Sl, Sp, s):
-    """Solve the block-arrow Newton system [L B; C P] [s.dl; s.dp] = [s.res_l; s.res_p] of one
-    realisation, the contact Jacobians D already in their slots (:func:`newton_one`).
+    """Solve the block-arrow Newton system [L B; C P] [s.dl; s.dp] = [s.res_l; s.res_p] of one realisation.
 
     L = Sl - G^T diag(D) G per leg is block tridiagonal in the joint nodes' 3x3 blocks
     (crank node 0 - crank tip: crank; tip - rod C end: joint C; C end - B end: rod), so
@@ -562,17 +479,14 @@ def _newton_update(fr, Sl, Sp, s):
     the links' condensed step matrices, SPD, plus the contact stiffness); B = E Rr^T D_B J
     and C = J^T D_B Rr (E the B-end rows) border it, P = Sp - sum J^T D_B J.  The 6x6 Schur
     complement on the platform is solved with pivoting, then each leg back-substituted.
-    The six legs run side by side in the lanes of s.lanes (see ``_LANES``).
     """
-    W = s.lanes
-    _load_legs(fr, Sl, s.res_l, W)
-    _chain_blocks(W)
-    _linv3(W, _A, _AINV)
-    _chain_step(W, 0)         # constant k: the slots' offsets stay constants LLVM can tell apart
-    _chain_step(W, 1)
-    _chain_step(W, 2)
-    _border(W)
-    _platform_solve(Sp, s)
+    for a in range(6):
+        for b in range(6):
+            s.schur[a, b] = Sp[a, b]
+        s.y[a] = s.res_p[a]
+    for leg in range(6):
+        _leg_chain(fr.Rc, fr.Rr, Sl, s.D, s.res_l, leg, s)
+        _leg_border(fr.J, fr.Rr, s.D, leg, s)
     _back_substitute(s)
 
 
@@ -680,8 +594,7 @@ def newton_one(fr, jt, r, sy, a_l, a_p, bh2, gh, wf, cfg, out, s):
             for j in range(3):
                 for a in range(3):
                     for b in range(3):
-                        s.lanes[_ix(_D + 9 * j + 3 * a + b, leg)] = wf * (bh2 * s.De[leg, j, a, b]
-                                                                          + gh * s.Dv[leg, j, a, b])
+                        s.D[leg, j, a, b] = wf * (bh2 * s.De[leg, j, a, b] + gh * s.Dv[leg, j, a, b])
         _newton_update(fr, sy.Sl, sy.Sp, s)
         gain = _take_update(a_l, a_p, s) / max(norm, 1e-300)
         lam = 1.0
@@ -744,6 +657,22 @@ def _lu_solve(A, piv, x):
             if a != 0.0:
                 x[i] -= a * x[k]
         x[i] *= inv
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _inv3(A, c, out, leg, k):
+    """out[leg, k] = A[c]^-1 (3x3) by the adjugate (the pivots here are SPD-dominated, see below)."""
+    c00 = A[c, 1, 1] * A[c, 2, 2] - A[c, 1, 2] * A[c, 2, 1]
+    c01 = A[c, 1, 2] * A[c, 2, 0] - A[c, 1, 0] * A[c, 2, 2]
+    c02 = A[c, 1, 0] * A[c, 2, 1] - A[c, 1, 1] * A[c, 2, 0]
+    inv = 1.0 / (A[c, 0, 0] * c00 + A[c, 0, 1] * c01 + A[c, 0, 2] * c02)
+    out[leg, k, 0, 0], out[leg, k, 1, 0], out[leg, k, 2, 0] = c00 * inv, c01 * inv, c02 * inv
+    out[leg, k, 0, 1] = (A[c, 0, 2] * A[c, 2, 1] - A[c, 0, 1] * A[c, 2, 2]) * inv
+    out[leg, k, 1, 1] = (A[c, 0, 0] * A[c, 2, 2] - A[c, 0, 2] * A[c, 2, 0]) * inv
+    out[leg, k, 2, 1] = (A[c, 0, 1] * A[c, 2, 0] - A[c, 0, 0] * A[c, 2, 1]) * inv
+    out[leg, k, 0, 2] = (A[c, 0, 1] * A[c, 1, 2] - A[c, 0, 2] * A[c, 1, 1]) * inv
+    out[leg, k, 1, 2] = (A[c, 0, 2] * A[c, 1, 0] - A[c, 0, 0] * A[c, 1, 2]) * inv
+    out[leg, k, 2, 2] = (A[c, 0, 0] * A[c, 1, 1] - A[c, 0, 1] * A[c, 1, 0]) * inv
 
 
 # --- whole steps: predictor, condensation, Newton, recovery, adaptive control ---

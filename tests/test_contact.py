@@ -323,21 +323,17 @@ def _rotation(rng):
 
 
 def test_compiled_newton_update_solves_the_assembled_block_arrow_system():
-    """The kernel's Newton update (contact_kernel._newton_update: six legs side by side in lanes, the
-    border as J^T E J) solves the whole system assembled densely, blockdiag(Sl, .., Sl, Sp) - sum over
-    legs of G^T diag(D_A, D_C, D_B) G with G's blocks Rc, -Rc, Rr, Rr and -J on the platform, as
-    np.linalg.solve does; non-symmetric contact Jacobians, two of them zero (joints apart)."""
+    """The kernel's Newton update (contact_kernel._newton_update: each leg's chain eliminated block by
+    block, the platform's Schur complement) solves the whole system assembled densely,
+    blockdiag(Sl, .., Sl, Sp) - sum over legs of G^T diag(D_A, D_C, D_B) G with G's blocks Rc, -Rc, Rr,
+    Rr and -J on the platform, as np.linalg.solve does; non-symmetric contact Jacobians, two of them
+    zero (joints apart)."""
     from numba import njit
 
-    from rss6core.contact_kernel import _D, _ix, Frame, _newton_update, make_scratch
+    from rss6core.contact_kernel import Frame, _newton_update, make_scratch
 
     @njit(_nrt=False)
-    def update(fr, Sl, Sp, D, s):
-        for leg in range(6):
-            for j in range(3):
-                for a in range(3):
-                    for b in range(3):
-                        s.lanes[_ix(_D + 9 * j + 3 * a + b, leg)] = D[leg, j, a, b]
+    def update(fr, Sl, Sp, s):
         _newton_update(fr, Sl, Sp, s)
     rng = np.random.default_rng(13)
     Rc, Rr = np.array([_rotation(rng) for _ in range(6)]), np.array([_rotation(rng) for _ in range(6)])
@@ -348,8 +344,8 @@ def test_compiled_newton_update_solves_the_assembled_block_arrow_system():
     D = rng.normal(size=(6, 3, 3, 3))
     D[2, 1] = D[4, 2] = 0.0
     s = make_scratch()
-    s.res_l[:], s.res_p[:] = rng.normal(size=(6, 12)), rng.normal(size=6)
-    update(Frame(Rc=Rc, J=J, Rr=Rr, omega=np.zeros((6, 3, 3))), Sl, Sp, D, s)
+    s.D[:], s.res_l[:], s.res_p[:] = D, rng.normal(size=(6, 12)), rng.normal(size=6)
+    update(Frame(Rc=Rc, J=J, Rr=Rr, omega=np.zeros((6, 3, 3))), Sl, Sp, s)
     K = np.zeros((78, 78))
     K[72:, 72:] = Sp
     for leg in range(6):
