@@ -475,8 +475,8 @@ def _newton_update(fr, Sl, Sp, s):
     L = Sl - G^T diag(D) G per leg is block tridiagonal in the joint nodes' 3x3 blocks
     (crank node 0 - crank tip: crank; tip - rod C end: joint C; C end - B end: rod), so
     each leg is eliminated block by block down to its B end (no pivoting: the blocks are
-    the links' condensed step matrices, SPD, plus the contact stiffness); B = E Rr^T D_B J
-    and C = J^T D_B Rr (E the B-end rows) border it, P = Sp - sum J^T D_B J.  The 6x6 Schur
+    the links' condensed step matrices, SPD, plus the contact stiffness); B = I_B Rr^T D_B J
+    and C = J^T D_B Rr (I_B the identity's B-end rows) border it, P = Sp - sum J^T D_B J.  The 6x6 Schur
     complement on the platform is solved with pivoting, then each leg back-substituted.
     """
     for a in range(6):
