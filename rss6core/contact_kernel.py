@@ -123,7 +123,7 @@ the joint nodes (6, 12) and the platform (6,), penetrations and rates (6, 4)."""
 Work = namedtuple("Work", "Zc Zr Ic Ir Ac Ar Yc Yr dp vp rhs tmp a_new d_new v_new rb db vb ab dpp vpp ap "
                   "impact Sp f gl gp delta rate e jb jp dims scale op")
 Scratch = namedtuple("Scratch", "e de De Dv D pair xb ub xp up res_l res_p dl dp base_l base_p A Ainv Up "
-                     "rhat M top top0 tb z schur ypiv y border lower DG DJ DR")
+                     "rhat M top top0 X z schur ypiv y E RD EJ v DG")
 
 
 def make_work(N, nc, nr, ni_c, ni_r) -> Work:
@@ -143,8 +143,8 @@ def make_scratch() -> Scratch:
     return Scratch(e((6, 3, 3)), e((6, 3, 3)), e((6, 3, 3, 3)), e((6, 3, 3, 3)), e((6, 3, 3, 3)), e(21),
                    e((6, 12)), e((6, 12)), e(6), e(6), e((6, 12)), e(6), e((6, 12)), e(6), e((6, 12)), e(6),
                    e((4, 3, 3)), e((6, 4, 3, 3)), e((6, 3, 3, 3)), e((6, 4, 3)), e((3, 3)), e((3, 3)),
-                   e((6, 3)), e((6, 3, 6)), e(3), e((6, 6)), e(6, np.int64), e(6), e((3, 6)), e((6, 3)),
-                   e((_PATTERN.shape[0], 3, 3)), e((3, 6)), e((3, 3)))
+                   e((6, 3)), e((6, 3, 3)), e(3), e((6, 6)), e(6, np.int64), e(6), e((3, 3)), e((3, 3)),
+                   e((3, 6)), e(3), e((_PATTERN.shape[0], 3, 3)))
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -412,42 +412,38 @@ def _leg_chain(Rc, Rr, Sl, D, res_l, leg, s):
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _leg_border(J, Rr, D, leg, s):
-    """Leg ``leg``'s border B = Rr^T D_B J (3x6), its partner C = J^T D_B Rr (6x3), P -= J^T D_B J, and
-    its share of the platform's Schur complement P - C Ahat_3^-1 B and right-hand side in s."""
-    DJ, DR, border, lower, schur, y, top0, tb, Ainv, rhat = (s.DJ, s.DR, s.border, s.lower, s.schur, s.y,
-                                                             s.top0, s.tb, s.Ainv, s.rhat)
-    for u in range(3):
-        for b in range(6):
-            DJ[u, b] = D[leg, 2, u, 0] * J[leg, 0, b] + D[leg, 2, u, 1] * J[leg, 1, b] \
-                + D[leg, 2, u, 2] * J[leg, 2, b]
+    """Leg ``leg``'s share of the platform's Schur complement and right-hand side in s.  With the
+    border B = Rr^T D_B J and its partner C = J^T D_B Rr, the share J^T D_B J + C Ahat_3^-1 B is
+    J^T E J, E = D_B + (D_B Rr) X, X = Ahat_3^-1 Rr^T D_B (kept for the back substitution), and
+    C Ahat_3^-1 rhat_3 = J^T (D_B Rr) top0, top0 = Ahat_3^-1 rhat_3: 3x3 work instead of 3x6."""
+    E, RD, EJ, v, X, DR, Ainv, rhat = s.E, s.RD, s.EJ, s.v, s.X, s.DG[3], s.Ainv, s.rhat   # DG_3 = D_B Rr
+    for a in range(3):
         for b in range(3):
-            DR[u, b] = D[leg, 2, u, 0] * Rr[leg, 0, b] + D[leg, 2, u, 1] * Rr[leg, 1, b] \
-                + D[leg, 2, u, 2] * Rr[leg, 2, b]
+            RD[a, b] = Rr[leg, 0, a] * D[leg, 2, 0, b] + Rr[leg, 1, a] * D[leg, 2, 1, b] \
+                + Rr[leg, 2, a] * D[leg, 2, 2, b]
+    for a in range(3):
+        for b in range(3):
+            X[leg, a, b] = Ainv[leg, 3, a, 0] * RD[0, b] + Ainv[leg, 3, a, 1] * RD[1, b] \
+                + Ainv[leg, 3, a, 2] * RD[2, b]
+        s.top0[leg, a] = (Ainv[leg, 3, a, 0] * rhat[leg, 3, 0] + Ainv[leg, 3, a, 1] * rhat[leg, 3, 1]
+                          + Ainv[leg, 3, a, 2] * rhat[leg, 3, 2])
+    for a in range(3):
+        for b in range(3):
+            E[a, b] = D[leg, 2, a, b] + DR[a, 0] * X[leg, 0, b] + DR[a, 1] * X[leg, 1, b] + DR[a, 2] * X[leg, 2, b]
+        v[a] = DR[a, 0] * s.top0[leg, 0] + DR[a, 1] * s.top0[leg, 1] + DR[a, 2] * s.top0[leg, 2]
     for a in range(3):
         for b in range(6):
-            border[a, b] = Rr[leg, 0, a] * DJ[0, b] + Rr[leg, 1, a] * DJ[1, b] + Rr[leg, 2, a] * DJ[2, b]
-    for a in range(6):
-        for b in range(3):
-            lower[a, b] = J[leg, 0, a] * DR[0, b] + J[leg, 1, a] * DR[1, b] + J[leg, 2, a] * DR[2, b]
-        for b in range(6):
-            schur[a, b] -= J[leg, 0, a] * DJ[0, b] + J[leg, 1, a] * DJ[1, b] + J[leg, 2, a] * DJ[2, b]
-    # the B end: x_3 = Ahat_3^-1 (rhat_3 - border dp) = top0 - tb dp
-    for a in range(3):
-        top0[leg, a] = (Ainv[leg, 3, a, 0] * rhat[leg, 3, 0] + Ainv[leg, 3, a, 1] * rhat[leg, 3, 1]
-                        + Ainv[leg, 3, a, 2] * rhat[leg, 3, 2])
-        for b in range(6):
-            tb[leg, a, b] = (Ainv[leg, 3, a, 0] * border[0, b] + Ainv[leg, 3, a, 1] * border[1, b]
-                             + Ainv[leg, 3, a, 2] * border[2, b])
+            EJ[a, b] = E[a, 0] * J[leg, 0, b] + E[a, 1] * J[leg, 1, b] + E[a, 2] * J[leg, 2, b]
     for a in range(6):
         for b in range(6):
-            schur[a, b] -= lower[a, 0] * tb[leg, 0, b] + lower[a, 1] * tb[leg, 1, b] + lower[a, 2] * tb[leg, 2, b]
-        y[a] -= lower[a, 0] * top0[leg, 0] + lower[a, 1] * top0[leg, 1] + lower[a, 2] * top0[leg, 2]
+            s.schur[a, b] -= J[leg, 0, a] * EJ[0, b] + J[leg, 1, a] * EJ[1, b] + J[leg, 2, a] * EJ[2, b]
+        s.y[a] -= J[leg, 0, a] * v[0] + J[leg, 1, a] * v[1] + J[leg, 2, a] * v[2]
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _back_substitute(s):
+def _back_substitute(J, s):
     """The platform update s.dp from the Schur complement, then each leg's s.dl up its chain:
-    x_3 = top0 - tb dp, x_k = Ahat_k^-1 (rhat_k - U_k x_{k+1})."""
+    x_3 = top0 - X (J dp), x_k = Ahat_k^-1 (rhat_k - U_k x_{k+1})."""
     dl, dp, z, Ainv, Up, rhat = s.dl, s.dp, s.z, s.Ainv, s.Up, s.rhat
     _lu(s.schur, s.ypiv)
     for a in range(6):
@@ -455,10 +451,13 @@ def _back_substitute(s):
     _lu_solve(s.schur, s.ypiv, dp)
     for leg in range(6):
         for a in range(3):
-            q = s.top0[leg, a]
+            q = 0.0
             for b in range(6):
-                q -= s.tb[leg, a, b] * dp[b]
-            dl[leg, 9 + a] = q
+                q += J[leg, a, b] * dp[b]
+            z[a] = q
+        for a in range(3):
+            dl[leg, 9 + a] = s.top0[leg, a] - (s.X[leg, a, 0] * z[0] + s.X[leg, a, 1] * z[1]
+                                               + s.X[leg, a, 2] * z[2])
         for k in range(2, -1, -1):
             for a in range(3):
                 q = rhat[leg, k, a]
@@ -476,8 +475,8 @@ def _newton_update(fr, Sl, Sp, s):
     L = Sl - G^T diag(D) G per leg is block tridiagonal in the joint nodes' 3x3 blocks
     (crank node 0 - crank tip: crank; tip - rod C end: joint C; C end - B end: rod), so
     each leg is eliminated block by block down to its B end (no pivoting: the blocks are
-    the links' condensed step matrices, SPD, plus the contact stiffness); B = E Rr^T D_B J
-    and C = J^T D_B Rr (E the B-end rows) border it, P = Sp - sum J^T D_B J.  The 6x6 Schur
+    the links' condensed step matrices, SPD, plus the contact stiffness); B = I_B Rr^T D_B J
+    and C = J^T D_B Rr (I_B the identity's B-end rows) border it, P = Sp - sum J^T D_B J.  The 6x6 Schur
     complement on the platform is solved with pivoting, then each leg back-substituted.
     """
     for a in range(6):
@@ -487,7 +486,7 @@ def _newton_update(fr, Sl, Sp, s):
     for leg in range(6):
         _leg_chain(fr.Rc, fr.Rr, Sl, s.D, s.res_l, leg, s)
         _leg_border(fr.J, fr.Rr, s.D, leg, s)
-    _back_substitute(s)
+    _back_substitute(fr.J, s)
 
 
 System = namedtuple("System", "Sl Sp impact rb rp db dpp vb vpp")

@@ -317,6 +317,52 @@ def test_compiled_recovery_equals_the_condensed_links_recover(paper):
     np.testing.assert_allclose(work.v_new, work.vp + 0.5 * work.a_new, rtol=1e-15, atol=0)
 
 
+def _rotation(rng):
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+def test_compiled_newton_update_solves_the_assembled_block_arrow_system():
+    """The kernel's Newton update (contact_kernel._newton_update: each leg's chain eliminated block by
+    block, the platform's Schur complement) solves the whole system assembled densely,
+    blockdiag(Sl, .., Sl, Sp) - sum over legs of G^T diag(D_A, D_C, D_B) G with G's blocks Rc, -Rc, Rr,
+    Rr and -J on the platform, as np.linalg.solve does; non-symmetric contact Jacobians, two of them
+    zero (joints apart)."""
+    from numba import njit
+
+    from rss6core.contact_kernel import Frame, _newton_update, make_scratch
+
+    @njit(_nrt=False)
+    def update(fr, Sl, Sp, s):
+        _newton_update(fr, Sl, Sp, s)
+    rng = np.random.default_rng(13)
+    Rc, Rr = np.array([_rotation(rng) for _ in range(6)]), np.array([_rotation(rng) for _ in range(6)])
+    J = rng.normal(size=(6, 3, 6))
+    spd = [(lambda a: 10 * (a @ a.T + 6 * np.eye(6)))(rng.normal(size=(6, 6))) for _ in range(3)]
+    Sl, Sp = np.zeros((12, 12)), spd[2]
+    Sl[:6, :6], Sl[6:, 6:] = spd[0], spd[1]
+    D = rng.normal(size=(6, 3, 3, 3))
+    D[2, 1] = D[4, 2] = 0.0
+    s = make_scratch()
+    s.D[:], s.res_l[:], s.res_p[:] = D, rng.normal(size=(6, 12)), rng.normal(size=6)
+    update(Frame(Rc=Rc, J=J, Rr=Rr, omega=np.zeros((6, 3, 3))), Sl, Sp, s)
+    K = np.zeros((78, 78))
+    K[72:, 72:] = Sp
+    for leg in range(6):
+        c = 12 * leg
+        K[c:c + 12, c:c + 12] = Sl
+        G = np.zeros((9, 78))
+        G[0:3, c:c + 3], G[3:6, c + 3:c + 6], G[3:6, c + 6:c + 9] = Rc[leg], -Rc[leg], Rr[leg]
+        G[6:9, c + 9:c + 12], G[6:9, 72:] = Rr[leg], -J[leg]
+        Dl = np.zeros((9, 9))
+        for j in range(3):
+            Dl[3 * j:3 * j + 3, 3 * j:3 * j + 3] = D[leg, j]
+        K -= G.T @ Dl @ G
+    want = np.linalg.solve(K, np.concatenate([s.res_l.ravel(), s.res_p]))
+    np.testing.assert_allclose(np.concatenate([s.dl.ravel(), s.dp]), want, rtol=0,
+                               atol=1e-13 * np.abs(want).max())
+
+
 def test_compiled_steps_run_without_reference_counting():
     """The entry points that run the steps allocate nothing and skip numba's atomic reference counts
     (a fifth of the steps' time, docs/performance.md section 15); an allocation there fails to compile."""
