@@ -170,8 +170,7 @@ def _run(args) -> int:
                                worker_timeout=args.worker_timeout)
     except SchedulerUnavailable as exc:
         parts = output.with_name(output.name + ".parts")
-        kept = (f"; the finished chunks are kept in {parts}; rerun the same command to resume"
-                if parts.exists() else "")
+        kept = f"; {_continue(f'finished chunks are kept in {parts}')}" if parts.exists() else ""
         print(f"rss6: error: {exc}{kept}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
@@ -286,12 +285,16 @@ def _outcome_line(outcome, output, n: int, model: str) -> str:
     return f"wrote {output}: {total} realisations of the {model} level ({failed} failed{kept})"
 
 
+def _continue(kept: str) -> str:
+    """What a stopped command kept (e.g. "finished chunks are kept in X.parts") and that the same
+    command continues from it: one wording for Ctrl-C and a lost scheduler alike."""
+    return f"{kept}; rerun the same command to continue"
+
+
 def _interrupted(kept: str | None) -> int:
-    """Exit code 130 after Ctrl-C, with one line in one wording for every command: what is kept
-    (``kept``, e.g. "finished chunks are kept in X.parts") and that the same command continues,
-    or, for a command that does not resume (``kept`` None), that nothing was written."""
-    what = (f"{kept}; rerun the same command to continue" if kept
-            else "nothing written (this command does not resume)")
+    """Exit code 130 after Ctrl-C, with one line: :func:`_continue` of what is kept, or, for a
+    command that does not resume (``kept`` None), that nothing was written."""
+    what = _continue(kept) if kept else "nothing written (this command does not resume)"
     print(f"rss6: interrupted; {what}", file=sys.stderr)
     return 130
 
@@ -335,14 +338,14 @@ def _report(args) -> int:
                          "--overwrite-tracked")
     plan = ReportPlan(args.n, args.family_n, args.workers, args.scheduler, args.seed,
                       args.worker_timeout)
+    kept = f"finished ensembles and chunks are kept in {args.data or out / 'results-data'}"
     try:
         path = write_report(args.configs, args.output, plan, args.data)
     except SchedulerUnavailable as exc:
-        print(f"rss6: error: {exc}; finished ensembles and chunks are kept; rerun the same command "
-              "to continue", file=sys.stderr)
+        print(f"rss6: error: {exc}; {_continue(kept)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        return _interrupted(f"finished ensembles and chunks are kept in {args.data or out / 'results-data'}")
+        return _interrupted(kept)
     print(f"wrote {path}")
     return 0
 
@@ -486,7 +489,8 @@ def _multifidelity(args) -> int:
             out = ensemble(_level_spec(args, scene, level), n, path, workers=args.workers,
                            scheduler=args.scheduler, progress=not args.json)
         except SchedulerUnavailable as exc:
-            print(f"rss6: error: {exc}; finished chunks are kept; rerun to resume", file=sys.stderr)
+            print(f"rss6: error: {exc}; {_continue(f'finished chunks are kept in {path}.parts')}",
+                  file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             return _interrupted(f"finished chunks are kept in {path}.parts")
