@@ -54,9 +54,10 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 # batch is the one `rss6 run -n 1000` makes on 2 workers (default_chunk: 125 for both levels);
 # paper's throughput is that of the 1000-realisation ensemble its time target names (8 chunks of
 # 125): a run's fixed costs (the first task's start, the final merge) are then amortised as in real
-# runs
+# runs; contact's is that of two tasks of the same 125 (one per worker with 2), as its 1000 run
+# computes them (that run on 1 worker would take about 3 minutes per repeat)
 BATCH = default_chunk(1000, 2, "paper"), default_chunk(1000, 2, "contact")
-FULL = {"config": "paper.toml", "paper": (10, BATCH[0], 1000), "contact": (2, BATCH[1], 128),
+FULL = {"config": "paper.toml", "paper": (10, BATCH[0], 1000), "contact": (2, BATCH[1], 2 * BATCH[1]),
         "memory": (100, 1000), "reference": 6000, "contact_run": 1000}
 QUICK = {"config": "smoke.toml", "paper": (3, 50, 100), "contact": (1, 6, 4), "memory": (100, 1000),
          "reference": 1500, "contact_run": 8}
