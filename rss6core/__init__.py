@@ -72,6 +72,7 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom",
            "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "size_band",
-           "SIZE_UNIFORMS", "UNIFORM_BLOCKS", "clearances_from_named_uniforms", "Integrator", "build_elastic_model", "BeamTheory", "BEAM_THEORIES",
+           "SIZE_UNIFORMS", "UNIFORM_BLOCKS", "clearances_from_named_uniforms", "Integrator", "build_elastic_model",
+           "BeamTheory", "BEAM_THEORIES",
            "quasi_static_state", "simulate_elastic",
            "rigid_motion", "inverse_dynamics", "crank_inertia", "rod_inertia", "__version__"]
