@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
-from scipy.special import ndtr, ndtri
 
-from rss6core import FINISHED, ClearanceDraw, prepare_level, size_band
+from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, prepare_level,
+                      size_band)
 
 from .store import DIRECTIONS, JOINTS, QUANTITIES, _provenance, _unit_table, error_summaries
 
@@ -56,11 +56,6 @@ class ClearanceInputs:
     joints: tuple[str, ...]
     families: tuple[str, ...]
 
-    def column(self, u: np.ndarray, joint: str, what: str) -> np.ndarray | None:
-        """Column ``JOINT_WHAT`` of the uniforms u (R, D); None when the draw has no such input."""
-        name = f"{joint}_{what}"
-        return u[:, self.names.index(name)] if name in self.names else None
-
 
 def clearance_inputs(scene) -> ClearanceInputs:
     """The scene's inputs: sizes only where they vary (size tolerance > 0 and a nonzero size)."""
@@ -82,67 +77,18 @@ def clearance_inputs(scene) -> ClearanceInputs:
                            tuple(f for _, _, f in rows))
 
 
-def _truncated_normal_ppf(u, mean, std, low, high) -> np.ndarray:
-    """Normal(mean, std) truncated to [low, high] at probability u: the inverse CDF that
-    rss6core.clearance.truncated_normal applies to its uniform (a point law when std <= 0)."""
-    mean, std = np.broadcast_arrays(np.asarray(mean, float), np.asarray(std, float))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lo, hi = ndtr((low - mean) / std), ndtr((high - mean) / std)
-        x = mean + std * ndtri(lo + u * (hi - lo))
-    return np.clip(np.where(std > 0, x, mean), low, high)
-
-
-def _sizes(inputs, u, joints, what, nominal: float, band) -> np.ndarray:
-    """(R, 6) clearance sizes (m): nominal, or from the family's size band (rss6core.size_band)."""
-    cols = [inputs.column(u, j, what) for j in joints]
-    if cols[0] is None:
-        return np.full((u.shape[0], 6), nominal)
-    c = np.stack(cols, -1)
-    if band.law == "uniform":
-        return band.low + (band.high - band.low) * c
-    return _truncated_normal_ppf(c, nominal, band.std, band.low, band.high)
-
-
-def _spherical(inputs, u, kind: str, size: np.ndarray, law: str) -> np.ndarray:
-    """(R, 6, 3) eccentricities k size n, n uniform on the sphere (or the paper's polar law)."""
-    joints = [f"{kind}{leg}" for leg in range(1, 7)]
-    k, u1, u2 = (np.stack([inputs.column(u, j, w) for j in joints], -1)
-                 for w in ("magnitude", "polar", "azimuth"))
-    eta1 = np.arccos(1.0 - 2.0 * u1) if law == "uniform" else np.pi * u1
-    eta2 = 2.0 * np.pi * u2
-    n = np.stack([np.sin(eta1) * np.cos(eta2), np.sin(eta1) * np.sin(eta2), np.cos(eta1)], -1)
-    return (k * size)[..., None] * n
-
-
 def clearance_draws_from_uniforms(scene, inputs: ClearanceInputs, u: np.ndarray) -> list[ClearanceDraw]:
-    """The clearance draws (one per row) of uniforms u (R, D) laid out as ``inputs``.
-
-    The same laws as rss6core.clearance.draw_clearances, applied to given uniforms instead of a
-    realisation's stream (tests check both give the same draw from the same uniforms); to be
-    merged with the core's uniforms-to-draw path used for quasi-Monte Carlo.
-    """
-    cl, law = scene.clearance, scene.sampling
+    """The clearance draws (one per row) of uniforms u (R, D) laid out as ``inputs``: the core's
+    draw (rss6core.clearances_from_named_uniforms) with each block's six uniforms taken from the
+    columns of its joints (block ``C_magnitude``: columns C1_magnitude .. C6_magnitude)."""
     u = np.atleast_2d(np.asarray(u, float))
-    legs_a = [f"A{leg}" for leg in range(1, 7)]
-    band = {f: size_band(scene, f) for f in FAMILIES}
-    dr = _sizes(inputs, u, legs_a, "radial_size", cl.revolute_radial, band["revolute_radial"])
-    da = _sizes(inputs, u, legs_a, "axial_size", cl.revolute_axial, band["revolute_axial"])
-    dC = _sizes(inputs, u, [f"C{leg}" for leg in range(1, 7)], "size", cl.spherical_C, band["spherical_C"])
-    dB = _sizes(inputs, u, [f"B{leg}" for leg in range(1, 7)], "size", cl.spherical_B, band["spherical_B"])
-    col = {w: np.stack([inputs.column(u, j, w) for j in legs_a], -1)
-           for w in ("radial_magnitude", "radial_angle", "axial")}
-    radial = _truncated_normal_ppf(col["radial_magnitude"], law.radial_mean * dr, law.radial_std * dr,
-                                   0.0, dr)
-    theta = 2.0 * np.pi * col["radial_angle"]
-    axial = _truncated_normal_ppf(col["axial"], law.axial_mean * da, law.axial_std * da, -da, da)
-    angle = scene.geometry.base_angles
-    plane_x = np.stack([np.cos(angle), np.sin(angle), 0 * angle], -1)
-    plane_y = np.broadcast_to([0.0, 0.0, 1.0], (6, 3))
-    e_A = ((radial * np.cos(theta))[..., None] * plane_x + (radial * np.sin(theta))[..., None] * plane_y
-           + axial[..., None] * scene.geometry.w)
-    e_C = _spherical(inputs, u, "C", dC, law.direction)
-    e_B = _spherical(inputs, u, "B", dB, law.direction)
-    return [ClearanceDraw(dr[r], da[r], dC[r], dB[r], e_A[r], e_C[r], e_B[r]) for r in range(len(u))]
+    columns = {}
+    for block in UNIFORM_BLOCKS:
+        kind, what = block.split("_", 1)
+        names = [f"{kind}{leg}_{what}" for leg in range(1, 7)]
+        if all(n in inputs.names for n in names):
+            columns[block] = [inputs.names.index(n) for n in names]
+    return [clearances_from_named_uniforms(scene, {b: row[c] for b, c in columns.items()}) for row in u]
 
 
 # --- the sampling design ---------------------------------------------------------------------

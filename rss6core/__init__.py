@@ -31,6 +31,8 @@ Clearance draws
 - ClearanceDraw: one realisation's clearance sizes and eccentricity vectors (m).
 - draw_clearances: one realisation's clearance sizes and eccentricities (m), from its seeded stream.
 - clearances_from_uniforms: the same draw as a function of a vector of uniforms (quasi-Monte Carlo).
+- clearances_from_named_uniforms: the same draw from its uniforms by block name (Sobol' designs).
+- UNIFORM_BLOCKS: the names of those blocks of six uniforms (legs 1-6), in stream order.
 - uniform_dimension: how many uniforms one draw uses at most.
 - size_band: a joint family's clearance-size band ([tolerance.<family>] or [sampling] size_tolerance), or None.
 - SIZE_UNIFORMS: how many of them (the first) set the clearance sizes.
@@ -51,8 +53,8 @@ from .elastic import quasi_static_state, simulate_elastic
 from .results import ContactBatch, SimulationResult, time_grid
 from .assembly import build_elastic_model
 from .beam import BEAM_THEORIES, BeamTheory
-from .clearance import (SIZE_UNIFORMS, ClearanceDraw, clearances_from_uniforms, draw_clearances, size_band,
-                        uniform_dimension)
+from .clearance import (SIZE_UNIFORMS, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms,
+                        clearances_from_uniforms, draw_clearances, size_band, uniform_dimension)
 from .contact_options import CONTACT_STARTS
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
@@ -70,6 +72,7 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom",
            "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "size_band",
-           "SIZE_UNIFORMS", "Integrator", "build_elastic_model", "BeamTheory", "BEAM_THEORIES",
+           "SIZE_UNIFORMS", "UNIFORM_BLOCKS", "clearances_from_named_uniforms", "Integrator", "build_elastic_model",
+           "BeamTheory", "BEAM_THEORIES",
            "quasi_static_state", "simulate_elastic",
            "rigid_motion", "inverse_dynamics", "crank_inertia", "rod_inertia", "__version__"]

@@ -16,7 +16,9 @@ SeedSequence([s, r]), so results do not depend on chunking or worker count.
 Every law inverts a CDF, so a draw is a function of a vector of uniforms
 (:func:`clearances_from_uniforms`, at most :func:`uniform_dimension` of them):
 plain Monte Carlo takes them from the realisation's stream, randomised
-quasi-Monte Carlo (pipeline/sampler.py) from a scrambled Sobol' point.
+quasi-Monte Carlo (pipeline/sampler.py) from a scrambled Sobol' point, and a
+Sobol' sensitivity design (pipeline/sensitivity.py) by name, six per block of
+:data:`UNIFORM_BLOCKS` (:func:`clearances_from_named_uniforms`).
 """
 from __future__ import annotations
 
@@ -25,8 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr, ndtri
 
-__all__ = ["SIZE_UNIFORMS", "FAMILIES", "size_band", "SizeBand", "ClearanceDraw", "UniformVector", "realization_rng", "truncated_normal",
-           "sphere_directions", "draw_clearances", "clearances_from_uniforms", "uniform_dimension"]
+__all__ = ["SIZE_UNIFORMS", "FAMILIES", "UNIFORM_BLOCKS", "size_band", "SizeBand", "ClearanceDraw", "UniformVector",
+           "NamedUniforms", "realization_rng", "truncated_normal", "sphere_directions", "draw_clearances",
+           "clearances_from_uniforms", "clearances_from_named_uniforms", "uniform_dimension"]
 
 
 def realization_rng(seed: int, realization: int) -> np.random.Generator:
@@ -51,19 +54,43 @@ class UniformVector:
         return low + (high - low) * out
 
 
-def truncated_normal(rng: np.random.Generator, mean, std, low, high, size) -> np.ndarray:
-    """Normal(mean, std) truncated to [low, high], by inverting the CDF (one uniform per draw)."""
+class NamedUniforms:
+    """Given uniforms on [0, 1) by block name (:data:`UNIFORM_BLOCKS`, six per block, legs 1-6), for
+    a design whose inputs are named rather than laid out in stream order (a Sobol' design)."""
+
+    def __init__(self, blocks: dict):
+        self.blocks = {name: np.asarray(u, float) for name, u in blocks.items()}
+
+    def take(self, name: str, low, high, size) -> np.ndarray:
+        if name not in self.blocks:
+            raise ValueError(f"the draw needs the uniforms {name!r}, which were not given")
+        u = self.blocks[name]
+        return low + (high - low) * u.reshape(tuple(np.atleast_1d(size)))
+
+
+def _uniform(rng, name: str, low=0.0, high=1.0, size=None):
+    """Uniforms on [low, high) of the block ``name`` from a Generator, a :class:`UniformVector` (in
+    order; the name unused) or a :class:`NamedUniforms` (by name)."""
+    if isinstance(rng, NamedUniforms):
+        return rng.take(name, low, high, size)
+    return rng.uniform(low, high, size)
+
+
+def truncated_normal(rng: np.random.Generator, mean, std, low, high, size, name: str = "") -> np.ndarray:
+    """Normal(mean, std) truncated to [low, high], by inverting the CDF (one uniform per draw, of the
+    block ``name``; none when a std is not positive: then the law is the point mean)."""
     mean, std = np.asarray(mean, float), np.asarray(std, float)
     if np.any(std <= 0):
         return np.clip(np.broadcast_to(mean, size), low, high).astype(float)
     lo, hi = ndtr((np.asarray(low) - mean) / std), ndtr((np.asarray(high) - mean) / std)
-    u = rng.uniform(size=size)
+    u = _uniform(rng, name, size=size)
     return np.clip(mean + std * ndtri(lo + u * (hi - lo)), low, high)
 
 
-def sphere_directions(rng: np.random.Generator, size: int, law: str = "uniform") -> np.ndarray:
-    """Unit vectors (size, 3): uniform on the sphere, or the paper's eta_d1 = pi u variant."""
-    u1, u2 = rng.uniform(size=size), rng.uniform(size=size)
+def sphere_directions(rng: np.random.Generator, size: int, law: str = "uniform", joint: str = "") -> np.ndarray:
+    """Unit vectors (size, 3): uniform on the sphere, or the paper's eta_d1 = pi u variant (polar
+    then azimuth uniforms, blocks ``<joint>_polar`` and ``<joint>_azimuth``)."""
+    u1, u2 = _uniform(rng, f"{joint}_polar", size=size), _uniform(rng, f"{joint}_azimuth", size=size)
     eta1 = np.arccos(1.0 - 2.0 * u1) if law == "uniform" else np.pi * u1
     eta2 = 2.0 * np.pi * u2
     sin1, out = np.sin(eta1), np.empty((size, 3))   # filled in place: no temporaries to stack
@@ -105,18 +132,25 @@ def size_band(scene, family: str):
     return band
 
 
-def _sizes(rng, nominal: float, band) -> np.ndarray:
-    """Six clearance sizes (m) of one family from six uniforms: nominal, or drawn from ``band``."""
+def _sizes(rng, name: str, nominal: float, band) -> np.ndarray:
+    """Six clearance sizes (m) of one family from six uniforms (block ``name``): nominal, or drawn
+    from ``band``."""
     if band is None:
-        rng.uniform(size=6)  # keep the stream's layout the same with and without tolerances
+        if not isinstance(rng, NamedUniforms):
+            rng.uniform(size=6)  # keep the stream's layout the same with and without tolerances
         return np.full(6, nominal)
     if band.law == "uniform":
-        return rng.uniform(band.low, band.high, size=6)
-    return truncated_normal(rng, nominal, band.std, band.low, band.high, 6)
+        return _uniform(rng, name, band.low, band.high, size=6)
+    return truncated_normal(rng, nominal, band.std, band.low, band.high, 6, name)
 
 
 SIZE_UNIFORMS = 24   # a draw takes its uniforms for the 4 x 6 clearance sizes first
 FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")   # in that order
+SIZE_BLOCKS = ("A_radial_size", "A_axial_size", "C_size", "B_size")              # the families' sizes
+# the blocks of six uniforms (legs 1-6) a draw takes, in stream order (A_radial_magnitude and A_axial
+# are skipped where their law is a point)
+UNIFORM_BLOCKS = SIZE_BLOCKS + ("A_radial_magnitude", "A_radial_angle", "A_axial", "C_magnitude", "C_polar",
+                                "C_azimuth", "B_magnitude", "B_polar", "B_azimuth")
 
 
 def uniform_dimension(steps: int | None = None) -> int:
@@ -144,6 +178,13 @@ def clearances_from_uniforms(scene, u, steps: int | None = None) -> ClearanceDra
     return _draw(scene, UniformVector(u), steps)
 
 
+def clearances_from_named_uniforms(scene, blocks: dict) -> ClearanceDraw:
+    """The draw as a function of its uniforms by block (:data:`UNIFORM_BLOCKS`, six each): the same
+    laws and arithmetic as :func:`clearances_from_uniforms`; a size block is needed only where the
+    family's size varies (:func:`size_band`)."""
+    return _draw(scene, NamedUniforms(blocks), None)
+
+
 def _combine(a, u, b, v, c, w) -> np.ndarray:
     """a u + b v + c w (..., 6, 3) for coefficients (..., 6) and leg vectors (6, 3), one component at
     a time (the same operations in the same order as broadcasting, without its 3-long inner loops)."""
@@ -154,13 +195,15 @@ def _combine(a, u, b, v, c, w) -> np.ndarray:
 
 
 def _draw(scene, rng, steps: int | None) -> ClearanceDraw:
-    """The draw from ``rng`` (a Generator or a :class:`UniformVector`), uniforms taken in a fixed order."""
+    """The draw from ``rng`` (a Generator, a :class:`UniformVector` or :class:`NamedUniforms`),
+    uniforms taken in a fixed order (:data:`UNIFORM_BLOCKS`)."""
     cl, law = scene.clearance, scene.sampling
-    dr, da, dC, dB = (_sizes(rng, getattr(cl, f), size_band(scene, f)) for f in FAMILIES)
+    dr, da, dC, dB = (_sizes(rng, name, getattr(cl, f), size_band(scene, f))
+                      for f, name in zip(FAMILIES, SIZE_BLOCKS))
     shape = (6,) if steps is None else (steps, 6)
-    radial = truncated_normal(rng, law.radial_mean * dr, law.radial_std * dr, 0.0, dr, shape)
-    theta = rng.uniform(0.0, 2.0 * np.pi, size=shape)
-    axial = truncated_normal(rng, law.axial_mean * da, law.axial_std * da, -da, da, shape)
+    radial = truncated_normal(rng, law.radial_mean * dr, law.radial_std * dr, 0.0, dr, shape, "A_radial_magnitude")
+    theta = _uniform(rng, "A_radial_angle", 0.0, 2.0 * np.pi, size=shape)
+    axial = truncated_normal(rng, law.axial_mean * da, law.axial_std * da, -da, da, shape, "A_axial")
     u = scene.geometry.base_angles
     # the plane normal to w_i is spanned by the horizontal radial direction and Z
     plane_x = np.stack([np.cos(u), np.sin(u), 0 * u], -1)
@@ -168,8 +211,8 @@ def _draw(scene, rng, steps: int | None) -> ClearanceDraw:
     e_A = _combine(radial * np.cos(theta), plane_x, radial * np.sin(theta), plane_y, axial,
                    scene.geometry.w)
     count = int(np.prod(shape))
-    e_C = ((rng.uniform(size=shape) * dC)[..., None]
-           * sphere_directions(rng, count, law.direction).reshape(shape + (3,)))
-    e_B = ((rng.uniform(size=shape) * dB)[..., None]
-           * sphere_directions(rng, count, law.direction).reshape(shape + (3,)))
+    e_C = ((_uniform(rng, "C_magnitude", size=shape) * dC)[..., None]
+           * sphere_directions(rng, count, law.direction, "C").reshape(shape + (3,)))
+    e_B = ((_uniform(rng, "B_magnitude", size=shape) * dB)[..., None]
+           * sphere_directions(rng, count, law.direction, "B").reshape(shape + (3,)))
     return ClearanceDraw(dr, da, dC, dB, e_A, e_C, e_B)

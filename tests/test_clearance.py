@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from rss6core.clearance import draw_clearances, realization_rng, sphere_directions
+from rss6core.clearance import (UNIFORM_BLOCKS, clearances_from_named_uniforms, draw_clearances, realization_rng,
+                                sphere_directions, uniform_dimension)
 from rss6core.kinematics import rigid_motion
 from rss6core.models import simulate
 from rss6core.quasi_static import quasi_static_error
@@ -95,6 +96,25 @@ def _worst_case_bound(scene, motion):
     reach = (c.revolute_radial * np.sqrt(np.maximum(1 - nw ** 2, 0)) + c.revolute_axial * np.abs(nw)
              + c.spherical_C + c.spherical_B)
     return np.einsum("tkl,tl->tk", np.abs(Ginv), reach), Ginv, n
+
+
+@pytest.mark.parametrize("tolerance", [0.0, 0.1])
+def test_named_uniforms_in_stream_order_give_the_stream_draw_bit_for_bit(paper, tolerance):
+    """The blocks of UNIFORM_BLOCKS, six uniforms each, are the stream's uniforms in that order: laid
+    out by name (as a Sobol' design does) they give draw_clearances' draw, sizes drawn or not."""
+    scene = dataclasses.replace(paper, sampling=dataclasses.replace(paper.sampling, size_tolerance=tolerance))
+    for r in (0, 3):
+        u = realization_rng(7, r).uniform(size=uniform_dimension())
+        named = clearances_from_named_uniforms(scene, {b: u[6 * i:6 * i + 6] for i, b in enumerate(UNIFORM_BLOCKS)})
+        core = draw_clearances(scene, 7, r)
+        assert all(np.array_equal(x, y) for x, y in zip(dataclasses.astuple(named), dataclasses.astuple(core)))
+    assert draw_clearances(scene, 7, 0).radial_size.std() > 0 or tolerance == 0.0
+
+
+def test_a_named_draw_without_a_block_it_needs_names_the_block(paper):
+    blocks = {b: np.full(6, 0.5) for b in UNIFORM_BLOCKS if b != "C_polar"}
+    with pytest.raises(ValueError, match="'C_polar'"):
+        clearances_from_named_uniforms(paper, blocks)
 
 
 def test_quasi_static_never_exceeds_the_worst_case_bound(paper):
