@@ -602,7 +602,8 @@ def _sensitivity(args) -> int:
     with OutputLock(output):
         try:
             ds = sensitivity(spec, args.n, args.per_joint, args.confidence, args.workers,
-                             announce=lambda line: print(f"rss6 sensitivity: {line}", file=sys.stderr))
+                             announce=lambda line: print(f"rss6 sensitivity: {line}", file=sys.stderr),
+                             window=args.window)
         except SensitivityError as exc:
             raise SceneError(str(exc)) from None
         except KeyboardInterrupt:
@@ -646,6 +647,7 @@ def _budget(args) -> int:
 
 def _sensitivity_parser(sub) -> None:
     from .sensitivity import LEVELS, MIN_N
+    from .store import WINDOWS
     se = sub.add_parser("sensitivity", help="Sobol' indices of the error statistics by joint family "
                                             "(and joint), with bootstrap intervals (SALib)")
     se.add_argument("config", nargs="?", default="paper",
@@ -666,6 +668,9 @@ def _sensitivity_parser(sub) -> None:
     se.add_argument("--seed", type=_nonnegative_int, default=0, help="random seed (default 0)")
     se.add_argument("--confidence", type=_fraction, default=0.95,
                     help="confidence of the bootstrap intervals (default 0.95)")
+    se.add_argument("--window", choices=WINDOWS, default="whole",
+                    help="analysis window of the statistics: whole (t >= the scene's settle_time_s), "
+                         "startup (before its steady_after_s) or steady (from it) (default whole)")
     se.add_argument("--workers", type=_positive_int, default=2,
                     help="local dask workers (1: in this process) (default 2)")
     se.set_defaults(func=_sensitivity, dt=None, integrator=None, elements=None)

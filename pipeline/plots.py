@@ -253,8 +253,9 @@ def sensitivity_figures(ds, quantities=QUANTITIES) -> dict:
             groups = [str(g) for g, d in zip(ds["group"].values, ds["group_design"].values) if d == design]
             for q in quantities:
                 da = ds[f"{stat}_sobol"].sel(quantity=q, group=groups)
+                window = da.attrs.get("analysis_window", "whole run")
                 fig, axes = _grid(figure_title(
-                    f"Sobol' indices of per-realisation {what} |{q} error| by "
+                    f"Sobol' indices of per-realisation {what} |{q} error|, {window}, by "
                     f"{_DESIGN_NAMES.get(design, design)}, bars: {conf} bootstrap intervals", ds,
                     int(ds.attrs["n_base_samples"])))
                 for ax, d in zip(axes, _DIRS):

@@ -24,7 +24,8 @@ import xarray as xr
 from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, prepare_level,
                       size_band)
 
-from .store import DIRECTIONS, JOINTS, QUANTITIES, _provenance, _unit_table, error_summaries
+from .store import (DIRECTIONS, JOINTS, QUANTITIES, WINDOWS, _provenance, _unit_table, window_label, window_masks,
+                    window_summaries)
 
 __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
            "clearance_draws_from_uniforms", "Design", "designs", "sample_design",
@@ -130,13 +131,16 @@ def sample_design(design: Design, n: int, seed: int) -> np.ndarray:
 
 # --- evaluation ------------------------------------------------------------------------------
 
-def _evaluate_chunk(spec, inputs: ClearanceInputs, u: np.ndarray):
-    """(statistics (R, 2, 3, 6) max and mean |error| SI, status messages ('' when finished))."""
+def _evaluate_chunk(spec, inputs: ClearanceInputs, u: np.ndarray, window: str = "whole"):
+    """(statistics (R, 2, 3, 6) max and mean |error| SI over the analysis ``window`` (WINDOWS), status
+    messages ('' when finished))."""
     scene = spec.scene()
     sim = scene.simulation
     level = prepare_level(scene, spec.model, spec.integrator, spec.dt, spec.elements)
     results = level.simulate_draws(clearance_draws_from_uniforms(scene, inputs, u))
-    stats = np.stack([np.stack(error_summaries(r, sim.settle_time)) for r in results])
+    k = WINDOWS.index(window)
+    stats = np.stack([np.stack([w[k] for w in window_summaries(r, sim.settle_time, sim.steady_after)])
+                      for r in results])
     return stats, [r.message or r.status if r.status != FINISHED else "" for r in results]
 
 
@@ -145,14 +149,14 @@ def _chunks(rows: int, chunk: int) -> list[slice]:
 
 
 def evaluate_statistics(spec, inputs: ClearanceInputs, u: np.ndarray, client=None,
-                        chunk: int | None = None) -> np.ndarray:
-    """Per-row statistics (R, 2, 3, 6) of the level for uniforms u (R, D), in chunks (default: four
-    per worker, at most 256 rows) on a dask ``client`` (None: in this process); SensitivityError
-    if any row failed."""
+                        chunk: int | None = None, window: str = "whole") -> np.ndarray:
+    """Per-row statistics (R, 2, 3, 6) of the level for uniforms u (R, D) over the analysis
+    ``window``, in chunks (default: four per worker, at most 256 rows) on a dask ``client`` (None:
+    in this process); SensitivityError if any row failed."""
     workers = max(1, len(client.nthreads())) if client is not None else 1
     chunk = chunk or max(1, min(256, -(-len(u) // (4 * workers))))
     out, failures = np.empty((len(u), len(STATISTICS), len(QUANTITIES), len(DIRECTIONS))), []
-    for part, (stats, messages) in _run_chunks(spec, inputs, u, _chunks(len(u), chunk), client):
+    for part, (stats, messages) in _run_chunks(spec, inputs, u, _chunks(len(u), chunk), client, window):
         out[part] = stats
         failures += [m for m in messages if m]
     if failures:
@@ -161,14 +165,14 @@ def evaluate_statistics(spec, inputs: ClearanceInputs, u: np.ndarray, client=Non
     return out
 
 
-def _run_chunks(spec, inputs, u, parts, client):
+def _run_chunks(spec, inputs, u, parts, client, window):
     """(slice, chunk result) pairs as they finish."""
     if client is None:
         for part in parts:
-            yield part, _evaluate_chunk(spec, inputs, u[part])
+            yield part, _evaluate_chunk(spec, inputs, u[part], window)
         return
     from dask.distributed import as_completed
-    futures = {client.submit(_evaluate_chunk, spec, inputs, u[p], pure=False): p for p in parts}
+    futures = {client.submit(_evaluate_chunk, spec, inputs, u[p], window, pure=False): p for p in parts}
     for future in as_completed(futures):
         yield futures[future], future.result()
 
@@ -229,8 +233,9 @@ def _group_inputs(inputs: ClearanceInputs, design: Design) -> list[str]:
 
 
 def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int, confidence: float,
-                        wall_time: float) -> xr.Dataset:
-    """The indices of every design as one CF Dataset (index, bound, group, quantity, direction)."""
+                        wall_time: float, window: str = "whole") -> xr.Dataset:
+    """The indices of every design as one CF Dataset (index, bound, group, quantity, direction), of
+    the statistics over the analysis ``window``."""
     groups = [g for r in results for g in r.design.groups]
     data = {}
     for s, name in enumerate(STATISTICS):
@@ -239,7 +244,8 @@ def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int
         what = "maximum" if name == "max_abs_error" else "mean"
         data[f"{name}_sobol"] = (("index", "bound", "group", "quantity", "direction"), values, {
             "long_name": f"Sobol' index of the per-realisation {what} over time of |platform pose "
-                         "error| with respect to an input group", "units": "1"})
+                         "error| with respect to an input group", "units": "1",
+            "analysis_window": window_label(window, scene.simulation.steady_after)})
     design = [r.design.name for r in results for _ in r.design.groups]
     data["group_design"] = (("group",), np.array(design, dtype=object),
                             {"long_name": "grouping the index belongs to (families or joints)"})
@@ -257,7 +263,7 @@ def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int
     attrs = _provenance(scene, f"rss6 Sobol' indices: {spec.model} level, scene {scene.name!r}",
                         model=spec.model, integrator=spec.integrator, dt=spec.dt, elements=spec.elements)
     evaluations = {f"evaluations_{r.design.name}": n * (len(r.design.groups) + 2) for r in results}
-    attrs |= {"seed": spec.seed, "n_base_samples": n, **evaluations, "confidence": confidence,
+    attrs |= {"seed": spec.seed, "n_base_samples": n, **evaluations, "confidence": confidence, "window": window,
               "sampler": "SALib sobol.sample: Saltelli's scheme on scrambled Sobol' points, "
                          "N (G + 2) rows for G groups, no second-order rows",
               "estimator": "SALib sobol.analyze: first order Saltelli et al. (2010), total Jansen "
@@ -276,9 +282,20 @@ def _outputs(stats: np.ndarray) -> np.ndarray:
     return stats.reshape(stats.shape[0], -1)
 
 
+def _check_window(scene, window: str) -> None:
+    """SensitivityError unless ``window`` is one of WINDOWS and holds output samples of the scene."""
+    if window not in WINDOWS:
+        raise SensitivityError(f"--window {window}: choose one of {', '.join(WINDOWS)}")
+    sim = scene.simulation
+    if not window_masks(scene.times, sim.settle_time, sim.steady_after)[WINDOWS.index(window)].any():
+        raise SensitivityError(f"--window {window}: the scene's {window_label(window, sim.steady_after)} "
+                               f"window holds no sample after settle_time_s = {sim.settle_time:g} s")
+
+
 def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = 0.95, workers: int = 2,
-                announce=None) -> xr.Dataset:
-    """Sobol' indices of the level ``spec.model`` with N base rows per design (a power of 2)."""
+                announce=None, window: str = "whole") -> xr.Dataset:
+    """Sobol' indices of the level ``spec.model`` with N base rows per design (a power of 2), of the
+    statistics over the analysis ``window`` (WINDOWS: whole run, startup or steady)."""
     import time
     if spec.model not in LEVELS:
         raise SensitivityError(f"--model {spec.model}: Sobol' indices need a level whose error is a "
@@ -290,6 +307,7 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = 0.95,
                                f"measured from {MIN_N})")
     start = time.perf_counter()
     scene = spec.scene()
+    _check_window(scene, window)
     inputs = clearance_inputs(scene)
     results = []
     with _client(workers) as client:
@@ -298,10 +316,10 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = 0.95,
             if announce:
                 announce(f"{design.name}: {len(u)} evaluations of the {spec.model} level "
                          f"({len(design.groups)} groups, N = {n}) on {workers} worker(s)")
-            stats = evaluate_statistics(spec, inputs, u, client)
+            stats = evaluate_statistics(spec, inputs, u, client, window=window)
             results.append(sobol_indices(design, _outputs(stats), confidence, spec.seed))
     return sensitivity_dataset(scene, spec, inputs, results, n, confidence,
-                               time.perf_counter() - start)
+                               time.perf_counter() - start, window)
 
 
 def _dominant(cell) -> str:
@@ -322,8 +340,10 @@ def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
     da = ds[f"{statistic}_sobol"].sel(group=[g for g in FAMILIES if g in ds["group"].values])
     conf = f"{100 * float(ds.attrs['confidence']):g} %"
     head = "".join(f"{g:>24s}" for g in da["group"].values)
+    window = ds[f"{statistic}_sobol"].attrs.get("analysis_window", "whole run")
     lines = [f"total Sobol' indices ST of the per-realisation {statistic} by joint family, "
-             f"{ds.attrs['model']} level, N = {ds.attrs['n_base_samples']}, [{conf} bootstrap interval]",
+             f"{ds.attrs['model']} level, {window}, N = {ds.attrs['n_base_samples']}, "
+             f"[{conf} bootstrap interval]",
              f"{'quantity':<13s}{'dir':<4s}{head}  largest"]
     for q in ds["quantity"].values:
         for d in ds["direction"].values:

@@ -12,8 +12,8 @@ from pipeline.run import EnsembleSpec
 from pipeline.scene_variant import scene_variant
 from pipeline.sensitivity import (FAMILIES, clearance_draws_from_uniforms, clearance_inputs, designs,
                                   evaluate_statistics, sample_design, sobol_indices)
-from pipeline.store import load_netcdf
-from rss6core import parse_scene
+from pipeline.store import WINDOWS, error_summaries, load_netcdf
+from rss6core import parse_scene, prepare_level
 from rss6core.clearance import draw_clearances, realization_rng
 from rss6core.kinematics import rigid_motion
 from rss6core.quasi_static import closure_matrix, quasi_static_error
@@ -147,6 +147,34 @@ def test_evaluations_do_not_depend_on_chunking(smoke):
     np.testing.assert_array_equal(one, many)
 
 
+def test_window_statistics_are_taken_over_the_windows_samples(smoke):
+    """--window: the steady maxima are the maxima over t >= steady_after_s of each evaluation's own
+    history, the whole-run ones those of before (error_summaries) and the larger of startup and steady."""
+    spec = EnsembleSpec(smoke.source_text, "smoke", "quasi-static", "newmark", 1e-3, 4, 0)
+    inputs = clearance_inputs(smoke)
+    u = sample_design(designs(inputs, False)[0], 8, seed=0)[:5]
+    stats = {w: evaluate_statistics(spec, inputs, u, window=w) for w in WINDOWS}
+    level = prepare_level(smoke, "quasi-static", "newmark", 1e-3, 4)
+    results = level.simulate_draws(clearance_draws_from_uniforms(smoke, inputs, u))
+    steady = smoke.times >= smoke.simulation.steady_after
+    assert 0 < steady.sum() < len(steady)
+    for r, result in enumerate(results):
+        np.testing.assert_array_equal(stats["steady"][r, 0, 0], np.abs(result.displacement)[steady].max(0))
+        np.testing.assert_array_equal(stats["whole"][r], np.stack(error_summaries(result, 0.0)))
+    np.testing.assert_array_equal(stats["whole"][:, 0], np.maximum(stats["startup"][:, 0], stats["steady"][:, 0]))
+    assert not np.array_equal(stats["startup"], stats["steady"])
+
+
+def test_an_empty_window_is_refused_before_any_work(smoke, tmp_path, capsys):
+    config = tmp_path / "nostartup.toml"
+    config.write_text(smoke.source_text.replace("[simulation]\n", "[simulation]\nsteady_after_s = 0.0\n", 1))
+    out = tmp_path / "x.nc"
+    code = main_code(["sensitivity", str(config), "--window", "startup", "-o", str(out), "--no-plots"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "--window startup" in err and "no sample" in err, err
+    assert not out.exists()
+
+
 @pytest.fixture(scope="module")
 def sobol_file(tmp_path_factory, configs):
     path = tmp_path_factory.mktemp("sens") / "s.nc"
@@ -163,6 +191,7 @@ def test_sensitivity_file(sobol_file):
     assert list(ds["bound"].values) == ["estimate", "lower", "upper"]
     assert list(ds["group"].values)[:4] == list(FAMILIES) and ds.sizes["group"] == 22
     assert "bootstrap" in ds.attrs["interval_method"] and ds.attrs["confidence"] == 0.95
+    assert ds.attrs["window"] == "whole" and da.attrs["analysis_window"] == "whole run"
     assert ds.attrs["evaluations_families"] == 64 * 6 and ds.attrs["evaluations_joints"] == 64 * 20
     est, lo, hi = (da.sel(bound=b).values for b in ("estimate", "lower", "upper"))
     assert np.all(lo <= est) and np.all(est <= hi) and np.isfinite(est).all()
@@ -183,6 +212,7 @@ def test_sensitivity_is_reproducible_across_workers(sobol_file, configs, tmp_pat
     (["-n", "100"], "-n 100: the base sample must be a power of 2"),
     (["-n", "32"], "-n 32: the base sample must be a power of 2 of at least 64"),
     (["--model", "paper"], "invalid choice: 'paper'"),
+    (["--window", "late"], "invalid choice: 'late'"),
 ])
 def test_bad_requests_get_one_line(argv, message, configs, tmp_path, capsys):
     out = tmp_path / "x.nc"
