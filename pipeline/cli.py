@@ -142,7 +142,7 @@ def _simulate(args) -> int:
 
 def _run(args) -> int:
     from .outputs import check_output_path
-    from .run import EnsembleSpec, SchedulerUnavailable, ensemble
+    from .run import EnsembleSpec, SchedulerUnavailable, ensemble, parts_dir
     from .summary import failure_reasons
     specs, verdicts = _requirements(args), []
     targets = _until_targets(args)
@@ -157,6 +157,7 @@ def _run(args) -> int:
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements,
                         args.seed, args.store, qmc_replicates=replicates)
     until = None
+    kept = f"finished chunks are kept in {parts_dir(output)}"
     try:
         if targets:
             from .until import run_until
@@ -169,12 +170,11 @@ def _run(args) -> int:
                                chunk=args.chunk, annotate=_annotate(specs, verdicts),
                                worker_timeout=args.worker_timeout)
     except SchedulerUnavailable as exc:
-        parts = output.with_name(output.name + ".parts")
-        kept = f"; {_continue(f'finished chunks are kept in {parts}')}" if parts.exists() else ""
-        print(f"rss6: error: {exc}{kept}", file=sys.stderr)
+        print(f"rss6: error: {exc}" + (f"; {_continue(kept)}" if parts_dir(output).exists() else ""),
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        return _interrupted(f"finished chunks are kept in {output}.parts")
+        return _interrupted(kept)
     from .stats import ensemble_stats, format_stats
     from .gate import exit_code, format_verdicts
     ds = outcome.dataset
@@ -468,7 +468,7 @@ def _level_spec(args, scene, level: str):
 def _multifidelity(args) -> int:
     from .multifidelity import format_multifidelity, level_paths, multifidelity_dataset, to_json
     from .outputs import check_output_path
-    from .run import SchedulerUnavailable, ensemble
+    from .run import SchedulerUnavailable, ensemble, parts_dir
     from .store import write_netcdf
     if args.high == args.low:
         raise SceneError(f"--low {args.low}: must differ from --high (the same level is no control "
@@ -485,15 +485,15 @@ def _multifidelity(args) -> int:
     data = []
     for level, n, path in ((args.high, args.n, files[0]), (args.low, args.low_n, files[1])):
         print(f"rss6 multifidelity: {level} level, {n} realisations in {path}", file=sys.stderr)
+        kept = f"finished chunks are kept in {parts_dir(path)}"
         try:
             out = ensemble(_level_spec(args, scene, level), n, path, workers=args.workers,
                            scheduler=args.scheduler, progress=not args.json)
         except SchedulerUnavailable as exc:
-            print(f"rss6: error: {exc}; {_continue(f'finished chunks are kept in {path}.parts')}",
-                  file=sys.stderr)
+            print(f"rss6: error: {exc}; {_continue(kept)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
-            return _interrupted(f"finished chunks are kept in {path}.parts")
+            return _interrupted(kept)
         data.append(out.dataset.sel(realization=out.dataset["realization"].values < n))
     try:
         mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio, args.width)

@@ -37,7 +37,7 @@ from .store import (EnsembleFileError, finish_ensemble, identity, load_netcdf, o
                     chunk_dataset, sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
-           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable"]
+           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable", "parts_dir"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -161,7 +161,8 @@ def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest) -> tuple[
     return pieces, done
 
 
-def _parts_dir(output: Path) -> Path:
+def parts_dir(output: Path) -> Path:
+    """The folder OUTPUT.parts where a run keeps its finished chunks until the merged file is written."""
     return output.with_name(output.name + ".parts")
 
 
@@ -424,7 +425,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
         raise ValueError(f"--worker-timeout must be positive, got {worker_timeout}")
     output = Path(output)
     with OutputLock(output):
-        manifest = PartsManifest(_parts_dir(output), spec.attrs())
+        manifest = PartsManifest(parts_dir(output), spec.attrs())
         pieces, done = _stored(output, spec, manifest)
         todo = [r for r in range(n) if r not in done]
         if todo:
