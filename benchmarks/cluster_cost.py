@@ -94,7 +94,8 @@ def main(argv=None) -> int:
         print("  each run: " + ", ".join(f"worker {m['run']['worker_cpu_s']:.2f} s / wall {m['run']['wall_s']:.2f} s"
                                           for m in out["runs"][name]))
     r, d = out["rss6"]["run"], out["dask"]["run"]
-    print(f"rss6 / dask settings, medians of {args.pairs} pairs: worker CPU {r['worker_cpu_s'] / d['worker_cpu_s']:.2f}, "
+    print(f"rss6 / dask settings, medians of {args.pairs} pairs: "
+          f"worker CPU {r['worker_cpu_s'] / d['worker_cpu_s']:.2f}, "
           f"main CPU {r['main_cpu_s'] / d['main_cpu_s']:.2f}, wall {r['wall_s'] / d['wall_s']:.2f}")
     return 0
 

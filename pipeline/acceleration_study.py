@@ -2,11 +2,12 @@
 
 Issue 21, "accelerations you can defend": the same realisations (same seed) of the contact level
 are run for each variant (elements per link; Euler-Bernoulli, or Timoshenko beams with rotary
-inertia and consistent or lumped mass; the scene's contact step or half of it) and each realisation's max |acceleration error|
-is taken per direction over the scene's steady window (t >= ``[simulation] steady_after_s``, the
-boundary every ensemble file uses) on the output histories.  The
-friction-excited ~100 Hz bursts are measured as the max over each burst window (BURSTS) of the
-acceleration minus its running mean over BURST_PERIOD (which removes the slow trajectory-rate part).  One command reruns it::
+inertia and consistent or lumped mass; the scene's contact step or half of it) and each
+realisation's max |acceleration error| is taken per direction over the scene's steady window
+(t >= ``[simulation] steady_after_s``, the boundary every ensemble file uses) on the output
+histories.  The friction-excited ~100 Hz bursts are measured as the max over each burst window (BURSTS) of the
+acceleration minus its running mean over BURST_PERIOD (which removes the slow trajectory-rate
+part).  One command reruns it::
 
     python -m pipeline.acceleration_study paper -n 6 -o docs/study   # about 5 min, 2 cores
 
@@ -152,7 +153,8 @@ def markdown(runs: dict, scene_name: str, n: int, seed: int) -> str:
                     + f" | {r['seconds_per_realization']:.3g} |")
     steady_after = next(iter(runs.values()))["steady_after"]
     intro = (f"Scene {scene_name}, contact level, realisations 0-{n - 1} of seed {seed}; max |acceleration "
-             f"error| over the steady window t >= {steady_after:g} s on the output grid (x, y, z in m/s^2; rx, ry, rz in "
+             f"error| over the steady window t >= {steady_after:g} s on the output grid (x, y, z in m/s^2; "
+             f"rx, ry, rz in "
              f"rad/s^2), median [min-max] over the realisations; bursts: max |ry - its {1e3 * BURST_PERIOD:g} ms "
              f"running mean| over " + " and ".join(f"{a:g}-{b:g} s" for a, b in BURSTS) + ".")
     return "\n".join([intro, "", *rows, "", *_verdict(runs)]) + "\n"

@@ -469,7 +469,7 @@ def _multifidelity(args) -> int:
     from .multifidelity import format_multifidelity, level_paths, multifidelity_dataset, to_json
     from .outputs import check_output_path
     from .run import SchedulerUnavailable, ensemble, parts_dir
-    from .store import write_netcdf
+    from .store import check_window, write_netcdf
     if args.high == args.low:
         raise SceneError(f"--low {args.low}: must differ from --high (the same level is no control "
                          "variate)")
@@ -479,6 +479,10 @@ def _multifidelity(args) -> int:
     if args.width is not None and args.cost_ratio is None:
         raise SceneError("--width: needs --cost-ratio (the cost of a high realisation over a low one)")
     scene = find_scene(args.config)
+    try:
+        check_window(scene, args.window)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
     output = check_output_path(args.output, args.parents)
     _warn_oversubscription(args.workers, args.scheduler)
     files = level_paths(output)
@@ -496,7 +500,8 @@ def _multifidelity(args) -> int:
             return _interrupted(kept)
         data.append(out.dataset.sel(realization=out.dataset["realization"].values < n))
     try:
-        mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio, args.width)
+        mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio, args.width,
+                                    args.window)
     except ValueError as exc:   # too few finished pairs
         print(f"rss6: error: {files[0]}: {exc}", file=sys.stderr)
         return 1
@@ -510,6 +515,7 @@ def _multifidelity(args) -> int:
 
 
 def _multifidelity_parser(sub) -> None:
+    from .store import WINDOWS
     mf = sub.add_parser("multifidelity", help="means of a dear level with a cheap level on more "
                         "realisations as control variate (multi-fidelity Monte Carlo)")
     mf.add_argument("config", nargs="?", default="paper",
@@ -536,6 +542,9 @@ def _multifidelity_parser(sub) -> None:
     mf.add_argument("--width", type=_fraction, metavar="REL",
                     help="with --cost-ratio: also the realisations plain MC and multi-fidelity need "
                          "for a half-width of REL times the mean, e.g. 0.02 (default: none)")
+    mf.add_argument("--window", choices=WINDOWS, default="whole",
+                    help="analysis window of the means: whole (t >= the scene's settle_time_s), "
+                         "startup (before its steady_after_s) or steady (from it) (default whole)")
     mf.add_argument("--workers", type=_positive_int, default=2,
                     help="local dask workers, one thread each (default 2)")
     mf.add_argument("--scheduler", help=SCHEDULER_HELP)

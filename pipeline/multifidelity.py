@@ -50,6 +50,7 @@ from scipy import stats as sps
 from rss6core import FINISHED
 
 from .stats import BOUNDS, MIN_N_MEAN, VARIABLES, in_window, mean_interval
+from .store import window_label
 
 __all__ = ["MIN_N_MF", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
            "variance_reduction", "estimated_variance_reduction", "adjusted_correlation",
@@ -210,6 +211,7 @@ def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float =
     With a cost ratio (one high realisation over one low one) also the cost-optimal M/N and the
     cost relative to plain MC for the same interval width; with a relative half-width ``width``
     too, the realisations each method needs to reach it; all in analysis window ``window``."""
+    steady_after = float(high.attrs.get("steady_after_s", 0.0))
     high, low = in_window(high, window), in_window(low, window)
     _check_pairing(high, low, *sources)
     data = {}
@@ -225,8 +227,9 @@ def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float =
         for name in VARIABLES:
             ds = ds.assign(_costs(ds, paired_values(high, low, name)[0], name, cost_high_over_low,
                                   width, confidence))
+    where = {"window": window, "analysis_window": window_label(window, steady_after)}
     return ds.assign_attrs(_attrs(high, low, confidence, sources, n_pairs, cost_high_over_low,
-                                  width))
+                                  width) | where)
 
 
 def _costs(ds: xr.Dataset, y: np.ndarray, name: str, cost: float, width, confidence) -> dict:
@@ -337,9 +340,9 @@ def format_multifidelity(mds: xr.Dataset, name: str = "max_abs_error") -> str:
     plain-MC n, and the cost columns when known."""
     a = mds.attrs
     extra = _extra_columns(mds, name)
-    lines = [f"mean of per-realisation {name}: {a['high_model']} level on N = {a['n_high']} with "
-             f"{a['low_model']} on M = {a['n_low']} as control variate; two-sided "
-             f"{100 * a['confidence']:g} % bounds",
+    lines = [f"mean of per-realisation {name}, window {a.get('analysis_window', 'whole run')}: "
+             f"{a['high_model']} level on N = {a['n_high']} with {a['low_model']} on M = {a['n_low']} "
+             f"as control variate; two-sided {100 * a['confidence']:g} % bounds",
              f"{'quantity':<13s}{'dir':<4s}{'unit':<8s}{'MF':>10s}{'lower':>10s}{'upper':>10s}"
              f"{'high only':>10s}{'lower':>10s}{'upper':>10s}{'rho':>7s}{'VR':>7s}{'n_eq':>8s}"
              + "".join(f"{h:>11s}" for h in extra.values())]

@@ -218,7 +218,9 @@ def local_cluster(workers: int):
     The workers are forked from a server process that imports rss6 and its libraries once
     (:func:`_preload_worker_imports`), not started afresh: each fresh worker spent seconds importing
     them, and closing the cluster took seconds more. The cluster has no dashboard, so what only
-    feeds one is off or slowed (QUIET_CLUSTER).
+    feeds one is off or slowed (QUIET_CLUSTER). Its scheduler still serves dask's health routes
+    over HTTP, on a free local port: by default it takes 8787 and warns "Port 8787 is already in
+    use" whenever another cluster (a second rss6 run) holds it.
     """
     import dask
     from dask.distributed import LocalCluster
@@ -228,7 +230,8 @@ def local_cluster(workers: int):
     with dask.config.set(settings), _workers_ignore_ctrl_c():
         _preload_worker_imports()
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                            dashboard_address=None, host="127.0.0.1", silence_logs=logging.CRITICAL)
+                            dashboard_address=None, host="127.0.0.1", silence_logs=logging.CRITICAL,
+                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
 
 
 # a local cluster without a dashboard: no statistical profiler in the workers (a stack sample of

@@ -24,7 +24,7 @@ import xarray as xr
 from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, prepare_level,
                       size_band)
 
-from .store import (DIRECTIONS, JOINTS, QUANTITIES, WINDOWS, _provenance, _unit_table, window_label, window_masks,
+from .store import (DIRECTIONS, JOINTS, QUANTITIES, WINDOWS, _provenance, _unit_table, check_window, window_label,
                     window_summaries)
 
 __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
@@ -284,12 +284,10 @@ def _outputs(stats: np.ndarray) -> np.ndarray:
 
 def _check_window(scene, window: str) -> None:
     """SensitivityError unless ``window`` is one of WINDOWS and holds output samples of the scene."""
-    if window not in WINDOWS:
-        raise SensitivityError(f"--window {window}: choose one of {', '.join(WINDOWS)}")
-    sim = scene.simulation
-    if not window_masks(scene.times, sim.settle_time, sim.steady_after)[WINDOWS.index(window)].any():
-        raise SensitivityError(f"--window {window}: the scene's {window_label(window, sim.steady_after)} "
-                               f"window holds no sample after settle_time_s = {sim.settle_time:g} s")
+    try:
+        check_window(scene, window)
+    except ValueError as exc:
+        raise SensitivityError(str(exc)) from None
 
 
 def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = 0.95, workers: int = 2,

@@ -123,6 +123,17 @@ def window_label(window: str, steady_after: float) -> str:
             "steady": f"steady (t >= {steady_after:g} s)"}[window]
 
 
+def check_window(scene, window: str) -> None:
+    """ValueError (naming --window) unless ``window`` is one of WINDOWS and holds output samples of
+    ``scene`` (an ensemble's statistics over an empty window would all be NaN)."""
+    if window not in WINDOWS:
+        raise ValueError(f"--window {window}: choose one of {', '.join(WINDOWS)}")
+    sim = scene.simulation
+    if not window_masks(scene.times, sim.settle_time, sim.steady_after)[WINDOWS.index(window)].any():
+        raise ValueError(f"--window {window}: the scene's {window_label(window, sim.steady_after)} "
+                         f"window holds no sample after settle_time_s = {sim.settle_time:g} s")
+
+
 _WINDOW_ATTRS = {"long_name": "analysis window: whole run, startup t < steady_after_s, "
                               "steady t >= steady_after_s (global attribute, s)"}
 

@@ -33,8 +33,8 @@ from .dynamics import euler_moment, platform_inertia_world, rod_angular_motion
 from .kinematics import RigidMotion, crank_axes
 from .sections import section_properties, shear_correction_factor
 
-__all__ = ["LegLayout", "ElasticModel", "build_elastic_model", "scene_link_matrices", "EndMaps", "end_maps", "link_frames",
-           "frame_maps", "split", "join", "apply", "apply_pair", "internal_force", "StepSolver",
+__all__ = ["LegLayout", "ElasticModel", "build_elastic_model", "scene_link_matrices", "EndMaps", "end_maps",
+           "link_frames", "frame_maps", "split", "join", "apply", "apply_pair", "internal_force", "StepSolver",
            "dense_matrices", "system_at", "rigid_loads", "link_loads", "platform_point_map",
            "frame_coupling_forces"]
 

@@ -26,7 +26,8 @@ from .models import MODELS
 from .sections import RectangleSection, TubeSection
 
 __all__ = [
-    "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping", "Clearances", "ContactLaw", "Tolerances",
+    "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping",
+    "Clearances", "ContactLaw", "Tolerances",
     "load_scene", "parse_scene",
 ]
 

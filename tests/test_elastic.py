@@ -118,7 +118,8 @@ def _lowest_mode_release(paper, integrator, dt, duration=0.02):
 
 
 @pytest.mark.parametrize("method", [Integrator.newmark(), Integrator.hht(0.05), Integrator.hht(1 / 3),
-                                    Integrator.generalized_alpha(0.8)], ids=["newmark", "hht-0.05", "hht-1/3", "generalized-alpha-0.8"])
+                                    Integrator.generalized_alpha(0.8)],
+                         ids=["newmark", "hht-0.05", "hht-1/3", "generalized-alpha-0.8"])
 def test_second_order_against_the_closed_form_of_one_mode(paper, method):
     """Release in the lowest mode (91.5 Hz) for 0.02 s: halving h (omega h = 0.23, 0.115, 0.058)
     divides the error against phi cos(omega t) by 4, as a second-order method must."""

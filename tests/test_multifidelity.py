@@ -8,11 +8,11 @@ import xarray as xr
 from scipy import stats as sps
 
 from pipeline.cli import main
-from pipeline.multifidelity import (MIN_N_MF, control_variate_mean, cost_ratio, level_paths,
-                                    multifidelity_dataset, optimal_low_ratio, paired_values,
+from pipeline.multifidelity import (MIN_N_MF, control_variate_mean, cost_ratio, format_multifidelity,
+                                    level_paths, multifidelity_dataset, optimal_low_ratio, paired_values,
                                     variance_reduction)
 from pipeline.run import EnsembleSpec, run_chunk
-from pipeline.store import EnsembleFileError, load_netcdf
+from pipeline.store import WINDOWS, EnsembleFileError, load_netcdf, window_label
 
 CONF = 0.95
 LAWS = {"normal": sps.norm(), "gamma(2)": sps.gamma(2.0), "Laplace": sps.laplace()}
@@ -143,6 +143,29 @@ def test_dataset_from_a_smoke_pair_and_pairing_check(configs):
         multifidelity_dataset(low.isel(realization=[0, 1, 2]), shuffled)
 
 
+def test_dataset_in_one_window_is_the_means_of_that_windows_summaries(configs):
+    """window="steady": the high-only means are the means of the files' steady maxima (not the whole
+    run's), the control variate uses the same window's low maxima, and the window is recorded and
+    shown in the table's header."""
+    high = _ensemble(configs, "smoke", "paper", range(4))
+    low = _ensemble(configs, "smoke", "quasi-static", range(8))
+    means = {}
+    for window in WINDOWS:
+        mds = multifidelity_dataset(high, low, CONF, window=window)
+        means[window] = mds["max_abs_error_mean"].sel(estimator="high_only", bound="estimate")
+        np.testing.assert_allclose(means[window], high["max_abs_error"].sel(window=window).mean(
+            "realization").transpose("quantity", "direction"))
+        y, x = paired_values(high, low, "max_abs_error", window)
+        rho = [np.corrcoef(y[:, 0, d], x[:4, 0, d])[0, 1] for d in range(6)]    # independent: numpy
+        np.testing.assert_allclose(mds["max_abs_error_correlation"].sel(quantity="displacement"), rho,
+                                   rtol=1e-10)
+        label = window_label(window, float(high.attrs["steady_after_s"]))
+        assert mds.attrs["window"] == window and mds.attrs["analysis_window"] == label
+        assert f"max_abs_error, window {label}:" in format_multifidelity(mds).splitlines()[0]
+    assert not np.allclose(means["steady"], means["whole"])
+    assert (means["steady"] <= means["whole"]).all() and (means["startup"] <= means["whole"]).all()
+
+
 def test_help_states_the_measured_minimum(capsys):
     with pytest.raises(SystemExit):
         main(["multifidelity", "-h"])
@@ -164,6 +187,16 @@ def test_cli_bad_options_exit_2_before_work(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_cli_empty_window_is_refused_before_work(smoke, tmp_path, capsys):
+    config = tmp_path / "nostartup.toml"
+    config.write_text(smoke.source_text.replace("[simulation]\n", "[simulation]\nsteady_after_s = 0.0\n", 1))
+    out = tmp_path / "F.nc"
+    assert main(["multifidelity", str(config), "--high", "paper", "--window", "startup", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--window startup" in err and "no sample" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["nostartup.toml"]
+
+
 @pytest.mark.slow
 def test_cli_runs_resumes_and_writes_json(tmp_path, capsys):
     """smoke, paper level high on 32, quasi-static low on 64: the two ordinary ensembles beside
@@ -180,5 +213,6 @@ def test_cli_runs_resumes_and_writes_json(tmp_path, capsys):
     assert main(argv + ["--json"]) == 0
     js = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(c))
     assert js["n_high"] == 32 and js["max_abs_error"]["displacement"]["x"]["multifidelity_lower"]
+    assert js["window"] == "whole" and js["analysis_window"] == "whole run"
     assert js["mean_abs_error"]["velocity"]["z"]["correlation"] is not None
     xr.testing.assert_identical(load_netcdf(out).drop_attrs(), first.drop_attrs())

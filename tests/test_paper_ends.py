@@ -29,7 +29,8 @@ def paper_maxima_positions(paper):
     """Sample index of every realisation's |v| and |a| maximum, per direction: (2, R, 6), and T."""
     level = prepare_level(paper, "paper")
     results = level.simulate(0, range(REALIZATIONS))
-    where = np.array([[np.argmax(np.abs(getattr(r, q)), axis=0) for r in results] for q in ("velocity", "acceleration")])
+    where = np.array([[np.argmax(np.abs(getattr(r, q)), axis=0) for r in results]
+                      for q in ("velocity", "acceleration")])
     return where, len(results[0].t)
 
 

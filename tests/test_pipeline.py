@@ -1,4 +1,5 @@
 """Ensembles: reproducibility across workers and chunks, resume, refusal, file checks, statistics."""
+import contextlib
 import json
 import os
 import signal
@@ -230,6 +231,24 @@ def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(referen
     assert taken == []
     assert np.array_equal(error_summaries(open_ensemble(tmp_path / "with-client.nc")),
                           error_summaries(ref))
+
+
+def test_a_second_local_cluster_starts_without_a_port_warning():
+    """Two rss6 runs at once: the second cluster's scheduler finds dask's default HTTP port 8787
+    taken (held here by a socket, or by whatever holds it already) and starts without the
+    "Port 8787 is already in use" warning dask prints by default."""
+    import socket
+    import warnings
+
+    from pipeline.run import local_cluster
+    with socket.socket() as holder, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with contextlib.suppress(OSError):      # already taken: the same situation
+            holder.bind(("127.0.0.1", 8787))
+            holder.listen()
+        with local_cluster(1) as cluster:
+            assert cluster.scheduler.http_server is not None
+    assert not [w for w in caught if "8787" in str(w.message)], [str(w.message) for w in caught]
 
 
 def test_smoke_ensemble_through_the_cli(tmp_path, capsys):

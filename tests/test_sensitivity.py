@@ -103,8 +103,9 @@ def test_quasi_static_indices_match_the_closed_form(paper):
     in closed form.  The 48 cells (S1, ST x 4 families x 6 directions) from N = 1024 (6144 core
     evaluations) lie within their 95 % bootstrap intervals: coverage was measured at 94-98 % (slow
     test below), so 1-2 of 48 may lie outside; at most 5 are allowed (more happens with
-    probability 3 % at 95 % coverage, 0.1 % at 97.5 %, were the cells independent), none by more than half an interval width beyond its
-    bound, and every interval is narrower than 0.15 (so a swapped or misweighted family fails)."""
+    probability 3 % at 95 % coverage, 0.1 % at 97.5 %, were the cells independent), none by more
+    than half an interval width beyond its bound, and every interval is narrower than 0.15 (so a
+    swapped or misweighted family fails)."""
     inputs = clearance_inputs(paper)
     design = designs(inputs, False)[0]
     u = sample_design(design, 1024, seed=1)
