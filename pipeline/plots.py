@@ -18,7 +18,7 @@ __all__ = ["plot_ensemble", "plot_run", "ensemble_figures", "run_figures", "figu
            "draw_abs_envelope", "mark_steady", "figure_title", "save_figure", "plain_ticks", "sensitivity_figures",
            "plot_sensitivity"]
 
-from .stats import (MIN_N_MEAN, estimates, in_window, quantile_estimates,  # noqa: E402
+from .stats import (MIN_N_MEAN, ensemble_stats, estimates, in_window, quantile_estimates,  # noqa: E402
                     running_mean_interval, windows_of)
 from .store import DIRECTIONS as _DIRS  # noqa: E402
 from .store import window_label  # noqa: E402
@@ -104,9 +104,10 @@ def _peaks(ds, q: str, finished, window: str = "whole") -> np.ndarray:
         "realization", "direction").values[finished]
 
 
-def _histograms(ds, q: str, finished):
+def _histograms(ds, q: str, finished, sds):
     """Per direction, histograms of the per-realisation maxima in the startup and steady windows
-    (the whole run's where the file has no windows), each with its mean."""
+    (the whole run's where the file has no windows), each with its mean and its q95 from ``sds``
+    (:func:`pipeline.stats.ensemble_stats`, every window), as ``rss6 stats`` prints them."""
     windows = [w for w in windows_of(ds) if w != "whole"] or ["whole"]
     peaks = {w: _peaks(ds, q, finished, w) for w in windows}             # (R, 6) each
     fig, axes = _grid(figure_title(f"per-realisation max |{q} error| per analysis window", ds,
@@ -123,15 +124,37 @@ def _histograms(ds, q: str, finished):
             label = window_label(w, t_s).split(" (")[0]
             ax.hist(x, bins=min(30, max(5, x.size // 4)), color=f"C{i}", alpha=0.5,
                     label=f"{label}, mean {mean:.3g}")
-            ax.axvline(mean, color=f"C{i}", lw=1.2)
+            ax.axvline(mean, color=f"C{i}", lw=1.2, gid=f"mean {w}")
+            _mark_q95(ax, in_window(sds, w)["max_abs_error"].sel(statistic="q95", quantity=q, direction=d),
+                      f, i, w, label)
         ax.set(xlabel=f"max |{d} error| [{unit}]", ylabel="realisations", title=d)
-        ax.legend(fontsize=7, loc="upper right")
+        ax.set_ylim(0, 1.25 * ax.get_ylim()[1])                # headroom for the interval bars
+        ax.legend(fontsize=7, loc="best")
         ax.grid(alpha=0.3)
         plain_ticks(ax)
         ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
-    if np.isfinite(t_s):
-        fig.supxlabel(f"startup: t < {t_s:g} s; steady: t >= {t_s:g} s", fontsize=9)
+    fig.supxlabel(_histogram_key(t_s, sds), fontsize=9)
     return fig
+
+
+def _mark_q95(ax, cell, f: float, i: int, window: str, label: str) -> None:
+    """A dashed line at the q95 estimate of ``cell`` (bound: estimate, lower, upper; SI, shown times
+    ``f``) and, only where pipeline.stats gives one, its interval as a capped bar near the top."""
+    est, lo, hi = (float(cell.sel(bound=b)) * f for b in ("estimate", "lower", "upper"))
+    text = f"{label}, q95 est. {est:.3g}"
+    if np.isfinite(lo) and np.isfinite(hi):
+        ax.plot([lo, hi], [0.96 - 0.05 * i] * 2, color=f"C{i}", lw=1.5, marker="|", ms=7,
+                transform=ax.get_xaxis_transform(), gid=f"q95 interval {window}")
+        text += f" [{lo:.3g}, {hi:.3g}]"
+    ax.axvline(est, color=f"C{i}", lw=1.2, ls="--", label=text, gid=f"q95 {window}")
+
+
+def _histogram_key(t_s: float, sds) -> str:
+    """The line under the histograms: the windows' time spans and what the marks are."""
+    conf = f"{100 * float(sds.attrs['confidence']):g} %"
+    marks = (f"solid: mean; dashed: q95 estimate; bar: its {conf} interval, where rss6 stats gives one "
+             f"(from n = {int(sds.attrs['min_n_q95'])})")
+    return f"startup: t < {t_s:g} s; steady: t >= {t_s:g} s; {marks}" if np.isfinite(t_s) else marks
 
 
 def _convergence(ds, q: str, finished, confidence: float = 0.95):
@@ -173,11 +196,11 @@ def ensemble_figures(ds):
     finished = ds["status"].values.astype(str) == "finished"
     if not finished.any():
         raise ValueError("no finished realisation to plot")
-    figs = {}
+    sds, figs = ensemble_stats(ds, window=None), {}
     for q in QUANTITIES:
         if "error" in ds:
             figs[f"envelope_{q}.png"] = _envelope(ds, q, finished)
-        figs[f"hist_max_{q}.png"] = _histograms(ds, q, finished)
+        figs[f"hist_max_{q}.png"] = _histograms(ds, q, finished, sds)
         figs[f"convergence_{q}.png"] = _convergence(ds, q, finished)
     return figs
 

@@ -17,7 +17,8 @@ from pipeline.cli import main
 from pipeline.filecheck import open_results
 from pipeline.plots import ensemble_figures, figure_unit, run_figures
 from pipeline.report import LEVELS, error_figure, rigid_figure
-from pipeline.stats import MIN_N_MEAN, estimates, running_mean_interval
+from pipeline.stats import (MIN_N_MEAN, ensemble_stats, estimates, min_n_for_quantile,
+                            running_mean_interval)
 from pipeline.store import open_ensemble, write_netcdf
 from pipeline.study import recommend, stability_figure, tradeoff_figure
 
@@ -176,19 +177,20 @@ def test_figure_units_follow_the_magnitude():
 
 
 def test_histogram_markers_and_convergence_interval_come_from_stats(full_ensemble):
-    """Mean and q95 lines sit at pipeline.stats' numbers; the interval starts at MIN_N_MEAN; the
-    y range is not below zero."""
+    """Mean lines sit at pipeline.stats' numbers; the interval starts at MIN_N_MEAN; the y range is
+    not below zero."""
     ds = open_ensemble(full_ensemble)
     figs = ensemble_figures(ds)
     try:
         si = ds["max_abs_error"].sel(quantity="acceleration", direction="z")
         f, unit = figure_unit("acceleration", "z", si.sel(window=["startup", "steady"]).values)
         hist = figs["hist_max_acceleration.png"].axes[2]
-        lines = [ln.get_xdata()[0] for ln in hist.get_lines()]      # one mean per window
+        lines = [ln.get_xdata()[0] for ln in hist.get_lines() if ln.get_gid().startswith("mean")]
         want = [estimates(si.sel(window=w).values * f, ("mean",))[0] for w in ("startup", "steady")]
         np.testing.assert_allclose(lines, want, rtol=1e-12)
         assert want[0] != want[1]
-        assert [t.get_text().split(",")[0] for t in hist.get_legend().get_texts()] == ["startup", "steady"]
+        assert [t.get_text().split(",")[0] for t in hist.get_legend().get_texts()] == [
+            "startup", "startup", "steady", "steady"]
         assert f"[{unit}]" in hist.get_xlabel()
         f, unit = figure_unit("acceleration", "z", si.sel(window="whole").values)
         peak = si.sel(window="whole").values * f
@@ -198,6 +200,45 @@ def test_histogram_markers_and_convergence_interval_come_from_stats(full_ensembl
         mean, (lo, _) = running_mean_interval(peak, 0.95)
         np.testing.assert_allclose(conv.get_lines()[0].get_ydata(), mean)
         assert conv.get_ylim()[0] >= 0.0
+    finally:
+        for fig in figs.values():
+            plt.close(fig)
+
+
+def _tiled(ds, n: int):
+    """An ensemble of ``n`` realisations repeating those of ``ds`` (enough for a q95 interval)."""
+    return ds.isel(realization=np.arange(n) % ds.sizes["realization"]).assign_coords(
+        realization=np.arange(n))
+
+
+@pytest.mark.parametrize("n", [None, 60])
+def test_histogram_q95_marker_is_stats_estimate_with_its_interval_only_from_min_n(full_ensemble, n):
+    """Each panel's dashed q95 line sits at ensemble_stats' q95 estimate of its window, the legend
+    names it an estimate, and the interval bar (stats' bounds) is drawn only from n = 59 on."""
+    ds = open_ensemble(full_ensemble)
+    ds = ds if n is None else _tiled(ds.load(), n)
+    sds, figs = ensemble_stats(ds, window=None), ensemble_figures(ds)
+    n = ds.sizes["realization"]
+    assert (n >= min_n_for_quantile(0.95, 0.95)) == (n == 60)
+    try:
+        for ax, d in zip(figs["hist_max_acceleration.png"].axes, sds.direction.values):
+            f, _ = figure_unit("acceleration", d, ds["max_abs_error"].sel(
+                quantity="acceleration", direction=d, window=["startup", "steady"]).values)
+            marks = {ln.get_gid(): ln.get_xdata() for ln in ax.get_lines()}
+            legend = [t.get_text() for t in ax.get_legend().get_texts()]
+            for w in ("startup", "steady"):
+                cell = sds["max_abs_error"].sel(window=w, statistic="q95", quantity="acceleration",
+                                                direction=d)
+                est, lo, hi = (float(cell.sel(bound=b)) * f for b in ("estimate", "lower", "upper"))
+                np.testing.assert_allclose(marks[f"q95 {w}"], est, rtol=1e-12)
+                assert any(t.startswith(f"{w}, q95 est. {est:.3g}") for t in legend), legend
+                if n == 60:
+                    np.testing.assert_allclose(marks[f"q95 interval {w}"], [lo, hi], rtol=1e-12)
+                else:
+                    assert np.isnan(lo) and f"q95 interval {w}" not in marks
+        key = " ".join(figs["hist_max_acceleration.png"]._supxlabel.get_text().split())
+        assert "dashed: q95 estimate" in key and "from n = 59" in key
+        assert_legible({k: v for k, v in figs.items() if k.startswith("hist")})
     finally:
         for fig in figs.values():
             plt.close(fig)
