@@ -786,6 +786,7 @@ def _simulate_parser(sub) -> None:
 
 
 def _run_parser(sub) -> None:
+    from .store import STORES
     run = sub.add_parser("run", help="run a Monte Carlo ensemble of clearance realisations")
     run.add_argument("config", nargs="?", default="paper",
                      help="scene TOML file or embedded scene name (default: paper)")
@@ -810,7 +811,7 @@ def _run_parser(sub) -> None:
                      help="realisations per task (default: n cut into a multiple of the workers "
                           "nearly equal chunks of at most 64, 128 for contact; each task integrates its realisations "
                           "as one batch)")
-    run.add_argument("--store", choices=("summary", "full"), default="summary",
+    run.add_argument("--store", choices=STORES, default="summary",
                      help="summary: per-realisation maxima and means; full: also time histories "
                           "(default: summary)")
     _require_arguments(run)

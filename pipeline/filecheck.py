@@ -1,20 +1,25 @@
-"""Checks that a readable netCDF file holds what rss6 wrote: dimensions, labels, units, values.
+"""Checks that a readable netCDF file holds what rss6 wrote: dimensions, labels, units, values,
+and global attributes consistent with the data, rss6's vocabularies and the recorded scene.
 
 A tampered or foreign file that opens fine must not be summarised silently: each
 check raises store.EnsembleFileError naming the file and the first problem.
 """
 from __future__ import annotations
 
+import functools
+import math
+
 import numpy as np
 
-from rss6core import FINISHED, STATUSES
+from rss6core import FINISHED, INTEGRATORS, MODELS, STATUSES, SceneError, parse_scene, time_grid
 
-from .store import (DIRECTIONS, MIXED_UNITS, QUANTITIES, WINDOWS, EnsembleFileError, _unit_table,
-                    load_netcdf)
+from .store import (DIRECTIONS, ENSEMBLE_ATTRS, MIXED_UNITS, PROVENANCE, QUANTITIES, STORES, WINDOWS,
+                    EnsembleFileError, _unit_table, load_netcdf)
 
 __all__ = ["check_ensemble", "check_run", "open_results"]
 
 SUMMARIES = ("max_abs_error", "mean_abs_error")
+FORCE_LEVELS = ("paper", "contact")   # the levels that write max_contact_force
 
 
 def _labels(ds, path) -> None:
@@ -92,6 +97,150 @@ def _values(ds, path, finished: np.ndarray) -> None:
             raise EnsembleFileError(f"{path}: {name} is not finite in finished realisation {first}")
 
 
+def _plain(value):
+    """An attribute as a Python value (netCDF gives numpy scalars and arrays), to compare and print."""
+    return value.tolist() if isinstance(value, (np.generic, np.ndarray)) else value
+
+
+def _required(ds, path, names, kind: str) -> None:
+    """Every global attribute of ``names`` present (``kind``: the files rss6 writes them in)."""
+    missing = [k for k in names if k not in ds.attrs]
+    if missing:
+        raise EnsembleFileError(f"{path}: attribute {missing[0]} missing (rss6 writes it in every {kind})")
+
+
+def _integer(ds, path, key: str, least: int) -> int:
+    """Attribute ``key``, which rss6 writes as an integer, checked to be one >= ``least``."""
+    value = _plain(ds.attrs[key])
+    if isinstance(value, bool) or not isinstance(value, int) or value < least:
+        raise EnsembleFileError(f"{path}: attribute {key} is {value!r}; expected an integer >= {least}")
+    return value
+
+
+def _choice(ds, path, key: str, allowed: tuple) -> str:
+    """Attribute ``key`` checked to be a word of rss6's vocabulary ``allowed``."""
+    value = _plain(ds.attrs[key])
+    if not isinstance(value, str) or value not in allowed:
+        raise EnsembleFileError(f"{path}: attribute {key} is {value!r}; expected one of {', '.join(allowed)}")
+    return value
+
+
+def _settings(ds, path) -> str:
+    """Model, integrator, time step (s), mesh and version as rss6 writes them; returns the model."""
+    model = _choice(ds, path, "model", MODELS)
+    _choice(ds, path, "integrator", INTEGRATORS)
+    dt = _plain(ds.attrs["time_step_s"])
+    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not (math.isfinite(dt) and dt > 0):
+        raise EnsembleFileError(f"{path}: attribute time_step_s is {dt!r}; expected a time > 0 s")
+    _integer(ds, path, "elements_per_link", 1)
+    version = _plain(ds.attrs["rss6_version"])
+    if not isinstance(version, str) or not version.strip():
+        raise EnsembleFileError(f"{path}: attribute rss6_version is {version!r}; expected a version")
+    return model
+
+
+def _level(ds, path, model: str, finished: np.ndarray) -> None:
+    """The model agrees with the data: the paper and contact levels, and only they, write contact
+    forces, for every finished realisation."""
+    has = "max_contact_force" in ds
+    if has and model not in FORCE_LEVELS:
+        raise EnsembleFileError(f"{path}: attribute model is {model!r}, but the file holds max_contact_force, "
+                                f"which only the {' and '.join(FORCE_LEVELS)} levels write")
+    if not has and model in FORCE_LEVELS and finished.any():
+        raise EnsembleFileError(f"{path}: attribute model is {model!r}, but the file has no max_contact_force, "
+                                "which that level writes for every finished realisation")
+
+
+@functools.lru_cache(maxsize=8)
+def _scene_of(text: str):
+    """The scene a file's scene_toml describes, or the parser's complaint in one line; cached, as
+    every part of an ensemble carries the same text (parsing the paper scene takes 16 ms)."""
+    try:
+        return parse_scene(text, "scene_toml")
+    except SceneError as exc:
+        return " ".join(str(exc).removeprefix("scene_toml: ").split())
+
+
+def _scene(ds, path, model: str) -> None:
+    """scene_toml is a scene rss6 reads, and the name, window bounds (s), time step and contact
+    start recorded beside it agree with it."""
+    text = ds.attrs["scene_toml"]
+    scene = _scene_of(text) if isinstance(text, str) else f"a {type(text).__name__}, not TOML text"
+    if isinstance(scene, str):
+        raise EnsembleFileError(f"{path}: attribute scene_toml is not a scene rss6 reads: {scene}")
+    if _plain(ds.attrs["scene_name"]) != scene.name:
+        raise EnsembleFileError(f"{path}: attribute scene_name is {_plain(ds.attrs['scene_name'])!r}, but "
+                                f"scene_toml is scene {scene.name!r}")
+    sim = scene.simulation
+    for key, value, want in zip(("settle_time_s", "steady_after_s"), _window_bounds(ds, path),
+                                (sim.settle_time, sim.steady_after)):
+        if not math.isclose(value, want, rel_tol=1e-12, abs_tol=1e-15):
+            raise EnsembleFileError(f"{path}: attribute {key} is {value:g} s, but scene_toml says {want:g} s")
+    dt, duration = float(ds.attrs["time_step_s"]), scene.trajectory.duration
+    try:
+        time_grid(duration, dt)
+    except ValueError:
+        raise EnsembleFileError(f"{path}: attribute time_step_s ({dt:g} s) does not divide the scene's "
+                                f"duration ({duration:g} s)") from None
+    _contact_start(ds, path, model, sim.contact_start)
+
+
+def _contact_start(ds, path, model: str, scene_start: str) -> None:
+    """contact_start: in every contact-level file and only there, equal to the scene's."""
+    start = _plain(ds.attrs.get("contact_start"))
+    if model != "contact":
+        if start is not None:
+            raise EnsembleFileError(f"{path}: attribute contact_start in a {model}-level file (only the "
+                                    "contact level writes it)")
+    elif start is None:
+        raise EnsembleFileError(f"{path}: attribute contact_start missing (rss6 writes it in every "
+                                "contact-level file)")
+    elif start != scene_start:
+        raise EnsembleFileError(f"{path}: attribute contact_start is {start!r}, but scene_toml says "
+                                f"{scene_start!r}")
+
+
+def _attributes(ds, path, finished: np.ndarray) -> None:
+    """The provenance every rss6 file carries (store._provenance): present, in rss6's vocabularies,
+    and agreeing with the scene text it records and with the data."""
+    _required(ds, path, PROVENANCE, "file")
+    model = _settings(ds, path)
+    _level(ds, path, model, finished)
+    _scene(ds, path, model)
+
+
+def _sampler(ds, path) -> None:
+    """Plain Monte Carlo (no sampler attribute), or sampler 'qmc' with its replicates and mapping."""
+    sampler = _plain(ds.attrs.get("sampler"))
+    if sampler is None:
+        stray = [k for k in ("qmc_replicates", "qmc_mapping") if k in ds.attrs]
+        if stray:
+            raise EnsembleFileError(f"{path}: attribute {stray[0]} without sampler 'qmc'")
+        return
+    if sampler != "qmc":
+        raise EnsembleFileError(f"{path}: attribute sampler is {sampler!r}; expected 'qmc' (a plain "
+                                "Monte Carlo file has none)")
+    _required(ds, path, ("qmc_replicates", "qmc_mapping"), "QMC ensemble file")
+    _integer(ds, path, "qmc_replicates", 2)
+
+
+def _ensemble_attributes(ds, path, status: np.ndarray) -> None:
+    """seed, store, sampler and the counts n_realizations and n_failed, against the data."""
+    _required(ds, path, ENSEMBLE_ATTRS, "ensemble file")
+    _integer(ds, path, "seed", 0)
+    store = _choice(ds, path, "store", STORES)
+    if (store == "full") != ("error" in ds):
+        raise EnsembleFileError(f"{path}: attribute store is {store!r}, but the file "
+                                f"{'has no' if store == 'full' else 'holds'} histories (error)")
+    _sampler(ds, path)
+    counts = (("n_realizations", ds.sizes["realization"], "realisations"),
+              ("n_failed", int((status != FINISHED).sum()), "failed realisations (status)"))
+    for key, held, what in counts:
+        value = _integer(ds, path, key, 0)
+        if value != held:
+            raise EnsembleFileError(f"{path}: attribute {key} is {value}, but the file holds {held} {what}")
+
+
 def check_ensemble(ds, path) -> None:
     """EnsembleFileError unless ``ds`` is a well-formed rss6 ensemble (docs/model.md section 7)."""
     _dims(ds, path, {"window", "quantity", "realization", "direction"})
@@ -110,6 +259,8 @@ def check_ensemble(ds, path) -> None:
     if unknown:
         raise EnsembleFileError(f"{path}: unknown status {sorted(unknown)[0]!r}; expected "
                                 f"{' or '.join(STATUSES)}")
+    _attributes(ds, path, status.values == FINISHED)
+    _ensemble_attributes(ds, path, status.values)
     _values(ds, path, status.values == FINISHED)
 
 
@@ -122,6 +273,7 @@ def check_run(ds, path) -> None:
     if status not in STATUSES:
         raise EnsembleFileError(f"{path}: status attribute {status!r}; expected "
                                 f"{' or '.join(STATUSES)}")
+    _attributes(ds, path, np.array([status == FINISHED]))
     one = ds[list(SUMMARIES)].expand_dims(realization=[0], axis=1).assign_attrs(ds.attrs)
     _values(one, path, np.array([status == FINISHED]))
 

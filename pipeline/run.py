@@ -30,7 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import FAILED, SimulationResult, parse_scene, prepare_level, stored_draw, time_grid
+from rss6core import (FAILED, SimulationResult, __version__, parse_scene, prepare_level, stored_draw,
+                     time_grid)
 
 from .outputs import OutputLock, PartsManifest
 from .store import (EnsembleFileError, finish_ensemble, identity, load_netcdf, open_ensemble,
@@ -138,6 +139,16 @@ def _check_identity(path, attrs: dict, spec: EnsembleSpec) -> None:
                          else "scene_toml (a different scene file)" for k in diff)
         raise EnsembleFileError(f"{path}: refusing to mix ensembles: it was made with a different "
                                 f"{what}; choose another output file or the same settings")
+    _check_version(path, attrs)
+
+
+def _check_version(path, attrs: dict) -> None:
+    """Refuse to extend a file (or part) another rss6 version wrote: the merged file would hold two
+    versions' results under this version's name."""
+    theirs = str(attrs.get("rss6_version"))
+    if theirs != __version__:
+        raise EnsembleFileError(f"{path}: written by rss6 {theirs}, this is rss6 {__version__}; resuming it "
+                                "would mix results of two versions in one file: choose another -o")
 
 
 def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest) -> tuple[list, set]:

@@ -17,9 +17,10 @@ import xarray as xr
 
 from rss6core import __version__
 
-__all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "WINDOWS", "display_unit", "error_summaries", "window_summaries",
-           "window_masks", "window_reductions", "window_label", "run_dataset", "chunk_dataset",
-           "write_netcdf", "cf_encode", "cf_decode", "check_free_space", "netcdf_size"]
+__all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "WINDOWS", "PROVENANCE", "ENSEMBLE_ATTRS", "STORES", "display_unit",
+           "error_summaries", "window_summaries", "window_masks", "window_reductions", "window_label",
+           "run_dataset", "chunk_dataset", "write_netcdf", "cf_encode", "cf_decode", "check_free_space",
+           "netcdf_size"]
 
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
 QUANTITIES = ("displacement", "velocity", "acceleration")
@@ -38,6 +39,11 @@ def display_unit(quantity: str, direction: str) -> tuple[float, str]:
 
 
 MIXED_UNITS = "m or rad, per direction (see coordinate 'unit'); time derivatives thereof"
+
+# the global attributes :func:`_provenance` gives every file (contact-level files also contact_start)
+PROVENANCE = ("Conventions", "title", "source", "rss6_version", "scene_name", "scene_toml", "model",
+              "integrator", "time_step_s", "elements_per_link", "settle_time_s", "steady_after_s")
+STORES = ("summary", "full")   # --store: summaries only, or also the error histories
 
 
 def _provenance(scene, title: str, *, model: str, integrator: str, dt: float,
@@ -364,6 +370,7 @@ def cf_decode(ds: xr.Dataset) -> xr.Dataset:
 # --- ensembles -------------------------------------------------------------
 
 JOINTS = tuple(f"{j}{i}" for j in "ACB" for i in range(1, 7))
+ENSEMBLE_ATTRS = ("seed", "store", "n_realizations", "n_failed")   # and PROVENANCE: finish_ensemble
 IDENTITY = ("scene_toml", "model", "integrator", "time_step_s", "elements_per_link", "seed", "store",
             "sampler", "qmc_replicates")   # the last two absent (None) in mc files
 

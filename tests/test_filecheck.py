@@ -6,9 +6,11 @@ import json
 import numpy as np
 import pytest
 
+from rss6core import __version__
+
 from pipeline.cli import main
 from pipeline.run import EnsembleSpec, run_ensemble
-from pipeline.store import EnsembleFileError, load_netcdf, open_ensemble
+from pipeline.store import ENSEMBLE_ATTRS, PROVENANCE, EnsembleFileError, load_netcdf, open_ensemble
 from pipeline.scenes import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
@@ -46,10 +48,26 @@ def _unit(i, j, unit):
     return change
 
 
+def _attrs(**changes):
+    """Global attributes set (None: deleted), as an edit with netCDF4 would."""
+    def change(ds):
+        for key, value in changes.items():
+            if value is None:
+                del ds.attrs[key]
+            else:
+                ds.attrs[key] = value
+        return ds
+    return change
+
+
+def _forces(ds):
+    return ds.assign(max_contact_force=(("realization", "joint"), np.ones((ds.sizes["realization"], 18))))
+
+
 def _failed_with_nan(ds):
     ds["status"].values[1] = "failed"
     ds["max_abs_error"].loc[{"realization": 1}] = np.nan
-    return ds
+    return ds.assign_attrs(n_failed=1)
 
 
 CASES = {
@@ -76,6 +94,34 @@ CASES = {
                                 r"'unit' has dimensions \(quantity\); expected quantity, direction"),
     "no unit coordinate": (lambda ds: ds.drop_vars("unit"), "no 'unit' coordinate"),
     "unknown status": (_set("status", {"realization": 2}, "done"), "unknown status 'done'"),
+    "n_realizations": (_attrs(n_realizations=40), "attribute n_realizations is 40, but the file holds 6 "
+                                                  "realisations"),
+    "n_failed": (_attrs(n_failed=3), r"attribute n_failed is 3, but the file holds 0 failed realisations"),
+    "count not an integer": (_attrs(n_realizations="6"), "attribute n_realizations is '6'; expected an integer"),
+    "model of another level": (_attrs(model="contact"), "attribute model is 'contact', but the file has no "
+                                                        "max_contact_force"),
+    "model no level": (_attrs(model="fast"), "attribute model is 'fast'; expected one of rigid, quasi-static"),
+    "forces at a level without them": (_forces, "attribute model is 'quasi-static', but the file holds "
+                                                "max_contact_force"),
+    "scene_toml not TOML": (_attrs(scene_toml="garbage = ["), "attribute scene_toml is not a scene rss6 "
+                                                              "reads: not valid TOML"),
+    "scene_toml not a scene": (_attrs(scene_toml='name = "smoke"'), "attribute scene_toml is not a scene "
+                                                                    "rss6 reads: missing key"),
+    "scene_name": (_attrs(scene_name="paper"), "attribute scene_name is 'paper', but scene_toml is scene "
+                                               "'smoke'"),
+    "settle_time_s": (_attrs(settle_time_s=0.05), "attribute settle_time_s is 0.05 s, but scene_toml says 0 s"),
+    "time_step_s": (_attrs(time_step_s=7e-4), r"attribute time_step_s \(0.0007 s\) does not divide"),
+    "integrator": (_attrs(integrator="euler"), "attribute integrator is 'euler'; expected one of newmark"),
+    "elements_per_link": (_attrs(elements_per_link=0), "attribute elements_per_link is 0; expected an "
+                                                       "integer >= 1"),
+    "seed": (_attrs(seed=-1), "attribute seed is -1; expected an integer >= 0"),
+    "store": (_attrs(store="full"), "attribute store is 'full', but the file has no histories"),
+    "contact_start": (_attrs(contact_start="drawn"), "attribute contact_start in a quasi-static-level file"),
+    "sampler": (_attrs(sampler="sobol"), "attribute sampler is 'sobol'; expected 'qmc'"),
+    "replicates without sampler": (_attrs(qmc_replicates=4), "attribute qmc_replicates without sampler"),
+    "no rss6_version": (_attrs(rss6_version=None), r"not an rss6 ensemble file \(missing rss6 attributes\)"),
+    **{f"no {key}": (_attrs(**{key: None}), f"attribute {key} missing")
+       for key in PROVENANCE + ENSEMBLE_ATTRS if key != "rss6_version"},
 }
 
 
@@ -129,3 +175,24 @@ def test_a_tampered_simulate_file_is_refused(single_run, tmp_path, capsys):
     ds.to_netcdf(bad)
     assert main(["stats", str(bad)]) == 2
     assert "bad-run.nc: max_abs_error has negative values" in capsys.readouterr().err
+
+
+def test_a_simulate_file_with_a_wrong_attribute_is_refused(single_run, tmp_path, capsys):
+    bad = tmp_path / "bad-attr.nc"
+    load_netcdf(single_run).assign_attrs(model="contact").to_netcdf(bad)
+    assert main(["stats", str(bad)]) == 2
+    assert "bad-attr.nc: attribute model is 'contact', but the file has no max_contact_force" in capsys.readouterr().err
+
+
+def test_resuming_a_file_of_another_rss6_version_is_refused(good, tmp_path, capsys):
+    """Merging would file one version's realisations under another's name: one line, nothing run."""
+    old = tmp_path / "old.nc"
+    _attrs(rss6_version="9.9.9", source="rss6 9.9.9")(load_netcdf(good)).to_netcdf(old)
+    before = old.read_bytes()
+    assert main(["stats", str(old)]) == 0                    # reading it is fine
+    capsys.readouterr()
+    assert main(["run", str(SMOKE), "-n", "8", "--model", "quasi-static", "--workers", "1", "-o", str(old)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"rss6: error: {old}: written by rss6 9.9.9, this is "
+                                                         f"rss6 {__version__}") and "another -o" in err
+    assert old.read_bytes() == before and not (tmp_path / "old.nc.parts").exists()

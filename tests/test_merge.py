@@ -141,6 +141,7 @@ def test_parts_with_shorter_strings_first_merge_without_cutting_longer_ones(tmp_
     spec = _spec()
     first, second = run_chunk(spec, [0]), run_chunk(spec, [1])
     first["status"].values[:] = np.array(["failed"], dtype=object)
+    first.attrs["n_failed"] = 1
     write_netcdf(first, tmp_path / "a.nc")
     write_netcdf(second, tmp_path / "b.nc")
     merged = _merged([open_ensemble(tmp_path / p, lazy=True) for p in ("a.nc", "b.nc")], spec)

@@ -142,8 +142,8 @@ def test_parts_left_beside_a_finished_file_add_no_duplicates(reference, tmp_path
     path = tmp_path / "left.nc"
     run_ensemble(_spec(), 10, path, chunk=5, progress=False, client=cluster_client)
     parts = Path(str(path) + ".parts")
-    PartsManifest(parts, _spec().attrs()).write(open_ensemble(path).isel(realization=[0, 1]),
-                                                "chunk-0000000-0000001.nc")
+    part = open_ensemble(path).isel(realization=[0, 1]).assign_attrs(n_realizations=2)   # as a chunk's
+    PartsManifest(parts, _spec().attrs()).write(part, "chunk-0000000-0000001.nc")
     again = run_ensemble(_spec(), 10, path, chunk=5, progress=False, client=cluster_client)
     assert list(again.realization.values) == list(range(10)) and not parts.exists()
     assert np.array_equal(error_summaries(open_ensemble(path)), error_summaries(ref))

@@ -10,12 +10,14 @@ import pytest
 import xarray as xr
 from scipy import stats as sps
 
+from rss6core import load_scene
+
 from pipeline.cli import main
 from pipeline.run import EnsembleSpec, run_ensemble
 from pipeline.stats import (in_window, MIN_N_MEAN, MIN_N_STD, QUANTILES, STATISTICS, ensemble_stats,
                             mean_interval, min_n_for_quantile, quantile_interval, quantile_ranks,
                             std_interval, to_json)
-from pipeline.store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, load_netcdf
+from pipeline.store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, _provenance, load_netcdf
 from pipeline.scenes import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
@@ -106,11 +108,15 @@ def _synthetic(values: np.ndarray, status=None) -> xr.Dataset:
 
 
 def _file(ds: xr.Dataset) -> xr.Dataset:
-    """``ds`` as rss6 writes it: summaries per analysis window (here the same values in each)."""
+    """``ds`` as rss6 writes it: summaries per analysis window (here the same values in each), the
+    provenance of a quasi-static ensemble of the smoke scene and its counts."""
     windowed = {name: xr.concat([ds[name]] * 3, dim="window") for name in ("max_abs_error",
                                                                           "mean_abs_error")}
+    scene = load_scene(CONFIGS / "smoke.toml")
+    attrs = _provenance(scene, "synthetic", model="quasi-static", integrator="newmark", dt=1e-3, elements=4)
     return ds.assign(windowed).assign_coords(window=["whole", "startup", "steady"]).assign_attrs(
-        rss6_version="test", settle_time_s=0.0, steady_after_s=0.5)
+        **attrs, seed=0, store="summary", n_realizations=ds.sizes["realization"],
+        n_failed=int((ds["status"].values != "finished").sum()))
 
 
 def test_dataset_layout_and_attributes():
