@@ -105,11 +105,11 @@ def _simulate(args) -> int:
     from rss6core import simulate
 
     from .store import run_dataset, write_netcdf
-    from .outputs import check_output_path
+    from .outputs import check_new_output
     scene = _with_start(args, find_scene(args.config))
     model, integrator, dt, elements = _settings(args, scene)
     if args.output:
-        check_output_path(args.output, args.parents)
+        check_new_output(args.output, "rss6 simulate", args.parents)
     start = time.perf_counter()
     try:
         result = simulate(scene, model, integrator, dt, elements, args.seed, args.realization)
@@ -384,9 +384,12 @@ def _stats(args) -> int:
     from .filecheck import open_results
     from .gate import exit_code, format_verdicts, verdicts_json
     from .stats import ensemble_stats, format_stats, to_json
+    from .outputs import check_new_output
     from .store import write_netcdf
     specs = _requirements(args)
     _known_windows(specs)
+    if args.output:
+        check_new_output(args.output, "rss6 stats", args.parents)
     full = ensemble_stats(open_results(args.file), args.confidence, window=None)
     if args.window is not None:
         full, specs = _window_of(full, args.window), [replace(s, window=s.window or args.window)
@@ -435,7 +438,9 @@ def _require_arguments(p) -> None:
 def _plot(args) -> int:
     from .filecheck import open_results
     from .plots import plot_ensemble, plot_run
+    from .outputs import check_output_folder
     from .store import EnsembleFileError
+    check_output_folder(args.output)
     ds = open_results(args.file)
     if "realization" not in ds.dims:                      # rss6 simulate -o: one run's histories
         if str(ds.attrs.get("status", "finished")) != "finished":
@@ -466,8 +471,8 @@ def _level_spec(args, scene, level: str):
 
 
 def _multifidelity(args) -> int:
-    from .multifidelity import format_multifidelity, level_paths, multifidelity_dataset, to_json
-    from .outputs import check_output_path
+    from .multifidelity import (check_multifidelity_output, format_multifidelity, level_paths,
+                                multifidelity_dataset, to_json)
     from .run import SchedulerUnavailable, ensemble, parts_dir
     from .store import check_window, write_netcdf
     if args.high == args.low:
@@ -483,7 +488,7 @@ def _multifidelity(args) -> int:
         check_window(scene, args.window)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
-    output = check_output_path(args.output, args.parents)
+    output = check_multifidelity_output(args.output, args.parents)
     _warn_oversubscription(args.workers, args.scheduler)
     files = level_paths(output)
     data = []
@@ -554,8 +559,10 @@ def _multifidelity_parser(sub) -> None:
 
 
 def _tradeoff(args) -> int:
+    from .outputs import check_output_folder
     from .study import tradeoff, write_tradeoff
     scene = find_scene(args.config)
+    check_output_folder(args.output)
     print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")
     ds = tradeoff(scene, args.n, args.seed)
     ref = ds.attrs["reference"]
@@ -575,8 +582,10 @@ def _tradeoff(args) -> int:
 
 
 def _stability(args) -> int:
+    from .outputs import check_output_folder
     from .study import stability, write_stability
     scene = find_scene(args.config)
+    check_output_folder(args.output)
     print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
     ds = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
     write_stability(ds, args.output)
@@ -594,17 +603,15 @@ def _sensitivity(args) -> int:
     import time
     from pathlib import Path
 
-    from .outputs import OutputLock, check_output_path
+    from .outputs import OutputLock, check_new_output
     from .plots import plot_sensitivity
     from .run import EnsembleSpec
     from .sensitivity import SensitivityError, format_sensitivity, sensitivity
     from .store import load_netcdf, write_netcdf
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
-    output = check_output_path(args.output or f"{scene.name}_{model}_sobol.nc", args.parents)
-    if output.exists():
-        raise SceneError(f"{output}: exists; rss6 sensitivity does not resume or overwrite (remove it "
-                         "or choose another -o)")
+    output = check_new_output(args.output or f"{scene.name}_{model}_sobol.nc", "rss6 sensitivity",
+                              args.parents)
     _warn_oversubscription(args.workers, None)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements, args.seed)
     start = time.perf_counter()
@@ -626,9 +633,8 @@ def _sensitivity(args) -> int:
 
 
 def _budget(args) -> int:
-    from pathlib import Path
-
     from .budget import BudgetError, budget, format_budget
+    from .outputs import check_output_folder
     from .run import EnsembleSpec
     from .spec import SpecError, parse_spec
     try:
@@ -637,11 +643,7 @@ def _budget(args) -> int:
         raise SceneError(str(exc).replace("--require", "--spec", 1)) from None
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
-    folder = Path(args.output or f"budget_{scene.name}_{model}")
-    if not folder.parent.is_dir():
-        raise SceneError(f"{folder}: folder {folder.parent} does not exist")
-    if folder.exists() and not folder.is_dir():
-        raise SceneError(f"{folder}: exists and is not a folder")
+    folder = check_output_folder(args.output or f"budget_{scene.name}_{model}", create_parents=False)
     _warn_oversubscription(args.workers, None)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements, args.seed)
     try:
@@ -730,7 +732,8 @@ def _stats_parser(sub) -> None:
     st.add_argument("--direction", help="x, y, z, rx, ry or rz (default: all)")
     st.add_argument("--json", action="store_true",
                     help="print one strict JSON object (SI units; null where no number)")
-    st.add_argument("-o", "--output", help="also write the statistics Dataset to this netCDF file")
+    st.add_argument("-o", "--output", help="also write the statistics Dataset to this new netCDF file")
+    st.add_argument("--parents", action="store_true", help="create the output's missing folders")
     st.add_argument("--confidence", type=_fraction, default=0.95,
                     help="confidence of the two-sided intervals, in (0, 1) (default 0.95)")
     st.add_argument("--window", help="analysis window: whole, startup (t < the scene's "
