@@ -31,7 +31,7 @@ from .gate import Verdict, judge_all
 from .run import EnsembleSpec, ensemble
 from .scene_variant import scene_variant
 from .spec import Spec
-from .stats import MIN_N_MEAN, MIN_N_STD, QUANTILES, ensemble_stats, min_n_for_quantile
+from .stats import ensemble_stats, interval_floor
 from .store import WINDOWS
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
@@ -86,13 +86,6 @@ def scaled_scene(spec: EnsembleSpec, scale: float) -> tuple[str, dict]:
     return scene_variant(spec.scene_text, {"clearance": sizes}, spec.source), sizes
 
 
-def _min_n(statistic: str, confidence: float) -> int:
-    """The smallest n at which rss6 gives an interval of ``statistic`` (pipeline.stats)."""
-    if statistic in QUANTILES:
-        return min_n_for_quantile(QUANTILES[statistic], confidence)
-    return {"mean": MIN_N_MEAN, "std": MIN_N_STD}[statistic]
-
-
 def _check_scene(spec: EnsembleSpec) -> None:
     """BudgetError for a scene whose sizes a [clearance] scale would not move: a family whose
     [tolerance.<family>] band (absolute limits, m) draws them. A relative [sampling] size_tolerance
@@ -111,7 +104,7 @@ def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> 
         raise BudgetError(f"--model {model}: this level has no clearances, so no clearance budget; "
                           "use quasi-static, paper or contact")
     for s in specs:
-        need = _min_n(s.statistic, confidence)
+        need = interval_floor(s.statistic, confidence)
         if n < need:
             raise BudgetError(f"--spec {s.text!r}: {s.statistic} has no {100 * confidence:g} % interval "
                               f"below n = {need} (-n {n}); raise -n")

@@ -151,6 +151,7 @@ def _run(args) -> int:
     model, integrator, dt, elements = _settings(args, scene)
     _refuse_clearance_free_default(args, scene, model)
     replicates = _replicates(args, scene, model, dt)
+    _check_until_cap(targets, args.n, replicates)
     output = check_output_path(args.output or f"{scene.name}_{model}.nc", args.parents)
     _warn_oversubscription(args.workers, args.scheduler)
     _import_meanwhile("distributed", "pipeline.gate")   # gate imports stats (scipy.stats)
@@ -207,6 +208,15 @@ def _until_targets(args) -> list:
     from .until import UntilError, parse_targets
     try:
         return parse_targets(args.until)
+    except UntilError as exc:
+        raise SceneError(str(exc)) from None
+
+
+def _check_until_cap(targets: list, cap: int, replicates: int | None) -> None:
+    """A --until target no n up to -n can meet is a one-line error before any work."""
+    from .until import UntilError, check_cap
+    try:
+        check_cap(targets, cap, replicates)
     except UntilError as exc:
         raise SceneError(str(exc)) from None
 

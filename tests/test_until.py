@@ -163,7 +163,10 @@ def test_a_malformed_target_or_qmc_option_exits_2_before_any_work(tmp_path):
                                                                  "missing unit"),
                          (["--sampler", "qmc", "-n", "12"], "-n 12 with --sampler qmc must be a "
                                                             "multiple of --replicates 8"),
-                         (["--replicates", "4"], "--replicates applies to --sampler qmc only")):
+                         (["--replicates", "4"], "--replicates applies to --sampler qmc only"),
+                         (["-n", "100", "--until", "displacement:x@q99<=50%"],
+                          "--until 'displacement:x@q99<=50%': q99 has no 95 % interval below n = 299 "
+                          "(-n 100); raise -n")):
         proc = _rss6(["run", "smoke", "--model", "quasi-static", "-o", "x.nc"] + extra, tmp_path)
         assert proc.returncode == 2 and token in proc.stderr, proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1
