@@ -33,6 +33,7 @@ from .scene_variant import scene_variant
 from .spec import Spec
 from .stats import ensemble_stats, interval_floor
 from .store import WINDOWS
+from .summary import CLEARANCE_LEVELS
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
            "BudgetError"]
@@ -100,7 +101,7 @@ def _check_scene(spec: EnsembleSpec) -> None:
 
 def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> None:
     """BudgetError for a request no budget can answer, before any ensemble runs."""
-    if model in ("rigid", "elastic"):
+    if model not in CLEARANCE_LEVELS:
         raise BudgetError(f"--model {model}: this level has no clearances, so no clearance budget; "
                           "use quasi-static, paper or contact")
     for s in specs:

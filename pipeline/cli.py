@@ -485,9 +485,14 @@ def _multifidelity(args) -> int:
                                 multifidelity_dataset, to_json)
     from .run import SchedulerUnavailable, ensemble, parts_dir
     from .store import check_window, write_netcdf
+    from .summary import CLEARANCE_LEVELS
     if args.high == args.low:
         raise SceneError(f"--low {args.low}: must differ from --high (the same level is no control "
                          "variate)")
+    for option, level in (("--high", args.high), ("--low", args.low)):
+        if level not in CLEARANCE_LEVELS:
+            raise SceneError(f"{option} {level}: this level has no clearances, so all its realisations "
+                             f"are the same; choose one of {', '.join(CLEARANCE_LEVELS)}")
     if args.low_n < args.n:
         raise SceneError(f"--low-n {args.low_n}: must be at least -n ({args.n}); the first -n low "
                          "realisations are the pairs")
