@@ -87,6 +87,15 @@ def scaled_scene(spec: EnsembleSpec, scale: float) -> tuple[str, dict]:
     return scene_variant(spec.scene_text, {"clearance": sizes}, spec.source), sizes
 
 
+def geometric_limit(scene) -> float:
+    """The clearance scale at which the first clearance would reach its joint's radius, which the
+    scene check refuses (rss6core.scene.CLEARANCE_RADII); inf without clearances."""
+    from rss6core.scene import CLEARANCE_RADII
+    c, ct = scene.clearance, scene.contact
+    return min((getattr(ct, r.removesuffix("_m")) / getattr(c, k.removesuffix("_m"))
+                for k, r in CLEARANCE_RADII.items() if getattr(c, k.removesuffix("_m")) > 0), default=math.inf)
+
+
 def _check_scene(spec: EnsembleSpec) -> None:
     """BudgetError for a scene whose sizes a [clearance] scale would not move: a family whose
     [tolerance.<family>] band (absolute limits, m) draws them. A relative [sampling] size_tolerance
@@ -172,7 +181,13 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
     folder = Path(folder)
     folder.mkdir(exist_ok=True)
 
+    limit = geometric_limit(spec.scene())
+
     def run(scale: float) -> Trial:
+        if scale >= limit:
+            raise BudgetError(f"the specs pass beyond the joints' geometry: at clearance scale {scale:g} a "
+                              f"clearance would reach its joint's [contact] radius (from scale {limit:.4g}), "
+                              "so they set no clearance budget")
         return _trial(spec, specs, scale, n, folder, confidence, workers)
 
     if spec.model in LINEAR_LEVELS:
