@@ -184,13 +184,17 @@ def test_lock_is_released_by_its_owner_only(tmp_path):
 
 # --- failures shown ---------------------------------------------------------------------------
 
-def test_failure_reasons_count_each_distinct_message():
-    status = np.array(["failed", "finished", "failed", "failed"], dtype=object)
-    message = np.array(["diverged at t = 0.002 s", "", "Newton did not converge",
-                        "diverged at t = 0.002 s"], dtype=object)
+def test_failure_reasons_count_each_reason_whatever_its_numbers():
+    """Messages alike but for their numbers (time, step, size) are one reason, shown by its first."""
+    status = np.array(["failed", "finished", "failed", "failed", "failed", "failed"], dtype=object)
+    newton = "Newton did not converge in 60 iterations at t = 0.5 s"
+    size = "size 1.15 exceeds 1 m at t = 0.002 s, step 2"
+    message = np.array([newton, "", size, size, "size 2.5e+01 exceeds 1 m at t = 0.013 s, step 13",
+                        "Newton did not converge in 60 iterations at t = 1.25 s"], dtype=object)
     ds = xr.Dataset({"status": ("realization", status), "status_message": ("realization", message)})
-    assert failure_reasons(ds) == ["3 of 4 realisations failed:",
-                                   "  2 x diverged at t = 0.002 s", "  1 x Newton did not converge"]
+    same = " (the first; the rest differ only in their numbers)"
+    assert failure_reasons(ds) == ["5 of 6 realisations failed:", f"  3 x {size}{same}", f"  2 x {newton}{same}"]
+    assert failure_reasons(ds.isel(realization=[0, 1])) == ["1 of 2 realisations failed:", f"  1 x {newton}"]
     assert failure_reasons(ds.isel(realization=[1])) == []
 
 
