@@ -228,15 +228,16 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
     stream = stream or sys.stderr
     points = checkpoints(targets, cap, spec.qmc_replicates)
     found: dict = {}
+    stored = _stored(output, spec)
+    done = 0 if stored is None else stored.sizes["realization"]
+    checked = sorted(set(points) | ({done} if done else set()))   # a stored file is checked first
 
     def judge(ds) -> dict:
         n = ds.sizes["realization"]
         found.update(n=n, widths=widths(targets, ensemble_stats(ds, CONFIDENCE, window=None)))
-        extra = until_attrs(targets, found["widths"], n, points, cap)
+        extra = until_attrs(targets, found["widths"], n, checked, cap)
         return extra | (annotate(ds) if annotate else {})
 
-    stored = _stored(output, spec)
-    done = 0 if stored is None else stored.sizes["realization"]
     if stored is not None:
         judge(stored)
         stream.write(f"rss6 run --until: {output} holds {done} realisations; checked there first\n"

@@ -158,6 +158,15 @@ def test_a_run_stopped_at_a_cap_resumes_to_the_same_file_and_a_cap_reached_first
     assert resumed.attrs["until_widths"] == whole.attrs["until_widths"]
 
 
+def test_the_rule_lists_the_stored_n_a_resume_checked_first(tmp_path):
+    """Stopped at a cap of 60 (no checkpoint of a cap of 100), resumed to 100: 60 was checked first,
+    so the rule names it among the checks."""
+    argv = RUN + ["--until", "displacement:x@q95<=0.0001%", "-o", "r.nc"]
+    assert _rss6(argv + ["-n", "60"], tmp_path).returncode == 1
+    assert _rss6(argv + ["-n", "100"], tmp_path).returncode == 1
+    assert "checked at n = 59, 60, 74, 93, 100; cap -n 100" in open_ensemble(tmp_path / "r.nc").attrs["until_rule"]
+
+
 def test_a_malformed_target_or_qmc_option_exits_2_before_any_work(tmp_path):
     for extra, token in ((["--until", "displacement:x@q95<5"], "--until 'displacement:x@q95<5': "
                                                                  "missing unit"),
