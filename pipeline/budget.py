@@ -31,8 +31,9 @@ from .gate import Verdict, judge_all
 from .run import EnsembleSpec, ensemble
 from .scene_variant import scene_variant
 from .spec import Spec
-from .stats import MIN_N_MEAN, MIN_N_STD, QUANTILES, ensemble_stats, min_n_for_quantile
+from .stats import ensemble_stats, interval_floor
 from .store import WINDOWS
+from .summary import CLEARANCE_LEVELS
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
            "BudgetError"]
@@ -86,11 +87,13 @@ def scaled_scene(spec: EnsembleSpec, scale: float) -> tuple[str, dict]:
     return scene_variant(spec.scene_text, {"clearance": sizes}, spec.source), sizes
 
 
-def _min_n(statistic: str, confidence: float) -> int:
-    """The smallest n at which rss6 gives an interval of ``statistic`` (pipeline.stats)."""
-    if statistic in QUANTILES:
-        return min_n_for_quantile(QUANTILES[statistic], confidence)
-    return {"mean": MIN_N_MEAN, "std": MIN_N_STD}[statistic]
+def geometric_limit(scene) -> float:
+    """The clearance scale at which the first clearance would reach its joint's radius, which the
+    scene check refuses (rss6core.scene.CLEARANCE_RADII); inf without clearances."""
+    from rss6core.scene import CLEARANCE_RADII
+    c, ct = scene.clearance, scene.contact
+    return min((getattr(ct, r.removesuffix("_m")) / getattr(c, k.removesuffix("_m"))
+                for k, r in CLEARANCE_RADII.items() if getattr(c, k.removesuffix("_m")) > 0), default=math.inf)
 
 
 def _check_scene(spec: EnsembleSpec) -> None:
@@ -107,11 +110,11 @@ def _check_scene(spec: EnsembleSpec) -> None:
 
 def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> None:
     """BudgetError for a request no budget can answer, before any ensemble runs."""
-    if model in ("rigid", "elastic"):
+    if model not in CLEARANCE_LEVELS:
         raise BudgetError(f"--model {model}: this level has no clearances, so no clearance budget; "
                           "use quasi-static, paper or contact")
     for s in specs:
-        need = _min_n(s.statistic, confidence)
+        need = interval_floor(s.statistic, confidence)
         if n < need:
             raise BudgetError(f"--spec {s.text!r}: {s.statistic} has no {100 * confidence:g} % interval "
                               f"below n = {need} (-n {n}); raise -n")
@@ -178,7 +181,13 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
     folder = Path(folder)
     folder.mkdir(exist_ok=True)
 
+    limit = geometric_limit(spec.scene())
+
     def run(scale: float) -> Trial:
+        if scale >= limit:
+            raise BudgetError(f"the specs pass beyond the joints' geometry: at clearance scale {scale:g} a "
+                              f"clearance would reach its joint's [contact] radius (from scale {limit:.4g}), "
+                              "so they set no clearance budget")
         return _trial(spec, specs, scale, n, folder, confidence, workers)
 
     if spec.model in LINEAR_LEVELS:

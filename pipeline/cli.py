@@ -105,11 +105,11 @@ def _simulate(args) -> int:
     from rss6core import simulate
 
     from .store import run_dataset, write_netcdf
-    from .outputs import check_output_path
+    from .outputs import check_new_output
     scene = _with_start(args, find_scene(args.config))
     model, integrator, dt, elements = _settings(args, scene)
     if args.output:
-        check_output_path(args.output, args.parents)
+        check_new_output(args.output, "rss6 simulate", args.parents)
     start = time.perf_counter()
     try:
         result = simulate(scene, model, integrator, dt, elements, args.seed, args.realization)
@@ -151,6 +151,7 @@ def _run(args) -> int:
     model, integrator, dt, elements = _settings(args, scene)
     _refuse_clearance_free_default(args, scene, model)
     replicates = _replicates(args, scene, model, dt)
+    _check_until_cap(targets, args.n, replicates)
     output = check_output_path(args.output or f"{scene.name}_{model}.nc", args.parents)
     _warn_oversubscription(args.workers, args.scheduler)
     _import_meanwhile("distributed", "pipeline.gate")   # gate imports stats (scipy.stats)
@@ -207,6 +208,15 @@ def _until_targets(args) -> list:
     from .until import UntilError, parse_targets
     try:
         return parse_targets(args.until)
+    except UntilError as exc:
+        raise SceneError(str(exc)) from None
+
+
+def _check_until_cap(targets: list, cap: int, replicates: int | None) -> None:
+    """A --until target no n up to -n can meet is a one-line error before any work."""
+    from .until import UntilError, check_cap
+    try:
+        check_cap(targets, cap, replicates)
     except UntilError as exc:
         raise SceneError(str(exc)) from None
 
@@ -384,9 +394,12 @@ def _stats(args) -> int:
     from .filecheck import open_results
     from .gate import exit_code, format_verdicts, verdicts_json
     from .stats import ensemble_stats, format_stats, to_json
+    from .outputs import check_new_output
     from .store import write_netcdf
     specs = _requirements(args)
     _known_windows(specs)
+    if args.output:
+        check_new_output(args.output, "rss6 stats", args.parents)
     full = ensemble_stats(open_results(args.file), args.confidence, window=None)
     if args.window is not None:
         full, specs = _window_of(full, args.window), [replace(s, window=s.window or args.window)
@@ -435,7 +448,9 @@ def _require_arguments(p) -> None:
 def _plot(args) -> int:
     from .filecheck import open_results
     from .plots import plot_ensemble, plot_run
+    from .outputs import check_output_folder
     from .store import EnsembleFileError
+    check_output_folder(args.output)
     ds = open_results(args.file)
     if "realization" not in ds.dims:                      # rss6 simulate -o: one run's histories
         if str(ds.attrs.get("status", "finished")) != "finished":
@@ -466,13 +481,18 @@ def _level_spec(args, scene, level: str):
 
 
 def _multifidelity(args) -> int:
-    from .multifidelity import format_multifidelity, level_paths, multifidelity_dataset, to_json
-    from .outputs import check_output_path
+    from .multifidelity import (check_multifidelity_output, format_multifidelity, level_paths,
+                                multifidelity_dataset, to_json)
     from .run import SchedulerUnavailable, ensemble, parts_dir
     from .store import check_window, write_netcdf
+    from .summary import CLEARANCE_LEVELS
     if args.high == args.low:
         raise SceneError(f"--low {args.low}: must differ from --high (the same level is no control "
                          "variate)")
+    for option, level in (("--high", args.high), ("--low", args.low)):
+        if level not in CLEARANCE_LEVELS:
+            raise SceneError(f"{option} {level}: this level has no clearances, so all its realisations "
+                             f"are the same; choose one of {', '.join(CLEARANCE_LEVELS)}")
     if args.low_n < args.n:
         raise SceneError(f"--low-n {args.low_n}: must be at least -n ({args.n}); the first -n low "
                          "realisations are the pairs")
@@ -483,7 +503,7 @@ def _multifidelity(args) -> int:
         check_window(scene, args.window)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
-    output = check_output_path(args.output, args.parents)
+    output = check_multifidelity_output(args.output, args.parents)
     _warn_oversubscription(args.workers, args.scheduler)
     files = level_paths(output)
     data = []
@@ -554,8 +574,10 @@ def _multifidelity_parser(sub) -> None:
 
 
 def _tradeoff(args) -> int:
+    from .outputs import check_output_folder
     from .study import tradeoff, write_tradeoff
     scene = find_scene(args.config)
+    check_output_folder(args.output)
     print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")
     ds = tradeoff(scene, args.n, args.seed)
     ref = ds.attrs["reference"]
@@ -575,8 +597,10 @@ def _tradeoff(args) -> int:
 
 
 def _stability(args) -> int:
+    from .outputs import check_output_folder
     from .study import stability, write_stability
     scene = find_scene(args.config)
+    check_output_folder(args.output)
     print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
     ds = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
     write_stability(ds, args.output)
@@ -594,17 +618,15 @@ def _sensitivity(args) -> int:
     import time
     from pathlib import Path
 
-    from .outputs import OutputLock, check_output_path
+    from .outputs import OutputLock, check_new_output
     from .plots import plot_sensitivity
     from .run import EnsembleSpec
     from .sensitivity import SensitivityError, format_sensitivity, sensitivity
     from .store import load_netcdf, write_netcdf
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
-    output = check_output_path(args.output or f"{scene.name}_{model}_sobol.nc", args.parents)
-    if output.exists():
-        raise SceneError(f"{output}: exists; rss6 sensitivity does not resume or overwrite (remove it "
-                         "or choose another -o)")
+    output = check_new_output(args.output or f"{scene.name}_{model}_sobol.nc", "rss6 sensitivity",
+                              args.parents)
     _warn_oversubscription(args.workers, None)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements, args.seed)
     start = time.perf_counter()
@@ -626,9 +648,8 @@ def _sensitivity(args) -> int:
 
 
 def _budget(args) -> int:
-    from pathlib import Path
-
     from .budget import BudgetError, budget, format_budget
+    from .outputs import check_output_folder
     from .run import EnsembleSpec
     from .spec import SpecError, parse_spec
     try:
@@ -637,11 +658,7 @@ def _budget(args) -> int:
         raise SceneError(str(exc).replace("--require", "--spec", 1)) from None
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
-    folder = Path(args.output or f"budget_{scene.name}_{model}")
-    if not folder.parent.is_dir():
-        raise SceneError(f"{folder}: folder {folder.parent} does not exist")
-    if folder.exists() and not folder.is_dir():
-        raise SceneError(f"{folder}: exists and is not a folder")
+    folder = check_output_folder(args.output or f"budget_{scene.name}_{model}", create_parents=False)
     _warn_oversubscription(args.workers, None)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements, args.seed)
     try:
@@ -730,7 +747,8 @@ def _stats_parser(sub) -> None:
     st.add_argument("--direction", help="x, y, z, rx, ry or rz (default: all)")
     st.add_argument("--json", action="store_true",
                     help="print one strict JSON object (SI units; null where no number)")
-    st.add_argument("-o", "--output", help="also write the statistics Dataset to this netCDF file")
+    st.add_argument("-o", "--output", help="also write the statistics Dataset to this new netCDF file")
+    st.add_argument("--parents", action="store_true", help="create the output's missing folders")
     st.add_argument("--confidence", type=_fraction, default=0.95,
                     help="confidence of the two-sided intervals, in (0, 1) (default 0.95)")
     st.add_argument("--window", help="analysis window: whole, startup (t < the scene's "

@@ -3,7 +3,10 @@
 A spec holds with the file's confidence when the statistic's whole confidence
 interval meets the limit (pass), is refuted when the whole interval violates it
 (fail), and is undecided when the interval straddles the limit or no interval
-exists at this sample size. Each direction of a spec is judged on its own
+exists at this sample size. The intervals describe the finished realisations
+only: where any realisation failed, a spec they meet is undecided, not passed
+(the failed draws, which often diverged on the largest errors, are in the
+population the requirement is about). Each direction of a spec is judged on its own
 interval; the spec's verdict is the worst of them. For an undecided verdict the
 sample size that would likely decide is estimated from the interval's 1/sqrt(n)
 shrinkage about an unchanged estimate (and, for quantiles, never below the
@@ -44,6 +47,7 @@ class Verdict:
     upper: float | None
     confidence: float
     n: int
+    n_failed: int
     outcome: str
     n_needed: int | None
     reason: str
@@ -95,20 +99,26 @@ def judge(spec: Spec, stats) -> list[Verdict]:
     """Verdicts of one spec, one per direction, from a statistics Dataset (``pipeline.stats``)."""
     da = _select(spec=spec, stats=stats)
     n, confidence = int(stats.attrs["n_finished"]), float(stats.attrs["confidence"])
+    failed = int(stats.attrs.get("n_failed", 0))
     replicates = stats.attrs.get("qmc_replicates")
     replicates = None if replicates is None else int(replicates)
     out = []
     for d in spec.directions:
         est, lo, hi = (float(da.sel(direction=d, bound=b)) for b in ("estimate", "lower", "upper"))
         outcome = _outcome(spec, lo, hi)
-        need, reason = (_n_needed(spec, est, lo, hi, n, confidence, replicates)
-                        if outcome == "undecided"
-                        else (None, "the whole interval " + ("meets" if outcome == "pass"
-                                                             else "violates") + " the limit"))
+        if outcome == "pass" and failed:
+            outcome, need, reason = "undecided", None, (
+                f"the whole interval meets the limit, but {failed} of {n + failed} realisations failed "
+                "and are not in it")
+        elif outcome == "undecided":
+            need, reason = _n_needed(spec, est, lo, hi, n, confidence, replicates)
+        else:
+            need, reason = None, "the whole interval " + ("meets" if outcome == "pass"
+                                                          else "violates") + " the limit"
         out.append(Verdict(spec.text, spec.quantity, d, spec.statistic, spec.measure, spec.window,
                            spec.op, spec.limit, spec.unit, spec.factor, est,
                            lo if np.isfinite(lo) else None, hi if np.isfinite(hi) else None,
-                           confidence, n, outcome, need, reason))
+                           confidence, n, failed, outcome, need, reason))
     return out
 
 
@@ -132,7 +142,9 @@ def format_verdicts(verdicts: list[Verdict]) -> str:
     if not verdicts:
         return ""
     conf = f"{100 * verdicts[0].confidence:g} %"
-    lines = [f"requirements ({conf} intervals, n = {verdicts[0].n} finished realisations)",
+    failed = verdicts[0].n_failed
+    lines = [f"requirements ({conf} intervals, n = {verdicts[0].n} finished realisations"
+             + (f"; {failed} failed, so a limit they meet is undecided)" if failed else ")"),
              f"{'spec':<40s}{'dir':<4s}{'estimate':>11s}{'interval':>24s}{'limit':>14s}  "
              f"{'verdict':<10s}n to decide"]
     for v in verdicts:

@@ -57,6 +57,7 @@ __all__ = ["MIN_N_MF", "ESTIMATORS", "ControlVariateMean", "control_variate_mean
            "optimal_low_ratio", "cost_ratio", "paired_values", "multifidelity_dataset",
            "format_multifidelity", "to_json", "level_paths"]
 
+HISTORY = "rss6 multifidelity"   # how a multi-fidelity file's history attribute begins
 MIN_N_MF = 32   # smallest N whose interval coverage was measured >= 93 % on all laws (module doc)
 ESTIMATORS = ("multifidelity", "high_only")
 
@@ -265,7 +266,7 @@ def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
     return {"Conventions": "CF-1.10", "source": f"rss6 {__version__}", "rss6_version": __version__,
             "title": f"rss6 multi-fidelity means: {a['model']} level with {low.attrs['model']} "
                      f"as control variate, scene {a.get('scene_name', '')!r}",
-            "history": f"rss6 multifidelity of {sources[0]} and {sources[1]}",
+            "history": f"{HISTORY} of {sources[0]} and {sources[1]}",
             "scene_name": a.get("scene_name", ""), "scene_toml": a["scene_toml"], "seed": a["seed"],
             "high_model": a["model"], "low_model": low.attrs["model"],
             "high_file": str(sources[0]), "low_file": str(sources[1]),
@@ -360,6 +361,26 @@ def format_multifidelity(mds: xr.Dataset, name: str = "max_abs_error") -> str:
         notes.append(f"MF: no {100 * a['confidence']:g} % interval below N = {MIN_N_MF} "
                      f"(N = {a['n_high']} here)")
     return "\n".join(lines + ["notes:"] + [f"  {t}" for t in notes])
+
+
+def check_multifidelity_output(path, create_dirs: bool = False):
+    """The output F.nc checked before any work: a file there must be an earlier multi-fidelity file
+    (a rerun resumes the two ensembles and rewrites it); any other file is refused, not overwritten."""
+    import netCDF4
+
+    from .outputs import check_output_path
+    from .store import EnsembleFileError
+    path = check_output_path(path, create_dirs)
+    if path.exists():
+        try:
+            with netCDF4.Dataset(path) as nc:
+                ours = str(getattr(nc, "history", "")).startswith(HISTORY)
+        except OSError:
+            ours = False
+        if not ours:
+            raise EnsembleFileError(f"{path}: exists and is not an rss6 multi-fidelity file; rss6 "
+                                    "multifidelity does not overwrite it (remove it or choose another -o)")
+    return path
 
 
 def level_paths(output) -> tuple:

@@ -41,6 +41,34 @@ def check_output_path(path, create_dirs: bool = False) -> Path:
     return path
 
 
+def check_output_folder(path, create_parents: bool = True) -> Path:
+    """Refuse (before any work) an output folder that is a file, sits below a file, or would be made
+    in a folder that is not writable; with ``create_parents`` off its parent folder must exist."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise EnsembleFileError(f"{path}: exists and is not a folder; -o names the output folder")
+    if not create_parents and not path.parent.is_dir():
+        raise EnsembleFileError(f"{path}: folder {path.parent} does not exist")
+    nearest = path
+    while not nearest.exists():
+        nearest = nearest.parent if str(nearest.parent) != str(nearest) else Path(".")
+    if not nearest.is_dir():
+        raise EnsembleFileError(f"{path}: {nearest} is a file, not a folder")
+    if not os.access(nearest, os.W_OK | os.X_OK):
+        raise EnsembleFileError(f"{path}: folder {nearest} is not writable")
+    return path
+
+
+def check_new_output(path, command: str, create_dirs: bool = False) -> Path:
+    """:func:`check_output_path`, and refuse an existing file: ``command`` (e.g. "rss6 stats") writes a
+    new file and overwrites none, so a second run on the same output loses nothing."""
+    path = check_output_path(path, create_dirs)
+    if path.exists():
+        raise EnsembleFileError(f"{path}: exists; {command} does not overwrite a file (remove it or "
+                                "choose another -o)")
+    return path
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)

@@ -306,6 +306,10 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = 0.95,
     start = time.perf_counter()
     scene = spec.scene()
     _check_window(scene, window)
+    c = scene.clearance
+    if not any((c.revolute_radial, c.revolute_axial, c.spherical_C, c.spherical_B)):
+        raise SensitivityError(f"{spec.source}: every [clearance] size is 0, so no input varies and no "
+                               "Sobol' index is defined")
     inputs = clearance_inputs(scene)
     results = []
     with _client(workers) as client:

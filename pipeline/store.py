@@ -481,7 +481,7 @@ def load_netcdf(path, lazy: bool = False) -> xr.Dataset:
             # variable through dask took 3x as long as reading it)
             ds = xr.open_dataset(path, engine="netcdf4", decode_times=False)
             histories = {name: var.chunk({"realization": HISTORY_BLOCK})
-                         for name, var in ds.data_vars.items() if _ELAPSED in var.dims}
+                         for name, var in ds.data_vars.items() if {_ELAPSED, "realization"} <= set(var.dims)}
             for var in ds.variables.values():
                 if _ELAPSED not in var.dims:
                     var.load()

@@ -1,6 +1,8 @@
 """Scene summaries for ``rss6 check``: what a user checks before launching a run."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from rss6core import crank_inertia, inverse_dynamics, natural_frequencies, rigid_motion, rod_inertia
@@ -144,17 +146,25 @@ def format_errors(summary: dict) -> str:
     return "\n".join(lines)
 
 
+_NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+
+
 def failure_reasons(ds, shown: int = 5) -> list[str]:
-    """Lines naming how many realisations of an ensemble failed and why (distinct messages, most
-    frequent first, at most ``shown``); empty when none failed."""
+    """Lines naming how many realisations of an ensemble failed and why: one line per reason (the
+    messages alike but for their numbers: time, step, size), most frequent first, at most ``shown``,
+    each with its first realisation's message; empty when none failed."""
     status = ds["status"].values.astype(str)
     failed = status != "finished"
     if not failed.any():
         return []
-    reasons, counts = np.unique(ds["status_message"].values.astype(str)[failed], return_counts=True)
-    order = np.argsort(-counts, kind="stable")
+    messages = ds["status_message"].values.astype(str)[failed]
+    reasons, first, counts = np.unique([_NUMBER.sub("#", m) for m in messages], return_index=True,
+                                       return_counts=True)
+    order = np.lexsort((first, -counts))
     lines = [f"{int(failed.sum())} of {len(status)} realisations failed:"]
-    lines += [f"  {int(counts[i])} x {reasons[i] or '(no message)'}" for i in order[:shown]]
+    lines += [f"  {int(counts[i])} x {messages[first[i]] or '(no message)'}"
+              + (" (the first; the rest differ only in their numbers)" if counts[i] > 1 else "")
+              for i in order[:shown]]
     if len(order) > shown:
         lines.append(f"  ... and {len(order) - shown} other reasons "
                      f"({int(counts[order[shown:]].sum())} realisations)")

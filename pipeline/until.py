@@ -109,6 +109,17 @@ def parse_targets(texts: list[str] | None) -> list[Target]:
     return [parse_target(t) for t in texts or []]
 
 
+def check_cap(targets: list[Target], cap: int, replicates: int | None = None) -> None:
+    """UntilError, before any work, for a target whose statistic has no interval at the cap ``-n``:
+    no check could meet it (as ``rss6 budget`` refuses the same request)."""
+    from .stats import interval_floor
+    for t in targets:
+        floor = interval_floor(t.statistic, CONFIDENCE, replicates)
+        if cap < floor:
+            raise _fail(t.text, f"{t.statistic} has no {100 * CONFIDENCE:g} % interval below n = {floor} "
+                                f"(-n {cap}); raise -n")
+
+
 def checkpoints(targets: list[Target], cap: int, replicates: int | None = None) -> list[int]:
     """The sample sizes at which the rule is checked, ascending, ending at ``cap``.
 
@@ -217,15 +228,16 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
     stream = stream or sys.stderr
     points = checkpoints(targets, cap, spec.qmc_replicates)
     found: dict = {}
+    stored = _stored(output, spec)
+    done = 0 if stored is None else stored.sizes["realization"]
+    checked = sorted(set(points) | ({done} if done else set()))   # a stored file is checked first
 
     def judge(ds) -> dict:
         n = ds.sizes["realization"]
         found.update(n=n, widths=widths(targets, ensemble_stats(ds, CONFIDENCE, window=None)))
-        extra = until_attrs(targets, found["widths"], n, points, cap)
+        extra = until_attrs(targets, found["widths"], n, checked, cap)
         return extra | (annotate(ds) if annotate else {})
 
-    stored = _stored(output, spec)
-    done = 0 if stored is None else stored.sizes["realization"]
     if stored is not None:
         judge(stored)
         stream.write(f"rss6 run --until: {output} holds {done} realisations; checked there first\n"

@@ -413,6 +413,20 @@ def _read_table(table: dict, schema: dict, path: tuple[str, ...] = ()) -> dict:
     return out
 
 
+# each [clearance] size and the [contact] radius of the joint it belongs to
+CLEARANCE_RADII = {"revolute_radial_m": "journal_radius_m", "revolute_axial_m": "journal_radius_m",
+                   "spherical_C_m": "sphere_radius_m", "spherical_B_m": "sphere_radius_m"}
+
+
+def _check_clearances(clearance: dict, contact: dict) -> None:
+    """A clearance is a small gap between pin and bore: one not below its joint's radius is refused
+    (typically a value in mm written in an _m key)."""
+    for key, radius in CLEARANCE_RADII.items():
+        if clearance[key] >= contact[radius]:
+            raise SceneError(f"[clearance] {key}: {clearance[key]!r} m is not below [contact] {radius} "
+                             f"= {contact[radius]!r} m (a clearance in mm written in metres?)")
+
+
 def _build(v: dict, text: str, source: str) -> Scene:
     g, tr, ct = v["geometry"], v["trajectory"], v["contact"]
     rod = TubeSection(v["rod_section"]["outer_diameter_m"], v["rod_section"]["inner_diameter_m"])
@@ -428,6 +442,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
     if v["beam"]["mass"] == "lumped" and not v["beam"]["rotary_inertia"]:
         raise SceneError("[beam] mass: 'lumped' puts the sections' rotary inertia on the nodes' "
                          "rotations; set [beam] rotary_inertia = true")
+    _check_clearances(v["clearance"], ct)
     if ct["stick_velocity_m_s"] >= ct["slip_velocity_m_s"]:
         raise SceneError("[contact] stick_velocity_m_s: must be smaller than slip_velocity_m_s")
     dt, duration = v["simulation"]["time_step_s"], tr["duration_s"]

@@ -137,6 +137,18 @@ def test_a_level_without_clearances_is_refused(configs, tmp_path, capsys):
     assert not (tmp_path / "b").exists()
 
 
+def test_geometric_limit_and_a_spec_that_passes_beyond_it(configs, tmp_path, capsys):
+    """smoke: 0.25 mm clearances on 10 mm pins and balls reach the radius at scale 40; a spec that the
+    quasi-static level meets beyond that is one line and exit 2, not a budget of 4 cm gaps."""
+    from pipeline.budget import geometric_limit
+    from pipeline.scenes import find_scene
+    assert geometric_limit(find_scene("smoke")) == pytest.approx(0.010 / 0.25e-3)
+    code = main(["budget", str(configs / "smoke.toml"), "--spec", "displacement:x<=1m@q95", "-n", str(N),
+                 "--workers", "1", "-o", str(tmp_path / "b")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "beyond the joints' geometry" in err, err
+
+
 def test_too_few_realisations_for_the_interval(configs, tmp_path, capsys):
     code = main(["budget", str(configs / "smoke.toml"), "--spec", SPEC, "-n", "20", "--workers", "1",
                  "-o", str(tmp_path / "b")])

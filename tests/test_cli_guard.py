@@ -85,6 +85,48 @@ def test_read_only_folder_is_refused(tmp_path, capsys):
         folder.chmod(0o700)
 
 
+@pytest.fixture(scope="module")
+def small_ensemble(tmp_path_factory):
+    path = tmp_path_factory.mktemp("ens") / "qs.nc"
+    assert main([*QS, "-n", "4", "-o", str(path)]) == 0
+    return path
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["stats", "{ens}", "-o", "{ens}"], ["rss6 stats does not overwrite"]),
+    (["simulate", "smoke", "--model", "rigid", "-o", "{ens}"], ["rss6 simulate does not overwrite"]),
+    (["multifidelity", "smoke", "--high", "paper", "-n", "3", "--low-n", "3", "-o", "{ens}"],
+     ["not an rss6 multi-fidelity file"]),
+    (["run", "smoke", "--model", "quasi-static", "-n", "2", "-o", "{sim}"], ["not an rss6 ensemble file"]),
+    (["stats", "{ens}", "-o", "{dir}/missing/s.nc"], ["does not exist", "--parents"]),
+    (["plot", "{ens}", "-o", "{ens}"], ["not a folder"]),
+    (["tradeoff", "smoke", "-o", "{ens}/sub"], ["is a file, not a folder"]),
+    (["stability", "smoke", "-o", "{ens}"], ["not a folder"]),
+    (["budget", "smoke", "--spec", "displacement:x<=1mm@q50", "-o", "{dir}/missing/b"], ["does not exist"]),
+])
+def test_an_existing_file_or_a_bad_output_folder_is_refused_before_work(argv, words, small_ensemble, tmp_path,
+                                                                        capsys):
+    """Outputs checked before any work: a command that writes a new file overwrites no existing one
+    (an ensemble given as its own -o survives byte for byte); a figure or study folder that is a file,
+    or lies below one, is one line and exit 2, not a traceback after the work."""
+    sim = tmp_path / "sim.nc"
+    assert main(["simulate", "smoke", "--model", "rigid", "-o", str(sim)]) == 0
+    before = small_ensemble.read_bytes(), sim.read_bytes()
+    capsys.readouterr()
+    names = {"ens": small_ensemble, "sim": sim, "dir": tmp_path}
+    assert _exit_code([a.format(**names) for a in argv]) == 2
+    _one_line_error(capsys, *words)
+    assert (small_ensemble.read_bytes(), sim.read_bytes()) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sim.nc"]
+
+
+def test_a_rerun_rewrites_its_own_multifidelity_file(tmp_path, capsys):
+    """The one output a second run may replace: F.nc of rss6 multifidelity (its ensembles resume)."""
+    argv = ["multifidelity", "smoke", "--high", "paper", "--low", "quasi-static", "-n", "3", "--low-n", "4",
+            "-o", str(tmp_path / "F.nc"), "--workers", "1"]
+    assert main(argv) == 0 and main(argv) == 0
+
+
 def test_elastic_default_without_clearances_is_refused(tmp_path, capsys):
     assert main(["run", str(SMOKE), "-n", "2", "-o", str(tmp_path / "e.nc")]) == 2
     _one_line_error(capsys, "'elastic'", "--model")
@@ -142,13 +184,17 @@ def test_lock_is_released_by_its_owner_only(tmp_path):
 
 # --- failures shown ---------------------------------------------------------------------------
 
-def test_failure_reasons_count_each_distinct_message():
-    status = np.array(["failed", "finished", "failed", "failed"], dtype=object)
-    message = np.array(["diverged at t = 0.002 s", "", "Newton did not converge",
-                        "diverged at t = 0.002 s"], dtype=object)
+def test_failure_reasons_count_each_reason_whatever_its_numbers():
+    """Messages alike but for their numbers (time, step, size) are one reason, shown by its first."""
+    status = np.array(["failed", "finished", "failed", "failed", "failed", "failed"], dtype=object)
+    newton = "Newton did not converge in 60 iterations at t = 0.5 s"
+    size = "size 1.15 exceeds 1 m at t = 0.002 s, step 2"
+    message = np.array([newton, "", size, size, "size 2.5e+01 exceeds 1 m at t = 0.013 s, step 13",
+                        "Newton did not converge in 60 iterations at t = 1.25 s"], dtype=object)
     ds = xr.Dataset({"status": ("realization", status), "status_message": ("realization", message)})
-    assert failure_reasons(ds) == ["3 of 4 realisations failed:",
-                                   "  2 x diverged at t = 0.002 s", "  1 x Newton did not converge"]
+    same = " (the first; the rest differ only in their numbers)"
+    assert failure_reasons(ds) == ["5 of 6 realisations failed:", f"  3 x {size}{same}", f"  2 x {newton}{same}"]
+    assert failure_reasons(ds.isel(realization=[0, 1])) == ["1 of 2 realisations failed:", f"  1 x {newton}"]
     assert failure_reasons(ds.isel(realization=[1])) == []
 
 

@@ -91,6 +91,22 @@ def test_verdict_is_where_the_interval_lies(limit_mm, outcome):
     assert w.outcome == {"pass": "fail", "fail": "pass"}.get(outcome, "undecided")
 
 
+def test_failed_realisations_make_a_met_limit_undecided_not_passed():
+    """The intervals cover the finished realisations only: with 30 of 64 failed (the failed draws
+    are in the population), a limit the whole interval meets is undecided, with no n that decides;
+    a violated one still fails; the table says why."""
+    stats = _stats(1.0e-4, 0.8e-4, 1.3e-4, n=34).assign_attrs(n_failed=30)
+    (v,) = judge(parse_spec("displacement:x<=0.2mm@mean"), stats)
+    assert (v.outcome, v.n_needed, v.n_failed) == ("undecided", None, 30)
+    assert "30 of 64 realisations failed" in v.reason
+    (w,) = judge(parse_spec("displacement:x<=0.05mm@mean"), stats)
+    assert w.outcome == "fail"
+    assert exit_code([v]) == 1 and exit_code([v], undecided="pass") == 0
+    assert "30 failed, so a limit they meet is undecided" in format_verdicts([v, w])
+    (p,) = judge(parse_spec("displacement:x<=0.2mm@mean"), stats.assign_attrs(n_failed=0))
+    assert p.outcome == "pass"
+
+
 def test_n_to_decide_follows_the_interval_shrinkage():
     stats = _stats(1.0e-4, 0.8e-4, 1.3e-4, n=100)
     (v,) = judge(parse_spec("displacement:x<=0.12mm@q95"), stats)

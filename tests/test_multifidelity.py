@@ -180,7 +180,9 @@ def test_cli_bad_options_exit_2_before_work(tmp_path, capsys):
     out = tmp_path / "F.nc"
     for argv, word in ((["-n", "8", "--low-n", "4"], "--low-n 4"),
                        (["--high", "paper", "--low", "paper"], "--low paper"),
-                       (["--width", "0.02"], "--width")):
+                       (["--width", "0.02"], "--width"),
+                       (["--high", "quasi-static", "--low", "rigid"], "--low rigid: this level has no clearances"),
+                       (["--high", "elastic"], "--high elastic: this level has no clearances")):
         assert main(["multifidelity", "smoke", *argv, "-o", str(out)]) == 2
         err = capsys.readouterr().err
         assert word in err and len(err.strip().splitlines()) == 1

@@ -123,6 +123,17 @@ def test_contact_time_step_must_divide_the_time_step(paper_text):
     assert fine.contact.impact_speed_floor == pytest.approx(1e-3)
 
 
+@pytest.mark.parametrize("old, new, key, radius", [
+    ("revolute_radial_m = 0.25e-3", "revolute_radial_m = 0.25", "revolute_radial_m", "journal_radius_m"),
+    ("spherical_B_m = 0.25e-3", "spherical_B_m = 0.010", "spherical_B_m", "sphere_radius_m"),
+])
+def test_a_clearance_not_below_its_joints_radius_is_refused(paper_text, old, new, key, radius):
+    """A value in mm typed into an _m key (250 mm on a 10 mm pin), or a gap as wide as the ball."""
+    with pytest.raises(SceneError, match=rf"\[clearance\] {key}: .* not below \[contact\] {radius}"):
+        parse_scene(_edit(paper_text, old, new))
+    assert parse_scene(_edit(paper_text, old, new.replace("0.25", "0.0099").replace("0.010", "0.0099")))
+
+
 def test_new_models_are_accepted_and_a_typo_is_named(paper_text):
     for model in ("paper", "contact"):
         scene = parse_scene(_edit(paper_text, 'model = "elastic"', f'model = "{model}"'))

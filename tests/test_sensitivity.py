@@ -177,6 +177,18 @@ def test_an_empty_window_is_refused_before_any_work(smoke, tmp_path, capsys):
     assert not out.exists()
 
 
+def test_a_scene_without_clearances_is_refused_before_any_work(smoke, tmp_path, capsys):
+    """All four clearance sizes 0: every evaluation is the same, so every index would be 0/0."""
+    zero = {k: 0.0 for k in ("revolute_radial_m", "revolute_axial_m", "spherical_C_m", "spherical_B_m")}
+    config = tmp_path / "tight.toml"
+    config.write_text(scene_variant(smoke.source_text, {"clearance": zero}, smoke.source_path))
+    out = tmp_path / "x.nc"
+    code = main_code(["sensitivity", str(config), "--model", "quasi-static", "-o", str(out), "--no-plots"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "every [clearance] size is 0" in err, err
+    assert not out.exists()
+
+
 @pytest.fixture(scope="module")
 def sobol_file(tmp_path_factory, configs):
     path = tmp_path_factory.mktemp("sens") / "s.nc"

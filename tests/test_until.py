@@ -158,12 +158,24 @@ def test_a_run_stopped_at_a_cap_resumes_to_the_same_file_and_a_cap_reached_first
     assert resumed.attrs["until_widths"] == whole.attrs["until_widths"]
 
 
+def test_the_rule_lists_the_stored_n_a_resume_checked_first(tmp_path):
+    """Stopped at a cap of 60 (no checkpoint of a cap of 100), resumed to 100: 60 was checked first,
+    so the rule names it among the checks."""
+    argv = RUN + ["--until", "displacement:x@q95<=0.0001%", "-o", "r.nc"]
+    assert _rss6(argv + ["-n", "60"], tmp_path).returncode == 1
+    assert _rss6(argv + ["-n", "100"], tmp_path).returncode == 1
+    assert "checked at n = 59, 60, 74, 93, 100; cap -n 100" in open_ensemble(tmp_path / "r.nc").attrs["until_rule"]
+
+
 def test_a_malformed_target_or_qmc_option_exits_2_before_any_work(tmp_path):
     for extra, token in ((["--until", "displacement:x@q95<5"], "--until 'displacement:x@q95<5': "
                                                                  "missing unit"),
                          (["--sampler", "qmc", "-n", "12"], "-n 12 with --sampler qmc must be a "
                                                             "multiple of --replicates 8"),
-                         (["--replicates", "4"], "--replicates applies to --sampler qmc only")):
+                         (["--replicates", "4"], "--replicates applies to --sampler qmc only"),
+                         (["-n", "100", "--until", "displacement:x@q99<=50%"],
+                          "--until 'displacement:x@q99<=50%': q99 has no 95 % interval below n = 299 "
+                          "(-n 100); raise -n")):
         proc = _rss6(["run", "smoke", "--model", "quasi-static", "-o", "x.nc"] + extra, tmp_path)
         assert proc.returncode == 2 and token in proc.stderr, proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1
