@@ -353,4 +353,17 @@ def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
             text = "".join(f"{e:8.3f} [{lo:6.3f},{hi:6.3f}]" for e, lo, hi in
                            zip(*(cell.sel(bound=b).values for b in BOUNDS)))
             lines.append(f"{q:<13s}{d:<4s}{text}  {_dominant(cell)}")
-    return "\n".join(lines)
+    return "\n".join(lines + _outside_note(da.sel(index="ST", bound="estimate"), ds.attrs["n_base_samples"]))
+
+
+def _outside_note(st: xr.DataArray, n: int) -> list[str]:
+    """A note line when total-index estimates fall outside [0, 1], where no index lies: the
+    estimator's sampling noise at this N, which the intervals show."""
+    outside = (st < 0) | (st > 1)
+    if not outside.any():
+        return []
+    worst = abs(st - st.clip(0, 1)).where(outside).argmax(...)
+    cell = st.isel(worst)
+    return [f"note: {int(outside.sum())} ST estimates lie outside [0, 1] (e.g. {float(cell):.3f}, "
+            f"{cell['group'].item()} on {cell['quantity'].item()} {cell['direction'].item()}): sampling "
+            f"noise of the estimator at N = {n}, not an index outside [0, 1]; a larger -n narrows it"]
