@@ -133,7 +133,9 @@ def _simulate(args) -> int:
         print(format_errors(summary))
         if "max_contact_force_N" in summary:
             print("max contact force (N): " + ", ".join(
-                f"{k} {v:.4g}" for k, v in summary["max_contact_force_N"].items()))
+                f"{k} {v:.4g}" for k, v in summary["max_contact_force_N"].items())
+                + (" (the paper's method keeps every joint inside its clearance, so eq. 17 gives none)"
+                   if model == "paper" and not any(summary["max_contact_force_N"].values()) else ""))
     if result.status != "finished":
         print(f"rss6: run failed: {result.message}", file=sys.stderr)
         return 1
@@ -186,7 +188,11 @@ def _run(args) -> int:
     if reasons and ds.attrs["n_failed"] == ds.sizes["realization"]:
         print("rss6: every realisation failed; no statistics", file=sys.stderr)
         return 1
-    print(format_stats(ensemble_stats(ds).sel(quantity=["displacement"])))
+    from .store import QUANTITIES
+    shown = list(QUANTITIES) if model == "contact" else ["displacement"]   # contact: v, a measure the robot
+    print(format_stats(ensemble_stats(ds).sel(quantity=shown)))
+    if model != "contact":
+        print(f"(displacement only; rss6 stats {output} shows velocity and acceleration too)")
     code = 0 if until is None else _until_verdict(until, args.n)
     if not specs:
         return code
