@@ -627,7 +627,7 @@ def _sensitivity(args) -> int:
     from .outputs import OutputLock, check_new_output
     from .plots import plot_sensitivity
     from .run import EnsembleSpec
-    from .sensitivity import SensitivityError, format_sensitivity, sensitivity
+    from .sensitivity import SensitivityError, format_joints, format_sensitivity, sensitivity
     from .store import load_netcdf, write_netcdf
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
@@ -650,6 +650,8 @@ def _sensitivity(args) -> int:
     paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
     print(f"wrote {output} in {time.perf_counter() - start:.1f} s" + (f"; bar charts in {plots}/" if paths else ""))
     print(format_sensitivity(ds))
+    if args.per_joint:
+        print(format_joints(ds))
     return 0
 
 
