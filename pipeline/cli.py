@@ -28,6 +28,17 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _scheduler_address(text: str) -> str:
+    """A dask.distributed scheduler address (tcp://host:port or host:port), checked before any work."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+    try:
+        parse_host_port(parse_address(text)[1])
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r} is no scheduler address ({exc}); e.g. "
+                                         "tcp://10.0.0.5:8786") from None
+    return text
+
+
 def _fraction(text: str) -> float:
     try:
         value = float(text)
@@ -573,7 +584,7 @@ def _multifidelity_parser(sub) -> None:
                          "startup (before its steady_after_s) or steady (from it) (default whole)")
     mf.add_argument("--workers", type=_positive_int, default=2,
                     help="local dask workers, one thread each (default 2)")
-    mf.add_argument("--scheduler", help=SCHEDULER_HELP)
+    mf.add_argument("--scheduler", type=_scheduler_address, help=SCHEDULER_HELP)
     mf.add_argument("--json", action="store_true",
                     help="print one strict JSON object (SI units; null where no number)")
     mf.set_defaults(func=_multifidelity)
@@ -913,10 +924,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _scheduler_options(parser) -> None:
     """--scheduler and --worker-timeout, the same for every command that runs ensembles."""
-    parser.add_argument("--scheduler", help=SCHEDULER_HELP)
-    parser.add_argument("--worker-timeout", type=_positive_float, default=60.0, metavar="S",
+    parser.add_argument("--scheduler", type=_scheduler_address, help=SCHEDULER_HELP)
+    parser.add_argument("--worker-timeout", type=_positive_float, metavar="S",
                         help="with --scheduler: stop (exit 2, finished chunks kept) once the "
                              "scheduler has had no workers for S seconds (default 60)")
+
+
+def _worker_timeout(args) -> None:
+    """--worker-timeout only with --scheduler (rss6's own local workers are never missing); its
+    default filled in."""
+    from .run import WORKER_TIMEOUT_S
+    if not hasattr(args, "worker_timeout"):
+        return
+    if args.worker_timeout is not None and not args.scheduler:
+        raise SceneError(f"--worker-timeout {args.worker_timeout:g}: applies with --scheduler only "
+                         "(a local cluster's workers are rss6's own)")
+    if args.worker_timeout is None:
+        args.worker_timeout = WORKER_TIMEOUT_S
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -924,6 +948,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from .store import EnsembleFileError
     try:
+        _worker_timeout(args)
         return args.func(args)
     except (SceneError, EnsembleFileError) as exc:
         print(f"rss6: error: {exc}", file=sys.stderr)
