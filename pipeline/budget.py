@@ -90,7 +90,7 @@ def scaled_scene(spec: EnsembleSpec, scale: float) -> tuple[str, dict]:
 def geometric_limit(scene) -> float:
     """The clearance scale at which the first clearance would reach its joint's radius, which the
     scene check refuses (rss6core.scene.CLEARANCE_RADII); inf without clearances."""
-    from rss6core.scene import CLEARANCE_RADII
+    from rss6core import CLEARANCE_RADII
     c, ct = scene.clearance, scene.contact
     return min((getattr(ct, r.removesuffix("_m")) / getattr(c, k.removesuffix("_m"))
                 for k, r in CLEARANCE_RADII.items() if getattr(c, k.removesuffix("_m")) > 0), default=math.inf)

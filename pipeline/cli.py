@@ -28,6 +28,17 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _scheduler_address(text: str) -> str:
+    """A dask.distributed scheduler address (tcp://host:port or host:port), checked before any work."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+    try:
+        parse_host_port(parse_address(text)[1])
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r} is no scheduler address ({exc}); e.g. "
+                                         "tcp://10.0.0.5:8786") from None
+    return text
+
+
 def _fraction(text: str) -> float:
     try:
         value = float(text)
@@ -133,7 +144,9 @@ def _simulate(args) -> int:
         print(format_errors(summary))
         if "max_contact_force_N" in summary:
             print("max contact force (N): " + ", ".join(
-                f"{k} {v:.4g}" for k, v in summary["max_contact_force_N"].items()))
+                f"{k} {v:.4g}" for k, v in summary["max_contact_force_N"].items())
+                + (" (the paper's method keeps every joint inside its clearance, so eq. 17 gives none)"
+                   if model == "paper" and not any(summary["max_contact_force_N"].values()) else ""))
     if result.status != "finished":
         print(f"rss6: run failed: {result.message}", file=sys.stderr)
         return 1
@@ -186,7 +199,11 @@ def _run(args) -> int:
     if reasons and ds.attrs["n_failed"] == ds.sizes["realization"]:
         print("rss6: every realisation failed; no statistics", file=sys.stderr)
         return 1
-    print(format_stats(ensemble_stats(ds).sel(quantity=["displacement"])))
+    from .store import QUANTITIES
+    shown = list(QUANTITIES) if model == "contact" else ["displacement"]   # contact: v, a measure the robot
+    print(format_stats(ensemble_stats(ds).sel(quantity=shown)))
+    if model != "contact":
+        print(f"(displacement only; rss6 stats {output} shows velocity and acceleration too)")
     code = 0 if until is None else _until_verdict(until, args.n)
     if not specs:
         return code
@@ -567,7 +584,7 @@ def _multifidelity_parser(sub) -> None:
                          "startup (before its steady_after_s) or steady (from it) (default whole)")
     mf.add_argument("--workers", type=_positive_int, default=2,
                     help="local dask workers, one thread each (default 2)")
-    mf.add_argument("--scheduler", help=SCHEDULER_HELP)
+    mf.add_argument("--scheduler", type=_scheduler_address, help=SCHEDULER_HELP)
     mf.add_argument("--json", action="store_true",
                     help="print one strict JSON object (SI units; null where no number)")
     mf.set_defaults(func=_multifidelity)
@@ -621,7 +638,7 @@ def _sensitivity(args) -> int:
     from .outputs import OutputLock, check_new_output
     from .plots import plot_sensitivity
     from .run import EnsembleSpec
-    from .sensitivity import SensitivityError, format_sensitivity, sensitivity
+    from .sensitivity import SensitivityError, format_joints, format_sensitivity, sensitivity
     from .store import load_netcdf, write_netcdf
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
@@ -644,6 +661,8 @@ def _sensitivity(args) -> int:
     paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
     print(f"wrote {output} in {time.perf_counter() - start:.1f} s" + (f"; bar charts in {plots}/" if paths else ""))
     print(format_sensitivity(ds))
+    if args.per_joint:
+        print(format_joints(ds))
     return 0
 
 
@@ -905,10 +924,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _scheduler_options(parser) -> None:
     """--scheduler and --worker-timeout, the same for every command that runs ensembles."""
-    parser.add_argument("--scheduler", help=SCHEDULER_HELP)
-    parser.add_argument("--worker-timeout", type=_positive_float, default=60.0, metavar="S",
+    parser.add_argument("--scheduler", type=_scheduler_address, help=SCHEDULER_HELP)
+    parser.add_argument("--worker-timeout", type=_positive_float, metavar="S",
                         help="with --scheduler: stop (exit 2, finished chunks kept) once the "
                              "scheduler has had no workers for S seconds (default 60)")
+
+
+def _worker_timeout(args) -> None:
+    """--worker-timeout only with --scheduler (rss6's own local workers are never missing); its
+    default filled in."""
+    from .run import WORKER_TIMEOUT_S
+    if not hasattr(args, "worker_timeout"):
+        return
+    if args.worker_timeout is not None and not args.scheduler:
+        raise SceneError(f"--worker-timeout {args.worker_timeout:g}: applies with --scheduler only "
+                         "(a local cluster's workers are rss6's own)")
+    if args.worker_timeout is None:
+        args.worker_timeout = WORKER_TIMEOUT_S
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -916,6 +948,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from .store import EnsembleFileError
     try:
+        _worker_timeout(args)
         return args.func(args)
     except (SceneError, EnsembleFileError) as exc:
         print(f"rss6: error: {exc}", file=sys.stderr)

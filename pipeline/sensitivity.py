@@ -30,7 +30,7 @@ from .store import (DIRECTIONS, JOINTS, QUANTITIES, WINDOWS, _provenance, _unit_
 __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
            "clearance_draws_from_uniforms", "Design", "designs", "sample_design",
            "evaluate_statistics", "SobolIndices", "sobol_indices", "sensitivity", "sensitivity_dataset",
-           "format_sensitivity", "SensitivityError"]
+           "format_sensitivity", "format_joints", "SensitivityError"]
 
 FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
 LEVELS = ("quasi-static", "contact")     # the levels whose error is a function of one draw
@@ -353,4 +353,39 @@ def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
             text = "".join(f"{e:8.3f} [{lo:6.3f},{hi:6.3f}]" for e, lo, hi in
                            zip(*(cell.sel(bound=b).values for b in BOUNDS)))
             lines.append(f"{q:<13s}{d:<4s}{text}  {_dominant(cell)}")
+    return "\n".join(lines + _outside_note(da.sel(index="ST", bound="estimate"), ds.attrs["n_base_samples"]))
+
+
+def format_joints(ds: xr.Dataset, statistic: str = "max_abs_error", top: int = 3) -> str:
+    """With the joint design (--per-joint): per quantity and direction the ``top`` joints of largest
+    total index with their intervals, largest first, and whether the first two intervals overlap
+    (:func:`_dominant`); empty without it."""
+    joints = [g for g in JOINTS if g in ds["group"].values]
+    if not joints:
+        return ""
+    da = ds[f"{statistic}_sobol"].sel(group=joints, index="ST")
+    lines = [f"the {top} joints of largest total index ST of the per-realisation {statistic}, largest "
+             f"first (of {len(joints)}; all in the file)", f"{'quantity':<13s}{'dir':<4s}ST [interval]"]
+    for q in ds["quantity"].values:
+        for d in ds["direction"].values:
+            cell = da.sel(quantity=q, direction=d)
+            est = cell.sel(bound="estimate").values
+            order = np.argsort(-np.nan_to_num(est, nan=-np.inf))[:top]
+            text = ", ".join(f"{joints[i]} {est[i]:.3f} [{float(cell.sel(bound='lower')[i]):.3f},"
+                             f"{float(cell.sel(bound='upper')[i]):.3f}]" for i in order)
+            overlap = "  (the first two overlap)" if "overlaps" in _dominant(cell) else ""
+            lines.append(f"{q:<13s}{d:<4s}{text}{overlap}")
     return "\n".join(lines)
+
+
+def _outside_note(st: xr.DataArray, n: int) -> list[str]:
+    """A note line when total-index estimates fall outside [0, 1], where no index lies: the
+    estimator's sampling noise at this N, which the intervals show."""
+    outside = (st < 0) | (st > 1)
+    if not outside.any():
+        return []
+    worst = abs(st - st.clip(0, 1)).where(outside).argmax(...)
+    cell = st.isel(worst)
+    return [f"note: {int(outside.sum())} ST estimates lie outside [0, 1] (e.g. {float(cell):.3f}, "
+            f"{cell['group'].item()} on {cell['quantity'].item()} {cell['direction'].item()}): sampling "
+            f"noise of the estimator at N = {n}, not an index outside [0, 1]; a larger -n narrows it"]

@@ -8,6 +8,7 @@ Scenes
 - SceneError: a scene that cannot describe a physical robot; the message names the file and key.
 - load_scene: a Scene from a TOML file.
 - parse_scene: a Scene from TOML text.
+- CLEARANCE_RADII: each [clearance] key and the [contact] radius of its joint, which a clearance must stay below.
 
 Running a level
 - MODELS: the model levels, cheapest first (rigid, quasi-static, elastic, paper, contact).
@@ -61,12 +62,12 @@ from .integrators import INTEGRATORS, Integrator
 from .kinematics import rigid_motion
 from .models import (MODELS, Level, default_integrator, default_time_step, degrees_of_freedom,
                      natural_frequencies, prepare_level, simulate, simulate_batch, stored_draw)
-from .scene import Scene, SceneError, load_scene, parse_scene
+from .scene import CLEARANCE_RADII, Scene, SceneError, load_scene, parse_scene
 from .status import FAILED, FINISHED, STATUSES
 from .sections import crank_inertia, rod_inertia
 
 __version__ = "0.1.0"
-__all__ = ["Scene", "SceneError", "load_scene", "parse_scene",
+__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII",
            "MODELS", "INTEGRATORS", "CONTACT_STARTS", "simulate", "simulate_batch", "prepare_level", "Level",
            "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",

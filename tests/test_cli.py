@@ -87,6 +87,15 @@ def test_simulate_rigid_is_the_reference(capsys):
     assert all(v == 0 for q in out["max_abs_error"].values() for v in q.values())
 
 
+def test_simulate_paper_says_why_its_contact_forces_are_zero(capsys):
+    """The paper's method keeps every eccentricity inside its clearance: eq. 17 gives no force, and
+    the printout says so rather than reporting bare zeros."""
+    assert main(["simulate", "smoke", "--model", "paper"]) == 0
+    line = [s for s in capsys.readouterr().out.splitlines() if s.startswith("max contact force")][0]
+    assert line == ("max contact force (N): A 0, C 0, B 0 (the paper's method keeps every joint inside its "
+                    "clearance, so eq. 17 gives none)")
+
+
 def test_simulate_bad_time_step_is_a_usage_error(capsys):
     assert main(["simulate", "smoke", "--dt", "0.0003"]) == 2
     assert "does not divide" in capsys.readouterr().err

@@ -256,7 +256,9 @@ def test_smoke_ensemble_through_the_cli(tmp_path, capsys):
     out = tmp_path / "smoke.nc"
     assert main(["run", SMOKE, "-n", "8", "--workers", "2", "--model", "quasi-static",
                  "--store", "full", "-o", str(out)]) == 0
-    capsys.readouterr()
+    printed = capsys.readouterr().out
+    assert "displacement" in printed and "velocity" not in printed.split("(displacement only")[0]
+    assert f"rss6 stats {out} shows velocity and acceleration too" in printed
     assert main(["stats", str(out), "--json"]) == 0
     js = json.loads(capsys.readouterr().out)
     assert js["n_finished"] == 8

@@ -48,7 +48,8 @@ def _stop(proc: subprocess.Popen) -> None:
 
 def _error_line(err: str) -> str:
     """The last stderr line, checked to be the only non-progress line and no traceback."""
-    lines = [ln for ln in err.strip().splitlines() if not ln.startswith("rss6 run:")]
+    lines = [ln for ln in err.strip().splitlines()
+             if not ln.startswith("rss6 run:") or ln.startswith("rss6 run: error:")]
     assert len(lines) == 1 and "Traceback" not in err, err
     return lines[0]
 
@@ -64,9 +65,16 @@ def test_worker_timeout_is_checked_before_work(tmp_path, capsys, value):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_worker_timeout_without_a_scheduler_is_refused(tmp_path, capsys):
+    assert main(RUN[3:] + ["--worker-timeout", "5", "-o", str(tmp_path / "out.nc")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--worker-timeout 5: applies with --scheduler only" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("port, words", [
     (None, ["cannot reach the dask scheduler"]),        # nothing listens there
-    ("", ["--scheduler", "missing port number"]),       # a malformed address
+    ("", ["--scheduler", "missing port number", "no scheduler address"]),   # malformed: refused by argparse
 ])
 def test_unreachable_scheduler_is_one_line_and_exit_2_within_seconds(tmp_path, port, words):
     address = f"tcp://127.0.0.1:{_free_port()}" if port is None else "tcp://127.0.0.1"

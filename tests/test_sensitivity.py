@@ -251,6 +251,38 @@ def main_code(argv) -> int:
         return exc.code
 
 
+def test_the_joint_table_lists_the_largest_joints_from_the_file(sobol_file):
+    """--per-joint: per quantity and direction the three joints of largest ST, largest first, with
+    the intervals the file holds; no table without the joint design."""
+    from pipeline.sensitivity import format_joints
+    ds = load_netcdf(sobol_file)
+    lines = format_joints(ds).splitlines()
+    assert len(lines) == 2 + 18 and "of 18; all in the file" in lines[0]
+    st = ds["max_abs_error_sobol"].sel(index="ST", quantity="velocity", direction="y",
+                                       group=[g for g in ds["group"].values if g not in FAMILIES])
+    est = st.sel(bound="estimate")
+    first = str(est["group"].values[int(np.argmax(est.values))])
+    row = [s for s in lines if s.startswith("velocity     y   ")][0]
+    lo, hi = (float(st.sel(group=first, bound=b)) for b in ("lower", "upper"))
+    assert row[17:].startswith(f"{first} {float(est.sel(group=first)):.3f} [{lo:.3f},{hi:.3f}]"), row
+    assert format_joints(ds.sel(group=list(FAMILIES))) == ""
+
+
+def test_total_estimates_outside_zero_one_get_a_note_naming_the_worst(sobol_file):
+    """No index lies outside [0, 1], but an estimate at small N can: the table says so and names the
+    estimate farthest out; with every estimate inside, no note."""
+    from pipeline.sensitivity import format_sensitivity
+    ds = load_netcdf(sobol_file)
+    inside = ds.assign(max_abs_error_sobol=ds["max_abs_error_sobol"].clip(0, 1))
+    assert "note:" not in format_sensitivity(inside)
+    st = inside["max_abs_error_sobol"]
+    st.loc[dict(index="ST", bound="estimate", group="spherical_B", quantity="velocity", direction="rz")] = 1.4
+    st.loc[dict(index="ST", bound="estimate", group="revolute_axial", quantity="velocity", direction="x")] = -0.1
+    note = format_sensitivity(inside.assign(max_abs_error_sobol=st)).splitlines()[-1]
+    assert note.startswith("note: 2 ST estimates lie outside [0, 1] (e.g. 1.400, spherical_B on velocity rz)")
+    assert "N = 64" in note
+
+
 def test_the_largest_family_is_named_with_its_overlap():
     import xarray as xr
     from pipeline.sensitivity import _dominant
