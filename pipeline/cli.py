@@ -14,7 +14,7 @@ import numpy as np
 
 from rss6core import CONTACT_STARTS, INTEGRATORS, MODELS, SceneError, __version__
 
-from .scenes import find_scene
+from .scenes import find_scene, scene_names
 from .summary import contact_peaks, error_summary, format_errors, format_summary, scene_summary
 
 
@@ -869,7 +869,9 @@ def _run_parser(sub) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
-        prog="rss6", description="Joint clearance and link elasticity errors of a 6-RSS robot.")
+        prog="rss6", description="Joint clearance and link elasticity errors of a 6-RSS robot.",
+        epilog="shipped scenes (a CONFIG argument takes one of these names or a TOML file): "
+               + ", ".join(scene_names()))
     parser.add_argument("--version", action="version", version=f"rss6 {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     check = sub.add_parser("check", help="validate a scene and print its summary")

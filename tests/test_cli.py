@@ -1,6 +1,7 @@
 """End-to-end: the rss6 command line as a user calls it."""
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
+from pipeline.scenes import scene_names
 
 
 def test_check_json_paper(configs, capsys):
@@ -29,6 +31,16 @@ def test_check_json_paper(configs, capsys):
 def test_check_text_names_the_scene(capsys):
     assert main(["check", "smoke"]) == 0
     assert "scene 'smoke'" in capsys.readouterr().out
+
+
+def test_top_level_help_lists_every_shipped_scene(configs, capsys):
+    names = scene_names()
+    assert names == sorted(p.stem for p in configs.glob("*.toml"))   # every file under configs/
+    with pytest.raises(SystemExit) as exit_:
+        main(["--help"])
+    assert exit_.value.code == 0
+    words = set(re.findall(r"[\w.-]+", capsys.readouterr().out))
+    assert [name for name in names if name not in words] == []
 
 
 def test_bad_config_is_a_usage_error(configs, tmp_path, capsys):
