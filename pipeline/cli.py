@@ -78,6 +78,9 @@ def _settings(args, scene) -> tuple[str, str, float, int]:
     from rss6core import default_integrator, default_time_step, time_grid
     sim = scene.simulation
     model = args.model or sim.model
+    if getattr(args, "start", None) is not None and model != "contact":
+        raise SceneError(f"--start {args.start}: sets the contact level's initial state; this run is "
+                         f"the {model} level")
     dt = args.dt or default_time_step(scene, model)
     try:
         time_grid(scene.trajectory.duration, dt)
@@ -211,7 +214,7 @@ def _run(args) -> int:
     if not specs:
         return code
     print(format_verdicts(verdicts))
-    return max(code, exit_code(verdicts, args.undecided))
+    return max(code, exit_code(verdicts, args.undecided or "fail"))
 
 
 def _known_windows(specs: list) -> None:
@@ -395,6 +398,8 @@ def _selection(sds, args):
 def _requirements(args) -> list:
     """The --require specs, parsed before any work; a malformed one is a one-line error."""
     from .spec import SpecError, parse_specs
+    if args.undecided is not None and not args.require:
+        raise SceneError(f"--undecided {args.undecided}: applies with --require only")
     try:
         return parse_specs(args.require)
     except SpecError as exc:
@@ -435,7 +440,7 @@ def _stats(args) -> int:
         print(format_stats(sds))
         if specs:
             print(format_verdicts(verdicts))
-    return exit_code(verdicts, args.undecided) if specs else 0
+    return exit_code(verdicts, args.undecided or "fail") if specs else 0
 
 
 def _window_of(sds, window: str):
@@ -461,7 +466,7 @@ def _require_arguments(p) -> None:
                         "'displacement:x,y<=0.05mm@q95' or '...@q95/steady' (window whole, startup or "
                         "steady; default whole) (repeatable): judged pass, fail or undecided "
                         "from the statistic's confidence interval; exit 1 unless all pass (default: none)")
-    p.add_argument("--undecided", choices=("fail", "pass"), default="fail",
+    p.add_argument("--undecided", choices=("fail", "pass"),
                    help="how an undecided requirement counts for the exit code (default: fail)")
 
 
