@@ -179,7 +179,7 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
     _check_request(spec.model, specs, n, confidence)
     _check_scene(spec)
     folder = Path(folder)
-    folder.mkdir(exist_ok=True)
+    folder.mkdir(parents=True, exist_ok=True)
 
     limit = geometric_limit(spec.scene())
 

@@ -78,6 +78,9 @@ def _settings(args, scene) -> tuple[str, str, float, int]:
     from rss6core import default_integrator, default_time_step, time_grid
     sim = scene.simulation
     model = args.model or sim.model
+    if getattr(args, "start", None) is not None and model != "contact":
+        raise SceneError(f"--start {args.start}: sets the contact level's initial state; this run is "
+                         f"the {model} level")
     dt = args.dt or default_time_step(scene, model)
     try:
         time_grid(scene.trajectory.duration, dt)
@@ -200,15 +203,18 @@ def _run(args) -> int:
         print("rss6: every realisation failed; no statistics", file=sys.stderr)
         return 1
     from .store import QUANTITIES
-    shown = list(QUANTITIES) if model == "contact" else ["displacement"]   # contact: v, a measure the robot
-    print(format_stats(ensemble_stats(ds).sel(quantity=shown)))
+    contact = model == "contact"   # its velocity and acceleration measure the robot; start-up impacts
+    shown = {"quantity": list(QUANTITIES) if contact else ["displacement"],
+             "window": ["whole", "steady"] if contact else ["whole"]}
+    sds = ensemble_stats(ds, window=None)
+    print(format_stats(sds.sel({k: v for k, v in shown.items() if k in sds.dims})))
     if model != "contact":
         print(f"(displacement only; rss6 stats {output} shows velocity and acceleration too)")
     code = 0 if until is None else _until_verdict(until, args.n)
     if not specs:
         return code
     print(format_verdicts(verdicts))
-    return max(code, exit_code(verdicts, args.undecided))
+    return max(code, exit_code(verdicts, args.undecided or "fail"))
 
 
 def _known_windows(specs: list) -> None:
@@ -392,6 +398,8 @@ def _selection(sds, args):
 def _requirements(args) -> list:
     """The --require specs, parsed before any work; a malformed one is a one-line error."""
     from .spec import SpecError, parse_specs
+    if args.undecided is not None and not args.require:
+        raise SceneError(f"--undecided {args.undecided}: applies with --require only")
     try:
         return parse_specs(args.require)
     except SpecError as exc:
@@ -432,7 +440,7 @@ def _stats(args) -> int:
         print(format_stats(sds))
         if specs:
             print(format_verdicts(verdicts))
-    return exit_code(verdicts, args.undecided) if specs else 0
+    return exit_code(verdicts, args.undecided or "fail") if specs else 0
 
 
 def _window_of(sds, window: str):
@@ -458,7 +466,7 @@ def _require_arguments(p) -> None:
                         "'displacement:x,y<=0.05mm@q95' or '...@q95/steady' (window whole, startup or "
                         "steady; default whole) (repeatable): judged pass, fail or undecided "
                         "from the statistic's confidence interval; exit 1 unless all pass (default: none)")
-    p.add_argument("--undecided", choices=("fail", "pass"), default="fail",
+    p.add_argument("--undecided", choices=("fail", "pass"),
                    help="how an undecided requirement counts for the exit code (default: fail)")
 
 
@@ -467,7 +475,7 @@ def _plot(args) -> int:
     from .plots import plot_ensemble, plot_run
     from .outputs import check_output_folder
     from .store import EnsembleFileError
-    check_output_folder(args.output)
+    check_output_folder(args.output, args.parents)
     ds = open_results(args.file)
     if "realization" not in ds.dims:                      # rss6 simulate -o: one run's histories
         if str(ds.attrs.get("status", "finished")) != "finished":
@@ -594,7 +602,7 @@ def _tradeoff(args) -> int:
     from .outputs import check_output_folder
     from .study import tradeoff, write_tradeoff
     scene = find_scene(args.config)
-    check_output_folder(args.output)
+    check_output_folder(args.output, args.parents)
     print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")
     ds = tradeoff(scene, args.n, args.seed)
     ref = ds.attrs["reference"]
@@ -617,7 +625,7 @@ def _stability(args) -> int:
     from .outputs import check_output_folder
     from .study import stability, write_stability
     scene = find_scene(args.config)
-    check_output_folder(args.output)
+    check_output_folder(args.output, args.parents)
     print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
     ds = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
     write_stability(ds, args.output)
@@ -677,7 +685,7 @@ def _budget(args) -> int:
         raise SceneError(str(exc).replace("--require", "--spec", 1)) from None
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
-    folder = check_output_folder(args.output or f"budget_{scene.name}_{model}", create_parents=False)
+    folder = check_output_folder(args.output or f"budget_{scene.name}_{model}", args.parents)
     _warn_oversubscription(args.workers, None)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements, args.seed)
     try:
@@ -737,6 +745,7 @@ def _budget_parser(sub) -> None:
                     help="realisations per ensemble (default 200; q95 has an interval from n = 59)")
     bu.add_argument("-o", "--output", help="folder of the ensembles and the budget scene "
                                            "(default: budget_SCENE_MODEL); rerunning resumes")
+    bu.add_argument("--parents", action="store_true", help="create the output's missing folders")
     bu.add_argument("--seed", type=_nonnegative_int, default=0, help="random seed (default 0)")
     bu.add_argument("--confidence", type=_fraction, default=0.95,
                     help="confidence of the intervals the specs are judged on (default 0.95)")
@@ -752,6 +761,7 @@ def _study_arguments(p, output: str, n: int, tolerance_help: str) -> None:
     p.add_argument("config", nargs="?", default="paper",
                    help="scene TOML file or embedded scene name (default: paper)")
     p.add_argument("-o", "--output", default=output, help=f"output folder (default: {output})")
+    p.add_argument("--parents", action="store_true", help="create the output's missing folders")
     p.add_argument("-n", type=_positive_int, default=n, help=f"realisations per setting (default {n})")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--tolerance", type=_positive_float, default=0.05,
@@ -844,10 +854,12 @@ def _run_parser(sub) -> None:
     run.add_argument("--workers", type=_positive_int, default=2,
                      help="local dask workers, one thread each (default 2)")
     _scheduler_options(run)
+    from .run import MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL
+    larger = ", ".join(f"{n} for {m}" for m, n in MAX_AUTO_CHUNK_BY_MODEL.items())
     run.add_argument("--chunk", type=_positive_int,
                      help="realisations per task (default: n cut into a multiple of the workers "
-                          "nearly equal chunks of at most 64, 128 for contact; each task integrates its realisations "
-                          "as one batch)")
+                          f"nearly equal chunks of at most {MAX_AUTO_CHUNK}, {larger}; each task integrates "
+                          "its realisations as one batch)")
     run.add_argument("--store", choices=STORES, default="summary",
                      help="summary: per-realisation maxima and means; full: also time histories "
                           "(default: summary)")
@@ -910,6 +922,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "a simulate -o file")
     pl.add_argument("file", help="netCDF file of rss6 run, or of rss6 simulate -o")
     pl.add_argument("-o", "--output", default="plots", help="output folder (default: plots)")
+    pl.add_argument("--parents", action="store_true", help="create the output's missing folders")
     pl.set_defaults(func=_plot)
 
     tr = sub.add_parser("tradeoff", help="cost and error of every model level, integrator, step and mesh")

@@ -144,7 +144,8 @@ def format_verdicts(verdicts: list[Verdict]) -> str:
     conf = f"{100 * verdicts[0].confidence:g} %"
     failed = verdicts[0].n_failed
     lines = [f"requirements ({conf} intervals, n = {verdicts[0].n} finished realisations"
-             + (f"; {failed} failed, so a limit they meet is undecided)" if failed else ")"),
+             + (f"; {failed} failed, so a limit they meet is undecided" if failed else "")
+             + "; estimate and interval in the unit of the spec's limit)",
              f"{'spec':<40s}{'dir':<4s}{'estimate':>11s}{'interval':>24s}{'limit':>14s}  "
              f"{'verdict':<10s}n to decide"]
     for v in verdicts:

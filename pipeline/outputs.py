@@ -41,19 +41,20 @@ def check_output_path(path, create_dirs: bool = False) -> Path:
     return path
 
 
-def check_output_folder(path, create_parents: bool = True) -> Path:
+def check_output_folder(path, create_parents: bool = False) -> Path:
     """Refuse (before any work) an output folder that is a file, sits below a file, or would be made
-    in a folder that is not writable; with ``create_parents`` off its parent folder must exist."""
+    in a folder that is not writable; its parent folder must exist unless ``create_parents`` (the
+    ``--parents`` option)."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise EnsembleFileError(f"{path}: exists and is not a folder; -o names the output folder")
-    if not create_parents and not path.parent.is_dir():
-        raise EnsembleFileError(f"{path}: folder {path.parent} does not exist")
     nearest = path
     while not nearest.exists():
         nearest = nearest.parent if str(nearest.parent) != str(nearest) else Path(".")
     if not nearest.is_dir():
         raise EnsembleFileError(f"{path}: {nearest} is a file, not a folder")
+    if not create_parents and not path.parent.is_dir():
+        raise EnsembleFileError(f"{path}: folder {path.parent} does not exist; create it or pass --parents")
     if not os.access(nearest, os.W_OK | os.X_OK):
         raise EnsembleFileError(f"{path}: folder {nearest} is not writable")
     return path

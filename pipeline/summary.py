@@ -42,9 +42,14 @@ def scene_summary(scene) -> dict:
 
 
 def clearance_summary(scene) -> dict:
-    """Clearances (m), their sampling laws, the contact settings and what ``rss6 run`` runs by default."""
+    """Clearances (m), the bands their sizes are drawn from (m; none: nominal sizes), their sampling
+    laws, the contact settings and what ``rss6 run`` runs by default."""
     import dataclasses
+
+    from rss6core import size_band
+    bands = {f: size_band(scene, f) for f in dataclasses.asdict(scene.clearance)}
     return {"clearances_m": dataclasses.asdict(scene.clearance),
+            "size_bands_m": {f: dataclasses.asdict(b) for f, b in bands.items() if b is not None},
             "sampling": dataclasses.asdict(scene.sampling),
             "contact": {**dataclasses.asdict(scene.contact),
                         "time_step_s": scene.simulation.contact_time_step,
@@ -90,7 +95,11 @@ def _clearance_lines(s: dict) -> list[str]:
     join = lambda d: ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"  # noqa: E731
                                for k, v in d.items())
     level = s["run_default_level"]
+    bands = ", ".join(f"{f} {b['law']} {1e3 * b['low']:g}-{1e3 * b['high']:g}"
+                      + (f" (std {1e3 * b['std']:g})" if b["law"] == "normal" else "")
+                      for f, b in s["size_bands_m"].items())
     return ["clearances [mm]: " + ", ".join(f"{k} {1e3 * v:g}" for k, v in s["clearances_m"].items()),
+            "clearance sizes drawn per joint [mm]: " + (bands or "none (every joint at its nominal size)"),
             "sampling (fractions of the clearance): " + join(s["sampling"]),
             "contact (SI): " + join(s["contact"]),
             f"rss6 run default level: {level}" if level else

@@ -43,6 +43,20 @@ def test_top_level_help_lists_every_shipped_scene(configs, capsys):
     assert [name for name in names if name not in words] == []
 
 
+def test_check_shows_the_bands_clearance_sizes_are_drawn_from(configs, capsys):
+    """configs/paper_tolerance.toml draws each joint's size from its family's [tolerance.*] band: check
+    says so (mm in the text, m in --json), and says a scene without bands keeps nominal sizes."""
+    assert main(["check", str(configs / "paper_tolerance.toml")]) == 0
+    line = [s for s in capsys.readouterr().out.splitlines() if s.startswith("clearance sizes drawn")][0]
+    assert line == ("clearance sizes drawn per joint [mm]: revolute_radial normal 0.11-0.37 (std 0.0433), "
+                    "revolute_axial uniform 0.15-0.35, spherical_C uniform 0.15-0.35, spherical_B uniform 0.15-0.35")
+    assert main(["check", str(configs / "paper_tolerance.toml"), "--json"]) == 0
+    bands = json.loads(capsys.readouterr().out)["size_bands_m"]
+    assert bands["revolute_radial"] == {"law": "normal", "low": 0.110e-3, "high": 0.370e-3, "std": 0.0433e-3}
+    assert main(["check", "smoke"]) == 0
+    assert "clearance sizes drawn per joint [mm]: none" in capsys.readouterr().out
+
+
 def test_bad_config_is_a_usage_error(configs, tmp_path, capsys):
     bad = tmp_path / "typo.toml"
     bad.write_text((configs / "paper.toml").read_text().replace("mass_kg", "mas_kg"))

@@ -103,6 +103,8 @@ def small_ensemble(tmp_path_factory):
     (["tradeoff", "smoke", "-o", "{ens}/sub"], ["is a file, not a folder"]),
     (["stability", "smoke", "-o", "{ens}"], ["not a folder"]),
     (["budget", "smoke", "--spec", "displacement:x<=1mm@q50", "-o", "{dir}/missing/b"], ["does not exist"]),
+    (["plot", "{ens}", "-o", "{dir}/missing/p"], ["folder", "missing does not exist", "--parents"]),
+    (["stability", "smoke", "-o", "{dir}/missing/s"], ["does not exist", "--parents"]),
 ])
 def test_an_existing_file_or_a_bad_output_folder_is_refused_before_work(argv, words, small_ensemble, tmp_path,
                                                                         capsys):
@@ -118,6 +120,24 @@ def test_an_existing_file_or_a_bad_output_folder_is_refused_before_work(argv, wo
     _one_line_error(capsys, *words)
     assert (small_ensemble.read_bytes(), sim.read_bytes()) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sim.nc"]
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["simulate", "smoke", "--model", "quasi-static", "--start", "equilibrium"],
+     ["--start equilibrium: sets the contact level's initial state; this run is the quasi-static level"]),
+    ([*QS, "-n", "2", "--start", "drawn", "-o", "{dir}/x.nc"], ["--start drawn", "quasi-static level"]),
+    ([*QS, "-n", "2", "--undecided", "pass", "-o", "{dir}/x.nc"], ["--undecided pass: applies with --require only"]),
+    (["stats", "{ens}", "--undecided", "fail"], ["--undecided fail: applies with --require only"]),
+])
+def test_an_option_that_does_not_apply_is_refused_not_ignored(argv, words, small_ensemble, tmp_path, capsys):
+    assert _exit_code([a.format(ens=small_ensemble, dir=tmp_path) for a in argv]) == 2
+    _one_line_error(capsys, *words)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_plot_parents_creates_the_missing_folders(small_ensemble, tmp_path, capsys):
+    assert main(["plot", str(small_ensemble), "-o", str(tmp_path / "a" / "b"), "--parents"]) == 0
+    assert any((tmp_path / "a" / "b").glob("*.png"))
 
 
 def test_a_rerun_rewrites_its_own_multifidelity_file(tmp_path, capsys):

@@ -103,6 +103,7 @@ def test_failed_realisations_make_a_met_limit_undecided_not_passed():
     assert w.outcome == "fail"
     assert exit_code([v]) == 1 and exit_code([v], undecided="pass") == 0
     assert "30 failed, so a limit they meet is undecided" in format_verdicts([v, w])
+    assert format_verdicts([v]).splitlines()[0].endswith("; estimate and interval in the unit of the spec's limit)")
     (p,) = judge(parse_spec("displacement:x<=0.2mm@mean"), stats.assign_attrs(n_failed=0))
     assert p.outcome == "pass"
 

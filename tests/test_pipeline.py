@@ -259,6 +259,7 @@ def test_smoke_ensemble_through_the_cli(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "displacement" in printed and "velocity" not in printed.split("(displacement only")[0]
     assert f"rss6 stats {out} shows velocity and acceleration too" in printed
+    assert "window: whole run" in printed and "window: steady" not in printed
     assert main(["stats", str(out), "--json"]) == 0
     js = json.loads(capsys.readouterr().out)
     assert js["n_finished"] == 8
