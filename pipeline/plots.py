@@ -15,13 +15,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["plot_ensemble", "plot_run", "ensemble_figures", "run_figures", "figure_unit",
-           "draw_abs_envelope", "mark_steady", "figure_title", "save_figure", "plain_ticks", "sensitivity_figures",
+           "draw_abs_envelope", "mark_steady", "mark_stored_maxima", "stored_maxima",
+           "output_grid", "figure_title", "save_figure", "plain_ticks", "sensitivity_figures",
            "plot_sensitivity"]
 
 from .stats import (MIN_N_MEAN, ensemble_stats, estimates, in_window, quantile_estimates,  # noqa: E402
                     running_mean_interval, windows_of)
 from .store import DIRECTIONS as _DIRS  # noqa: E402
-from .store import window_label  # noqa: E402
+from .store import WINDOWS, window_label, window_masks, window_reductions  # noqa: E402
 
 QUANTITIES = ("displacement", "velocity", "acceleration")
 _BASE = {"displacement": ("m", "rad"), "velocity": ("m/s", "rad/s"),
@@ -74,28 +75,94 @@ def mark_steady(ax, ds) -> None:
         ax.axvline(t_s, color="0.4", ls=":", lw=1.0, label=f"steady from {t_s:g} s")
 
 
+def output_grid(t) -> str:
+    """How a curve sampled at times t (s) is labelled: its output grid and step, which at the
+    contact level is coarser than the internal steps the stored maxima come from."""
+    step = float(np.median(np.diff(t))) if np.size(t) > 1 else float("nan")
+    return f"{step:g} s output grid"
+
+
 def draw_abs_envelope(ax, t, e, who: str = "", **peak_style) -> None:
-    """|e| of realisations e (R, T) against time t: its 5-95 % band, median and maximum."""
-    a = np.abs(e)
+    """|e| of realisations e (R, T) against time t: its 5-95 % band, median and maximum, each
+    labelled as sampled on the output grid (the stored maxima may lie higher)."""
+    a, grid = np.abs(e), output_grid(t)
     lo, mid, hi = quantile_estimates(a, [0.05, 0.5, 0.95], axis=0)
-    ax.fill_between(t, lo, hi, color="C0", alpha=0.3, lw=0, label=f"{who}5-95 % of |error|")
-    ax.plot(t, mid, color="C0", lw=1.0, label=f"{who}median |error|")
-    ax.plot(t, estimates(a, ("max",))[..., 0], label=f"{who}max |error|", **peak_style)
+    ax.fill_between(t, lo, hi, color="C0", alpha=0.3, lw=0, label=f"{who}5-95 % of |error|, {grid}")
+    ax.plot(t, mid, color="C0", lw=1.0, label=f"{who}median |error|, {grid}")
+    ax.plot(t, estimates(a, ("max",))[..., 0], label=f"{who}max |error|, {grid}", gid="sampled max",
+            **peak_style)
 
 
-def _envelope(ds, q: str, finished):
+STORED_MAX_LABEL = "max |error| over internal steps (file's stored maximum)"
+
+
+def _marked_windows(ds) -> list[str]:
+    """The windows whose stored maxima are marked: startup and steady, else the whole run."""
+    return [w for w in windows_of(ds) if w != "whole"] or ["whole"]
+
+
+def stored_maxima(ds, sds, q: str) -> dict[str, np.ndarray]:
+    """{window: (direction,) SI} the file's maximum |q error| per window of _marked_windows, over
+    the finished realisations (``sds``: :func:`pipeline.stats.ensemble_stats`, every window)."""
+    return {w: in_window(sds, w)["max_abs_error"].sel(statistic="max", bound="estimate", quantity=q)
+            .transpose("direction").values for w in _marked_windows(ds)}
+
+
+def _finer_maxima(ds, t, sampled, stored: dict) -> dict[str, tuple[float, float, np.ndarray]]:
+    """{window: (start s, end s, stored maxima)} where the stored maxima exceed the maxima of the
+    plotted samples ``sampled`` (T, direction) in that window (the contact level's come from every
+    internal step); other directions NaN.  Samples per window as the file's summaries take them."""
+    masks = window_masks(t, float(ds.attrs.get("settle_time_s", 0.0)),
+                         float(ds.attrs.get("steady_after_s", 0.0)))
+    shown = window_reductions(np.asarray(sampled)[None], masks)[0][:, 0]     # (window, direction)
+    out = {}
+    for w, peak in stored.items():
+        i = WINDOWS.index(w)
+        above = peak > shown[i] * (1 + 1e-9)      # elsewhere the two are one computation, equal
+        if above.any() and masks[i].any():
+            span = t[masks[i]]
+            out[w] = (float(span[0]), float(span[-1]), np.where(above, peak, np.nan))
+    return out
+
+
+def mark_stored_maxima(ax, finer: dict, k: int, f: float, signed: bool = False) -> None:
+    """Dashed lines at the stored maxima of direction ``k`` (SI, shown times ``f``) over their
+    windows' spans; at plus and minus the value on a signed history."""
+    for w, (t0, t1, peak) in finer.items():
+        if not np.isfinite(peak[k]):
+            continue
+        for sign in (1, -1) if signed else (1,):
+            ax.plot([t0, t1], [sign * peak[k] * f] * 2, color="C3", ls="--", lw=1.2,
+                    label=STORED_MAX_LABEL, gid=f"stored max {w}" + (" negative" if sign < 0 else ""))
+
+
+def _figure_legend(fig, axes) -> None:
+    """One legend under the panels with every distinct label of ``axes`` (a mark drawn in any
+    panel is explained even when the first panel lacks it)."""
+    handles = {}
+    for ax in axes:
+        for h, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, h)
+    fig.legend(handles.values(), handles.keys(), loc="outside lower center", fontsize=8,
+               ncols=min(3, len(handles)))
+
+
+def _envelope(ds, q: str, finished, sds):
     err = ds["error"].sel(quantity=q).transpose("realization", "time", "direction").values[finished]
     t = ds["time"].values
+    stored = stored_maxima(ds, sds, q)
+    finer = _finer_maxima(ds, t, estimates(np.abs(err), ("max",))[..., 0], stored)
     fig, axes = _grid(figure_title(f"|{q} error| envelope over realisations", ds, err.shape[0]))
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = figure_unit(q, d, err[..., k])
+        f, unit = figure_unit(q, d, np.concatenate([err[..., k].ravel(), [v[k] for v in stored.values()]]))
         draw_abs_envelope(ax, t, err[..., k] * f, color="k", ls="--", lw=0.8)
+        mark_stored_maxima(ax, finer, k, f)
         mark_steady(ax, ds)
         ax.set(xlabel="time [s]", ylabel=f"|{d} error| [{unit}]", title=d)
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
         plain_ticks(ax)
-    axes[0].legend(fontsize=8, loc="upper left")
+    _figure_legend(fig, axes)
     return fig
 
 
@@ -105,45 +172,55 @@ def _peaks(ds, q: str, finished, window: str = "whole") -> np.ndarray:
 
 
 def _histograms(ds, q: str, finished, sds):
-    """Per direction, histograms of the per-realisation maxima in the startup and steady windows
-    (the whole run's where the file has no windows), each with its mean and its q95 from ``sds``
-    (:func:`pipeline.stats.ensemble_stats`, every window), as ``rss6 stats`` prints them."""
-    windows = [w for w in windows_of(ds) if w != "whole"] or ["whole"]
-    peaks = {w: _peaks(ds, q, finished, w) for w in windows}             # (R, 6) each
-    fig, axes = _grid(figure_title(f"per-realisation max |{q} error| per analysis window", ds,
-                                   int(finished.sum())))
+    """Histograms of the per-realisation maxima, a 2 x 3 block of directions per analysis window
+    (startup above steady; the whole run's where the file has no windows), each panel on its own
+    x range: the contact level's startup maxima exceed the steady ones a hundredfold."""
+    peaks = {w: _peaks(ds, q, finished, w) for w in _marked_windows(ds)}      # (R, 6) each
+    peaks = {w: p for w, p in peaks.items() if np.isfinite(p).any()} or {"whole": _peaks(ds, q, finished)}
+    fig, axes = plt.subplots(2 * len(peaks), 3, figsize=(13, 1 + 5.5 * len(peaks)), constrained_layout=True)
+    fig.suptitle(figure_title(f"per-realisation max |{q} error| per analysis window", ds, int(finished.sum())))
     t_s = float(ds.attrs.get("steady_after_s", np.nan))
-    for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = figure_unit(q, d, np.concatenate([p[:, k] for p in peaks.values()]))
-        for i, (w, peak) in enumerate(peaks.items()):
-            x = peak[:, k] * f
-            x = x[np.isfinite(x)]
-            if not x.size:                                   # an empty startup window
-                continue
-            mean = estimates(x, ("mean",))[0]
-            label = window_label(w, t_s).split(" (")[0]
-            ax.hist(x, bins=min(30, max(5, x.size // 4)), color=f"C{i}", alpha=0.5,
-                    label=f"{label}, mean {mean:.3g}")
-            ax.axvline(mean, color=f"C{i}", lw=1.2, gid=f"mean {w}")
-            _mark_q95(ax, in_window(sds, w)["max_abs_error"].sel(statistic="q95", quantity=q, direction=d),
-                      f, i, w, label)
-        ax.set(xlabel=f"max |{d} error| [{unit}]", ylabel="realisations", title=d)
-        ax.set_ylim(0, 1.25 * ax.get_ylim()[1])                # headroom for the interval bars
-        ax.legend(fontsize=7, loc="best")
-        ax.grid(alpha=0.3)
-        plain_ticks(ax)
-        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
+    for i, (w, peak) in enumerate(peaks.items()):
+        for k, (ax, d) in enumerate(zip(axes.ravel()[6 * i:6 * i + 6], _DIRS)):
+            _histogram_panel(ax, peak[:, k], in_window(sds, w)["max_abs_error"].sel(
+                statistic="q95", quantity=q, direction=d), (q, d, w, i, t_s))
     fig.supxlabel(_histogram_key(t_s, sds), fontsize=9)
     return fig
 
 
-def _mark_q95(ax, cell, f: float, i: int, window: str, label: str) -> None:
+BARS_TOP = 0.6   # axes fraction the tallest bar reaches: the q95 interval bar and legend sit above
+
+
+def _histogram_panel(ax, peak, q95, where: tuple) -> None:
+    """One window's and direction's histogram of maxima ``peak`` (R,) SI, with its mean and the q95
+    cell of pipeline.stats; ``where``: (quantity, direction, window, colour index, steady_after_s)."""
+    q, d, w, i, t_s = where
+    f, unit = figure_unit(q, d, peak)
+    x = peak[np.isfinite(peak)] * f
+    label = window_label(w, t_s)
+    ax.set(xlabel=f"max |{d} error| [{unit}]", ylabel="realisations", title=f"{d}, {label}")
+    if not x.size:
+        return
+    mean = estimates(x, ("mean",))[0]
+    counts, _, _ = ax.hist(x, bins=min(30, max(5, x.size // 4)), color=f"C{i}", alpha=0.5,
+                           label=f"{w}, mean {mean:.3g}")
+    ax.axvline(mean, color=f"C{i}", lw=1.2, gid=f"mean {w}")
+    _mark_q95(ax, q95, f, i, w)
+    ax.set_ylim(0, max(counts.max(), 1) / BARS_TOP)
+    ax.legend(fontsize=7, loc="upper left")
+    ax.grid(alpha=0.3)
+    plain_ticks(ax)
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
+    ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))   # counts
+
+
+def _mark_q95(ax, cell, f: float, i: int, window: str) -> None:
     """A dashed line at the q95 estimate of ``cell`` (bound: estimate, lower, upper; SI, shown times
-    ``f``) and, only where pipeline.stats gives one, its interval as a capped bar near the top."""
+    ``f``) and, only where pipeline.stats gives one, its interval as a capped bar above the bars."""
     est, lo, hi = (float(cell.sel(bound=b)) * f for b in ("estimate", "lower", "upper"))
-    text = f"{label}, q95 est. {est:.3g}"
+    text = f"{window}, q95 est. {est:.3g}"
     if np.isfinite(lo) and np.isfinite(hi):
-        ax.plot([lo, hi], [0.96 - 0.05 * i] * 2, color=f"C{i}", lw=1.5, marker="|", ms=7,
+        ax.plot([lo, hi], [BARS_TOP + 0.07] * 2, color=f"C{i}", lw=1.5, marker="|", ms=7,
                 transform=ax.get_xaxis_transform(), gid=f"q95 interval {window}")
         text += f" [{lo:.3g}, {hi:.3g}]"
     ax.axvline(est, color=f"C{i}", lw=1.2, ls="--", label=text, gid=f"q95 {window}")
@@ -199,25 +276,29 @@ def ensemble_figures(ds):
     sds, figs = ensemble_stats(ds, window=None), {}
     for q in QUANTITIES:
         if "error" in ds:
-            figs[f"envelope_{q}.png"] = _envelope(ds, q, finished)
+            figs[f"envelope_{q}.png"] = _envelope(ds, q, finished, sds)
         figs[f"hist_max_{q}.png"] = _histograms(ds, q, finished, sds)
         figs[f"convergence_{q}.png"] = _convergence(ds, q, finished)
     return figs
 
 
-def _history(ds, q: str):
+def _history(ds, q: str, sds):
+    """One run's signed error history per direction, sampled on the output grid, with the stored
+    maxima marked where they exceed what the samples show."""
     err = ds["error"].sel(quantity=q).transpose("time", "direction").values       # (T, 6)
     t = ds["time"].values
+    stored = stored_maxima(ds, sds, q)
+    finer = _finer_maxima(ds, t, err, stored)
     fig, axes = _grid(figure_title(f"{q} error history (actual minus ideal rigid motion)", ds))
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = figure_unit(q, d, err[:, k])
-        ax.plot(t, err[:, k] * f, color="C0", lw=1.0)
+        f, unit = figure_unit(q, d, np.concatenate([err[:, k], [v[k] for v in stored.values()]]))
+        ax.plot(t, err[:, k] * f, color="C0", lw=1.0, label=f"error, sampled on the {output_grid(t)}", gid="history")
+        mark_stored_maxima(ax, finer, k, f, signed=True)
         mark_steady(ax, ds)
         ax.set(xlabel="time [s]", ylabel=f"{d} error [{unit}]", title=d)
         ax.grid(alpha=0.3)
         plain_ticks(ax)
-    if "steady_after_s" in ds.attrs:
-        axes[0].legend(fontsize=8, loc="best")
+    _figure_legend(fig, axes)
     return fig
 
 
@@ -225,7 +306,8 @@ def run_figures(ds):
     """{file name: Figure} of a single run (``rss6 simulate -o``): its error histories."""
     if "error" not in ds:
         raise ValueError("no error histories in the file")
-    return {f"history_{q}.png": _history(ds, q) for q in QUANTITIES}
+    sds = ensemble_stats(ds, window=None)
+    return {f"history_{q}.png": _history(ds, q, sds) for q in QUANTITIES}
 
 
 def _save_all(figs: dict, out_dir) -> list[Path]:

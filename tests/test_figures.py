@@ -19,7 +19,7 @@ from pipeline.plots import ensemble_figures, figure_unit, run_figures
 from pipeline.report import LEVELS, error_figure, rigid_figure
 from pipeline.stats import (MIN_N_MEAN, ensemble_stats, estimates, min_n_for_quantile,
                             running_mean_interval)
-from pipeline.store import open_ensemble, write_netcdf
+from pipeline.store import WINDOWS, open_ensemble, window_masks, write_netcdf
 from pipeline.study import recommend, stability_figure, tradeoff_figure
 
 SMOKE = str(Path(__file__).resolve().parent.parent / "configs" / "smoke.toml")
@@ -183,15 +183,17 @@ def test_histogram_markers_and_convergence_interval_come_from_stats(full_ensembl
     figs = ensemble_figures(ds)
     try:
         si = ds["max_abs_error"].sel(quantity="acceleration", direction="z")
-        f, unit = figure_unit("acceleration", "z", si.sel(window=["startup", "steady"]).values)
-        hist = figs["hist_max_acceleration.png"].axes[2]
-        lines = [ln.get_xdata()[0] for ln in hist.get_lines() if ln.get_gid().startswith("mean")]
-        want = [estimates(si.sel(window=w).values * f, ("mean",))[0] for w in ("startup", "steady")]
-        np.testing.assert_allclose(lines, want, rtol=1e-12)
+        axes = figs["hist_max_acceleration.png"].axes
+        want = []
+        for i, w in enumerate(("startup", "steady")):
+            hist = axes[6 * i + 2]                                  # z, one block of panels per window
+            f, unit = figure_unit("acceleration", "z", si.sel(window=w).values)
+            lines = [ln.get_xdata()[0] for ln in hist.get_lines() if ln.get_gid().startswith("mean")]
+            want.append(estimates(si.sel(window=w).values * f, ("mean",))[0])
+            np.testing.assert_allclose(lines, want[-1:], rtol=1e-12)
+            assert [t.get_text().split(",")[0] for t in hist.get_legend().get_texts()] == [w, w]
+            assert f"[{unit}]" in hist.get_xlabel() and hist.get_title().startswith(f"z, {w}")
         assert want[0] != want[1]
-        assert [t.get_text().split(",")[0] for t in hist.get_legend().get_texts()] == [
-            "startup", "startup", "steady", "steady"]
-        assert f"[{unit}]" in hist.get_xlabel()
         f, unit = figure_unit("acceleration", "z", si.sel(window="whole").values)
         peak = si.sel(window="whole").values * f
         conv = figs["convergence_acceleration.png"].axes[2]
@@ -221,12 +223,13 @@ def test_histogram_q95_marker_is_stats_estimate_with_its_interval_only_from_min_
     n = ds.sizes["realization"]
     assert (n >= min_n_for_quantile(0.95, 0.95)) == (n == 60)
     try:
-        for ax, d in zip(figs["hist_max_acceleration.png"].axes, sds.direction.values):
-            f, _ = figure_unit("acceleration", d, ds["max_abs_error"].sel(
-                quantity="acceleration", direction=d, window=["startup", "steady"]).values)
-            marks = {ln.get_gid(): ln.get_xdata() for ln in ax.get_lines()}
-            legend = [t.get_text() for t in ax.get_legend().get_texts()]
-            for w in ("startup", "steady"):
+        axes = figs["hist_max_acceleration.png"].axes
+        for i, w in enumerate(("startup", "steady")):
+            for ax, d in zip(axes[6 * i:6 * i + 6], sds.direction.values):
+                f, _ = figure_unit("acceleration", d, ds["max_abs_error"].sel(
+                    quantity="acceleration", direction=d, window=w).values)
+                marks = {ln.get_gid(): ln.get_xdata() for ln in ax.get_lines()}
+                legend = [t.get_text() for t in ax.get_legend().get_texts()]
                 cell = sds["max_abs_error"].sel(window=w, statistic="q95", quantity="acceleration",
                                                 direction=d)
                 est, lo, hi = (float(cell.sel(bound=b)) * f for b in ("estimate", "lower", "upper"))
@@ -287,3 +290,109 @@ def test_sensitivity_figures_are_legible(smoke, tmp_path):
         flat = " ".join(fig._suptitle.get_text().split())
         assert "scene smoke" in flat and "quasi-static level" in flat and "s.nc" in flat
     assert_legible(figs)
+
+
+def _contact_like(ds, q: str, factor: dict) -> xr.Dataset:
+    """``ds`` (loaded) with the stored maxima of ``q`` scaled per window, {window: factor or
+    (direction,) factors}, and the whole run's their maximum: as at the contact level, whose
+    stored maxima come from internal steps finer than the output grid the histories are on."""
+    ds = ds.copy(deep=True)
+    peak = ds["max_abs_error"]
+    for w, k in factor.items():
+        scale = xr.DataArray(np.broadcast_to(k, (6,)), coords={"direction": ds["direction"]})
+        peak.loc[{"window": w, "quantity": q}] = peak.sel(window=w, quantity=q) * scale
+    peak.loc[{"window": "whole"}] = peak.sel(window=["startup", "steady"]).max("window")
+    return ds.assign_attrs(model="contact")
+
+
+def _grid_label(t) -> str:
+    return f"{float(np.median(np.diff(t))):g} s output grid"
+
+
+def _gids(ax) -> dict:
+    return {ln.get_gid(): ln for ln in ax.get_lines() if ln.get_gid()}
+
+
+def _window_span(ds, w: str) -> list[float]:
+    t, a = ds["time"].values, ds.attrs
+    span = t[window_masks(t, float(a["settle_time_s"]), float(a["steady_after_s"]))[WINDOWS.index(w)]]
+    return [span[0], span[-1]]
+
+
+def test_run_figures_mark_stored_maxima_above_the_output_grid(simulate_file):
+    """A contact-like file (stored maxima above the sampled history's: startup x10 everywhere,
+    steady x1.5 in z only): each history panel's curve is labelled with the output grid, and a
+    dashed line at +-the file's stored maximum spans each window where it exceeds the samples."""
+    plain = open_results(simulate_file).load()
+    ds = _contact_like(plain, "acceleration", {"startup": 10.0, "steady": [1, 1, 1.5, 1, 1, 1]})
+    figs = run_figures(ds) | {"plain": run_figures(plain)["history_acceleration.png"]}
+    try:
+        err = ds["error"].sel(quantity="acceleration").transpose("time", "direction").values
+        for k, (ax, d) in enumerate(zip(figs["history_acceleration.png"].axes, ds["direction"].values)):
+            marks = _gids(ax)
+            assert _grid_label(ds["time"].values) in marks["history"].get_label()
+            f = np.nanmax(np.abs(marks["history"].get_ydata())) / np.nanmax(np.abs(err[:, k]))
+            for w in ("startup", "steady"):
+                drawn = f"stored max {w}" in marks
+                assert drawn == (w == "startup" or d == "z"), (d, w)
+                if drawn:
+                    stored = float(ds["max_abs_error"].sel(window=w, quantity="acceleration", direction=d))
+                    np.testing.assert_allclose(marks[f"stored max {w}"].get_ydata(), stored * f, rtol=1e-9)
+                    np.testing.assert_allclose(marks[f"stored max {w} negative"].get_ydata(), -stored * f,
+                                               rtol=1e-9)
+                    np.testing.assert_allclose(marks[f"stored max {w}"].get_xdata(), _window_span(ds, w))
+        legend = [t.get_text() for t in figs["history_acceleration.png"].legends[0].get_texts()]
+        assert any("over internal steps" in t for t in legend), legend
+        assert not any(g.startswith("stored max") for ax in figs["plain"].axes for g in _gids(ax))
+        assert_legible(figs)
+    finally:
+        for fig in figs.values():
+            plt.close(fig)
+
+
+def test_envelope_marks_the_stored_maximum_over_realisations(full_ensemble):
+    """The envelope's max curve names the output grid; where the file's stored maxima exceed it
+    (contact-like file), a dashed line sits at pipeline.stats' max over realisations per window."""
+    ds = _contact_like(open_ensemble(full_ensemble).load(), "velocity", {"startup": 14.0})
+    figs = ensemble_figures(ds)
+    try:
+        sds = ensemble_stats(ds, window=None)
+        err = ds["error"].sel(quantity="velocity").transpose("realization", "time", "direction").values
+        for k, (ax, d) in enumerate(zip(figs["envelope_velocity.png"].axes, ds["direction"].values)):
+            marks = _gids(ax)
+            assert _grid_label(ds["time"].values) in marks["sampled max"].get_label()
+            f = np.nanmax(marks["sampled max"].get_ydata()) / np.nanmax(np.abs(err[..., k]))
+            stored = float(sds["max_abs_error"].sel(window="startup", statistic="max", bound="estimate",
+                                                    quantity="velocity", direction=d))
+            np.testing.assert_allclose(marks["stored max startup"].get_ydata(), stored * f, rtol=1e-9)
+            assert "stored max steady" not in marks
+        assert not any(g.startswith("stored max") for ax in figs["envelope_displacement.png"].axes
+                       for g in _gids(ax))
+        assert_legible({k: v for k, v in figs.items() if k.startswith("envelope")})
+    finally:
+        for fig in figs.values():
+            plt.close(fig)
+
+
+def test_histograms_give_each_window_its_own_x_range(full_ensemble):
+    """Startup maxima a hundredfold the steady ones (as at the contact level): each window has its
+    own panels, the steady panels' x range lies within a few times the steady maxima, and no legend
+    covers a bar."""
+    ds = _contact_like(open_ensemble(full_ensemble).load(), "acceleration", {"startup": 100.0})
+    figs = ensemble_figures(ds)
+    try:
+        fig = figs["hist_max_acceleration.png"]
+        fig.canvas.draw()
+        for i, w in enumerate(("startup", "steady")):
+            for ax, d in zip(fig.axes[6 * i:6 * i + 6], ds["direction"].values):
+                x = ds["max_abs_error"].sel(window=w, quantity="acceleration", direction=d).values
+                f, unit = figure_unit("acceleration", d, x)
+                lo, hi = ax.get_xlim()
+                assert x.max() * f <= hi <= 3 * x.max() * f and hi - lo <= 3 * x.max() * f, (w, d, lo, hi)
+                assert ax.get_title().startswith(f"{d}, {w}") and f"[{unit}]" in ax.get_xlabel()
+                bars = max(p.get_window_extent().y1 for p in ax.patches)
+                assert ax.get_legend().get_window_extent().y0 > bars, (w, d)
+        assert_legible({"hist": fig})
+    finally:
+        for fig in figs.values():
+            plt.close(fig)
