@@ -590,7 +590,7 @@ def _multifidelity_parser(sub) -> None:
     mf.add_argument("--window", choices=WINDOWS, default="whole",
                     help="analysis window of the means: whole (t >= the scene's settle_time_s), "
                          "startup (before its steady_after_s) or steady (from it) (default whole)")
-    mf.add_argument("--workers", type=_positive_int, default=2,
+    mf.add_argument("--workers", type=_positive_int,
                     help="local dask workers, one thread each (default 2)")
     mf.add_argument("--scheduler", type=_scheduler_address, help=SCHEDULER_HELP)
     mf.add_argument("--json", action="store_true",
@@ -800,6 +800,7 @@ ELEMENTS_HELP = "beam elements per crank and per rod (default: the scene's eleme
 START_HELP = ("contact level's initial state: 'drawn' (links offset by the drawn eccentricities, "
               "joints open) or 'equilibrium' (the static contact equilibrium at t = 0, every loaded "
               "joint resting on its wall); default: the scene's [simulation] contact_start")
+LOCAL_WORKERS = 2   # --workers' default where --scheduler is the alternative
 SCHEDULER_HELP = ("address of a running dask.distributed scheduler, e.g. tcp://10.0.0.5:8786 "
                   "(default: none, a local cluster of --workers processes)")
 
@@ -851,7 +852,7 @@ def _run_parser(sub) -> None:
     run.add_argument("--dt", type=_positive_float, help=DT_HELP)
     run.add_argument("--elements", type=_positive_int, help=ELEMENTS_HELP)
     run.add_argument("--start", choices=CONTACT_STARTS, help=START_HELP)
-    run.add_argument("--workers", type=_positive_int, default=2,
+    run.add_argument("--workers", type=_positive_int,
                      help="local dask workers, one thread each (default 2)")
     _scheduler_options(run)
     from .run import MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL
@@ -908,7 +909,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--family-n", type=_positive_int, default=100,
                     help="realisations per joint-family run (default 100)")
     rp.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    rp.add_argument("--workers", type=_positive_int, default=2,
+    rp.add_argument("--workers", type=_positive_int,
                     help="local dask workers, one thread each (default 2)")
     _scheduler_options(rp)
     rp.set_defaults(func=_report)
@@ -945,10 +946,15 @@ def _scheduler_options(parser) -> None:
                              "scheduler has had no workers for S seconds (default 60)")
 
 
-def _worker_timeout(args) -> None:
-    """--worker-timeout only with --scheduler (rss6's own local workers are never missing); its
-    default filled in."""
+def _cluster_options(args) -> None:
+    """--worker-timeout only with --scheduler (rss6's own local workers are never missing), --workers
+    only without it (the scheduler's workers are its own); their defaults filled in."""
     from .run import WORKER_TIMEOUT_S
+    if getattr(args, "scheduler", None) and getattr(args, "workers", None) is not None:
+        raise SceneError(f"--workers {args.workers}: sets the local cluster; with --scheduler the "
+                         "scheduler's own workers run the tasks")
+    if getattr(args, "workers", 0) is None:
+        args.workers = LOCAL_WORKERS
     if not hasattr(args, "worker_timeout"):
         return
     if args.worker_timeout is not None and not args.scheduler:
@@ -963,7 +969,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from .store import EnsembleFileError
     try:
-        _worker_timeout(args)
+        _cluster_options(args)
         return args.func(args)
     except (SceneError, EnsembleFileError) as exc:
         print(f"rss6: error: {exc}", file=sys.stderr)

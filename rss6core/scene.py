@@ -321,8 +321,9 @@ _BAND = {"law": _Key(str, choices=("normal", "uniform")), "low_m": _Key(float, c
          "high_m": _Key(float, check=_NONNEG), "std_m": _Key(float, default=0.0, check=_NONNEG)}
 
 
-def _tolerances(table, clearance: dict, size_tolerance: float) -> Tolerances:
-    """The [tolerance] section: per family a size band around the [clearance] nominal size."""
+def _tolerances(table, clearance: dict, size_tolerance: float, contact: dict) -> Tolerances:
+    """The [tolerance] section: per family a size band around the [clearance] nominal size, below
+    the joint's radius as the nominal size is (:func:`_check_clearances`)."""
     if not isinstance(table, dict):
         raise SceneError("[tolerance] must be a table")
     if table and size_tolerance > 0:
@@ -340,6 +341,10 @@ def _tolerances(table, clearance: dict, size_tolerance: float) -> Tolerances:
             raise SceneError(f"{where} low_m: must be smaller than high_m, got {b['low_m']!r} >= {b['high_m']!r}")
         if b["law"] == "normal" and not b["low_m"] <= nominal <= b["high_m"]:
             raise SceneError(f"{where} low_m, high_m: must enclose the [clearance] {family}_m = {nominal!r}")
+        radius = CLEARANCE_RADII[f"{family}_m"]
+        if b["high_m"] >= contact[radius]:
+            raise SceneError(f"{where} high_m: {b['high_m']!r} m is not below [contact] {radius} = "
+                             f"{contact[radius]!r} m (a clearance in mm written in metres?)")
         if (b["law"] == "normal") != (b["std_m"] > 0):
             raise SceneError(f"{where} std_m: must be positive for law 'normal' and absent for 'uniform'")
         bands[family] = SizeBand(b["law"], b["low_m"], b["high_m"], b["std_m"])
@@ -487,7 +492,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
                            ct["slip_velocity_m_s"], ct["impact_speed_floor_m_s"],
                            ct["stiffness_scale"]),
         beam=BeamTheory(v["beam"]["theory"], v["beam"]["rotary_inertia"], v["beam"]["mass"]),
-        tolerance=_tolerances(v.get("tolerance", {}), v["clearance"], v["sampling"]["size_tolerance"]),
+        tolerance=_tolerances(v.get("tolerance", {}), v["clearance"], v["sampling"]["size_tolerance"], ct),
         source_text=text, source_path=source)
 
 

@@ -72,6 +72,14 @@ def test_worker_timeout_without_a_scheduler_is_refused(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_workers_with_a_scheduler_is_refused(tmp_path, capsys):
+    """--workers sizes rss6's own local cluster; with --scheduler it would be ignored."""
+    assert main(RUN[3:] + ["--scheduler", "tcp://127.0.0.1:1", "--workers", "4", "-o", str(tmp_path / "o.nc")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--workers 4: sets the local cluster" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("port, words", [
     (None, ["cannot reach the dask scheduler"]),        # nothing listens there
     ("", ["--scheduler", "missing port number", "no scheduler address"]),   # malformed: refused by argparse

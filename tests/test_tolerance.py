@@ -64,6 +64,8 @@ def test_no_tolerance_scene_draws_exactly_as_before(paper, paper_text):
     ('law = "normal"\nlow_m = 3e-4\nhigh_m = 4e-4\nstd_m = 1e-5', "[tolerance.spherical_B] low_m, high_m"),
     ('law = "gauss"\nlow_m = 1e-4\nhigh_m = 3e-4', "[tolerance.spherical_B] law"),
     ('law = "uniform"\nlow_m = 1e-4\nhigh = 3e-4', "[tolerance.spherical_B] high"),
+    ('law = "uniform"\nlow_m = 1e-4\nhigh_m = 0.35', "[tolerance.spherical_B] high_m: 0.35 m is not below "
+                                                    "[contact] sphere_radius_m"),
 ])
 def test_bad_bands_are_one_line_errors_naming_the_key(paper_text, band, message):
     with pytest.raises(SceneError) as err:
