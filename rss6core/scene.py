@@ -323,7 +323,7 @@ _BAND = {"law": _Key(str, choices=("normal", "uniform")), "low_m": _Key(float, c
 
 def _tolerances(table, clearance: dict, size_tolerance: float, contact: dict) -> Tolerances:
     """The [tolerance] section: per family a size band around the [clearance] nominal size, below
-    the joint's radius as the nominal size is (:func:`_check_clearances`)."""
+    the joint's radius as the nominal size is (:func:`_below_radius`)."""
     if not isinstance(table, dict):
         raise SceneError("[tolerance] must be a table")
     if table and size_tolerance > 0:
@@ -341,10 +341,7 @@ def _tolerances(table, clearance: dict, size_tolerance: float, contact: dict) ->
             raise SceneError(f"{where} low_m: must be smaller than high_m, got {b['low_m']!r} >= {b['high_m']!r}")
         if b["law"] == "normal" and not b["low_m"] <= nominal <= b["high_m"]:
             raise SceneError(f"{where} low_m, high_m: must enclose the [clearance] {family}_m = {nominal!r}")
-        radius = CLEARANCE_RADII[f"{family}_m"]
-        if b["high_m"] >= contact[radius]:
-            raise SceneError(f"{where} high_m: {b['high_m']!r} m is not below [contact] {radius} = "
-                             f"{contact[radius]!r} m (a clearance in mm written in metres?)")
+        _below_radius(f"{where} high_m", b["high_m"], CLEARANCE_RADII[f"{family}_m"], contact)
         if (b["law"] == "normal") != (b["std_m"] > 0):
             raise SceneError(f"{where} std_m: must be positive for law 'normal' and absent for 'uniform'")
         bands[family] = SizeBand(b["law"], b["low_m"], b["high_m"], b["std_m"])
@@ -423,13 +420,18 @@ CLEARANCE_RADII = {"revolute_radial_m": "journal_radius_m", "revolute_axial_m": 
                    "spherical_C_m": "sphere_radius_m", "spherical_B_m": "sphere_radius_m"}
 
 
+def _below_radius(where: str, size: float, radius: str, contact: dict) -> None:
+    """A clearance is a small gap between pin and bore: a ``size`` (m) not below the joint's [contact]
+    ``radius`` is refused (typically a value in mm written in an _m key)."""
+    if size >= contact[radius]:
+        raise SceneError(f"{where}: {size!r} m is not below [contact] {radius} = {contact[radius]!r} m "
+                         "(a clearance in mm written in metres?)")
+
+
 def _check_clearances(clearance: dict, contact: dict) -> None:
-    """A clearance is a small gap between pin and bore: one not below its joint's radius is refused
-    (typically a value in mm written in an _m key)."""
+    """Every [clearance] size below its joint's radius (:func:`_below_radius`)."""
     for key, radius in CLEARANCE_RADII.items():
-        if clearance[key] >= contact[radius]:
-            raise SceneError(f"[clearance] {key}: {clearance[key]!r} m is not below [contact] {radius} "
-                             f"= {contact[radius]!r} m (a clearance in mm written in metres?)")
+        _below_radius(f"[clearance] {key}", clearance[key], radius, contact)
 
 
 def _build(v: dict, text: str, source: str) -> Scene:
