@@ -31,7 +31,7 @@ from .gate import Verdict, judge_all
 from .run import EnsembleSpec, ensemble
 from .scene_variant import scene_variant
 from .spec import Spec
-from .stats import ensemble_stats, interval_floor
+from .stats import ensemble_stats, no_interval_at
 from .store import WINDOWS
 from .summary import CLEARANCE_LEVELS
 
@@ -114,10 +114,8 @@ def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> 
         raise BudgetError(f"--model {model}: this level has no clearances, so no clearance budget; "
                           "use quasi-static, paper or contact")
     for s in specs:
-        need = interval_floor(s.statistic, confidence)
-        if n < need:
-            raise BudgetError(f"--spec {s.text!r}: {s.statistic} has no {100 * confidence:g} % interval "
-                              f"below n = {need} (-n {n}); raise -n")
+        if why := no_interval_at(s.statistic, confidence, n):
+            raise BudgetError(f"--spec {s.text!r}: {why}")
         if s.op not in ("<=", "<"):
             raise BudgetError(f"--spec {s.text!r}: a budget bounds the error from above; use <= or <")
         if s.window is not None and s.window not in WINDOWS:

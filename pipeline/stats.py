@@ -61,7 +61,7 @@ __all__ = ["QUANTILES", "STATISTICS", "BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "quan
            "min_n_for_quantile", "quantile_estimates", "estimates", "mean_interval",
            "running_mean_interval", "std_interval", "quantile_interval", "ensemble_stats",
            "to_json", "format_stats", "MIN_POINTS_RQMC", "rqmc_intervals", "replicate_groups",
-           "interval_floor", "in_window", "windows_of", "json_number"]
+           "interval_floor", "no_interval_at", "in_window", "windows_of", "json_number"]
 
 QUANTILES = {"q05": 0.05, "q50": 0.5, "q95": 0.95, "q99": 0.99}
 STATISTICS = ("mean", "std", *QUANTILES, "max")
@@ -267,6 +267,15 @@ def interval_floor(statistic: str, confidence: float, replicates: int | None = N
     if statistic in QUANTILES:
         return min_n_for_quantile(QUANTILES[statistic], confidence)
     return {"mean": MIN_N_MEAN, "std": MIN_N_STD}[statistic]
+
+
+def no_interval_at(statistic: str, confidence: float, n: int, replicates: int | None = None) -> str | None:
+    """Why a request capped at ``n`` realisations can get no interval of ``statistic`` (e.g. "q99 has
+    no 95 % interval below n = 299 (-n 100); raise -n"), or None when it can."""
+    floor = interval_floor(statistic, confidence, replicates)
+    if n >= floor:
+        return None
+    return f"{statistic} has no {100 * confidence:g} % interval below n = {floor} (-n {n}); raise -n"
 
 
 # --- the Dataset -------------------------------------------------------------------

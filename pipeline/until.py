@@ -112,12 +112,10 @@ def parse_targets(texts: list[str] | None) -> list[Target]:
 def check_cap(targets: list[Target], cap: int, replicates: int | None = None) -> None:
     """UntilError, before any work, for a target whose statistic has no interval at the cap ``-n``:
     no check could meet it (as ``rss6 budget`` refuses the same request)."""
-    from .stats import interval_floor
+    from .stats import no_interval_at
     for t in targets:
-        floor = interval_floor(t.statistic, CONFIDENCE, replicates)
-        if cap < floor:
-            raise _fail(t.text, f"{t.statistic} has no {100 * CONFIDENCE:g} % interval below n = {floor} "
-                                f"(-n {cap}); raise -n")
+        if why := no_interval_at(t.statistic, CONFIDENCE, cap, replicates):
+            raise _fail(t.text, why)
 
 
 def checkpoints(targets: list[Target], cap: int, replicates: int | None = None) -> list[int]:
