@@ -42,7 +42,7 @@ import numpy as np
 from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
                        platform_point_map, scene_link_matrices, split)
 from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Records, Settings, State, System,
-                             Out, advance_chunk, make_scratch, make_work, newton_step)
+                             Out, advance_chunk, coarsest_next, make_scratch, make_work, newton_step)
 from .contact_options import MAX_CONTACT_REFINEMENTS
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
@@ -585,7 +585,8 @@ class _Workspace:
 
     d, v, a: displacements, velocities, accelerations (R, N); for the alpha-weighted integrators
     also M a, C v + K d and the generalised contact forces at the last instant (R, N); a_past, h_past
-    the accepted accelerations before a and their steps, for Newton's first iterate.
+    the accepted accelerations before a and their steps, for Newton's first iterate; coarsest the
+    step-size memory (:func:`.contact_kernel.coarsest_next`).
     """
 
     def __init__(self, R, N, n_out, floor):
@@ -602,6 +603,7 @@ class _Workspace:
         self.fail_t, self.fail_h, self.fail_size = np.zeros(R), np.zeros(R), np.zeros(R)   # s, s, m
         self.a_past = np.zeros((R, 2, N))      # Newton's predictor: the two accelerations before a,
         self.h_past = np.zeros((R, 2))         # the steps between them (s; 0: not yet known)
+        self.coarsest = np.zeros(R, np.int64)  # the coarsest level each realisation's next step may take
 
     def failed(self, r, code, t, h, size, limit):
         """Mark realisation r failed (``code`` from :mod:`.status`) in its next step, ending at t (s),
@@ -724,19 +726,34 @@ class NumpyStepper(ContactStepper):
 
     def _step(self, idx, ch, k0, level):
         """Step realisations ``idx`` from fine instant k0 of the chunk by sizes[level], halving where
-        needed; their state moves to k0 + sizes[level].span."""
+        the attempt is refused or where the step-size memory asks for a finer step; their state moves
+        to k0 + sizes[level].span."""
+        ws = self.ws
+        now = idx[ws.coarsest[idx] <= level]
+        retry = np.concatenate([idx[ws.coarsest[idx] > level], self._attempt(now, ch, k0, level) if len(now) else now])
+        if len(retry):
+            half = self.setup.sizes[level].span // 2
+            self._step(retry, ch, k0, level + 1)
+            retry = retry[ws.alive[retry]]
+            if len(retry):
+                self._step(retry, ch, k0 + half, level + 1)
+
+    def _attempt(self, idx, ch, k0, level):
+        """One attempt of realisations ``idx`` at sizes[level] from fine instant k0: keep the accepted
+        ones (and their step-size memory), fail the unsound ones at the finest level; returns the
+        refused ones."""
         su, ws = self.setup, self.ws
         sz = su.sizes[level]
         k1 = k0 + sz.span
         a_new, d_new, v_new, f, g, ok, delta, rate, used = self._candidate(idx, ch, k0, k1, sz)
         sound = ok & np.isfinite(d_new).all(-1) & (np.abs(d_new).max(-1) < su.limit)
+        estimate = np.zeros(len(idx))
+        if su.tolerance > 0.0:
+            jb, jp = _joint_nodes(su.jm, a_new - ws.a[idx])
+            estimate = sz.error * np.linalg.norm(_relative(ch, k1, jb, jp), axis=-1).max((-1, -2))
         accept = np.ones(len(idx), bool)
         if level < su.refinements:
-            accept = sound
-            if su.tolerance > 0.0:
-                jb, jp = _joint_nodes(su.jm, a_new - ws.a[idx])
-                jump = np.linalg.norm(_relative(ch, k1, jb, jp), axis=-1).max((-1, -2))
-                accept &= sz.error * jump <= su.tolerance
+            accept = sound & (estimate <= su.tolerance)
         for i in np.flatnonzero(accept & ~sound):
             ws.failed(idx[i], DIVERGED if ok[i] else NEWTON_FAILED, ch.t[k1], sz.weights.h,
                       np.abs(d_new[i]).max(), su.limit)
@@ -744,13 +761,10 @@ class NumpyStepper(ContactStepper):
         if keep.any():
             self._keep(idx[keep], ch, k1, sz.weights.h, a_new[keep], d_new[keep], v_new[keep], f[keep], g[keep],
                        delta[keep], rate[keep], used[keep])
-        retry = idx[~accept]
-        if len(retry):
-            ws.refined[retry] += 1
-            self._step(retry, ch, k0, level + 1)
-            retry = retry[ws.alive[retry]]
-            if len(retry):
-                self._step(retry, ch, k0 + sz.span // 2, level + 1)
+            for r, e in zip(idx[keep], estimate[keep]):
+                ws.coarsest[r] = coarsest_next(level, e, su.tolerance)
+        ws.refined[idx[~accept]] += 1
+        return idx[~accept]
 
     def _candidate(self, idx, ch, k0, k1, sz: _StepSize):
         """Predictor, alpha-weighted right-hand side, Newton and corrector of one step attempt."""
@@ -851,7 +865,7 @@ class CompiledStepper(ContactStepper):
         before = ws.alive.copy()
         state = State(d=ws.d, v=ws.v, a=ws.a, Ma=ws.Ma, rest=ws.rest, g=ws.g, stored=ws.contacts.stored,
                       in_contact=ws.contacts.in_contact, crate=ws.contacts.rate, a_past=ws.a_past,
-                      h_past=ws.h_past)
+                      h_past=ws.h_past, coarsest=ws.coarsest)
         records = Records(peak=ws.peak, cpeak=ws.cpeak, hist=ws.hist, alive=ws.alive, fail=ws.fail,
                           fail_t=ws.fail_t, fail_h=ws.fail_h, fail_size=ws.fail_size, steps=ws.steps,
                           iters=ws.iters, refined=ws.refined)

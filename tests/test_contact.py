@@ -7,6 +7,7 @@ from scipy.integrate import solve_ivp
 
 from rss6core.clearance import draw_clearances
 from rss6core.contact_dynamics import _ball, simulate_contact
+from rss6core.contact_kernel import coarsest_next
 from rss6core.contact_laws import (coulomb_friction, friction_factor, hertz_stiffness,
                                    lankarani_nikravesh, poisson_ratio)
 from rss6core.kinematics import rigid_motion
@@ -455,8 +456,9 @@ def test_contact_batch_equals_one_at_a_time_bit_for_bit(smoke, tolerance, refine
 
 
 def test_adaptive_step_limits_are_the_fixed_steps(smoke):
-    """A vanishing tolerance refines every step: the fixed run at the finest step, bit for bit;
-    a huge one refines none: the fixed run at the base step."""
+    """A vanishing tolerance refines every step: the fixed run at the finest step, bit for bit,
+    with each coarser level refused once, in the first base step (the step-size memory then keeps
+    the finest); a huge one refines none: the fixed run at the base step."""
     scene = _with(smoke, trajectory=dict(duration=0.02))
     draws = [draw_clearances(scene, 1, r) for r in range(2)]
     for adaptive, fixed, substeps in (
@@ -466,7 +468,17 @@ def test_adaptive_step_limits_are_the_fixed_steps(smoke):
         for q in ("displacement", "velocity", "acceleration", "peak", "contact_peak"):
             assert np.array_equal(getattr(a, q), getattr(b, q)), q
         assert np.array_equal(a.steps, b.steps)
-        assert np.array_equal(a.refined, (substeps - 1) * b.steps // substeps)
+        assert np.array_equal(a.refined, np.full(2, adaptive["refinements"] if substeps > 1 else 0))
+
+
+@pytest.mark.parametrize("level, estimate, expected", [
+    (3, 1e-8 / 64, 1), (3, 1e-8 / 63, 2), (3, 1e-8 / 8, 2), (3, 1e-8 / 7.9, 3), (3, 0.0, 0),
+    (0, 0.0, 0), (2, 2e-8, 2), (4, 1e-8 / 8 ** 4, 0), (4, np.nan, 4), (2, np.inf, 2)])
+def test_step_size_memory_takes_the_coarsest_level_its_h3_prediction_allows(level, estimate, expected):
+    """After an accepted step of ``level`` with local error estimate e, a step 2^j times longer is
+    predicted at e 8^j (the estimate grows as h^3 where the acceleration is smooth); the next
+    step may take the coarsest level whose prediction stays within the tolerance (1e-8 m)."""
+    assert coarsest_next(level, estimate, 1e-8) == expected
 
 
 def test_adaptive_step_converges_where_the_fixed_base_step_does_not(smoke):
