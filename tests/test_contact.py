@@ -7,7 +7,8 @@ from scipy.integrate import solve_ivp
 
 from rss6core.clearance import draw_clearances
 from rss6core.contact_dynamics import _ball, simulate_contact
-from rss6core.contact_kernel import coarsest_next
+from rss6core.contact_kernel import balance_next, coarsest_next
+from rss6core.integrators import Integrator, correct, predict
 from rss6core.contact_laws import (coulomb_friction, friction_factor, hertz_stiffness,
                                    lankarani_nikravesh, poisson_ratio)
 from rss6core.kinematics import rigid_motion
@@ -612,3 +613,28 @@ def test_a_newton_failure_is_reported_and_the_batch_returns(smoke, monkeypatch):
     assert run.status == ["failed", "failed"]
     assert all("Newton" in m and "t = 0.0001 s, step 1, with a 0.0001 s step" in m for m in run.message)
     assert np.all(np.isnan(run.displacement[:, 1:]))
+
+
+def test_force_balance_carried_by_the_step_equation_equals_the_forces_recomputed():
+    """Generalized-alpha on a damped oscillator m a + c v + k d = F(t) (three uncoupled DOFs, a
+    load that changes each step): the balance F + g - (c v + k d) that the contact steps carry from
+    one step to the next (:func:`balance_next`, from M a alone) equals the one recomputed from the
+    state, to round-off, over 200 steps of mixed size."""
+    method = Integrator.generalized_alpha(0.8)
+    am, af = method.alpha_m, method.alpha_f
+    m, c, k = np.array([1.0, 2.0, 0.5]), np.array([0.3, 0.0, 1.5]), np.array([40.0, 900.0, 5.0])
+    load = lambda t: np.array([np.sin(3 * t), 1.0 + t, np.cos(17 * t)])   # noqa: E731
+    t, d, v = 0.0, np.array([0.01, -0.02, 0.0]), np.array([0.0, 0.1, -0.3])
+    a = (load(t) - c * v - k * d) / m
+    balance = load(t) - c * v - k * d
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        w = method.weights(float(rng.choice([1e-3, 5e-4, 2.5e-4])))
+        dp, vp = predict(d, v, a, w.h, w.d_pred, w.v_pred)
+        rhs = (1 - af) * (load(t + w.h) - c * vp - k * dp) + af * balance - am * m * a
+        a_new = rhs / ((1 - am) * m + (1 - af) * (c * w.v_corr + k * w.d_corr))
+        d, v = correct(dp, vp, a_new, w.d_corr, w.v_corr)
+        balance = balance_next(m * a_new, m * a, balance, am, af)
+        a, t = a_new, t + w.h
+        direct = load(t) - c * v - k * d
+        assert np.allclose(balance, direct, rtol=1e-9, atol=1e-12 * np.abs(load(t)).max())
