@@ -42,7 +42,7 @@ import numpy as np
 from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
                        platform_point_map, scene_link_matrices, split)
 from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Records, Settings, State, System,
-                             Out, advance_chunk, make_scratch, make_work, newton_step)
+                             Out, advance_chunk, balance_next, coarsest_next, make_scratch, make_work, newton_step)
 from .contact_options import MAX_CONTACT_REFINEMENTS
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
@@ -584,12 +584,14 @@ class _Workspace:
     """The batch's state between steps (every array has the realisation axis first) and its records.
 
     d, v, a: displacements, velocities, accelerations (R, N); for the alpha-weighted integrators
-    also M a, C v + K d and the generalised contact forces at the last instant (R, N); a_past, h_past
-    the accepted accelerations before a and their steps, for Newton's first iterate.
+    also M a and the force balance F + g - (C v + K d) at the last instant (R, N,
+    :func:`.contact_kernel.balance_next`); a_past, h_past
+    the accepted accelerations before a and their steps, for Newton's first iterate; coarsest the
+    step-size memory (:func:`.contact_kernel.coarsest_next`).
     """
 
     def __init__(self, R, N, n_out, floor):
-        self.d = self.v = self.a = self.Ma = self.rest = self.g = None
+        self.d = self.v = self.a = self.Ma = self.balance = None
         self.contacts = _Contacts((R,), floor)
         self.hist = np.full((3, R, n_out, 6), np.nan)
         self.peak = np.zeros((R, len(PEAK_WINDOWS), 3, 6))
@@ -602,6 +604,7 @@ class _Workspace:
         self.fail_t, self.fail_h, self.fail_size = np.zeros(R), np.zeros(R), np.zeros(R)   # s, s, m
         self.a_past = np.zeros((R, 2, N))      # Newton's predictor: the two accelerations before a,
         self.h_past = np.zeros((R, 2))         # the steps between them (s; 0: not yet known)
+        self.coarsest = np.zeros(R, np.int64)  # the coarsest level each realisation's next step may take
 
     def failed(self, r, code, t, h, size, limit):
         """Mark realisation r failed (``code`` from :mod:`.status`) in its next step, ending at t (s),
@@ -658,11 +661,11 @@ class ContactStepper(abc.ABC):
             ws.alive[r], ws.status[r], ws.message[r] = False, FAILED, first.message[r]
         everyone = np.arange(len(ws.d))
         rest = _internal(su.jm, ch.Mp[0], ws.d, ws.v)
-        ws.a, f, ws.g, _, _, delta, rate, used = self._newton(
+        ws.a, f, g, _, _, delta, rate, used = self._newton(
             everyone, ch, 0, _Condensed(su.jm, 1.0, 0.0), 1.0, ch.F[0] - rest, ws.d, ws.v,
             np.zeros_like(ws.d), 0.0, 0.0, 1.0)
         ws.contacts.update(everyone, delta, rate, used)
-        ws.Ma, ws.rest = _mass(su.jm, ch.Mp[0], ws.a), rest
+        ws.Ma, ws.balance = _mass(su.jm, ch.Mp[0], ws.a), ch.F[0] + g - rest
         if 0.0 >= su.settle_at:
             ws.peaks(everyone, int(0.0 >= su.steady_at), ws.d, ws.v, ws.a, f)
         ws.history(0)
@@ -724,33 +727,45 @@ class NumpyStepper(ContactStepper):
 
     def _step(self, idx, ch, k0, level):
         """Step realisations ``idx`` from fine instant k0 of the chunk by sizes[level], halving where
-        needed; their state moves to k0 + sizes[level].span."""
+        the attempt is refused or where the step-size memory asks for a finer step; their state moves
+        to k0 + sizes[level].span."""
+        ws = self.ws
+        now = idx[ws.coarsest[idx] <= level]
+        retry = np.concatenate([idx[ws.coarsest[idx] > level], self._attempt(now, ch, k0, level) if len(now) else now])
+        if len(retry):
+            half = self.setup.sizes[level].span // 2
+            self._step(retry, ch, k0, level + 1)
+            retry = retry[ws.alive[retry]]
+            if len(retry):
+                self._step(retry, ch, k0 + half, level + 1)
+
+    def _attempt(self, idx, ch, k0, level):
+        """One attempt of realisations ``idx`` at sizes[level] from fine instant k0: keep the accepted
+        ones (and their step-size memory), fail the unsound ones at the finest level; returns the
+        refused ones."""
         su, ws = self.setup, self.ws
         sz = su.sizes[level]
         k1 = k0 + sz.span
-        a_new, d_new, v_new, f, g, ok, delta, rate, used = self._candidate(idx, ch, k0, k1, sz)
+        a_new, d_new, v_new, f, ok, delta, rate, used = self._candidate(idx, ch, k0, k1, sz)
         sound = ok & np.isfinite(d_new).all(-1) & (np.abs(d_new).max(-1) < su.limit)
+        estimate = np.zeros(len(idx))
+        if su.tolerance > 0.0:
+            jb, jp = _joint_nodes(su.jm, a_new - ws.a[idx])
+            estimate = sz.error * np.linalg.norm(_relative(ch, k1, jb, jp), axis=-1).max((-1, -2))
         accept = np.ones(len(idx), bool)
         if level < su.refinements:
-            accept = sound
-            if su.tolerance > 0.0:
-                jb, jp = _joint_nodes(su.jm, a_new - ws.a[idx])
-                jump = np.linalg.norm(_relative(ch, k1, jb, jp), axis=-1).max((-1, -2))
-                accept &= sz.error * jump <= su.tolerance
+            accept = sound & (estimate <= su.tolerance)
         for i in np.flatnonzero(accept & ~sound):
             ws.failed(idx[i], DIVERGED if ok[i] else NEWTON_FAILED, ch.t[k1], sz.weights.h,
                       np.abs(d_new[i]).max(), su.limit)
         keep = accept & sound
         if keep.any():
-            self._keep(idx[keep], ch, k1, sz.weights.h, a_new[keep], d_new[keep], v_new[keep], f[keep], g[keep],
+            self._keep(idx[keep], ch, k1, sz.weights.h, a_new[keep], d_new[keep], v_new[keep], f[keep],
                        delta[keep], rate[keep], used[keep])
-        retry = idx[~accept]
-        if len(retry):
-            ws.refined[retry] += 1
-            self._step(retry, ch, k0, level + 1)
-            retry = retry[ws.alive[retry]]
-            if len(retry):
-                self._step(retry, ch, k0 + sz.span // 2, level + 1)
+            for r, e in zip(idx[keep], estimate[keep]):
+                ws.coarsest[r] = coarsest_next(level, e, su.tolerance)
+        ws.refined[idx[~accept]] += 1
+        return idx[~accept]
 
     def _candidate(self, idx, ch, k0, k1, sz: _StepSize):
         """Predictor, alpha-weighted right-hand side, Newton and corrector of one step attempt."""
@@ -761,7 +776,7 @@ class NumpyStepper(ContactStepper):
         af, am = su.integrator.alpha_f, su.integrator.alpha_m
         r = (1.0 - af) * (ch.F[k1] - _internal(su.jm, ch.Mp[k1], dp, vp))
         if su.weighted:
-            r += af * (ch.F[k0] + ws.g[idx] - ws.rest[idx]) - am * ws.Ma[idx]
+            r += af * ws.balance[idx] - am * ws.Ma[idx]
         guess = _extrapolated(w.h, a, ws.a_past[idx], ws.h_past[idx])
         out = list(self._newton(idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp, guess, w.d_corr, w.v_corr, 1.0 - af))
         ws.iters[idx] += out[4]
@@ -772,11 +787,11 @@ class NumpyStepper(ContactStepper):
             ws.iters[idx[again]] += retry[4]
             for q, x in zip(out, retry):
                 q[again] = x
-        a_new, f, g, ok, count, delta, rate, used = out
+        a_new, f, _, ok, count, delta, rate, used = out
         d_new, v_new = correct(dp, vp, a_new, w.d_corr, w.v_corr)
-        return a_new, d_new, v_new, f, g, ok, delta, rate, used
+        return a_new, d_new, v_new, f, ok, delta, rate, used
 
-    def _keep(self, kept, ch, k1, h, a, d, v, f, g, delta, rate, used):
+    def _keep(self, kept, ch, k1, h, a, d, v, f, delta, rate, used):
         """Make an accepted step of h (s) to fine instant k1 the state of realisations ``kept``."""
         su, ws = self.setup, self.ws
         ws.a_past[kept, 1], ws.a_past[kept, 0] = ws.a_past[kept, 0], ws.a[kept]
@@ -785,9 +800,10 @@ class NumpyStepper(ContactStepper):
         ws.contacts.update(kept, delta, rate, used)
         ws.steps[kept] += 1
         if su.weighted:
-            ws.Ma[kept] = _mass(su.jm, ch.Mp[k1], a)
-            ws.rest[kept] = _internal(su.jm, ch.Mp[k1], d, v)
-            ws.g[kept] = g
+            ma = _mass(su.jm, ch.Mp[k1], a)
+            it = su.integrator
+            ws.balance[kept] = balance_next(ma, ws.Ma[kept], ws.balance[kept], it.alpha_m, it.alpha_f)
+            ws.Ma[kept] = ma
         if ch.t[k1] >= su.settle_at:
             ws.peaks(kept, int(ch.t[k1] >= su.steady_at), d, v, a, f)
 
@@ -849,9 +865,9 @@ class CompiledStepper(ContactStepper):
             N, nc = ws.d.shape[1], self.layout.crank_dofs
             self.work = make_work(N, nc, (N - 6) // 6 - nc, lv.crank_T.shape[2] - 6, lv.rod_T.shape[2] - 6)
         before = ws.alive.copy()
-        state = State(d=ws.d, v=ws.v, a=ws.a, Ma=ws.Ma, rest=ws.rest, g=ws.g, stored=ws.contacts.stored,
+        state = State(d=ws.d, v=ws.v, a=ws.a, Ma=ws.Ma, balance=ws.balance, stored=ws.contacts.stored,
                       in_contact=ws.contacts.in_contact, crate=ws.contacts.rate, a_past=ws.a_past,
-                      h_past=ws.h_past)
+                      h_past=ws.h_past, coarsest=ws.coarsest)
         records = Records(peak=ws.peak, cpeak=ws.cpeak, hist=ws.hist, alive=ws.alive, fail=ws.fail,
                           fail_t=ws.fail_t, fail_h=ws.fail_h, fail_size=ws.fail_size, steps=ws.steps,
                           iters=ws.iters, refined=ws.refined)

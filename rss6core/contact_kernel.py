@@ -56,8 +56,8 @@ from numba.extending import get_cython_function_address
 
 from .status import DIVERGED, NEWTON_FAILED   # the failure codes written to ``fail``
 
-__all__ = ["newton_step", "advance_chunk", "ball", "predict_one", "correct_one", "Levels", "Layout",
-           "Settings", "ChunkArrays", "Frame", "Law", "Joints", "State", "Records", "Out", "System",
+__all__ = ["newton_step", "advance_chunk", "ball", "predict_one", "correct_one", "coarsest_next", "balance_next",
+           "Levels", "Layout", "Settings", "ChunkArrays", "Frame", "Law", "Joints", "State", "Records", "Out", "System",
            "make_work", "make_scratch"]
 
 # reassociation and fused multiply-add, but no finite-math assumption: a diverging
@@ -67,6 +67,7 @@ __all__ = ["newton_step", "advance_chunk", "ball", "predict_one", "correct_one",
 # round-off, and which copy a call binds to depended on which was loaded first, so a process
 # that compiled the kernel and one that loaded it from numba's cache differed at 1e-11.
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
+GROWTH = 8.0    # a local error estimate's growth when the step doubles (h^3: :func:`coarsest_next`)
 # non-zero 3x3 blocks of a leg's joint map G: relative displacement j <- joint-node block c; block q
 # is Rc, -Rc, Rr, Rr (:func:`_gmap`)
 _PATTERN = np.array([[0, 0], [1, 1], [1, 2], [2, 3]], np.int64)
@@ -108,11 +109,13 @@ Joints = namedtuple("Joints", "size axial stiffness w radius law")
 Joints.__doc__ = """Per realisation (R): radial clearances [A radial, C, B] (R, 6, 3) m, A axial (R, 6) m,
 stiffnesses [A, C, B] (R, 6, 3) N/m^1.5; revolute axes w (6, 3), radii [journal, sphere, sphere]
 (3,) m, the :class:`Law`."""
-State = namedtuple("State", "d v a Ma rest g stored in_contact crate a_past h_past")
-State.__doc__ = """The batch's state (R, N): d, v, a and, for the alpha-weighted integrators, M a,
-C v + K d and the generalised contact forces g; contact memory (R, 6, 4): stored impact speeds,
-in-contact flags, penetration rates; Newton's predictor (:func:`_predict`): the two accepted
-accelerations before a (R, 2, N) and the steps between them (R, 2) s (0: not yet known)."""
+State = namedtuple("State", "d v a Ma balance stored in_contact crate a_past h_past coarsest")
+State.__doc__ = """The batch's state (R, N): d, v, a and, for the alpha-weighted integrators, M a and
+the force balance F + g - (C v + K d) (loads, generalised contact forces, internal forces:
+:func:`balance_next`); contact memory (R, 6, 4): stored impact speeds, in-contact flags,
+penetration rates; Newton's predictor (:func:`_predict`): the two accepted accelerations before a
+(R, 2, N) and the steps between them (R, 2) s (0: not yet known); the step-size memory (R,): the
+coarsest level the next step may take (:func:`coarsest_next`)."""
 Records = namedtuple("Records", "peak cpeak hist alive fail fail_t fail_h fail_size steps iters refined")
 Records.__doc__ = """Per realisation: peaks per window [startup, steady] (R, 2, 3, 6), contact force peaks
 (R, 18), histories (3, R, T_out, 6), alive, failure code (:mod:`.status`), time (s), step (s) and
@@ -825,7 +828,7 @@ def _prepare(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, st, work):
     for n in range(N):
         work.rhs[n] = wf * (ch.F[k1, n] - work.tmp[n])
         if weighted:
-            work.rhs[n] += af * (ch.F[k0, n] + st.g[r, n] - st.rest[r, n]) - am * st.Ma[r, n]
+            work.rhs[n] += af * st.balance[r, n] - am * st.Ma[r, n]
     # condensation onto the joint nodes: [r_i inv, r_b - r_i P] per link type
     _gather(work.rhs, 0, nc, work.Ac, 0)
     _gather(work.rhs, nc, nr, work.Ar, 0)
@@ -922,9 +925,7 @@ def _jump(r, k1, a, layout, ch, work):
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _accept(r, k1, layout, cfg, ch, st, rec, work):
     """Make the candidate step in work realisation r's state: contact memory, weighted terms, peaks."""
-    cb = layout.crank_boundary
     N = st.d.shape[1]
-    step = (N - 6) // 6
     for n in range(N):
         st.d[r, n], st.v[r, n], st.a[r, n] = work.d_new[n], work.v_new[n], work.a_new[n]
     for leg in range(6):
@@ -935,19 +936,23 @@ def _accept(r, k1, layout, cfg, ch, st, rec, work):
             st.in_contact[r, leg, m] = closed
             st.crate[r, leg, m] = work.rate[leg, m]
     if cfg.alpha_m != 0.0 or cfg.alpha_f != 0.0:
-        _mass(work.a_new, layout, ch.Mp[k1], work, st.Ma[r])
-        _internal(work.d_new, work.v_new, layout, cfg, ch.Mp[k1], work, st.rest[r])
+        _mass(work.a_new, layout, ch.Mp[k1], work, work.tmp)
         for n in range(N):
-            st.g[r, n] = 0.0
-        for leg in range(6):
-            base = leg * step
-            for q in range(6):
-                st.g[r, base + cb[q]] = work.gl[leg, q]
-                st.g[r, base + step - 6 + q] = work.gl[leg, 6 + q]
-        for b in range(6):
-            st.g[r, N - 6 + b] = work.gp[b]
+            st.balance[r, n] = balance_next(work.tmp[n], st.Ma[r, n], st.balance[r, n], cfg.alpha_m, cfg.alpha_f)
+            st.Ma[r, n] = work.tmp[n]
     if ch.t[k1] >= cfg.settle_at:
         _peaks(r, 1 if ch.t[k1] >= cfg.steady_at else 0, work, rec)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def balance_next(ma_new, ma, balance, alpha_m, alpha_f):
+    """The force balance F + g - (C v + K d) (N) at the end of an accepted alpha-weighted step, from
+    the step's own equation (1 - alpha_m) M a+ + alpha_m M a + (1 - alpha_f) (C v+ + K d+ - F+ - g+)
+    + alpha_f (C v + K d - F - g) = 0: (1 - alpha_m) M a+ + alpha_m M a - alpha_f balance, over
+    1 - alpha_f.  It replaces recomputing C v+ + K d+ (two link products per step); the two differ by
+    the joint nodes' Newton residual, which the next step's right-hand side then carries.  The
+    numpy engine calls this same function."""
+    return ((1.0 - alpha_m) * ma_new + alpha_m * ma - alpha_f * balance) / (1.0 - alpha_f)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -967,6 +972,20 @@ def _peaks(r, w, work, rec):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def coarsest_next(level, estimate, tolerance):
+    """The coarsest level the step after an accepted one of ``level`` may take: each level coarser
+    doubles h, and where the acceleration is smooth the estimate |beta - 1/6| h^2 |delta a| grows as
+    h^3, so the estimate (m) predicted for a step 2^j times longer is ``estimate`` 8^j; the next step
+    is not tried coarser than where that prediction exceeds ``tolerance`` (m).  Where that step is
+    still refused it is halved as before.  The numpy engine calls this same function."""
+    coarsest, predicted = level, estimate * GROWTH
+    while coarsest > 0 and predicted <= tolerance:
+        coarsest -= 1
+        predicted *= GROWTH
+    return coarsest
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _largest(x):
     """Largest |x|; inf if any entry is inf or nan."""
     big = 0.0
@@ -982,8 +1001,9 @@ def _base_step(r, k_start, lv, layout, cfg, ch, jt, st, rec, work, scratch):
     """Carry realisation r through one base step from fine instant k_start, halving where Newton fails
     or the local error estimate exceeds the tolerance: a failed attempt at level l is retried at
     l + 1 from the same instant; after an accepted step the next attempt takes the coarsest level
-    whose step starts at the instant reached.  Returns False where r failed (recorded in rec)."""
-    k, level = k_start, 0
+    whose step starts at the instant reached, but none coarser than the step-size memory
+    (:func:`coarsest_next`) allows.  Returns False where r failed (recorded in rec)."""
+    k, level = k_start, st.coarsest[r]
     while k < k_start + lv.span[0]:
         k1 = k + lv.span[level]
         for start in range(2):     # one call site: _attempt is inlined once
@@ -995,11 +1015,12 @@ def _base_step(r, k_start, lv, layout, cfg, ch, jt, st, rec, work, scratch):
                 break
         big = _largest(work.d_new)
         sound = ok and big < cfg.divergence_limit
+        estimate = 0.0
+        if sound and cfg.tolerance > 0.0:
+            estimate = lv.error[level] * _jump(r, k1, st.a, layout, ch, work)
         accept = True
         if level < cfg.refinements:
-            accept = sound
-            if sound and cfg.tolerance > 0.0:
-                accept = lv.error[level] * _jump(r, k1, st.a, layout, ch, work) <= cfg.tolerance
+            accept = sound and estimate <= cfg.tolerance
         if not accept:
             rec.refined[r] += 1
             level += 1
@@ -1013,9 +1034,11 @@ def _base_step(r, k_start, lv, layout, cfg, ch, jt, st, rec, work, scratch):
         _accept(r, k1, layout, cfg, ch, st, rec, work)
         rec.steps[r] += 1
         k = k1
+        st.coarsest[r] = coarsest_next(level, estimate, cfg.tolerance)
         level = 0
         while (k - k_start) % lv.span[level] != 0:
             level += 1
+        level = max(level, st.coarsest[r])
     return True
 
 

@@ -41,7 +41,7 @@ class ContactBatch:
     message: list
     steps: np.ndarray             # (R,) internal steps completed
     iterations: np.ndarray        # (R,) Newton iterations in all
-    refined: np.ndarray           # (R,) steps retried as two half steps
+    refined: np.ndarray           # (R,) attempts refused (each retried as two half steps)
 
     def result(self, k: int) -> SimulationResult:
         return SimulationResult(self.t, self.displacement[k], self.velocity[k], self.acceleration[k],

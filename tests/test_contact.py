@@ -7,6 +7,8 @@ from scipy.integrate import solve_ivp
 
 from rss6core.clearance import draw_clearances
 from rss6core.contact_dynamics import _ball, simulate_contact
+from rss6core.contact_kernel import balance_next, coarsest_next
+from rss6core.integrators import Integrator, correct, predict
 from rss6core.contact_laws import (coulomb_friction, friction_factor, hertz_stiffness,
                                    lankarani_nikravesh, poisson_ratio)
 from rss6core.kinematics import rigid_motion
@@ -455,8 +457,9 @@ def test_contact_batch_equals_one_at_a_time_bit_for_bit(smoke, tolerance, refine
 
 
 def test_adaptive_step_limits_are_the_fixed_steps(smoke):
-    """A vanishing tolerance refines every step: the fixed run at the finest step, bit for bit;
-    a huge one refines none: the fixed run at the base step."""
+    """A vanishing tolerance refines every step: the fixed run at the finest step, bit for bit,
+    with each coarser level refused once, in the first base step (the step-size memory then keeps
+    the finest); a huge one refines none: the fixed run at the base step."""
     scene = _with(smoke, trajectory=dict(duration=0.02))
     draws = [draw_clearances(scene, 1, r) for r in range(2)]
     for adaptive, fixed, substeps in (
@@ -466,7 +469,17 @@ def test_adaptive_step_limits_are_the_fixed_steps(smoke):
         for q in ("displacement", "velocity", "acceleration", "peak", "contact_peak"):
             assert np.array_equal(getattr(a, q), getattr(b, q)), q
         assert np.array_equal(a.steps, b.steps)
-        assert np.array_equal(a.refined, (substeps - 1) * b.steps // substeps)
+        assert np.array_equal(a.refined, np.full(2, adaptive["refinements"] if substeps > 1 else 0))
+
+
+@pytest.mark.parametrize("level, estimate, expected", [
+    (3, 1e-8 / 64, 1), (3, 1e-8 / 63, 2), (3, 1e-8 / 8, 2), (3, 1e-8 / 7.9, 3), (3, 0.0, 0),
+    (0, 0.0, 0), (2, 2e-8, 2), (4, 1e-8 / 8 ** 4, 0), (4, np.nan, 4), (2, np.inf, 2)])
+def test_step_size_memory_takes_the_coarsest_level_its_h3_prediction_allows(level, estimate, expected):
+    """After an accepted step of ``level`` with local error estimate e, a step 2^j times longer is
+    predicted at e 8^j (the estimate grows as h^3 where the acceleration is smooth); the next
+    step may take the coarsest level whose prediction stays within the tolerance (1e-8 m)."""
+    assert coarsest_next(level, estimate, 1e-8) == expected
 
 
 def test_adaptive_step_converges_where_the_fixed_base_step_does_not(smoke):
@@ -600,3 +613,28 @@ def test_a_newton_failure_is_reported_and_the_batch_returns(smoke, monkeypatch):
     assert run.status == ["failed", "failed"]
     assert all("Newton" in m and "t = 0.0001 s, step 1, with a 0.0001 s step" in m for m in run.message)
     assert np.all(np.isnan(run.displacement[:, 1:]))
+
+
+def test_force_balance_carried_by_the_step_equation_equals_the_forces_recomputed():
+    """Generalized-alpha on a damped oscillator m a + c v + k d = F(t) (three uncoupled DOFs, a
+    load that changes each step): the balance F + g - (c v + k d) that the contact steps carry from
+    one step to the next (:func:`balance_next`, from M a alone) equals the one recomputed from the
+    state, to round-off, over 200 steps of mixed size."""
+    method = Integrator.generalized_alpha(0.8)
+    am, af = method.alpha_m, method.alpha_f
+    m, c, k = np.array([1.0, 2.0, 0.5]), np.array([0.3, 0.0, 1.5]), np.array([40.0, 900.0, 5.0])
+    load = lambda t: np.array([np.sin(3 * t), 1.0 + t, np.cos(17 * t)])   # noqa: E731
+    t, d, v = 0.0, np.array([0.01, -0.02, 0.0]), np.array([0.0, 0.1, -0.3])
+    a = (load(t) - c * v - k * d) / m
+    balance = load(t) - c * v - k * d
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        w = method.weights(float(rng.choice([1e-3, 5e-4, 2.5e-4])))
+        dp, vp = predict(d, v, a, w.h, w.d_pred, w.v_pred)
+        rhs = (1 - af) * (load(t + w.h) - c * vp - k * dp) + af * balance - am * m * a
+        a_new = rhs / ((1 - am) * m + (1 - af) * (c * w.v_corr + k * w.d_corr))
+        d, v = correct(dp, vp, a_new, w.d_corr, w.v_corr)
+        balance = balance_next(m * a_new, m * a, balance, am, af)
+        a, t = a_new, t + w.h
+        direct = load(t) - c * v - k * d
+        assert np.allclose(balance, direct, rtol=1e-9, atol=1e-12 * np.abs(load(t)).max())
