@@ -584,10 +584,10 @@ class _Workspace:
     """The batch's state between steps (every array has the realisation axis first) and its records.
 
     d, v, a: displacements, velocities, accelerations (R, N); for the alpha-weighted integrators
-    also M a and the force balance F + g - (C v + K d) at the last instant (R, N,
-    :func:`.contact_kernel.balance_next`); a_past, h_past
-    the accepted accelerations before a and their steps, for Newton's first iterate; coarsest the
-    step-size memory (:func:`.contact_kernel.coarsest_next`).
+    also M a and the force balance F + g - (C v + K d) at the last instant (R, N;
+    :func:`.contact_kernel.balance_next`); a_past, h_past the accepted accelerations before a and
+    their steps, for Newton's first iterate; coarsest the step-size memory (R,;
+    :func:`.contact_kernel.coarsest_next`).
     """
 
     def __init__(self, R, N, n_out, floor):
