@@ -88,11 +88,13 @@ def scaled_scene(spec: EnsembleSpec, scale: float) -> tuple[str, dict]:
 
 
 def geometric_limit(scene) -> float:
-    """The clearance scale at which the first clearance would reach its joint's radius, which the
-    scene check refuses (rss6core.scene.CLEARANCE_RADII); inf without clearances."""
-    from rss6core import CLEARANCE_RADII
+    """The clearance scale at which the first clearance, or with a [sampling] size_tolerance its
+    largest draw, would reach its joint's radius, which the scene check refuses
+    (rss6core.CLEARANCE_RADII, RELATIVE_BAND_REACH); inf without clearances."""
+    from rss6core import CLEARANCE_RADII, RELATIVE_BAND_REACH
     c, ct = scene.clearance, scene.contact
-    return min((getattr(ct, r.removesuffix("_m")) / getattr(c, k.removesuffix("_m"))
+    reach = RELATIVE_BAND_REACH if scene.sampling.size_tolerance > 0 else 1.0
+    return min((getattr(ct, r.removesuffix("_m")) / (reach * getattr(c, k.removesuffix("_m")))
                 for k, r in CLEARANCE_RADII.items() if getattr(c, k.removesuffix("_m")) > 0), default=math.inf)
 
 

@@ -9,6 +9,7 @@ Scenes
 - load_scene: a Scene from a TOML file.
 - parse_scene: a Scene from TOML text.
 - CLEARANCE_RADII: each [clearance] key and the [contact] radius of its joint, which a clearance must stay below.
+- RELATIVE_BAND_REACH: the multiple of its nominal up to which [sampling] size_tolerance draws a size.
 
 Running a level
 - MODELS: the model levels, cheapest first (rigid, quasi-static, elastic, paper, contact).
@@ -54,8 +55,9 @@ from .elastic import quasi_static_state, simulate_elastic
 from .results import ContactBatch, SimulationResult, time_grid
 from .assembly import build_elastic_model
 from .beam import BEAM_THEORIES, BeamTheory
-from .clearance import (SIZE_UNIFORMS, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms,
-                        clearances_from_uniforms, draw_clearances, size_band, uniform_dimension)
+from .clearance import (RELATIVE_BAND_REACH, SIZE_UNIFORMS, UNIFORM_BLOCKS, ClearanceDraw,
+                        clearances_from_named_uniforms, clearances_from_uniforms, draw_clearances, size_band,
+                        uniform_dimension)
 from .contact_options import CONTACT_STARTS
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
@@ -67,7 +69,7 @@ from .status import FAILED, FINISHED, STATUSES
 from .sections import crank_inertia, rod_inertia
 
 __version__ = "0.2.0"
-__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII",
+__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII", "RELATIVE_BAND_REACH",
            "MODELS", "INTEGRATORS", "CONTACT_STARTS", "simulate", "simulate_batch", "prepare_level", "Level",
            "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr, ndtri
 
+RELATIVE_BAND_REACH = 2.0   # a [sampling] size_tolerance draws sizes up to this multiple of the nominal
+
 __all__ = ["SIZE_UNIFORMS", "FAMILIES", "UNIFORM_BLOCKS", "size_band", "SizeBand", "ClearanceDraw", "UniformVector",
            "NamedUniforms", "realization_rng", "truncated_normal", "sphere_directions", "draw_clearances",
            "clearances_from_uniforms", "clearances_from_named_uniforms", "uniform_dimension"]
@@ -124,11 +126,12 @@ class ClearanceDraw:
 
 def size_band(scene, family: str):
     """The family's size band: its [tolerance.<family>], else the relative [sampling] size_tolerance
-    as Normal(nominal, tolerance nominal) truncated to [0, 2 nominal], else None (nominal sizes)."""
+    as Normal(nominal, tolerance nominal) truncated to [0, RELATIVE_BAND_REACH nominal], else None
+    (nominal sizes)."""
     band, nominal = getattr(scene.tolerance, family), getattr(scene.clearance, family)
     tol = scene.sampling.size_tolerance
     if band is None and tol > 0.0 and nominal > 0.0:
-        return SizeBand("normal", 0.0, 2.0 * nominal, tol * nominal)
+        return SizeBand("normal", 0.0, RELATIVE_BAND_REACH * nominal, tol * nominal)
     return band
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .beam import BEAM_THEORIES, MASS_MODELS, BeamTheory
-from .clearance import SizeBand
+from .clearance import RELATIVE_BAND_REACH, SizeBand
 from .contact_options import CONTACT_STARTS, MAX_CONTACT_REFINEMENTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
@@ -328,6 +328,8 @@ def _tolerances(table, clearance: dict, size_tolerance: float, contact: dict) ->
         raise SceneError("[tolerance] must be a table")
     if table and size_tolerance > 0:
         raise SceneError("[tolerance]: give either [tolerance] bands or [sampling] size_tolerance, not both")
+    if size_tolerance > 0:
+        _relative_band_below_radius(clearance, contact)
     bands = {}
     for family, raw in table.items():
         if family not in Tolerances.__dataclass_fields__:
@@ -426,6 +428,16 @@ def _below_radius(where: str, size: float, radius: str, contact: dict) -> None:
     if size >= contact[radius]:
         raise SceneError(f"{where}: {size!r} m is not below [contact] {radius} = {contact[radius]!r} m "
                          "(a clearance in mm written in metres?)")
+
+
+def _relative_band_below_radius(clearance: dict, contact: dict) -> None:
+    """[sampling] size_tolerance draws each size up to RELATIVE_BAND_REACH x its nominal
+    (:func:`.clearance.size_band`): that bound must stay below the joint's radius too."""
+    for key, radius in CLEARANCE_RADII.items():
+        high = RELATIVE_BAND_REACH * clearance[key]
+        if high >= contact[radius]:
+            raise SceneError(f"[sampling] size_tolerance: sizes are drawn up to {RELATIVE_BAND_REACH:g} x "
+                             f"[clearance] {key} = {high!r} m, not below [contact] {radius} = {contact[radius]!r} m")
 
 
 def _check_clearances(clearance: dict, contact: dict) -> None:

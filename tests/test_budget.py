@@ -143,6 +143,9 @@ def test_geometric_limit_and_a_spec_that_passes_beyond_it(configs, tmp_path, cap
     from pipeline.budget import geometric_limit
     from pipeline.scenes import find_scene
     assert geometric_limit(find_scene("smoke")) == pytest.approx(0.010 / 0.25e-3)
+    from rss6core import parse_scene      # a relative size band draws up to twice the nominal size
+    banded = (configs / "smoke.toml").read_text().replace("size_tolerance = 0.0 ", "size_tolerance = 0.1 ")
+    assert geometric_limit(parse_scene(banded)) == pytest.approx(0.010 / (2 * 0.25e-3))
     code = main(["budget", str(configs / "smoke.toml"), "--spec", "displacement:x<=1m@q95", "-n", str(N),
                  "--workers", "1", "-o", str(tmp_path / "b")])
     err = capsys.readouterr().err.strip()
