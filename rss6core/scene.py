@@ -437,7 +437,8 @@ def _relative_band_below_radius(clearance: dict, contact: dict) -> None:
         high = RELATIVE_BAND_REACH * clearance[key]
         if high >= contact[radius]:
             raise SceneError(f"[sampling] size_tolerance: sizes are drawn up to {RELATIVE_BAND_REACH:g} x "
-                             f"[clearance] {key} = {high!r} m, not below [contact] {radius} = {contact[radius]!r} m")
+                             f"[clearance] {key} ({clearance[key]!r} m) = {high!r} m, not below [contact] "
+                             f"{radius} = {contact[radius]!r} m")
 
 
 def _check_clearances(clearance: dict, contact: dict) -> None:

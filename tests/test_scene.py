@@ -138,8 +138,8 @@ def test_a_relative_size_tolerance_whose_largest_draw_reaches_the_radius_is_refu
     """[sampling] size_tolerance draws sizes up to twice the nominal: 6 mm nominal on a 10 mm pin
     passes the nominal check but not that bound; 4.9 mm passes both."""
     text = _edit(paper_text, "size_tolerance = 0.0 ", "size_tolerance = 0.1 ")
-    with pytest.raises(SceneError, match=r"\[sampling\] size_tolerance: .* 2 x \[clearance\] revolute_radial_m = "
-                                         r"0\.012 m, not below \[contact\] journal_radius_m = 0\.01 m"):
+    with pytest.raises(SceneError, match=r"\[sampling\] size_tolerance: .* 2 x \[clearance\] revolute_radial_m "
+                                         r"\(0\.006 m\) = 0\.012 m, not below \[contact\] journal_radius_m = 0\.01 m"):
         parse_scene(_edit(text, "revolute_radial_m = 0.25e-3", "revolute_radial_m = 6.0e-3"))
     assert parse_scene(_edit(text, "revolute_radial_m = 0.25e-3", "revolute_radial_m = 4.9e-3"))
     assert parse_scene(_edit(paper_text, "revolute_radial_m = 0.25e-3", "revolute_radial_m = 6.0e-3"))
