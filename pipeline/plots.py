@@ -125,6 +125,14 @@ def _finer_maxima(ds, t, sampled, stored: dict) -> dict[str, tuple[float, float,
     return out
 
 
+def envelope_marks(ds, sds, q: str, err) -> tuple[dict, dict]:
+    """The file's stored maxima of |q error| (:func:`stored_maxima`) and those of them above the
+    maximum over realisations of err (R, T, direction), the envelope sampled on the output grid
+    (for :func:`mark_stored_maxima`)."""
+    stored = stored_maxima(ds, sds, q)
+    return stored, _finer_maxima(ds, ds["time"].values, estimates(np.abs(err), ("max",))[..., 0], stored)
+
+
 def mark_stored_maxima(ax, finer: dict, k: int, f: float, signed: bool = False) -> None:
     """Dashed lines at the stored maxima of direction ``k`` (SI, shown times ``f``) over their
     windows' spans; at plus and minus the value on a signed history."""
@@ -150,8 +158,7 @@ def _figure_legend(fig, axes) -> None:
 def _envelope(ds, q: str, finished, sds):
     err = ds["error"].sel(quantity=q).transpose("realization", "time", "direction").values[finished]
     t = ds["time"].values
-    stored = stored_maxima(ds, sds, q)
-    finer = _finer_maxima(ds, t, estimates(np.abs(err), ("max",))[..., 0], stored)
+    stored, finer = envelope_marks(ds, sds, q, err)
     fig, axes = _grid(figure_title(f"|{q} error| envelope over realisations", ds, err.shape[0]))
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
         f, unit = figure_unit(q, d, np.concatenate([err[..., k].ravel(), [v[k] for v in stored.values()]]))

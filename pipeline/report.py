@@ -11,6 +11,7 @@ then writes OUT/results.md and OUT/results/*.png from those files alone.
 """
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +21,8 @@ from rss6core import default_integrator, default_time_step, parse_scene, rigid_m
 
 from .run import WORKER_TIMEOUT_S, EnsembleSpec, dask_client, run_ensemble
 from .scenes import find_scene
-from .plots import draw_abs_envelope, figure_unit, mark_steady, plain_ticks, plt, save_figure
+from .plots import (draw_abs_envelope, envelope_marks, figure_unit, mark_steady, mark_stored_maxima, plain_ticks,
+                    plt, save_figure)
 from . import report_text as text
 from .scene_variant import scene_variant
 from .stats import ensemble_stats, in_window, min_n_for_quantile
@@ -180,7 +182,9 @@ def _error_figure(scene, quantity: str, runs: dict, out: Path) -> Path:
 def error_figure(scene, quantity: str, runs: dict):
     """Like the paper's figs. 11-16: the platform error (actual minus rigid) of the elastic level
     (ideal joints) and, per clearance level, one realisation (signed, left) and the envelope of
-    |error| over the ensemble (right) per direction.  ``runs``: the scene's opened files by role."""
+    |error| over the ensemble (right) per direction, with the file's stored maxima where they exceed
+    the envelope's samples (the contact level's come from every internal step).  ``runs``: the
+    scene's opened files by role."""
     elastic = runs["elastic"]
     el = elastic["error"].sel(quantity=quantity).transpose("time", "direction").values
     fig, axes = plt.subplots(2 * len(LEVELS), 6, figsize=(19, 5.2 * len(LEVELS) + 0.8),
@@ -192,14 +196,16 @@ def error_figure(scene, quantity: str, runs: dict):
         t = ds["time"].values
         err = ds["error"].sel(quantity=quantity).transpose("realization", "time", "direction")
         err = err.values[ds["status"].values.astype(str) == "finished"]        # (R, T, 6)
+        stored, finer = envelope_marks(ds, ensemble_stats(ds, window=None), quantity, err)
         for k, d in enumerate(DIRECTIONS):
-            f, unit = figure_unit(quantity, d, err[..., k])
+            f, unit = figure_unit(quantity, d, np.concatenate([err[..., k].ravel(), [v[k] for v in stored.values()]]))
             signed, envelope = axes[2 * i, k], axes[2 * i + 1, k]
             signed.plot(t, err[0, :, k] * f, color="C3", lw=0.8, label=f"{level}: realisation 0")
             signed.plot(elastic["time"].values, el[:, k] * f, color="k", lw=1.0,
                         label="elastic, ideal joints")
             signed.set(title=f"{level}: {d} error", ylabel=f"[{unit}]")
             draw_abs_envelope(envelope, t, err[..., k] * f, color="k", ls="--", lw=0.7)
+            mark_stored_maxima(envelope, finer, k, f)
             mark_steady(envelope, ds)
             envelope.set(title=f"{level}: |{d} error|, n = {err.shape[0]}", ylabel=f"[{unit}]")
             envelope.set_ylim(bottom=0)
@@ -207,7 +213,12 @@ def error_figure(scene, quantity: str, runs: dict):
                 ax.grid(alpha=0.3)
                 plain_ticks(ax)
         axes[2 * i, 0].legend(fontsize=7, loc="best")
-        axes[2 * i + 1, 0].legend(fontsize=7, loc="upper left")
+        labelled = {}       # every label of the row's envelope panels, once (a mark may miss panel 0)
+        for ax in axes[2 * i + 1]:
+            for handle, label in zip(*ax.get_legend_handles_labels()):
+                labelled.setdefault(label, handle)
+        axes[2 * i + 1, 0].legend(labelled.values(), [textwrap.fill(x, 28) for x in labelled], fontsize=7,
+                                  loc="best")
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
     return fig

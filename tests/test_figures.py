@@ -374,6 +374,34 @@ def test_envelope_marks_the_stored_maximum_over_realisations(full_ensemble):
             plt.close(fig)
 
 
+def test_report_envelopes_mark_the_stored_maxima_over_realisations(smoke, full_ensemble, simulate_file):
+    """rss6 report's error figure: the contact level's envelope panels (stored maxima above the
+    samples, a contact-like file) carry the dashed line at pipeline.stats' max over realisations in
+    each window where it exceeds them; the paper level's (a plain file) carry none."""
+    plain = open_ensemble(full_ensemble).load()
+    contact = _contact_like(plain, "velocity", {"startup": 14.0})
+    runs = {"elastic": open_results(simulate_file), "paper": plain, "contact": contact}
+    fig = error_figure(smoke, "velocity", runs)
+    try:
+        sds = ensemble_stats(contact, window=None)
+        err = contact["error"].sel(quantity="velocity").transpose("realization", "time", "direction").values
+        rows = fig.axes[:2 * len(LEVELS) * 6]
+        for i, level in enumerate(LEVELS):
+            for k, d in enumerate(contact["direction"].values):
+                marks = _gids(rows[(2 * i + 1) * 6 + k])
+                if level != "contact":
+                    assert not any(g.startswith("stored max") for g in marks), (level, d)
+                    continue
+                f = np.nanmax(marks["sampled max"].get_ydata()) / np.nanmax(np.abs(err[..., k]))
+                stored = float(sds["max_abs_error"].sel(window="startup", statistic="max", bound="estimate",
+                                                        quantity="velocity", direction=d))
+                np.testing.assert_allclose(marks["stored max startup"].get_ydata(), stored * f, rtol=1e-9)
+                assert "stored max steady" not in marks
+        assert_legible({"velocity": fig})
+    finally:
+        plt.close(fig)
+
+
 def test_histograms_give_each_window_its_own_x_range(full_ensemble):
     """Startup maxima a hundredfold the steady ones (as at the contact level): each window has its
     own panels, the steady panels' x range lies within a few times the steady maxima, and no legend
