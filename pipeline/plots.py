@@ -15,7 +15,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["plot_ensemble", "plot_run", "ensemble_figures", "run_figures", "figure_unit",
-           "draw_abs_envelope", "mark_steady", "mark_stored_maxima", "stored_maxima",
+           "draw_abs_envelope", "mark_steady", "mark_stored_maxima", "stored_maxima", "envelope_marks",
+           "envelope_unit", "legend_entries",
            "output_grid", "figure_title", "save_figure", "plain_ticks", "sensitivity_figures",
            "plot_sensitivity"]
 
@@ -144,13 +145,25 @@ def mark_stored_maxima(ax, finer: dict, k: int, f: float, signed: bool = False) 
                     label=STORED_MAX_LABEL, gid=f"stored max {w}" + (" negative" if sign < 0 else ""))
 
 
-def _figure_legend(fig, axes) -> None:
-    """One legend under the panels with every distinct label of ``axes`` (a mark drawn in any
-    panel is explained even when the first panel lacks it)."""
+def envelope_unit(q: str, d: str, e, stored: dict, k: int) -> tuple[float, str]:
+    """:func:`figure_unit` for the envelope of e (R, T) in direction ``d`` (index k) together with
+    the stored maxima that :func:`mark_stored_maxima` draws beside it."""
+    return figure_unit(q, d, np.concatenate([np.ravel(e), [v[k] for v in stored.values()]]))
+
+
+def legend_entries(axes) -> dict:
+    """Every distinct label of ``axes`` with its first handle, so that a mark drawn in any panel is
+    explained even when the first panel lacks it."""
     handles = {}
     for ax in axes:
         for h, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, h)
+    return handles
+
+
+def _figure_legend(fig, axes) -> None:
+    """One legend under the panels with every distinct label of ``axes`` (:func:`legend_entries`)."""
+    handles = legend_entries(axes)
     fig.legend(handles.values(), handles.keys(), loc="outside lower center", fontsize=8,
                ncols=min(3, len(handles)))
 
@@ -161,7 +174,7 @@ def _envelope(ds, q: str, finished, sds):
     stored, finer = envelope_marks(ds, sds, q, err)
     fig, axes = _grid(figure_title(f"|{q} error| envelope over realisations", ds, err.shape[0]))
     for k, (ax, d) in enumerate(zip(axes, _DIRS)):
-        f, unit = figure_unit(q, d, np.concatenate([err[..., k].ravel(), [v[k] for v in stored.values()]]))
+        f, unit = envelope_unit(q, d, err[..., k], stored, k)
         draw_abs_envelope(ax, t, err[..., k] * f, color="k", ls="--", lw=0.8)
         mark_stored_maxima(ax, finer, k, f)
         mark_steady(ax, ds)

@@ -21,8 +21,8 @@ from rss6core import default_integrator, default_time_step, parse_scene, rigid_m
 
 from .run import WORKER_TIMEOUT_S, EnsembleSpec, dask_client, run_ensemble
 from .scenes import find_scene
-from .plots import (draw_abs_envelope, envelope_marks, figure_unit, mark_steady, mark_stored_maxima, plain_ticks,
-                    plt, save_figure)
+from .plots import (draw_abs_envelope, envelope_marks, envelope_unit, figure_unit, legend_entries, mark_steady,
+                    mark_stored_maxima, plain_ticks, plt, save_figure)
 from . import report_text as text
 from .scene_variant import scene_variant
 from .stats import ensemble_stats, in_window, min_n_for_quantile
@@ -198,7 +198,7 @@ def error_figure(scene, quantity: str, runs: dict):
         err = err.values[ds["status"].values.astype(str) == "finished"]        # (R, T, 6)
         stored, finer = envelope_marks(ds, ensemble_stats(ds, window=None), quantity, err)
         for k, d in enumerate(DIRECTIONS):
-            f, unit = figure_unit(quantity, d, np.concatenate([err[..., k].ravel(), [v[k] for v in stored.values()]]))
+            f, unit = envelope_unit(quantity, d, err[..., k], stored, k)
             signed, envelope = axes[2 * i, k], axes[2 * i + 1, k]
             signed.plot(t, err[0, :, k] * f, color="C3", lw=0.8, label=f"{level}: realisation 0")
             signed.plot(elastic["time"].values, el[:, k] * f, color="k", lw=1.0,
@@ -213,10 +213,7 @@ def error_figure(scene, quantity: str, runs: dict):
                 ax.grid(alpha=0.3)
                 plain_ticks(ax)
         axes[2 * i, 0].legend(fontsize=7, loc="best")
-        labelled = {}       # every label of the row's envelope panels, once (a mark may miss panel 0)
-        for ax in axes[2 * i + 1]:
-            for handle, label in zip(*ax.get_legend_handles_labels()):
-                labelled.setdefault(label, handle)
+        labelled = legend_entries(axes[2 * i + 1])
         axes[2 * i + 1, 0].legend(labelled.values(), [textwrap.fill(x, 28) for x in labelled], fontsize=7,
                                   loc="best")
     for ax in axes[-1]:

@@ -730,8 +730,9 @@ class NumpyStepper(ContactStepper):
         the attempt is refused or where the step-size memory asks for a finer step; their state moves
         to k0 + sizes[level].span."""
         ws = self.ws
-        now = idx[ws.coarsest[idx] <= level]
-        retry = np.concatenate([idx[ws.coarsest[idx] > level], self._attempt(now, ch, k0, level) if len(now) else now])
+        finer = ws.coarsest[idx] > level
+        now = idx[~finer]
+        retry = np.concatenate([idx[finer], self._attempt(now, ch, k0, level) if len(now) else now])
         if len(retry):
             half = self.setup.sizes[level].span // 2
             self._step(retry, ch, k0, level + 1)
