@@ -17,3 +17,39 @@ def test_readme_python_api_example_runs(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "q95" in proc.stdout and "Traceback" not in proc.stderr
     assert (tmp_path / "smoke_qs.nc").is_file() and not (tmp_path / "smoke_qs.nc.parts").exists()
+
+
+def _block_after(text: str, marker: str) -> list[str]:
+    """The lines of the first fenced block after ``marker`` in the README."""
+    block = re.search(re.escape(marker) + r".*?```\n(.*?)```", text, re.S)
+    assert block, f"README has no block after {marker!r}"
+    return block.group(1).splitlines()
+
+
+def _in_order(shown: list[str], printed: list[str]) -> None:
+    """Every shown line (but '...') is a printed line, in the printed order."""
+    at = 0
+    for line in shown:
+        if line == "...":
+            continue
+        assert line in printed[at:], f"README line not printed (in this order): {line!r}"
+        at = printed.index(line, at) + 1
+
+
+def test_readme_main_job_output_is_what_the_command_prints(tmp_path):
+    text = README.read_text()
+    command = re.search(r"&& (rss6 run paper [^\n]*)\n", text).group(1)
+    assert command == "rss6 run paper -n 32 --model quasi-static -o paper_qs.nc"
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", *command.split()[1:]], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    _in_order(_block_after(text, "The main job prints"), proc.stdout.splitlines())
+
+
+def test_readme_error_example_is_what_check_prints(tmp_path, paper_text):
+    shown = _block_after(README.read_text(), "exits 130 with the finished chunks kept")
+    (tmp_path / "typo.toml").write_text(paper_text.replace("crank_length_m", "crank_lenght_m", 1))
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "check", "typo.toml"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == shown
