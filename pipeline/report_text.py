@@ -53,9 +53,12 @@ ACCELERATION = (
     "per-realisation maxima). {start} An impact's peak depends on the contact stiffness and on "
     "resolving it in time, which is why the contact level halves its step where an impact needs it "
     "(README, 'Speed and accuracy': a fixed step fine enough for these peaks would have to be fine "
-    "for the whole run). On the paper scene the steady maxima are converged in mesh and step within "
-    "5 %, with a 2-6 % beam-theory band (docs/accelerations.md). Of the three joint families switched on one at a "
-    "time, {family} gives the largest median peak over the whole run ({share:.0f} % of the three "
+    "for the whole run). On the paper scene rss6's steady maxima are converged in mesh and step "
+    "within 5 %, but an independent geometrically exact model converges to maxima 1.3-2.4x larger "
+    "(displacement maxima within 0.3 %), cause not yet found: the steady maxima's model-form band "
+    "runs from rss6's value to that model's (x 99-198, y 144-285, z 377-689 mm/s^2; rx 2.27-5.42, "
+    "ry 5.05-8.17, rz 1.15-1.60 rad/s^2; docs/accelerations.md). Of the three joint families "
+    "switched on one at a time, {family} gives the largest median peak over the whole run ({share:.0f} % of the three "
     "runs' sum).")
 
 START_PEAKS = {
