@@ -77,6 +77,11 @@ class EnsembleSpec:
 
 
 NUMERICAL_FAILURES = (ArithmeticError, np.linalg.LinAlgError)   # recorded as a failed realisation
+# For tests only, read by :func:`_hold` alone: "R:PATH" makes every chunk whose first realisation is
+# R or more wait, before it computes, until the file PATH exists, so that a test can interrupt or
+# kill a run in a known state (R realisations stored, the next chunk in flight) whatever the
+# machine's speed.  Unset (always, outside tests/), it costs one environment look-up per chunk.
+TEST_HOLD_ENV = "RSS6_TEST_HOLD"
 
 
 def run_chunk(spec: EnsembleSpec, realizations: list[int]):
@@ -85,6 +90,7 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
     A numerical failure raised by the batch is traced to its realisations by running each alone:
     only those that fail alone are recorded as failed (with the reason), the others are kept, so
     the file does not depend on how the realisations were cut into chunks."""
+    _hold(realizations)
     scene = spec.scene()
     try:
         results = _simulate(spec, realizations)
@@ -97,6 +103,15 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
     chunk = chunk_dataset(results, draws, realizations, spec.store, scene.simulation.settle_time,
                           scene.simulation.steady_after)
     return _finish([chunk], scene, spec)
+
+
+def _hold(realizations: list[int]) -> None:
+    """Test-only (TEST_HOLD_ENV): wait, before computing, until the release file exists."""
+    hold = os.environ.get(TEST_HOLD_ENV)
+    if hold:
+        first, _, release = hold.partition(":")
+        while realizations[0] >= int(first) and not os.path.exists(release):
+            time.sleep(0.05)
 
 
 def _finish(parts: list, scene, spec: EnsembleSpec):
