@@ -38,7 +38,7 @@ from .store import (EnsembleFileError, finish_ensemble, identity, load_netcdf, o
                     chunk_dataset, sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
-           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable", "parts_dir"]
+           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable", "parts_dir", "compile_note"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -192,9 +192,19 @@ def parts_dir(output: Path) -> Path:
     return output.with_name(output.name + ".parts")
 
 
+_COMPILE_NOTED: list = []   # the kernels a compile note of this process named (said once per command)
+
+
+def compile_note(kernels: list[str]) -> str:
+    """The one line that says kernels are being compiled (rss6 run and rss6 simulate)."""
+    return (f"compiling {', '.join(kernels)} first: numba's cache holds no copy for this machine and "
+            "rss6 version; this takes minutes once (rss6 warm pays it up front)")
+
+
 class _Progress:
-    """A bar on a terminal, plain lines otherwise; a first line at once (starting workers, compiling
-    kernels on a cold cache), then done/total with the elapsed time and an ETA."""
+    """A bar on a terminal, plain lines otherwise; a first line at once (starting workers), a line
+    when the workers compile kernels (:meth:`compiling`), then done/total with the elapsed time and
+    an ETA."""
 
     def __init__(self, total: int, done: int, stream=None):
         self.total, self.done, self.stream = total, done, stream or sys.stderr
@@ -204,8 +214,16 @@ class _Progress:
     def begin(self, chunks: int, where: str) -> None:
         self.stream.write(f"rss6 run: {self.total - self.done} realisations to compute in {chunks} "
                           f"chunks on {where}" + (f" ({self.done} stored)" if self.done else "")
-                          + "; starting workers (the first chunk also compiles kernels on a cold "
-                            "cache)\n")
+                          + "; starting workers\n")
+        self.stream.flush()
+
+    def compiling(self, kernels: list[str]) -> None:
+        """Say, once per process (a command's batches share it), that the workers compile
+        ``kernels`` before their first chunk (none: nothing said)."""
+        if not kernels or _COMPILE_NOTED:
+            return
+        _COMPILE_NOTED.append(kernels)
+        self.stream.write(f"rss6 run: {compile_note(kernels)}\n")
         self.stream.flush()
 
     def _eta(self, elapsed: float) -> str:
@@ -229,6 +247,16 @@ class _Progress:
             self.stream.write(f"rss6 run: {self.done}/{self.total} realisations "
                               f"({100 * frac:.0f} %), {elapsed:.1f} s{self._eta(elapsed)}\n")
         self.stream.flush()
+
+
+def _kernels_to_compile(client, model: str) -> list[str]:
+    """The compiled kernels of ``model`` that any of the client's workers would compile first (each
+    worker asked, from its own cache); none for levels without kernels, without asking."""
+    from rss6core import level_kernels, kernels_to_compile
+    if not level_kernels(model):
+        return []
+    answers = client.run(kernels_to_compile, model)
+    return sorted({name for names in answers.values() for name in names})
 
 
 def local_cluster(workers: int):
@@ -490,6 +518,8 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
     (histories stay on disk). The merged file is checked (:func:`ensemble`), the parts are not."""
     written, shared = [], client is not None
     with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
+        if bar:
+            bar.compiling(_kernels_to_compile(client, spec.model))
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
         try:
             with sigint_deferred() as interrupted:   # Ctrl-C is acted on in _finished
