@@ -251,11 +251,15 @@ class _Progress:
 
 def _kernels_to_compile(client, model: str) -> list[str]:
     """The compiled kernels of ``model`` that any of the client's workers would compile first (each
-    worker asked, from its own cache); none for levels without kernels, without asking."""
+    worker asked, from its own cache); none for levels without kernels, without asking, and none
+    when a worker cannot answer (lost meanwhile: the run itself reports that)."""
     from rss6core import level_kernels, kernels_to_compile
     if not level_kernels(model):
         return []
-    answers = client.run(kernels_to_compile, model)
+    try:
+        answers = client.run(kernels_to_compile, model)
+    except (OSError, TimeoutError):
+        return []
     return sorted({name for names in answers.values() for name in names})
 
 
@@ -519,7 +523,9 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
     written, shared = [], client is not None
     with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
         if bar:
-            bar.compiling(_kernels_to_compile(client, spec.model))
+            with sigint_deferred():   # a Ctrl-C meanwhile is raised after it, not inside dask's client
+                kernels = _kernels_to_compile(client, spec.model)
+            bar.compiling(kernels)
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
         try:
             with sigint_deferred() as interrupted:   # Ctrl-C is acted on in _finished

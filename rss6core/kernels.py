@@ -61,13 +61,18 @@ def _dispatchers(model: str) -> list:
 
 def _cached(kernel) -> bool:
     """Whether ``kernel`` (a numba dispatcher) runs without compiling: compiled or loaded in this
-    process, or an overload for this CPU and source in its on-disk cache (index and data file)."""
+    process, or an overload for this CPU and source in its on-disk cache (index and data file).
+    numba's cache has no public API: where its private one (0.60-0.68) is not found, False (a
+    compile note too many rather than minutes unexplained)."""
     if kernel.overloads:
         return True
-    cache = kernel._cache
-    index = cache._cache_file._load_index()   # empty when the source changed since it was written
-    _, machine, source = cache._index_key(None, kernel.targetctx.codegen())
-    return any(key[1:] == (machine, source) and os.path.exists(cache._cache_file._data_path(name))
+    try:
+        files = kernel._cache._cache_file
+        index = files._load_index()   # empty when the source changed since it was written
+        _, machine, source = kernel._cache._index_key(None, kernel.targetctx.codegen())
+    except AttributeError:
+        return False
+    return any(key[1:] == (machine, source) and os.path.exists(files._data_path(name))
                for key, name in index.items())
 
 
