@@ -124,6 +124,7 @@ def _simulate(args) -> int:
     model, integrator, dt, elements = _settings(args, scene)
     if args.output:
         check_new_output(args.output, "rss6 simulate", args.parents)
+    _note_compiling(model)
     start = time.perf_counter()
     try:
         result = simulate(scene, model, integrator, dt, elements, args.seed, args.realization)
@@ -153,6 +154,34 @@ def _simulate(args) -> int:
     if result.status != "finished":
         print(f"rss6: run failed: {result.message}", file=sys.stderr)
         return 1
+    return 0
+
+
+def _note_compiling(model: str) -> None:
+    """One line on stderr when this process is about to compile ``model``'s kernels."""
+    from rss6core import kernels_to_compile
+    cold = kernels_to_compile(model)
+    if cold:
+        from .run import compile_note
+        print(f"rss6 simulate: {compile_note(cold)}", file=sys.stderr, flush=True)
+
+
+def _warm(args) -> int:
+    """Compile the kernels every level uses into numba's cache, and say which and how long."""
+    import time
+
+    from rss6core import MODELS, compile_kernels, kernel_cache_folder, level_kernels
+    start = time.perf_counter()
+    compiled = compile_kernels(find_scene("smoke"))
+    wall = time.perf_counter() - start
+    where = f"numba's cache ({kernel_cache_folder()})"
+    if not compiled:
+        kernels = [k for model in MODELS for k in level_kernels(model)]
+        print(f"rss6 warm: nothing to compile: {', '.join(kernels)} (the contact level's; the other "
+              f"levels have none) are in {where}; checked in {wall:.1f} s")
+        return 0
+    print("rss6 warm: compiled " + ", ".join(f"{k} ({s:.0f} s)" for k, s in compiled.items())
+          + f" into {where} in {wall:.0f} s")
     return 0
 
 
@@ -893,6 +922,9 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--json", action="store_true", help="print one JSON object")
     check.set_defaults(func=_check)
     _simulate_parser(sub)
+    warm = sub.add_parser("warm", help="compile the contact level's kernels into numba's cache now (minutes "
+                                       "once per machine and rss6 version; quick when already done)")
+    warm.set_defaults(func=_warm)
 
     _run_parser(sub)
 

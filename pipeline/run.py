@@ -38,7 +38,7 @@ from .store import (EnsembleFileError, finish_ensemble, identity, load_netcdf, o
                     chunk_dataset, sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
-           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable", "parts_dir"]
+           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable", "parts_dir", "compile_note"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -77,6 +77,11 @@ class EnsembleSpec:
 
 
 NUMERICAL_FAILURES = (ArithmeticError, np.linalg.LinAlgError)   # recorded as a failed realisation
+# For tests only, read by :func:`_hold` alone: "R:PATH" makes every chunk whose first realisation is
+# R or more wait, before it computes, until the file PATH exists, so that a test can interrupt or
+# kill a run in a known state (R realisations stored, the next chunk in flight) whatever the
+# machine's speed.  Unset (always, outside tests/), it costs one environment look-up per chunk.
+TEST_HOLD_ENV = "RSS6_TEST_HOLD"
 
 
 def run_chunk(spec: EnsembleSpec, realizations: list[int]):
@@ -85,6 +90,7 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
     A numerical failure raised by the batch is traced to its realisations by running each alone:
     only those that fail alone are recorded as failed (with the reason), the others are kept, so
     the file does not depend on how the realisations were cut into chunks."""
+    _hold(realizations)
     scene = spec.scene()
     try:
         results = _simulate(spec, realizations)
@@ -97,6 +103,15 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
     chunk = chunk_dataset(results, draws, realizations, spec.store, scene.simulation.settle_time,
                           scene.simulation.steady_after)
     return _finish([chunk], scene, spec)
+
+
+def _hold(realizations: list[int]) -> None:
+    """Test-only (TEST_HOLD_ENV): wait, before computing, until the release file exists."""
+    hold = os.environ.get(TEST_HOLD_ENV)
+    if hold:
+        first, _, release = hold.partition(":")
+        while realizations[0] >= int(first) and not os.path.exists(release):
+            time.sleep(0.05)
 
 
 def _finish(parts: list, scene, spec: EnsembleSpec):
@@ -177,9 +192,19 @@ def parts_dir(output: Path) -> Path:
     return output.with_name(output.name + ".parts")
 
 
+_COMPILE_NOTED: list = []   # the kernels a compile note of this process named (said once per command)
+
+
+def compile_note(kernels: list[str]) -> str:
+    """The one line that says kernels are being compiled (rss6 run and rss6 simulate)."""
+    return (f"compiling {', '.join(kernels)} first: numba's cache holds no copy for this machine and "
+            "rss6 version; this takes minutes once (rss6 warm pays it up front)")
+
+
 class _Progress:
-    """A bar on a terminal, plain lines otherwise; a first line at once (starting workers, compiling
-    kernels on a cold cache), then done/total with the elapsed time and an ETA."""
+    """A bar on a terminal, plain lines otherwise; a first line at once (starting workers), a line
+    when the workers compile kernels (:meth:`compiling`), then done/total with the elapsed time and
+    an ETA."""
 
     def __init__(self, total: int, done: int, stream=None):
         self.total, self.done, self.stream = total, done, stream or sys.stderr
@@ -189,8 +214,16 @@ class _Progress:
     def begin(self, chunks: int, where: str) -> None:
         self.stream.write(f"rss6 run: {self.total - self.done} realisations to compute in {chunks} "
                           f"chunks on {where}" + (f" ({self.done} stored)" if self.done else "")
-                          + "; starting workers (the first chunk also compiles kernels on a cold "
-                            "cache)\n")
+                          + "; starting workers\n")
+        self.stream.flush()
+
+    def compiling(self, kernels: list[str]) -> None:
+        """Say, once per process (a command's batches share it), that the workers compile
+        ``kernels`` before their first chunk (none: nothing said)."""
+        if not kernels or _COMPILE_NOTED:
+            return
+        _COMPILE_NOTED.append(kernels)
+        self.stream.write(f"rss6 run: {compile_note(kernels)}\n")
         self.stream.flush()
 
     def _eta(self, elapsed: float) -> str:
@@ -214,6 +247,20 @@ class _Progress:
             self.stream.write(f"rss6 run: {self.done}/{self.total} realisations "
                               f"({100 * frac:.0f} %), {elapsed:.1f} s{self._eta(elapsed)}\n")
         self.stream.flush()
+
+
+def _kernels_to_compile(client, model: str) -> list[str]:
+    """The compiled kernels of ``model`` that any of the client's workers would compile first (each
+    worker asked, from its own cache); none for levels without kernels, without asking, and none
+    when a worker cannot answer (lost meanwhile: the run itself reports that)."""
+    from rss6core import level_kernels, kernels_to_compile
+    if not level_kernels(model):
+        return []
+    try:
+        answers = client.run(kernels_to_compile, model)
+    except (OSError, TimeoutError):
+        return []
+    return sorted({name for names in answers.values() for name in names})
 
 
 def local_cluster(workers: int):
@@ -475,6 +522,10 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
     (histories stay on disk). The merged file is checked (:func:`ensemble`), the parts are not."""
     written, shared = [], client is not None
     with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
+        if bar:
+            with sigint_deferred():   # a Ctrl-C meanwhile is raised after it, not inside dask's client
+                kernels = _kernels_to_compile(client, spec.model)
+            bar.compiling(kernels)
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
         try:
             with sigint_deferred() as interrupted:   # Ctrl-C is acted on in _finished

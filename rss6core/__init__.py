@@ -29,6 +29,12 @@ Running a level
 - natural_frequencies: undamped angular frequencies (rad/s) of the elastic robot at one instant.
 - degrees_of_freedom: how many unknowns a level solves for.
 
+Compiled kernels (numba; the contact level's)
+- level_kernels: the compiled kernels a level calls (none but the contact level's).
+- kernels_to_compile: those a level would compile first here (not in numba's cache for this machine).
+- compile_kernels: compile every level's kernels into numba's cache now; seconds per kernel compiled.
+- kernel_cache_folder: where numba's cache keeps them.
+
 Clearance draws
 - ClearanceDraw: one realisation's clearance sizes and eccentricity vectors (m).
 - draw_clearances: one realisation's clearance sizes and eccentricities (m), from its seeded stream.
@@ -61,6 +67,7 @@ from .clearance import (RELATIVE_BAND_REACH, SIZE_UNIFORMS, UNIFORM_BLOCKS, Clea
 from .contact_options import CONTACT_STARTS
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
+from .kernels import compile_kernels, kernel_cache_folder, kernels_to_compile, level_kernels
 from .kinematics import rigid_motion
 from .models import (MODELS, Level, default_integrator, default_time_step, degrees_of_freedom,
                      natural_frequencies, prepare_level, simulate, simulate_batch, stored_draw)
@@ -73,7 +80,7 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII"
            "MODELS", "INTEGRATORS", "CONTACT_STARTS", "simulate", "simulate_batch", "prepare_level", "Level",
            "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
-           "degrees_of_freedom",
+           "degrees_of_freedom", "level_kernels", "kernels_to_compile", "compile_kernels", "kernel_cache_folder",
            "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "size_band",
            "SIZE_UNIFORMS", "UNIFORM_BLOCKS", "clearances_from_named_uniforms", "Integrator", "build_elastic_model",
            "BeamTheory", "BEAM_THEORIES",

@@ -280,8 +280,13 @@ def _affine_nodal_loads(frames, lin0, lin1, ang, M_full: np.ndarray) -> np.ndarr
     (T, 6, 3), base frame; R = frames).
 
     The field is linear in the nine local components [R^T lin0, R^T lin1, R^T ang], so the
-    product is taken as (T 6, 9) @ (9, 6(n+1)) with the constant map folded into M_full:
+    product is taken as (6, 9) @ (9, 6(n+1)) per instant with the constant map folded into M_full:
     a third of the flops of the nodal field's product and no (T, 6, 6(n+1)) field in memory.
+    One BLAS product per instant, not one (T 6, 9) product: BLAS sums a row differently with
+    its place among the rows and their number (its edge kernels, which depend on the CPU and
+    OPENBLAS_CORETYPE), so an instant's loads would depend on how many instants are computed
+    together, and a contact run's chunks, of 2^refinements more instants with a finer step, must
+    give the fixed run's bits (tests/test_contact.py, adaptive step limits).
     """
     nodes = M_full.shape[0] // 6
     B = np.zeros((9, 6 * nodes))                  # [lin0, lin1, ang] -> nodal field
@@ -291,7 +296,7 @@ def _affine_nodal_loads(frames, lin0, lin1, ang, M_full: np.ndarray) -> np.ndarr
         B[6:9, 6 * k + 3:6 * k + 6] = np.eye(3)
     local = np.stack([lin0, lin1, ang], -2) @ frames          # rows v^T R = (R^T v)^T: (T, 6, 3, 3)
     T = local.shape[0]
-    return (local.reshape(T * 6, 9) @ (B @ M_full)).reshape(T, 6, 6 * nodes)
+    return (local.reshape(T, 6, 9) @ (B @ M_full)).reshape(T, 6, 6 * nodes)
 
 
 def system_at(model: ElasticModel, motion: RigidMotion, scene) -> tuple[EndMaps, np.ndarray]:

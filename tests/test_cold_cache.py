@@ -2,9 +2,12 @@
 cache: one realisation run cold then cached, and an ensemble interrupted while its worker compiles
 then resumed on the filled cache, against one run without interruption.
 
-The two cold compiles run at once, each into its own empty cache, so the test pays one compile."""
+The two cold compiles run at once, each into its own empty cache, so the test pays one compile.
+The cold ensemble says once that it compiles the kernels, the warm runs do not; `rss6 warm` compiles
+into an empty cache what a contact run then loads (a compile of its own)."""
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -13,8 +16,11 @@ from pathlib import Path
 
 import pytest
 
+from pipeline.run import TEST_HOLD_ENV
+
 SMOKE = Path(__file__).resolve().parent.parent / "configs" / "smoke.toml"
-N = 60      # one-realisation chunks: far more than finish between the first stored part and SIGINT
+KERNELS = "contact_kernel.advance_chunk, contact_kernel.newton_step"
+N = 6       # one-realisation chunks: the first is stored, the others wait for SIGINT (TEST_HOLD_ENV)
 RUN = ["run", "smoke", "--model", "contact", "-n", str(N), "--chunk", "1", "--workers", "1", "--seed", "2"]
 
 # one contact realisation; every number of its result as float.hex, which is exact
@@ -49,19 +55,19 @@ def _finished_json(proc: subprocess.Popen) -> dict:
     return json.loads(out)
 
 
-def _ensemble(out: Path, cache: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "pipeline.cli", *RUN, "-o", str(out)], env=_env(cache),
-                            cwd=out.parent, start_new_session=True, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+def _ensemble(out: Path, cache: Path, hold: dict | None = None) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "pipeline.cli", *RUN, "-o", str(out)],
+                            env=_env(cache) | (hold or {}), cwd=out.parent, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 
-def _interrupt_after_first_part(out: Path, cache: Path) -> None:
-    """Run the ensemble on the cold ``cache`` and SIGINT it once its first chunk is stored."""
+def _interrupt_after_first_part(out: Path, cache: Path) -> str:
+    """Run the ensemble on the cold ``cache`` and SIGINT it once its first chunk is stored (the
+    others wait for it: TEST_HOLD_ENV); returns its stderr."""
     parts = Path(str(out) + ".parts")
-    proc = _ensemble(out, cache)
+    proc = _ensemble(out, cache, {TEST_HOLD_ENV: f"1:{out.parent / 'never'}"})
     try:
-        deadline = time.monotonic() + 1200          # compiling the kernel: minutes on shared cores
-        while not list(parts.glob("chunk-*.nc")) and proc.poll() is None and time.monotonic() < deadline:
+        while not list(parts.glob("chunk-*.nc")) and proc.poll() is None:   # compiling: minutes
             time.sleep(0.1)
         assert proc.poll() is None, f"the run ended before it could be interrupted: {proc.stderr.read()}"
         os.kill(proc.pid, signal.SIGINT)
@@ -75,13 +81,22 @@ def _interrupt_after_first_part(out: Path, cache: Path) -> None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
     assert proc.returncode == 130, err
-    assert 1 <= len(list(parts.glob("chunk-*.nc"))) < N and not out.exists()
+    assert len(list(parts.glob("chunk-*.nc"))) == 1 and not out.exists()
+    return err
 
 
-def _complete(out: Path, cache: Path) -> None:
+def _complete(out: Path, cache: Path) -> str:
     proc = _ensemble(out, cache)
     _, err = proc.communicate(timeout=1200)
     assert proc.returncode == 0, err
+    return err
+
+
+def _rss6(cache: Path, *args) -> subprocess.CompletedProcess:
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", *args], env=_env(cache),
+                          capture_output=True, text=True, timeout=3600)
+    assert proc.returncode == 0, proc.stderr
+    return proc
 
 
 def _assert_same_bits(cold: dict, warm: dict) -> None:
@@ -99,11 +114,28 @@ def test_compiled_and_cached_kernels_agree_bit_for_bit(tmp_path):
     run_cache.mkdir()
     cold_one = _one_realisation(one_cache)            # compiles in its own process, meanwhile...
     resumed, whole = tmp_path / "resumed.nc", tmp_path / "whole.nc"
-    _interrupt_after_first_part(resumed, run_cache)   # ...the ensemble's worker compiles too
+    err = _interrupt_after_first_part(resumed, run_cache)   # ...the ensemble's worker compiles too
+    assert err.count(f"rss6 run: compiling {KERNELS} first") == 1, err
     cold = _finished_json(cold_one)
     assert any(one_cache.rglob("*contact_kernel.advance_chunk*.nbc")), "the cold run wrote no cache"
     assert any(run_cache.rglob("*.nbc")), "the cold ensemble wrote no compiled kernel to the cache"
     _assert_same_bits(cold, _finished_json(_one_realisation(one_cache)))
-    _complete(resumed, run_cache)                     # the stored chunks, then the rest, warm
-    _complete(whole, run_cache)                       # every chunk warm
+    for out in (resumed, whole):   # the stored chunks, then the rest; every chunk: warm, no note
+        err = _complete(out, run_cache)
+        assert "compiling" not in err, err
     assert resumed.read_bytes() == whole.read_bytes()
+    # the cache one realisation filled serves `rss6 warm` too
+    assert _rss6(one_cache, "warm").stdout.startswith(f"rss6 warm: nothing to compile: {KERNELS}")
+
+
+@pytest.mark.slow   # compiles the contact kernel into an empty cache: minutes
+def test_warm_compiles_into_an_empty_cache_what_a_contact_run_then_loads(tmp_path):
+    """`rss6 warm` on an empty cache names both kernels and their compile times; afterwards `rss6
+    warm` has nothing to compile and `rss6 simulate --model contact` prints no compile note."""
+    cold = _rss6(tmp_path, "warm").stdout
+    assert re.fullmatch(r"rss6 warm: compiled contact_kernel\.(newton_step|advance_chunk) \(\d+ s\), "
+                        r"contact_kernel\.(newton_step|advance_chunk) \(\d+ s\) into numba's cache "
+                        rf"\({re.escape(str(tmp_path))}/\S+\) in \d+ s\n", cold), cold
+    assert _rss6(tmp_path, "warm").stdout.startswith(f"rss6 warm: nothing to compile: {KERNELS}")
+    simulated = _rss6(tmp_path, "simulate", "smoke", "--model", "contact")
+    assert "compiling" not in simulated.stderr and "finished" in simulated.stdout, simulated

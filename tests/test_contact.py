@@ -472,6 +472,20 @@ def test_adaptive_step_limits_are_the_fixed_steps(smoke):
         assert np.array_equal(a.refined, np.full(2, adaptive["refinements"] if substeps > 1 else 0))
 
 
+@pytest.mark.parametrize("first, count", [(0, 201), (200, 201), (7, 1), (399, 2)])
+def test_an_instants_chunk_data_do_not_depend_on_the_chunk(smoke, first, count):
+    """Loads, frames and maps at an instant are the same bits whether computed in a chunk of 1, 2,
+    201 or 801 instants, at any place in it: a refined run's chunks hold 2^refinements times more
+    instants than the fixed run's at its finest step (BLAS's edge kernels sum a row of one long
+    product differently with its place and the rows' number; more so under OPENBLAS_CORETYPE=Haswell)."""
+    from rss6core.contact_dynamics import _Chunk, build_joint_model
+    jm, h = build_joint_model(smoke, 4), 5e-5
+    whole = _Chunk(smoke, jm, np.arange(801) * h)
+    part = _Chunk(smoke, jm, (first + np.arange(count)) * h)
+    for name in ("F", "Mp", "Rc", "J", "Rr", "omega", "t"):
+        assert np.array_equal(getattr(whole, name)[first:first + count], getattr(part, name)), name
+
+
 @pytest.mark.parametrize("level, estimate, expected", [
     (3, 1e-8 / 64, 1), (3, 1e-8 / 63, 2), (3, 1e-8 / 8, 2), (3, 1e-8 / 7.9, 3), (3, 0.0, 0),
     (0, 0.0, 0), (2, 2e-8, 2), (4, 1e-8 / 8 ** 4, 0), (4, np.nan, 4), (2, np.inf, 2)])

@@ -14,8 +14,8 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.outputs import PartsManifest
-from pipeline.run import (MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL, EnsembleSpec, default_chunk, run_chunk,
-                          run_ensemble)
+from pipeline.run import (MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL, TEST_HOLD_ENV, EnsembleSpec, default_chunk,
+                          run_chunk, run_ensemble)
 from pipeline.stats import ensemble_stats
 from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
 from pipeline.scenes import scene_text
@@ -155,20 +155,21 @@ def _cli(*args):
 
 @pytest.mark.slow
 def test_killed_run_resumes_to_the_same_file(tmp_path):
-    """Kill -9 the whole run after some chunks are stored; the rerun ends identical."""
+    """Kill -9 the whole run once 3 chunks are stored and the others wait (TEST_HOLD_ENV); the
+    rerun ends identical."""
     args = ["run", SMOKE, "-n", "12", "--chunk", "1", "--workers", "1", "--model", "elastic",
             "--seed", "5"]
     killed = tmp_path / "killed.nc"
     proc = subprocess.Popen(_cli(*args, "-o", str(killed)), start_new_session=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=dict(os.environ, **{TEST_HOLD_ENV: f"3:{tmp_path / 'never'}"}))
     parts = Path(str(killed) + ".parts")
-    deadline = time.time() + 120
-    while time.time() < deadline and len(list(parts.glob("*.nc"))) < 3:
+    while len(list(parts.glob("*.nc"))) < 3:
+        assert proc.poll() is None, "the run ended before it was killed"
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
-    stored = len(list(parts.glob("*.nc")))
-    assert 3 <= stored < 12 and not killed.exists()
+    assert len(list(parts.glob("*.nc"))) == 3 and not killed.exists()
     subprocess.run(_cli(*args, "-o", str(killed)), check=True, capture_output=True)
     whole = tmp_path / "whole.nc"
     subprocess.run(_cli(*args, "-o", str(whole)), check=True, capture_output=True)

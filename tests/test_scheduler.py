@@ -12,10 +12,11 @@ from pathlib import Path
 import pytest
 
 from pipeline.cli import main
+from pipeline.run import TEST_HOLD_ENV
 from pipeline.store import open_ensemble
 
 DASK = str(Path(sys.executable).with_name("dask"))
-N = 200   # long enough (100 chunks) that the worker is killed while chunks remain
+N = 20    # 10 chunks: the first is stored, the others wait (TEST_HOLD_ENV) until the worker is killed
 RUN = [sys.executable, "-m", "pipeline.cli", "run", "smoke", "--model", "quasi-static", "-n", str(N),
        "--chunk", "2"]
 
@@ -26,11 +27,11 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _start(args: list, log: Path) -> subprocess.Popen:
+def _start(args: list, log: Path, env: dict | None = None) -> subprocess.Popen:
     """A dask process in its own session (so that it and its children can be killed at once)."""
     with open(log, "w") as f:
         return subprocess.Popen([DASK, *args], stdout=f, stderr=subprocess.STDOUT,
-                                start_new_session=True)
+                                start_new_session=True, env=env)
 
 
 def _wait_for(condition, seconds: float, what: str) -> None:
@@ -107,8 +108,10 @@ def test_scheduler_that_loses_every_worker_stops_and_keeps_the_parts(tmp_path):
     try:
         procs.append(_start(["scheduler", "--host", "127.0.0.1", "--port", str(port),
                              "--no-dashboard"], tmp_path / "scheduler.log"))
+        # its chunks after the first wait (TEST_HOLD_ENV): it is killed while chunks remain, however fast
         worker = _start(["worker", address, "--nworkers", "1", "--nthreads", "1", "--no-nanny",
-                         "--no-dashboard", "--host", "127.0.0.1"], worker_log)
+                         "--no-dashboard", "--host", "127.0.0.1"], worker_log,
+                        env=dict(os.environ, **{TEST_HOLD_ENV: f"2:{tmp_path / 'never'}"}))
         procs.append(worker)
         _wait_for(lambda: "Registered to" in worker_log.read_text(), 30, "worker registered")
         rss6 = subprocess.Popen(RUN + ["--scheduler", address, "--worker-timeout", "3",
@@ -137,7 +140,7 @@ def test_scheduler_that_loses_every_worker_stops_and_keeps_the_parts(tmp_path):
     assert address in line and "no workers for 3 s" in line and str(parts) in line, line
     assert 3 <= waited < 15, waited
     assert not merged
-    assert kept, "no part kept"
+    assert stored == {0, 1}, stored
     assert rerun.returncode == 0, rerun.stderr
     assert f"wrote {out}: {N} realisations" in rerun.stdout, rerun.stdout
     assert f"{len(stored)} of them stored before" in rerun.stdout, rerun.stdout

@@ -1,0 +1,92 @@
+"""The compiled (numba) kernels of the levels: which a level uses, which are not yet compiled on this
+machine, and compiling them all up front (``rss6 warm``).
+
+Only the contact level has compiled kernels (:mod:`.contact_kernel`'s entry points).  numba compiles
+a kernel at its first call in a process unless its on-disk cache (``NUMBA_CACHE_DIR``, else
+``__pycache__`` beside the source) holds it for this CPU, this numba and this source file; compiling
+the contact level's takes minutes, loading them well under a second.  Every realisation and scene
+calls a kernel with the same argument types (tests/test_kernels.py), so one compiled overload per
+kernel serves every run; the cache check below takes any overload for this CPU and source as the one.
+Asking about a level without kernels imports nothing (numba is 0.3 s of import per process).
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+
+__all__ = ["level_kernels", "kernels_to_compile", "compile_kernels", "kernel_cache_folder", "KERNELS"]
+
+KERNELS = {"contact": ("advance_chunk", "newton_step")}   # level -> entry points of .contact_kernel
+
+
+def level_kernels(model: str) -> tuple[str, ...]:
+    """Names of the compiled kernels ``model`` calls (none for the levels without any)."""
+    return tuple(f"contact_kernel.{name}" for name in KERNELS.get(model, ()))
+
+
+def kernels_to_compile(model: str) -> list[str]:
+    """The kernels of ``model`` this process would compile before running it: neither compiled here
+    already nor in numba's on-disk cache for this machine and source."""
+    if not KERNELS.get(model):
+        return []
+    return [f"contact_kernel.{name}" for name, kernel in _dispatchers(model) if not _cached(kernel)]
+
+
+def kernel_cache_folder() -> str:
+    """Where numba keeps the compiled kernels (``NUMBA_CACHE_DIR``, else beside the source)."""
+    return str(dict(_dispatchers("contact"))["advance_chunk"]._cache._cache_path)
+
+
+def compile_kernels(scene) -> dict[str, float]:
+    """Compile every level's kernels not yet cached, into numba's on-disk cache, by running the
+    contact level on ``scene`` for two output steps; returns seconds spent compiling per kernel
+    compiled (empty when all were cached: then this takes about a second)."""
+    todo = {name for model in KERNELS for name in kernels_to_compile(model)}
+    if not todo:
+        return {}
+    from numba.core import event
+    from .models import prepare_level
+    sim = scene.simulation
+    short = dataclasses.replace(scene, trajectory=dataclasses.replace(scene.trajectory,
+                                                                      duration=2 * sim.time_step))
+    with event.install_recorder("numba:compile") as recorder:
+        prepare_level(short, "contact").simulate(0, [0])
+    return {name: seconds for name, seconds in _compile_times(recorder.buffer).items() if name in todo}
+
+
+def _dispatchers(model: str) -> list:
+    from . import contact_kernel
+    return [(name, getattr(contact_kernel, name)) for name in KERNELS[model]]
+
+
+def _cached(kernel) -> bool:
+    """Whether ``kernel`` (a numba dispatcher) runs without compiling: compiled or loaded in this
+    process, or an overload for this CPU and source in its on-disk cache (index and data file).
+    numba's cache has no public API: where its private one (0.60-0.68) is not found, False (a
+    compile note too many rather than minutes unexplained)."""
+    if kernel.overloads:
+        return True
+    try:
+        files = kernel._cache._cache_file
+        index = files._load_index()   # empty when the source changed since it was written
+        _, machine, source = kernel._cache._index_key(None, kernel.targetctx.codegen())
+    except AttributeError:
+        return False
+    return any(key[1:] == (machine, source) and os.path.exists(files._data_path(name))
+               for key, name in index.items())
+
+
+def _compile_times(events) -> dict[str, float]:
+    """Seconds per kernel compiled, from numba's compile events (start and end, nested: only the
+    outermost count, a kernel's callees compile inside it), named module.function."""
+    seconds, open_ = {}, []
+    for stamp, ev in events:
+        if ev.is_start:
+            open_.append(stamp)
+            continue
+        begun = open_.pop()
+        if not open_:
+            func = ev.data["dispatcher"].py_func
+            name = f"{func.__module__.rsplit('.', 1)[-1]}.{func.__name__}"
+            seconds[name] = seconds.get(name, 0.0) + stamp - begun
+    return seconds
