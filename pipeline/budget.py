@@ -1,16 +1,16 @@
 """``rss6 budget``: the largest common clearance scale factor for which requirement specs pass.
 
-A spec passes at the run's confidence when its statistic's whole interval meets the limit
-(pipeline.gate), so for an upper limit the answer is the largest scale s at which the
-interval's upper bound is within it, with every [clearance] size of the scene times s.
+A spec passes at the run's confidence when its statistic's one-sided upper bound meets the
+limit (pipeline.gate), so for an upper limit the answer is the largest scale s at which that
+upper bound is within it, with every [clearance] size of the scene times s.
 
 - quasi-static: exact scaling from one ensemble.  Every draw law scales with the clearance
   sizes on the same uniforms (truncated normals in units of the size, k times the size), so
   the eccentricities of each realisation are s times those at s = 1, and the linear closure
   (with the eccentricities drawn, or set by the sizes along the joint forces) makes its
   error s times as large.  Every per-realisation maximum and mean |error| is then s times
-  as large, and so is every interval rss6 gives: quantile bounds are order statistics, and
-  the mean and std intervals are location-scale equivariant (the skewness and kurtosis that
+  as large, and so is every bound rss6 gives: quantile bounds are order statistics, and
+  the mean and std bounds are location-scale equivariant (the skewness and kurtosis that
   enter them do not change).  Hence upper(s) = s upper(1) and s* = min(limit / upper(1)).
 - other levels: a measured sweep: ensembles of the same realisations (same seed) at
   scales doubled or halved from 1 until one passes and one does not, then bisection to the
@@ -27,11 +27,11 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from .gate import Verdict, judge_all
+from .gate import Verdict, check_confidence, judge_all
 from .run import EnsembleSpec, ensemble
 from .scene_variant import scene_variant
 from .spec import Spec
-from .stats import ensemble_stats, no_interval_at
+from .stats import no_interval_at
 from .store import WINDOWS
 from .summary import CLEARANCE_LEVELS
 
@@ -115,6 +115,10 @@ def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> 
     if model not in CLEARANCE_LEVELS:
         raise BudgetError(f"--model {model}: this level has no clearances, so no clearance budget; "
                           "use quasi-static, paper or contact")
+    try:
+        check_confidence(confidence)
+    except ValueError as exc:
+        raise BudgetError(f"--{exc}") from None
     for s in specs:
         if why := no_interval_at(s.statistic, confidence, n):
             raise BudgetError(f"--spec {s.text!r}: {why}")
@@ -132,8 +136,7 @@ def _trial(spec: EnsembleSpec, specs, scale: float, n: int, folder: Path, confid
     scene = spec.scene()
     path = folder / f"{scene.name}_{spec.model}_scale{scale:.6g}.nc"
     outcome = ensemble(replace(spec, scene_text=text), n, path, workers=workers, progress=False)
-    return Trial(scale, path, tuple(judge_all(specs, ensemble_stats(outcome.dataset, confidence,
-                                                                      window=None))))
+    return Trial(scale, path, tuple(judge_all(specs, outcome.dataset, confidence)))
 
 
 def exact_scale(verdicts: list[Verdict]) -> tuple[float, str]:
@@ -142,7 +145,7 @@ def exact_scale(verdicts: list[Verdict]) -> tuple[float, str]:
     best = None
     for v in verdicts:
         if v.upper is None:
-            raise BudgetError(f"--spec {v.spec!r}: no {100 * v.confidence:g} % interval of {v.statistic} "
+            raise BudgetError(f"--spec {v.spec!r}: no {100 * v.confidence:g} % upper bound of {v.statistic} "
                               f"at n = {v.n} ({v.reason}); raise -n")
         if not v.upper > 0:
             raise BudgetError(f"--spec {v.spec!r}: the {v.direction} error is zero at scale 1; any "
@@ -214,7 +217,7 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
 def format_budget(b: Budget, scene_name: str, model: str) -> str:
     """The answer as lines: factor, method, clearances per family, the trials' verdicts."""
     lines = [f"clearance budget: scene {scene_name}, {model} level, n = {b.n} realisations per "
-             f"ensemble, {100 * b.confidence:g} % intervals (a spec passes when its interval's upper "
+             f"ensemble, one-sided {100 * b.confidence:g} % bounds (a spec passes when its upper "
              "bound is within the limit)",
              f"largest common clearance scale factor: {b.scale:.{DIGITS}g} ({b.method})",
              f"limiting: {b.limiting}",

@@ -243,7 +243,7 @@ def _run(args) -> int:
     if not specs:
         return code
     print(format_verdicts(verdicts))
-    return max(code, exit_code(verdicts, args.undecided or "fail"))
+    return code or exit_code(verdicts, args.undecided)   # an --until cap reached first stays 1
 
 
 def _known_windows(specs: list) -> None:
@@ -329,8 +329,7 @@ def _annotate(specs: list, verdicts: list):
         return None
 
     def annotate(ds) -> dict:
-        from .stats import ensemble_stats
-        verdicts[:] = _judge(ensemble_stats(ds, window=None), specs)
+        verdicts[:] = _judge(ds, specs)
         return _verdict_attrs(verdicts)
     return annotate
 
@@ -435,30 +434,37 @@ def _requirements(args) -> list:
         raise SceneError(str(exc)) from None
 
 
-def _judge(sds, specs: list) -> list:
-    """Verdicts of the specs on a statistics Dataset; a window the file lacks is a one-line error."""
+def _judge(ds, specs: list, confidence: float = 0.95) -> list:
+    """Verdicts of the specs on an ensemble (or single-run) Dataset; a window the file lacks is a
+    one-line error."""
     from .gate import judge_all
     try:
-        return judge_all(specs, sds)
+        return judge_all(specs, ds, confidence)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
 
 
 def _stats(args) -> int:
     from .filecheck import open_results
-    from .gate import exit_code, format_verdicts, verdicts_json
+    from .gate import check_confidence, exit_code, format_verdicts, verdicts_json
     from .stats import ensemble_stats, format_stats, to_json
     from .outputs import check_new_output
     from .store import write_netcdf
     specs = _requirements(args)
     _known_windows(specs)
+    if specs:
+        try:
+            check_confidence(args.confidence)
+        except ValueError as exc:
+            raise SceneError(f"--{exc} (with --require)") from None
     if args.output:
         check_new_output(args.output, "rss6 stats", args.parents)
-    full = ensemble_stats(open_results(args.file), args.confidence, window=None)
+    ds = open_results(args.file)
+    full = ensemble_stats(ds, args.confidence, window=None)
     if args.window is not None:
         full, specs = _window_of(full, args.window), [replace(s, window=s.window or args.window)
                                                       for s in specs]
-    verdicts = _judge(full, specs)
+    verdicts = _judge(ds, specs, args.confidence)
     sds = _selection(full, args)
     if args.output:
         write_netcdf(sds.assign_attrs(_verdict_attrs(verdicts)) if specs else sds, args.output)
@@ -469,7 +475,7 @@ def _stats(args) -> int:
         print(format_stats(sds))
         if specs:
             print(format_verdicts(verdicts))
-    return exit_code(verdicts, args.undecided or "fail") if specs else 0
+    return exit_code(verdicts, args.undecided) if specs else 0
 
 
 def _window_of(sds, window: str):
@@ -493,10 +499,13 @@ def _require_arguments(p) -> None:
     p.add_argument("--require", action="append", metavar="SPEC",
                    help="a requirement QUANTITY:DIRECTIONS OP VALUE UNIT@STATISTIC[/WINDOW], e.g. "
                         "'displacement:x,y<=0.05mm@q95' or '...@q95/steady' (window whole, startup or "
-                        "steady; default whole) (repeatable): judged pass, fail or undecided "
-                        "from the statistic's confidence interval; exit 1 unless all pass (default: none)")
+                        "steady; default whole) (repeatable): fails when the statistic's one-sided "
+                        "bound on the limit's side violates the limit, passes when the other one-sided "
+                        "bound meets it, else undecided; exit 0 if all pass, 1 if any fails, 3 if none "
+                        "fails but some are undecided (default: none)")
     p.add_argument("--undecided", choices=("fail", "pass"),
-                   help="how an undecided requirement counts for the exit code (default: fail)")
+                   help="count undecided requirements as failed (exit 1) or passed (exit 0) "
+                        "(default: neither, exit 3)")
 
 
 def _plot(args) -> int:
@@ -777,7 +786,8 @@ def _budget_parser(sub) -> None:
     bu.add_argument("--parents", action="store_true", help="create the output's missing folders")
     bu.add_argument("--seed", type=_nonnegative_int, default=0, help="random seed (default 0)")
     bu.add_argument("--confidence", type=_fraction, default=0.95,
-                    help="confidence of the intervals the specs are judged on (default 0.95)")
+                    help="confidence of the one-sided bounds the specs are judged on, above 0.5 "
+                         "(default 0.95)")
     bu.add_argument("--tolerance", type=_positive_float, default=0.05,
                     help="sweep levels: relative width in the scale at which bisection stops "
                          "(default 0.05)")
@@ -808,7 +818,8 @@ def _stats_parser(sub) -> None:
     st.add_argument("-o", "--output", help="also write the statistics Dataset to this new netCDF file")
     st.add_argument("--parents", action="store_true", help="create the output's missing folders")
     st.add_argument("--confidence", type=_fraction, default=0.95,
-                    help="confidence of the two-sided intervals, in (0, 1) (default 0.95)")
+                    help="confidence of the two-sided intervals, in (0, 1), and of each one-sided bound "
+                         "a --require is decided on, then above 0.5 (default 0.95)")
     st.add_argument("--window", help="analysis window: whole, startup (t < the scene's "
                                      "steady_after_s) or steady; also the window of a --require "
                                      "without '/WINDOW' (default: every window shown, --require "

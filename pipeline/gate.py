@@ -1,16 +1,25 @@
-"""Pass, fail or undecided: requirement specs judged from the statistics Dataset's intervals.
+"""Pass, fail or undecided: requirement specs decided on one-sided bounds of the ensemble's statistics.
 
-A spec holds with the file's confidence when the statistic's whole confidence
-interval meets the limit (pass), is refuted when the whole interval violates it
-(fail), and is undecided when the interval straddles the limit or no interval
-exists at this sample size. The intervals describe the finished realisations
-only: where any realisation failed, a spec they meet is undecided, not passed
-(the failed draws, which often diverged on the largest errors, are in the
-population the requirement is about). Each direction of a spec is judged on its own
-interval; the spec's verdict is the worst of them. For an undecided verdict the
-sample size that would likely decide is estimated from the interval's 1/sqrt(n)
-shrinkage about an unchanged estimate (and, for quantiles, never below the
-smallest n at which a distribution-free interval exists).
+A requirement is decided on whichever side the data already decide, at the stated
+confidence c: it fails when the statistic's one-sided bound on the limit's side violates
+the limit (for ``<=`` L: the lower bound exceeds L), passes when the one-sided bound on
+the other side meets it (the upper bound is within L), and is undecided otherwise.  Each
+decision errs with probability at most 1 - c (the bounds: pipeline.stats, one-sided
+bounds; error rates measured in tests/test_gate.py).  So a q95 limit that all of a few
+realisations violate fails from n = 1 (were q95 <= L, all n would exceed L with
+probability at most 0.05^n), while passing one needs n >= 59.
+
+The bounds describe the finished realisations only: where any realisation failed, a spec
+they meet is undecided, not passed (the failed draws, which often diverged on the largest
+errors, are in the population the requirement is about); one they violate fails.  Each
+direction of a spec is judged on its own; the spec's verdict is the worst of them.  For an
+undecided verdict, the n that would likely decide: for a quantile of a plain Monte Carlo
+ensemble, the smallest n at which the binomial bound decides if the share of violating
+realisations stays as it is; otherwise from the bound's 1/sqrt(n) shrinkage about an
+unchanged estimate (never below the smallest n at which the bound exists).
+
+Exit codes (:func:`exit_code`): 0 every verdict passes, 1 any fails, 3 none fails but
+some are undecided ("needs more realisations"); 2 stays the CLI's for usage errors.
 """
 from __future__ import annotations
 
@@ -20,17 +29,25 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .spec import Spec
-from .stats import interval_floor
+from .stats import (QUANTILE_DECISION_CAP, QUANTILES, ensemble_stats, finished_values,
+                    interval_floor, quantile_decision_n)
 
-__all__ = ["OUTCOMES", "Verdict", "exit_code", "format_verdicts", "overall", "judge", "judge_all",
-           "verdicts_json"]
+__all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
+           "overall", "judge", "judge_all", "verdicts_json"]
 
 OUTCOMES = ("pass", "undecided", "fail")
+EXIT_CODES = {"pass": 0, "fail": 1, "undecided": 3}
+UPPER_LIMITS = ("<=", "<")
+BOUND_METHODS = {"quantile": "exact binomial order statistics, distribution-free",
+                 "mean": "union of Student t and Hall's skewness-corrected t",
+                 "std": "those of the two-sided Bonett interval",
+                 "qmc": "Student t over the randomised-QMC replicates"}
 
 
 @dataclass(frozen=True)
 class Verdict:
-    """One direction of one spec: the interval (SI), its outcome, and the n that would likely decide."""
+    """One direction of one spec: its one-sided bounds (SI; None where none exists at this n), its
+    outcome, the n that would likely decide, and the rule it was decided by."""
 
     spec: str
     quantity: str
@@ -51,30 +68,97 @@ class Verdict:
     outcome: str
     n_needed: int | None
     reason: str
+    rule: str
 
 
-def _n_needed(spec: Spec, est: float, lo: float, hi: float, n: int, confidence: float,
-              replicates: int | None = None):
-    """(n, reason) that would likely decide an undecided spec (see module doc); ``replicates``: R
-    of a randomised QMC file, whose intervals start at other n."""
+@dataclass(frozen=True)
+class _Evidence:
+    """What one direction of a spec is judged on: the bounds (SI, NaN where none) and the finished
+    realisations' values of its cell."""
+
+    estimate: float
+    lower: float
+    upper: float
+    values: np.ndarray
+
+
+def check_confidence(confidence: float) -> None:
+    """ValueError unless ``confidence`` lies in (0.5, 1): one-sided bounds below 0.5 cross."""
+    if not 0.5 < confidence < 1.0:
+        raise ValueError(f"confidence {confidence:g}: a requirement is decided on one-sided bounds, "
+                         "which need a confidence above 0.5 and below 1")
+
+
+def _sides(spec: Spec) -> tuple[str, str]:
+    """(the bound that can show a violation, the bound that can show the limit met)."""
+    return ("lower", "upper") if spec.op in UPPER_LIMITS else ("upper", "lower")
+
+
+def _rule(spec: Spec, confidence: float, replicates: int | None) -> str:
+    """The decision rule of ``spec`` in words, with its confidence."""
+    kind = "qmc" if replicates is not None else ("quantile" if spec.statistic in QUANTILES
+                                                  else spec.statistic)
+    check, other = _sides(spec)
+    return (f"one-sided {100 * confidence:g} % bounds of {spec.statistic} ({BOUND_METHODS[kind]}): "
+            f"fail when the {check} bound violates the limit, pass when the {other} bound meets it")
+
+
+def _outcome(spec: Spec, ev: _Evidence) -> str:
+    """fail, pass or undecided from the one-sided bounds (module doc)."""
+    check, other = (getattr(ev, side) for side in _sides(spec))
+    if np.isfinite(check) and not spec.holds(check):
+        return "fail"
+    if np.isfinite(other) and spec.holds(other):
+        return "pass"
+    return "undecided"
+
+
+def _quantile_needed(spec: Spec, ev: _Evidence, confidence: float):
+    """(n, reason) for an undecided quantile of a plain Monte Carlo ensemble: the n at which the
+    binomial bound decides if the share of violating realisations stays as it is."""
+    n = len(ev.values)
+    violating = int(np.count_nonzero(~spec.holds(ev.values)))
+    p = QUANTILES[spec.statistic]
+    allowed = 1 - p if spec.op in UPPER_LIMITS else p
+    need = quantile_decision_n(n, violating, allowed, confidence)
+    share = f"{violating} of {n} realisations violate the limit"
+    if need is None:
+        return None, (f"{share}, a share too close to the {allowed:g} the limit allows for any n up to "
+                      f"{QUANTILE_DECISION_CAP:,} to decide")
+    return need, f"{share}; at that share n = {need} decides"
+
+
+def _shrinkage_needed(spec: Spec, ev: _Evidence, n: int, confidence: float,
+                      replicates: int | None = None):
+    """(n, reason) from the bound's 1/sqrt(n) shrinkage about an unchanged estimate; ``replicates``:
+    R of a randomised QMC file, whose bounds start at other n."""
     floor = interval_floor(spec.statistic, confidence, replicates)
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        return max(floor, n + 1), f"no {100 * confidence:g} % interval exists at n = {n}"
-    margin = abs(est - spec.limit)
+    bound = ev.upper if ev.estimate < spec.limit else ev.lower
+    if not np.isfinite(bound):
+        return max(floor, n + 1), f"no {100 * confidence:g} % one-sided bound that could decide at n = {n}"
+    margin = abs(ev.estimate - spec.limit)
     if margin == 0:
         return None, "the estimate equals the limit: no sample size is expected to decide"
-    side = hi - est if est < spec.limit else est - lo
-    return max(floor, n + 1, math.ceil(n * (side / margin) ** 2)), "the interval straddles the limit"
+    side = abs(bound - ev.estimate)
+    return (max(floor, n + 1, math.ceil(n * (side / margin) ** 2)),
+            "the bounds lie on both sides of the limit")
 
 
-def _outcome(spec: Spec, lo: float, hi: float) -> str:
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        return "undecided"
-    if spec.holds(lo) and spec.holds(hi):
-        return "pass"
-    if not spec.holds(lo) and not spec.holds(hi):
-        return "fail"
-    return "undecided"
+def _decision(spec: Spec, ev: _Evidence, n: int, failed: int, confidence: float,
+              replicates: int | None):
+    """(outcome, n needed, reason) of one direction."""
+    outcome = _outcome(spec, ev)
+    check, other = _sides(spec)
+    if outcome == "pass" and failed:
+        return "undecided", None, (f"the {other} bound meets the limit, but {failed} of {n + failed} "
+                                   "realisations failed and are not in it")
+    if outcome == "pass":
+        return outcome, None, f"the {other} bound meets the limit"
+    if outcome == "fail":
+        return outcome, None, f"the {check} bound violates the limit"
+    if spec.statistic in QUANTILES and replicates is None and n > 0:
+        return (outcome, *_quantile_needed(spec, ev, confidence))
+    return (outcome, *_shrinkage_needed(spec, ev, n, confidence, replicates))
 
 
 def _select(stats, spec: Spec, window: str = "whole"):
@@ -95,42 +179,54 @@ def _select(stats, spec: Spec, window: str = "whole"):
     return da
 
 
-def judge(spec: Spec, stats) -> list[Verdict]:
-    """Verdicts of one spec, one per direction, from a statistics Dataset (``pipeline.stats``)."""
-    da = _select(spec=spec, stats=stats)
-    n, confidence = int(stats.attrs["n_finished"]), float(stats.attrs["confidence"])
-    failed = int(stats.attrs.get("n_failed", 0))
-    replicates = stats.attrs.get("qmc_replicates")
+def _values(ds, spec: Spec):
+    """The spec's variable over the finished realisations (realization, direction), in its window (SI)."""
+    return finished_values(ds, spec.variable, spec.window or "whole").sel(quantity=spec.quantity)
+
+
+def _judge(spec: Spec, ds, bounds) -> list[Verdict]:
+    """Verdicts of one spec, one per direction, from the ensemble ``ds`` and its one-sided bounds."""
+    da, values = _select(spec=spec, stats=bounds), _values(ds, spec)
+    n, confidence = int(bounds.attrs["n_finished"]), float(bounds.attrs["confidence"])
+    failed = int(bounds.attrs.get("n_failed", 0))
+    replicates = bounds.attrs.get("qmc_replicates")
     replicates = None if replicates is None else int(replicates)
+    rule = _rule(spec, confidence, replicates)
     out = []
     for d in spec.directions:
-        est, lo, hi = (float(da.sel(direction=d, bound=b)) for b in ("estimate", "lower", "upper"))
-        outcome = _outcome(spec, lo, hi)
-        if outcome == "pass" and failed:
-            outcome, need, reason = "undecided", None, (
-                f"the whole interval meets the limit, but {failed} of {n + failed} realisations failed "
-                "and are not in it")
-        elif outcome == "undecided":
-            need, reason = _n_needed(spec, est, lo, hi, n, confidence, replicates)
-        else:
-            need, reason = None, "the whole interval " + ("meets" if outcome == "pass"
-                                                          else "violates") + " the limit"
+        ev = _Evidence(*(float(da.sel(direction=d, bound=b)) for b in ("estimate", "lower", "upper")),
+                       values=values.sel(direction=d).values)
+        outcome, need, reason = _decision(spec, ev, n, failed, confidence, replicates)
         out.append(Verdict(spec.text, spec.quantity, d, spec.statistic, spec.measure, spec.window,
-                           spec.op, spec.limit, spec.unit, spec.factor, est,
-                           lo if np.isfinite(lo) else None, hi if np.isfinite(hi) else None,
-                           confidence, n, failed, outcome, need, reason))
+                           spec.op, spec.limit, spec.unit, spec.factor, ev.estimate,
+                           ev.lower if np.isfinite(ev.lower) else None,
+                           ev.upper if np.isfinite(ev.upper) else None,
+                           confidence, n, failed, outcome, need, reason, rule))
     return out
 
 
-def judge_all(specs: list[Spec], stats) -> list[Verdict]:
-    """Every spec's verdicts, in the order given."""
-    return [v for s in specs for v in judge(s, stats)]
+def judge_all(specs: list[Spec], ds, confidence: float = 0.95) -> list[Verdict]:
+    """Every spec's verdicts, in the order given, on an ensemble (or single-run) Dataset at
+    ``confidence``; ValueError names a window the file lacks or a confidence not above 0.5."""
+    if not specs:
+        return []
+    check_confidence(confidence)
+    bounds = ensemble_stats(ds, confidence, window=None, one_sided=True)
+    return [v for s in specs for v in _judge(s, ds, bounds)]
 
 
-def exit_code(verdicts: list[Verdict], undecided: str = "fail") -> int:
-    """0 when every verdict passes (undecided ones too with ``undecided='pass'``), else 1."""
-    allowed = ("pass", "undecided") if undecided == "pass" else ("pass",)
-    return 0 if all(v.outcome in allowed for v in verdicts) else 1
+def judge(spec: Spec, ds, confidence: float = 0.95) -> list[Verdict]:
+    """Verdicts of one spec, one per direction (see :func:`judge_all`)."""
+    return judge_all([spec], ds, confidence)
+
+
+def exit_code(verdicts: list[Verdict], undecided: str | None = None) -> int:
+    """0 when every verdict passes, 1 when any fails, else 3 (some undecided); ``undecided`` 'pass'
+    or 'fail' counts undecided verdicts as that (exit 0 or 1)."""
+    worst = overall(verdicts) if verdicts else "pass"
+    if worst == "undecided" and undecided is not None:
+        worst = undecided
+    return EXIT_CODES[worst]
 
 
 def _num(value: float | None, factor: float) -> str:
@@ -138,21 +234,23 @@ def _num(value: float | None, factor: float) -> str:
 
 
 def format_verdicts(verdicts: list[Verdict]) -> str:
-    """A table in each spec's own unit: spec, direction, interval, limit, verdict, n to decide."""
+    """A table in each spec's own unit: spec, direction, bounds, limit, verdict, n to decide."""
     if not verdicts:
         return ""
     conf = f"{100 * verdicts[0].confidence:g} %"
     failed = verdicts[0].n_failed
-    lines = [f"requirements ({conf} intervals, n = {verdicts[0].n} finished realisations"
+    lines = [f"requirements (one-sided {conf} bounds: fail when the bound on the limit's side "
+             f"violates it, pass when the other bound meets it; n = {verdicts[0].n} finished "
+             "realisations"
              + (f"; {failed} failed, so a limit they meet is undecided" if failed else "")
-             + "; estimate and interval in the unit of the spec's limit)",
-             f"{'spec':<40s}{'dir':<4s}{'estimate':>11s}{'interval':>24s}{'limit':>14s}  "
+             + "; estimate and bounds in the unit of the spec's limit)",
+             f"{'spec':<40s}{'dir':<4s}{'estimate':>11s}{'bounds':>24s}{'limit':>14s}  "
              f"{'verdict':<10s}n to decide"]
     for v in verdicts:
-        interval = f"[{_num(v.lower, v.factor)}, {_num(v.upper, v.factor)}]"
+        bounds = f"[{_num(v.lower, v.factor)}, {_num(v.upper, v.factor)}]"
         need = "" if v.outcome != "undecided" else (str(v.n_needed) if v.n_needed else "-")
         lines.append(f"{v.spec:<40.40s}{v.direction:<4s}{_num(v.estimate, v.factor):>11s}"
-                     f"{interval:>24s}{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  "
+                     f"{bounds:>24s}{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  "
                      f"{v.outcome:<10s}{need}")
     counts = ", ".join(f"{sum(v.outcome == o for v in verdicts)} {o}" for o in OUTCOMES)
     lines.append(f"verdict: {overall(verdicts)} ({counts})")

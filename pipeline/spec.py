@@ -68,8 +68,8 @@ class Spec:
         """The statistics Dataset variable the spec reads."""
         return MEASURES[self.measure]
 
-    def holds(self, value: float) -> bool:
-        """Whether ``value`` (SI) meets the limit."""
+    def holds(self, value):
+        """Whether ``value`` (SI; a number, or an array judged elementwise) meets the limit."""
         return {"<=": value <= self.limit, "<": value < self.limit,
                 ">=": value >= self.limit, ">": value > self.limit}[self.op]
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from pipeline.cli import main
 from pipeline.store import open_ensemble
 
 README = Path(__file__).resolve().parents[1] / "README.md"
@@ -77,21 +78,41 @@ def test_a_limit_far_below_fails(recipe_run):
     assert {v["outcome"] for v in out["requirements"]} == {"fail"}
 
 
-def test_a_limit_at_the_sample_median_is_undecided_with_the_n_it_needs(recipe_run):
+def test_a_limit_neither_side_decides_exits_3_with_the_n_it_needs(recipe_run, capsys):
+    """q50 <= a limit that 45 of the 100 realisations exceed: neither the binomial test of 'met'
+    nor of 'violated' rejects at 95 %, so undecided, exit 3 ('needs more realisations'), with the
+    n at which the same share would pass; --undecided pass and fail count it as that (0, 1)."""
     _, output, _ = recipe_run
     ds = open_ensemble(output)
-    x = ds["max_abs_error"].sel(quantity="displacement", direction="x").values
-    spec = f"displacement:x<={float(np.median(x)) * 1e3:.3g}mm@q50"   # as read off the table
+    x = np.sort(ds["max_abs_error"].sel(quantity="displacement", direction="x", window="whole").values)
+    spec = f"displacement:x<={float(x[54] + x[55]) / 2 * 1e3:.6g}mm@q50"   # 45 above
     proc, out = _stats_json(output, spec)
     (v,) = out["requirements"]
-    assert proc.returncode == 1 and v["outcome"] == "undecided"
-    assert v["lower"] < v["limit"] < v["upper"]
+    assert proc.returncode == 3 and v["outcome"] == "undecided"
+    assert v["lower"] < v["limit"] < v["upper"] and "45 of 100 realisations" in v["reason"]
     assert v["n_needed"] > v["n"] == ds.sizes["realization"]
-    proc, _ = _stats_json(output, spec, extra=["--undecided", "pass"])
-    assert proc.returncode == 0
-    table = _rss6(["stats", str(output), "--require", spec], output.parent).stdout
-    (row,) = [ln for ln in table.splitlines() if ln.startswith(spec[:30]) and " x " in ln]
+    assert v["rule"].startswith("one-sided 95 % bounds of q50 (exact binomial")
+    args = ["stats", str(output), "--require", spec]
+    assert main(args + ["--undecided", "pass"]) == 0 and main(args + ["--undecided", "fail"]) == 1
+    capsys.readouterr()
+    assert main(args) == 3
+    (row,) = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith(spec) and " x " in ln]
     assert row.split()[-2:] == ["undecided", str(v["n_needed"])]
+
+
+def test_rss6_run_exits_3_when_a_spec_is_undecided_and_none_fails(recipe_run, tmp_path, capsys):
+    """The recipe's run again on its own file (nothing to compute), one more spec that no side
+    decides at n = 100 (q99 has no 95 % upper bound below n = 299): exit 3, or 0 / 1 with
+    --undecided pass / fail."""
+    _, output, argv = recipe_run
+    shutil.copy(output, tmp_path / output.name)
+    argv = argv[1:] + ["--require", "displacement:x<=1mm@q99"]
+    argv[argv.index("-o") + 1] = str(tmp_path / output.name)
+    capsys.readouterr()
+    assert main(argv) == 3
+    printed = capsys.readouterr().out
+    assert "nothing to do" in printed and "verdict: undecided (6 pass, 1 undecided, 0 fail)" in printed
+    assert main(argv + ["--undecided", "pass"]) == 0 and main(argv + ["--undecided", "fail"]) == 1
 
 
 @pytest.mark.parametrize("spec, token", [
@@ -109,3 +130,27 @@ def test_malformed_spec_is_one_line_exit_2_and_computes_nothing(tmp_path, spec, 
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and token in lines[0] and "Traceback" not in proc.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_stats_with_a_malformed_spec_or_a_confidence_not_above_half_exits_2(recipe_run, capsys):
+    _, output, _ = recipe_run
+    for extra, token in [(["--require", "displacement:x<=1parsec@q95"], "unknown unit 'parsec'"),
+                         (["--require", "displacement:x<=1mm@q95", "--confidence", "0.5"],
+                          "--confidence 0.5: a requirement is decided on one-sided bounds")]:
+        capsys.readouterr()
+        assert main(["stats", str(output), *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and token in err, err
+
+
+@pytest.mark.slow
+def test_every_one_of_a_few_realisations_over_a_q95_limit_fails_it(tmp_path):
+    """The issue's command: 20 realisations, every one 13-25 x over the limit: fail in every
+    direction, exit 1 (were q95 <= L, all 20 would exceed L with probability 0.05^20)."""
+    spec = "displacement:x,y,z<=0.001mm@q95"
+    proc = _rss6(["run", "smoke", "-n", "20", "--model", "quasi-static", "-o", "x.nc",
+                  "--require", spec], tmp_path)
+    assert proc.returncode == 1, proc.stderr
+    rows = [ln.split() for ln in proc.stdout.splitlines() if ln.startswith(spec)]
+    assert [r[1] for r in rows] == ["x", "y", "z"] and all("fail" in r for r in rows), proc.stdout
+    assert json.loads(open_ensemble(tmp_path / "x.nc").attrs["requirements"])[0]["outcome"] == "fail"
