@@ -577,7 +577,8 @@ def test_results_carry_the_draw_an_ensemble_file_records(smoke, model):
     """The clearance levels hand back each realisation's draw (the paper level: its sizes and
     first-step eccentricities), so that an ensemble chunk need not redraw it: the same as drawing
     it again, per realisation."""
-    from rss6core.models import default_time_step, stored_draw
+    from rss6core.levels import default_time_step
+    from rss6core.models import stored_draw
     scene = _with(smoke, trajectory=dict(duration=0.05))
     results = simulate_batch(scene, model, seed=5, realizations=[2, 7])
     for r, result in zip((2, 7), results):
