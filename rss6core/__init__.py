@@ -13,6 +13,10 @@ Scenes
 
 Running a level
 - MODELS: the model levels, cheapest first (rigid, quasi-static, elastic, paper, contact).
+- MODEL_LEVELS: each level's ModelLevel by name, cheapest first: the one table of level properties.
+- ModelLevel: one level's name, ladder rung, description and yes/no properties (draws_clearances, ...).
+- model_level: the ModelLevel of a name, or ValueError naming the levels.
+- models_with: the names of the levels with a yes/no property (e.g. "draws_clearances").
 - INTEGRATORS: the time integrators a level accepts by name.
 - CONTACT_STARTS: the contact level's initial states by name (drawn, equilibrium).
 - simulate: one realisation of a level along the scene's trajectory.
@@ -69,15 +73,17 @@ from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
 from .kernels import compile_kernels, kernel_cache_folder, kernels_to_compile, level_kernels
 from .kinematics import rigid_motion
-from .models import (MODELS, Level, default_integrator, default_time_step, degrees_of_freedom,
-                     natural_frequencies, prepare_level, simulate, simulate_batch, stored_draw)
+from .levels import (MODEL_LEVELS, MODELS, ModelLevel, default_integrator, default_time_step, model_level,
+                     models_with)
+from .models import Level, degrees_of_freedom, natural_frequencies, prepare_level, simulate, simulate_batch, stored_draw
 from .scene import CLEARANCE_RADII, Scene, SceneError, load_scene, parse_scene
 from .status import FAILED, FINISHED, STATUSES
 from .sections import crank_inertia, rod_inertia
 
 __version__ = "0.2.0"
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII", "RELATIVE_BAND_REACH",
-           "MODELS", "INTEGRATORS", "CONTACT_STARTS", "simulate", "simulate_batch", "prepare_level", "Level",
+           "MODELS", "MODEL_LEVELS", "ModelLevel", "model_level", "models_with", "INTEGRATORS", "CONTACT_STARTS",
+           "simulate", "simulate_batch", "prepare_level", "Level",
            "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom", "level_kernels", "kernels_to_compile", "compile_kernels", "kernel_cache_folder",

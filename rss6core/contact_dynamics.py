@@ -24,10 +24,10 @@ contact forces then solve, per realisation, a block-arrow system of 12 joint DOF
 per leg bordered by the 6 platform DOFs.  Realisations are an array axis: the
 per-step matrices, factorizations and rigid loads are shared by the batch; the
 steps themselves run compiled (:mod:`.contact_kernel`), one realisation after
-another, with the vectorised numpy functions below (``engine="numpy"``) as their
-reference.  Both engines sit behind one stepper contract (:class:`ContactStepper`: it owns
-the batch's state and status; ``advance`` says how far it got and why it stopped), and
-:func:`simulate_contact` is a short driver over chunks of steps.
+another, with the vectorised numpy stepper (:mod:`.contact_numpy`, built on the numpy
+functions below) as their reference.  Both steppers keep one contract (:class:`ContactStepper`: it
+owns the batch's state and status; ``advance`` says how far it got and why it stopped), and
+:func:`simulate_contact` is a short driver over chunks of steps with either.
 """
 from __future__ import annotations
 
@@ -42,24 +42,23 @@ import numpy as np
 from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
                        platform_point_map, scene_link_matrices, split)
 from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Records, Settings, State, System,
-                             Out, advance_chunk, balance_next, coarsest_next, make_scratch, make_work, newton_step)
+                             Out, advance_chunk, make_scratch, make_work, newton_step)
 from .contact_options import MAX_CONTACT_REFINEMENTS
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
 from .elastic import quasi_static_state
 from .results import PEAK_WINDOWS, ContactBatch, time_grid
-from .integrators import Integrator, StepWeights, correct, make_integrator, predict
+from .integrators import Integrator, StepWeights, make_integrator
 from .kinematics import crank_axes, rigid_motion
 from .quasi_static import closure_matrix
-from .status import DIVERGED, DIVERGENCE_LIMIT, FAILED, FINISHED, NEWTON_FAILED, contact_failure
+from .status import DIVERGENCE_LIMIT, FAILED, FINISHED, contact_failure
 
-__all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactStepper", "NumpyStepper",
-           "CompiledStepper", "Progress", "StartState", "drawn_start"]
+__all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactStepper", "CompiledStepper",
+           "Progress", "JointSolution", "StepSolution", "StartState", "drawn_start"]
 
 TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
 TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
 MAX_ITERATIONS = 60
-ENGINES = ("compiled", "numpy")
 
 
 @dataclass(frozen=True)
@@ -377,55 +376,6 @@ def _solve_arrow(L, border, lower, P, rl, rp):
     return u - (E @ (border @ y[..., None, :, None]))[..., 0], y
 
 
-def _newton_numpy(scene, ch: _Chunk, j, joints: _Joints, sy: System, ab, ap, bh2, gh, wf):
-    """One step's Newton iteration on the joint nodes (see :func:`.contact_kernel.newton_one`),
-    vectorised over the batch with numpy: the compiled kernel's reference."""
-    R = ab.shape[0]
-    done = np.zeros(R, bool)
-    count = np.zeros(R, np.int64)
-    last = np.full(R, np.inf)           # residual norm at the last accepted iterate
-    gain = np.full(R, np.inf)           # |update| / |residual| of the last Newton solve
-    lam = np.ones(R)                    # step length of the last update
-    base_l, base_p = ab, ap
-    step_l, step_p = np.zeros_like(ab), np.zeros_like(ap)
-    for it in range(MAX_ITERATIONS + 1):
-        xb, ub = correct(sy.db, sy.vb, ab, bh2, gh)
-        xp, up = correct(sy.dpp, sy.vpp, ap, bh2, gh)
-        f, De, Dv, delta, rate = _evaluate(scene, ch, j, joints, sy.impact, xb, xp, ub, up)
-        gl, gp = _generalized(ch, j, f)
-        res_l = ab @ sy.Sl.T - sy.rb - wf * gl
-        res_p = (sy.Sp @ ap[..., None])[..., 0] - sy.rp - wf * gp
-        norm = np.sqrt((res_l ** 2).sum((-1, -2)) + (res_p ** 2).sum(-1))
-        # converged when the update this residual calls for (the last solve's gain times
-        # it) moves no joint by more than the tolerances: the iterate just evaluated is kept
-        est = gain * norm
-        if it:   # the first iterate has no gain yet
-            done |= (bh2 * est <= TOL_DISPLACEMENT) & (gh * est <= TOL_VELOCITY)
-        done |= norm == 0.0
-        if done.all() or it == MAX_ITERATIONS:
-            break
-        # backtrack where the full Newton step made the residual worse (contact kinks)
-        worse = ~done & (norm > last) & (lam > 1.0 / 256.0)
-        if worse.any():
-            lam = np.where(worse, 0.5 * lam, lam)
-            ab = np.where(worse[:, None, None], base_l - lam[:, None, None] * step_l, ab)
-            ap = np.where(worse[:, None], base_p - lam[:, None] * step_p, ap)
-            count += worse
-            continue
-        last = np.where(done, last, norm)
-        D = wf * (bh2 * De + gh * Dv)
-        L, border, lower, P = _tangent(ch, j, D, sy.Sl, sy.Sp)
-        dl, dpl = _solve_arrow(L, border, lower, P, res_l, res_p)
-        # converged realisations keep their iterate: a result never depends on its batch
-        dl, dpl = np.where(done[:, None, None], 0.0, dl), np.where(done[:, None], 0.0, dpl)
-        size = np.abs(np.concatenate([dl.reshape(R, -1), dpl], -1)).max(-1)
-        gain = np.where(done, gain, size / np.maximum(norm, 1e-300))
-        base_l, base_p, step_l, step_p, lam = ab, ap, dl, dpl, np.ones(R)
-        ab, ap = ab - dl, ap - dpl
-        count += ~done
-    return ab, ap, f, gl, gp, done, count, delta, rate
-
-
 def _lift(jm: JointModel, maps, x: np.ndarray) -> np.ndarray:
     """An elastic-level (ideal joint) state in the contact level's layout: joints closed."""
     c, f, p = split(jm.elastic, x)
@@ -490,7 +440,7 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
                      dt: float | None = None, output_step: float | None = None,
                      model: JointModel | None = None, chunk: int = 200,
                      divergence_limit: float = DIVERGENCE_LIMIT, settle: float | None = None,
-                     engine: str = "compiled", tolerance: float | None = None,
+                     stepper: type[ContactStepper] | None = None, tolerance: float | None = None,
                      refinements: int | None = None, initial=None) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (see :func:`_simulate_contact`).
 
@@ -498,11 +448,13 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
     :func:`.contact_start.contact_initial_state` makes the scene's ``contact_start``).
 
     Overflow in a diverging realisation is detected and reported as its failure, not warned about.
-    ``engine`` runs the steps "compiled" (numba, :mod:`.contact_kernel`) or
-    with "numpy" (vectorised over the batch; about 10x slower, kept as the reference).
+    ``stepper`` runs the steps: :class:`CompiledStepper` (the default; numba, :mod:`.contact_kernel`) or
+    :class:`.contact_numpy.NumpyStepper` (vectorised over the batch; about 10x slower, kept as the reference).
     """
-    if engine not in ENGINES:
-        raise ValueError(f"contact engine must be one of {', '.join(ENGINES)}, not {engine!r}")
+    stepper = stepper or CompiledStepper
+    if not (isinstance(stepper, type) and issubclass(stepper, ContactStepper)):
+        raise ValueError(f"contact stepper must be a ContactStepper class (CompiledStepper, "
+                         f"contact_numpy.NumpyStepper), not {stepper!r}")
     sim = scene.simulation
     tolerance = sim.contact_tolerance if tolerance is None else tolerance
     refinements = sim.contact_refinements if refinements is None else refinements
@@ -513,7 +465,7 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
                          f"got {refinements!r}")
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         return _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
-                                 divergence_limit, settle, engine, tolerance, refinements,
+                                 divergence_limit, settle, stepper, tolerance, refinements,
                                  initial or drawn_start)
 
 
@@ -632,6 +584,16 @@ class _Workspace:
                             self.status, self.message, self.steps, self.iters, self.refined)
 
 
+StepSolution = namedtuple("StepSolution", "a f g converged iterations delta rate impact")
+StepSolution.__doc__ = """What Newton finds for a step of realisations (:meth:`ContactStepper._newton`, leading axis
+R): accelerations a (R, N), contact forces f (R, 6, 3, 3) N, generalised contact forces g (R, N),
+converged flags and iteration counts (R,), penetrations (m) and their rates (m/s) (R, 6, 4) ordered
+[A radial, A axial, C, B], and the impact speeds used (m/s) (R, 6, 4)."""
+JointSolution = namedtuple("JointSolution", "ab ap f gl gp converged iterations delta rate")
+JointSolution.__doc__ = """Newton's result on the joint nodes (:meth:`ContactStepper._solve`): accelerations of the
+joint nodes (R, 6, 12) and platform (R, 6), contact forces f (R, 6, 3, 3) N, generalised contact forces
+on the joint nodes gl (R, 6, 12) and the platform gp (R, 6), converged flags and iteration counts (R,),
+penetrations (m) and their rates (m/s) (R, 6, 4)."""
 Progress = namedtuple("Progress", "t alive reason")
 Progress.__doc__ = """How far :meth:`ContactStepper.advance` got: the time (s) the live realisations
 reached (or the last failure's, when none is left), how many are alive, and why it stopped
@@ -643,8 +605,8 @@ class ContactStepper(abc.ABC):
     """The stepper contract of the contact level (in the spirit of SciPy's ``OdeSolver``): one object
     owns the batch's state and status; :meth:`start` sets the initial accelerations, :meth:`advance`
     carries every live realisation through a chunk of base steps and says how far it got and why it
-    stopped, :meth:`batch` hands the results over.  :class:`NumpyStepper` is the readable reference,
-    :class:`CompiledStepper` runs the same steps compiled (:mod:`.contact_kernel`)."""
+    stopped, :meth:`batch` hands the results over.  :class:`.contact_numpy.NumpyStepper` is the readable
+    reference, :class:`CompiledStepper` runs the same steps compiled (:mod:`.contact_kernel`)."""
 
     def __init__(self, setup: _Setup):
         self.setup = setup
@@ -661,13 +623,13 @@ class ContactStepper(abc.ABC):
             ws.alive[r], ws.status[r], ws.message[r] = False, FAILED, first.message[r]
         everyone = np.arange(len(ws.d))
         rest = _internal(su.jm, ch.Mp[0], ws.d, ws.v)
-        ws.a, f, g, _, _, delta, rate, used = self._newton(
-            everyone, ch, 0, _Condensed(su.jm, 1.0, 0.0), 1.0, ch.F[0] - rest, ws.d, ws.v,
-            np.zeros_like(ws.d), 0.0, 0.0, 1.0)
-        ws.contacts.update(everyone, delta, rate, used)
-        ws.Ma, ws.balance = _mass(su.jm, ch.Mp[0], ws.a), ch.F[0] + g - rest
+        first = self._newton(everyone, ch, 0, _Condensed(su.jm, 1.0, 0.0), 1.0, ch.F[0] - rest, ws.d, ws.v,
+                             np.zeros_like(ws.d), 0.0, 0.0, 1.0)
+        ws.a = first.a
+        ws.contacts.update(everyone, first.delta, first.rate, first.impact)
+        ws.Ma, ws.balance = _mass(su.jm, ch.Mp[0], ws.a), ch.F[0] + first.g - rest
         if 0.0 >= su.settle_at:
-            ws.peaks(everyone, int(0.0 >= su.steady_at), ws.d, ws.v, ws.a, f)
+            ws.peaks(everyone, int(0.0 >= su.steady_at), ws.d, ws.v, ws.a, first.f)
         ws.history(0)
 
     @abc.abstractmethod
@@ -684,10 +646,9 @@ class ContactStepper(abc.ABC):
             return Progress(float(ch.t[-1]), alive, CHUNK_DONE)
         return Progress(float(self.ws.fail_t.max()), 0, ALL_FAILED)
 
-    def _newton(self, idx, ch, j, cond, coef_p, rhs, dp, vp, a_guess, bh2, gh, wf):
-        """Accelerations for a step of realisations ``idx`` at chunk instant j; returns a, contact
-        forces, generalised contact forces, converged flags, iteration counts, penetrations, their
-        rates and the impact speeds used."""
+    def _newton(self, idx, ch, j, cond, coef_p, rhs, dp, vp, a_guess, bh2, gh, wf) -> StepSolution:
+        """Accelerations for a step of realisations ``idx`` at chunk instant j, with what comes with
+        them (:class:`StepSolution`)."""
         jm = self.setup.jm
         rc, rr, rp = split(jm, rhs)
         rb, keep = cond.condense(rc, rr)
@@ -697,116 +658,16 @@ class ContactStepper(abc.ABC):
         impact = self.ws.contacts.impact(idx)
         sy = System(Sl=cond.legs, Sp=coef_p * ch.Mp[j], impact=impact, rb=rb, rp=np.ascontiguousarray(rp),
                     db=db, dpp=np.ascontiguousarray(dpp), vb=vb, vpp=np.ascontiguousarray(vpp))
-        ab, ap, f, gl, gp, done, count, delta, rate = self._solve(idx, ch, j, sy, ab, ap.copy(), bh2, gh, wf)
-        ac, ar = cond.recover(ab, keep, rc.shape, rr.shape)
-        return (join(ac, ar, ap), f, join(*_full_contact(jm, gl, rc.shape, rr.shape), gp), done, count,
-                delta, rate, impact)
+        sol = self._solve(idx, ch, j, sy, ab, ap.copy(), bh2, gh, wf)
+        ac, ar = cond.recover(sol.ab, keep, rc.shape, rr.shape)
+        gc, gr = _full_contact(jm, sol.gl, rc.shape, rr.shape)
+        return StepSolution(a=join(ac, ar, sol.ap), f=sol.f, g=join(gc, gr, sol.gp), converged=sol.converged,
+                            iterations=sol.iterations, delta=sol.delta, rate=sol.rate, impact=impact)
 
     @abc.abstractmethod
-    def _solve(self, idx, ch, j, sy: System, ab, ap, bh2, gh, wf):
+    def _solve(self, idx, ch, j, sy: System, ab, ap, bh2, gh, wf) -> JointSolution:
         """Newton on the joint nodes for realisations ``idx`` at chunk instant j (see
-        :func:`.contact_kernel.newton_one`): ab, ap, f, gl, gp, done, count, delta, rate."""
-
-
-class NumpyStepper(ContactStepper):
-    """The steps vectorised over the batch with numpy: the compiled stepper's reference."""
-
-    def _solve(self, idx, ch, j, sy, ab, ap, bh2, gh, wf):
-        return _newton_numpy(self.setup.scene, ch, j, _subset(self.setup.joints, idx), sy, ab, ap, bh2, gh, wf)
-
-    def advance(self, ch: _Chunk, first: int, n_base: int) -> Progress:
-        su, ws = self.setup, self.ws
-        for j in range(n_base):
-            live = np.flatnonzero(ws.alive)
-            if not len(live):
-                break
-            self._step(live, ch, j * su.fine, 0)
-            if (first + j) % su.every == 0:
-                ws.history((first + j) // su.every)
-        return self._progress(ch)
-
-    def _step(self, idx, ch, k0, level):
-        """Step realisations ``idx`` from fine instant k0 of the chunk by sizes[level], halving where
-        the attempt is refused or where the step-size memory asks for a finer step; their state moves
-        to k0 + sizes[level].span."""
-        ws = self.ws
-        finer = ws.coarsest[idx] > level
-        now = idx[~finer]
-        retry = np.concatenate([idx[finer], self._attempt(now, ch, k0, level) if len(now) else now])
-        if len(retry):
-            half = self.setup.sizes[level].span // 2
-            self._step(retry, ch, k0, level + 1)
-            retry = retry[ws.alive[retry]]
-            if len(retry):
-                self._step(retry, ch, k0 + half, level + 1)
-
-    def _attempt(self, idx, ch, k0, level):
-        """One attempt of realisations ``idx`` at sizes[level] from fine instant k0: keep the accepted
-        ones (and their step-size memory), fail the unsound ones at the finest level; returns the
-        refused ones."""
-        su, ws = self.setup, self.ws
-        sz = su.sizes[level]
-        k1 = k0 + sz.span
-        a_new, d_new, v_new, f, ok, delta, rate, used = self._candidate(idx, ch, k0, k1, sz)
-        sound = ok & np.isfinite(d_new).all(-1) & (np.abs(d_new).max(-1) < su.limit)
-        estimate = np.zeros(len(idx))
-        if su.tolerance > 0.0:
-            jb, jp = _joint_nodes(su.jm, a_new - ws.a[idx])
-            estimate = sz.error * np.linalg.norm(_relative(ch, k1, jb, jp), axis=-1).max((-1, -2))
-        accept = np.ones(len(idx), bool)
-        if level < su.refinements:
-            accept = sound & (estimate <= su.tolerance)
-        for i in np.flatnonzero(accept & ~sound):
-            ws.failed(idx[i], DIVERGED if ok[i] else NEWTON_FAILED, ch.t[k1], sz.weights.h,
-                      np.abs(d_new[i]).max(), su.limit)
-        keep = accept & sound
-        if keep.any():
-            self._keep(idx[keep], ch, k1, sz.weights.h, a_new[keep], d_new[keep], v_new[keep], f[keep],
-                       delta[keep], rate[keep], used[keep])
-            for r, e in zip(idx[keep], estimate[keep]):
-                ws.coarsest[r] = coarsest_next(level, e, su.tolerance)
-        ws.refined[idx[~accept]] += 1
-        return idx[~accept]
-
-    def _candidate(self, idx, ch, k0, k1, sz: _StepSize):
-        """Predictor, alpha-weighted right-hand side, Newton and corrector of one step attempt."""
-        su, ws = self.setup, self.ws
-        d, v, a = ws.d[idx], ws.v[idx], ws.a[idx]
-        w = sz.weights
-        dp, vp = predict(d, v, a, w.h, w.d_pred, w.v_pred)
-        af, am = su.integrator.alpha_f, su.integrator.alpha_m
-        r = (1.0 - af) * (ch.F[k1] - _internal(su.jm, ch.Mp[k1], dp, vp))
-        if su.weighted:
-            r += af * ws.balance[idx] - am * ws.Ma[idx]
-        guess = _extrapolated(w.h, a, ws.a_past[idx], ws.h_past[idx])
-        out = list(self._newton(idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp, guess, w.d_corr, w.v_corr, 1.0 - af))
-        ws.iters[idx] += out[4]
-        again = ~out[3] & (ws.h_past[idx, 0] > 0.0)   # retry from a where Newton failed from the guess
-        if again.any():
-            retry = self._newton(idx[again], ch, k1, sz.cond, sz.coef_p, r[again], dp[again], vp[again],
-                                 a[again], w.d_corr, w.v_corr, 1.0 - af)
-            ws.iters[idx[again]] += retry[4]
-            for q, x in zip(out, retry):
-                q[again] = x
-        a_new, f, _, ok, count, delta, rate, used = out
-        d_new, v_new = correct(dp, vp, a_new, w.d_corr, w.v_corr)
-        return a_new, d_new, v_new, f, ok, delta, rate, used
-
-    def _keep(self, kept, ch, k1, h, a, d, v, f, delta, rate, used):
-        """Make an accepted step of h (s) to fine instant k1 the state of realisations ``kept``."""
-        su, ws = self.setup, self.ws
-        ws.a_past[kept, 1], ws.a_past[kept, 0] = ws.a_past[kept, 0], ws.a[kept]
-        ws.h_past[kept, 1], ws.h_past[kept, 0] = ws.h_past[kept, 0], h
-        ws.d[kept], ws.v[kept], ws.a[kept] = d, v, a
-        ws.contacts.update(kept, delta, rate, used)
-        ws.steps[kept] += 1
-        if su.weighted:
-            ma = _mass(su.jm, ch.Mp[k1], a)
-            it = su.integrator
-            ws.balance[kept] = balance_next(ma, ws.Ma[kept], ws.balance[kept], it.alpha_m, it.alpha_f)
-            ws.Ma[kept] = ma
-        if ch.t[k1] >= su.settle_at:
-            ws.peaks(kept, int(ch.t[k1] >= su.steady_at), d, v, a, f)
+        :func:`.contact_kernel.newton_one`), from the first iterate ab, ap."""
 
 
 class CompiledStepper(ContactStepper):
@@ -858,7 +719,8 @@ class CompiledStepper(ContactStepper):
         done, count = np.zeros(R, np.bool_), np.zeros(R, np.int64)
         newton_step(Frame(Rc=ch.Rc[j], J=ch.J[j], Rr=ch.Rr[j], omega=ch.omega[j]), self._joints_of(idx), sy, ab, ap,
                     float(bh2), float(gh), float(wf), self.settings, out, done, count, self.scratch)
-        return ab, ap, out.f, out.gl, out.gp, done, count, out.delta, out.rate
+        return JointSolution(ab=ab, ap=ap, f=out.f, gl=out.gl, gp=out.gp, converged=done, iterations=count,
+                             delta=out.delta, rate=out.rate)
 
     def advance(self, ch: _Chunk, first: int, n_base: int) -> Progress:
         ws, lv = self.ws, self.levels
@@ -881,7 +743,7 @@ class CompiledStepper(ContactStepper):
 
 
 def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
-                      divergence_limit, settle, engine, tolerance, refinements, initial) -> ContactBatch:
+                      divergence_limit, settle, stepper, tolerance, refinements, initial) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (one realisation each).
 
     ``dt`` is the base step and ``integrator`` the method (default: the scene's
@@ -897,7 +759,7 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     """
     setup = dataclasses.replace(_setup(scene, draws, elements, integrator, dt, output_step, model,
                                        divergence_limit, settle, tolerance, refinements), initial=initial)
-    stepper = (CompiledStepper if engine == "compiled" else NumpyStepper)(setup)
+    stepper = stepper(setup)
     stepper.start()
     t, fine, h = setup.t, setup.fine, setup.sizes[0].weights.h
     for s0 in range(1, len(t), chunk):
@@ -907,25 +769,6 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
         if stepper.advance(ch, s0, s1 - s0).reason == ALL_FAILED:
             break
     return stepper.batch()
-
-
-def _extrapolated(h, a, a_past, h_past):
-    """Newton's first iterate for a step of h (s): the accelerations a (R, N) extrapolated by the
-    polynomial through them and a_past (R, 2, N), h_past (R, 2) s apart (0: not yet known), of
-    degree 2, 1 or 0 as far as known (the compiled twin: :func:`.contact_kernel._predict`)."""
-    h1, h2 = h_past[:, 0], h_past[:, 1]
-    w = np.zeros((len(a), 3))
-    w[:, 0] = 1.0
-    lin, quad = (h1 > 0.0) & (h2 <= 0.0), h2 > 0.0
-    w[lin, 0], w[lin, 1] = 1.0 + h / h1[lin], -h / h1[lin]
-    h1, h2 = h1[quad], h2[quad]      # Lagrange weights at t + h of the nodes t, t - h1, t - h1 - h2
-    w[quad] = np.stack([(h + h1) * (h + h1 + h2) / (h1 * (h1 + h2)), -h * (h + h1 + h2) / (h1 * h2),
-                        h * (h + h1) / (h2 * (h1 + h2))], -1)
-    return w[:, 0, None] * a + w[:, 1, None] * a_past[:, 0] + w[:, 2, None] * a_past[:, 1]
-
-
-def _subset(joints: _Joints, idx) -> _Joints:
-    return _Joints(*(getattr(joints, f.name)[idx] for f in dataclasses.fields(joints)))
 
 
 def _full_contact(jm: JointModel, gl, shape_c, shape_r):

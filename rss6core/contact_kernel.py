@@ -5,9 +5,9 @@ realisation (18 contact pairs, six 12x12 leg systems, a 6x6 border), where
 numpy's per-call overhead is many times the arithmetic.  This module runs
 that work compiled with numba, one realisation after another, so a
 realisation's result never depends on its batch.  It computes what the
-vectorised functions of :mod:`.contact_dynamics` compute (its "numpy" engine:
-``_contacts``, ``_generalized``, ``_tangent``, ``_solve_arrow`` and
-``NumpyStepper._step``; the tests compare them).  One module, because numba's on-disk
+vectorised functions of :mod:`.contact_dynamics` (``_contacts``, ``_generalized``,
+``_tangent``, ``_solve_arrow``) and the numpy stepper (:mod:`.contact_numpy`,
+``NumpyStepper._step``) compute; the tests compare them.  One module, because numba's on-disk
 cache of a function is invalidated only by changes to its own file, and
 :func:`advance_chunk` compiles the Newton iteration into itself.
 
@@ -131,23 +131,25 @@ Scratch = namedtuple("Scratch", "e de De Dv D pair xb ub xp up res_l res_p dl dp
 
 def make_work(N, nc, nr, ni_c, ni_r) -> Work:
     """Per-realisation work arrays of :func:`advance_chunk` (N system size, nc/nr crank/rod DOFs per
-    leg, ni_c/ni_r their interior DOFs)."""
+    leg, ni_c/ni_r their interior DOFs), each named (a missing or repeated name is a TypeError)."""
     e = np.empty
-    return Work(e((6, 2 * nc)), e((6, 2 * nr)), e((6, nc)), e((6, nr)), e((6, nc)), e((6, nr)),
-                e((6, ni_c + 6)), e((6, ni_r + 6)), e(N), e(N), e(N), e(N), e(N), e(N), e(N),
-                e((6, 12)), e((6, 12)), e((6, 12)), e((6, 12)), e(6), e(6), e(6), e((6, 4)), e((6, 6)),
-                e((6, 3, 3)), e((6, 12)), e(6), e((6, 4)), e((6, 4)), e((6, 3, 3)), e((6, 12)), e(6),
-                e(3, np.int32), np.array([1.0, 0.0]), np.array([ord("N")], np.uint8))
+    return Work(Zc=e((6, 2 * nc)), Zr=e((6, 2 * nr)), Ic=e((6, nc)), Ir=e((6, nr)), Ac=e((6, nc)), Ar=e((6, nr)),
+                Yc=e((6, ni_c + 6)), Yr=e((6, ni_r + 6)), dp=e(N), vp=e(N), rhs=e(N), tmp=e(N), a_new=e(N),
+                d_new=e(N), v_new=e(N), rb=e((6, 12)), db=e((6, 12)), vb=e((6, 12)), ab=e((6, 12)), dpp=e(6),
+                vpp=e(6), ap=e(6), impact=e((6, 4)), Sp=e((6, 6)), f=e((6, 3, 3)), gl=e((6, 12)), gp=e(6),
+                delta=e((6, 4)), rate=e((6, 4)), e=e((6, 3, 3)), jb=e((6, 12)), jp=e(6), dims=e(3, np.int32),
+                scale=np.array([1.0, 0.0]), op=np.array([ord("N")], np.uint8))
 
 
 def make_scratch() -> Scratch:
-    """Work arrays of one realisation's Newton iteration (see :func:`newton_one`)."""
+    """Work arrays of one realisation's Newton iteration (see :func:`newton_one`), each named."""
     e = np.empty
-    return Scratch(e((6, 3, 3)), e((6, 3, 3)), e((6, 3, 3, 3)), e((6, 3, 3, 3)), e((6, 3, 3, 3)), e(21),
-                   e((6, 12)), e((6, 12)), e(6), e(6), e((6, 12)), e(6), e((6, 12)), e(6), e((6, 12)), e(6),
-                   e((4, 3, 3)), e((6, 4, 3, 3)), e((6, 3, 3, 3)), e((6, 4, 3)), e((3, 3)), e((3, 3)),
-                   e((6, 3)), e((6, 3, 3)), e(3), e((6, 6)), e(6, np.int64), e(6), e((3, 3)), e((3, 3)),
-                   e((3, 6)), e(3), e((_PATTERN.shape[0], 3, 3)))
+    return Scratch(e=e((6, 3, 3)), de=e((6, 3, 3)), De=e((6, 3, 3, 3)), Dv=e((6, 3, 3, 3)), D=e((6, 3, 3, 3)),
+                   pair=e(21), xb=e((6, 12)), ub=e((6, 12)), xp=e(6), up=e(6), res_l=e((6, 12)), res_p=e(6),
+                   dl=e((6, 12)), dp=e(6), base_l=e((6, 12)), base_p=e(6), A=e((4, 3, 3)), Ainv=e((6, 4, 3, 3)),
+                   Up=e((6, 3, 3, 3)), rhat=e((6, 4, 3)), M=e((3, 3)), top=e((3, 3)), top0=e((6, 3)),
+                   X=e((6, 3, 3)), z=e(3), schur=e((6, 6)), ypiv=e(6, np.int64), y=e(6), E=e((3, 3)),
+                   RD=e((3, 3)), EJ=e((3, 6)), v=e(3), DG=e((_PATTERN.shape[0], 3, 3)))
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -776,7 +778,7 @@ def _predict(r, h, a, a_past, h_past, cb, nc, ab, ap):
     """Newton's first iterate for a step of h (s) of realisation r: joint-node (6, 12) and platform
     (6,) accelerations extrapolated to the step's end by the polynomial through the last accepted
     ones, a[r] and a_past[r] (2, N), h_past[r] (2,) s apart (0: not yet known), of degree 2, 1 or 0
-    as far as known (the numpy twin: :func:`.contact_dynamics._extrapolated`).  It saves a fifth of
+    as far as known (the numpy twin: :func:`.contact_numpy._extrapolated`).  It saves a fifth of
     the Newton updates on the paper scene; the converged step is the same to Newton's tolerance."""
     h1, h2 = h_past[r, 0], h_past[r, 1]
     w0, w1, w2 = 1.0, 0.0, 0.0

@@ -27,36 +27,23 @@ from .clearance import draw_clearances
 from .elastic import simulate_elastic
 from .integrators import Integrator, make_integrator
 from .kinematics import RigidMotion, rigid_motion
+from .levels import default_integrator, default_time_step, model_level, models_with
 from .paper_method import PaperClosure, output_step, paper_contact_forces, paper_draw, paper_result
 from .quasi_static import quasi_static_result
 from .results import SimulationResult, time_grid
 from .status import FINISHED
 
-__all__ = ["simulate", "simulate_batch", "Level", "prepare_level", "default_time_step", "default_integrator",
-           "stored_draw", "natural_frequencies", "degrees_of_freedom", "MODELS"]
-
-MODELS = ("rigid", "quasi-static", "elastic", "paper", "contact")   # the levels, cheapest first
+__all__ = ["simulate", "simulate_batch", "Level", "prepare_level", "stored_draw", "natural_frequencies",
+           "degrees_of_freedom"]
 
 
 def stored_draw(scene, model: str, seed: int, realization: int, dt: float, uniforms=None):
     """The draw an ensemble file records for a realisation: the paper level's first step, else the
     draw (``uniforms`` as in :func:`.clearance.draw_clearances`)."""
-    if model == "paper":
+    if model_level(model).redraws_every_step:
         steps = len(time_grid(scene.trajectory.duration, dt))
         return output_step(paper_draw(scene, seed, realization, steps, uniforms))
     return draw_clearances(scene, seed, realization, uniforms=uniforms)
-
-
-def default_time_step(scene, model: str) -> float:
-    """The scene's time step for ``model``: the contact level has its own, finer one."""
-    sim = scene.simulation
-    return sim.contact_time_step if model == "contact" else sim.time_step
-
-
-def default_integrator(scene, model: str) -> str:
-    """The scene's integrator for ``model``: the contact level has its own (README, contact level)."""
-    sim = scene.simulation
-    return sim.contact_integrator if model == "contact" else sim.integrator
 
 
 def simulate(scene, model: str | None = None, integrator: str | None = None,
@@ -106,13 +93,10 @@ class Level:
         """Realisations ``realizations`` of the run seeded ``seed``, one result each, in order
         (``uniforms``: a quasi-Monte Carlo design, as in :func:`simulate_batch`)."""
         realizations = list(realizations)
-        if self.model == "rigid":
-            t = time_grid(self.scene.trajectory.duration, self.dt)
-            zero = np.zeros((len(t), 6))
-            return [SimulationResult(t, zero, zero, zero, FINISHED, "", len(t) - 1)] * len(realizations)
-        if self.model == "elastic":
-            return [self.elastic] * len(realizations)
-        if self.model == "paper":
+        kind = model_level(self.model)
+        if not kind.draws_clearances:      # every realisation is the same run
+            return [self.elastic if kind.elastic_links else self._rigid()] * len(realizations)
+        if kind.redraws_every_step:
             return self._paper(seed, realizations, uniforms)
         return self.simulate_draws([draw_clearances(self.scene, seed, r, uniforms=uniforms)
                                     for r in realizations])
@@ -120,16 +104,24 @@ class Level:
     def simulate_draws(self, draws: list) -> list[SimulationResult]:
         """The quasi-static or contact level on given clearance draws, one result each (the
         sensitivity study's designed inputs; an ensemble's draws come from :meth:`simulate`)."""
-        if self.model == "quasi-static":
+        kind = model_level(self.model)
+        if not kind.function_of_one_draw:
+            raise ValueError(f"the {self.model} level takes no given draws "
+                             f"({' or '.join(models_with('function_of_one_draw'))} do)")
+        if not kind.contact_joints:
             mode = self.scene.simulation.quasi_static_eccentricity
             return [quasi_static_result(self.scene, self.motion, draw, mode) for draw in draws]
-        if self.model != "contact":
-            raise ValueError(f"the {self.model} level takes no given draws (quasi-static or contact do)")
         dynamics, start = _contact_solver()
         batch = dynamics.simulate_contact(self.scene, draws, self.elements, self.integrator, self.dt,
                                           tolerance=self.tolerance, refinements=self.refinements,
                                           initial=start.contact_initial_state)
         return [dataclasses.replace(batch.result(k), draw=draw) for k, draw in enumerate(draws)]
+
+    def _rigid(self) -> SimulationResult:
+        """The rigid level's result: its error is zero by definition."""
+        t = time_grid(self.scene.trajectory.duration, self.dt)
+        zero = np.zeros((len(t), 6))
+        return SimulationResult(t, zero, zero, zero, FINISHED, "", len(t) - 1)
 
     def _paper(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
         elastic = self.elastic
@@ -156,20 +148,19 @@ def prepare_level(scene, model: str | None = None, integrator: str | None = None
     its shared part computed: the elastic run for the elastic and paper levels, for instance."""
     sim = scene.simulation
     model = model or sim.model
-    if model not in MODELS:
-        raise ValueError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+    kind = model_level(model)
     dt = default_time_step(scene, model) if dt is None else dt
     elements = elements or sim.elements_per_link
-    if model in ("rigid", "quasi-static"):
+    if not kind.elastic_links:
         t = time_grid(scene.trajectory.duration, dt)
         return Level(scene, model, None, dt, elements,
-                     motion=rigid_motion(scene, t) if model == "quasi-static" else None)
+                     motion=rigid_motion(scene, t) if kind.draws_clearances else None)
     method = make_integrator(integrator or default_integrator(scene, model), sim.newmark_beta,
                              sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
-    if model == "contact":
+    if kind.contact_joints:
         return Level(scene, model, method, dt, elements, tolerance, refinements)
     elastic = simulate_elastic(scene, elements, method, dt)
-    closure = PaperClosure(scene, elastic.t) if model == "paper" else None
+    closure = PaperClosure(scene, elastic.t) if kind.redraws_every_step else None
     return Level(scene, model, method, dt, elements, elastic=elastic, closure=closure)
 
 
@@ -184,8 +175,9 @@ def natural_frequencies(scene, elements: int | None = None, t: float = 0.0) -> n
 def degrees_of_freedom(scene, model: str, elements: int | None = None) -> int:
     """Unknowns a level solves for: the 6 pose errors (rigid, quasi-static), else the finite-element
     model's degrees of freedom (the contact level's with its joints' own nodes)."""
-    if model in ("rigid", "quasi-static"):
+    kind = model_level(model)
+    if not kind.elastic_links:
         return 6
     elements = elements or scene.simulation.elements_per_link
-    build = _contact_solver()[0].build_joint_model if model == "contact" else build_elastic_model
+    build = _contact_solver()[0].build_joint_model if kind.contact_joints else build_elastic_model
     return build(scene, elements).dofs

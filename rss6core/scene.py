@@ -22,7 +22,7 @@ from .clearance import RELATIVE_BAND_REACH, SizeBand
 from .contact_options import CONTACT_STARTS, MAX_CONTACT_REFINEMENTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
-from .models import MODELS
+from .levels import MODELS
 from .sections import RectangleSection, TubeSection
 
 __all__ = [

@@ -1,6 +1,7 @@
 """The core's boundaries, read from the installed sources: an acyclic import graph with every import
-at module level, each module exporting only what it defines, and a pipeline that uses the core
-through its public facade (``rss6core/__init__.py``) alone."""
+at module level and the level table at its bottom, each module exporting only what it defines, the
+level names and the status "finished" written once, and a pipeline that uses the core through its
+public facade (``rss6core/__init__.py``) alone."""
 import ast
 import re
 import subprocess
@@ -61,6 +62,9 @@ def _cycle(graph: dict[str, set[str]]) -> list[str]:
 # the one import inside a function, for import time and not to dodge a cycle: the contact level's
 # compiled kernel (numba, 0.3 s per process) loads only when a contact level runs
 LAZY = {("models", "contact_dynamics"), ("models", "contact_start")}
+# the modules that run a level: none of them is the scene's business
+LADDER = {"models", "assembly", "elastic", "quasi_static", "paper_method", "contact_dynamics", "contact_kernel",
+          "contact_numpy", "contact_start"}
 
 
 def test_core_imports_only_at_module_level_and_without_a_cycle():
@@ -71,8 +75,22 @@ def test_core_imports_only_at_module_level_and_without_a_cycle():
     assert deferred == LAZY, f"imports inside functions or classes: {sorted(deferred - LAZY)}"
     graph = {name: set().union(*map(_core_modules_imported, _imports(tree))) - {name}   # deferred too
              for name, tree in trees.items()}
-    assert graph["scene"] >= {"models", "integrators", "kinematics"}   # the case that had a cycle
     assert _cycle(graph) == []
+    assert graph["levels"] == set()                 # the level table is a leaf, and the scene reads it
+    assert "levels" in graph["scene"] and "levels" in graph["models"]
+    # reading a scene loads none of the ladder (scene -> models had been a cycle, then a top floor)
+    assert _reach(graph, "scene").isdisjoint(LADDER), sorted(_reach(graph, "scene") & LADDER)
+
+
+def _reach(graph: dict[str, set[str]], start: str) -> set[str]:
+    """The modules ``start`` imports, directly or through others."""
+    seen, todo = set(), [start]
+    while todo:
+        for m in graph.get(todo.pop(), ()):
+            if m not in seen:
+                seen.add(m)
+                todo.append(m)
+    return seen
 
 
 def test_reading_a_scene_and_the_paper_level_do_not_load_the_contact_kernel(paper):
@@ -89,6 +107,11 @@ def test_reading_a_scene_and_the_paper_level_do_not_load_the_contact_kernel(pape
 def test_cycle_finder_finds_a_cycle():
     assert _cycle({"scene": {"kinematics"}, "kinematics": {"trajectory", "scene"}}) == [
         "kinematics", "scene", "kinematics"]
+
+
+def test_reach_follows_imports_through_other_modules():
+    graph = {"scene": {"levels", "kinematics"}, "kinematics": {"trajectory"}, "models": {"scene"}}
+    assert _reach(graph, "scene") == {"levels", "kinematics", "trajectory"}
 
 
 def _defined(tree: ast.Module) -> set[str]:
@@ -116,8 +139,52 @@ def test_every_core_module_exports_only_names_it_defines():
     foreign = {name: sorted(set(_exported(tree)) - _defined(tree)) for name, tree in trees.items()
                if name != "__init__"}
     assert {k: v for k, v in foreign.items() if v} == {}
-    owners = {n: sorted(m for m, tree in trees.items() if n in _defined(tree)) for n in ("MODELS", "INTEGRATORS")}
-    assert owners == {"MODELS": ["models"], "INTEGRATORS": ["integrators"]}
+    names = ("MODELS", "MODEL_LEVELS", "INTEGRATORS", "FINISHED")
+    owners = {n: sorted(m for m, tree in trees.items() if n in _defined(tree)) for n in names}
+    assert owners == {"MODELS": ["levels"], "MODEL_LEVELS": ["levels"], "INTEGRATORS": ["integrators"],
+                      "FINISHED": ["status"]}
+
+
+def _is_level_name(node) -> bool:
+    return isinstance(node, ast.Constant) and node.value in rss6core.MODELS
+
+
+def _lists_level_names(node) -> bool:
+    """A tuple, list or set of level names only, or a dict keyed by level names only."""
+    items = node.keys if isinstance(node, ast.Dict) else getattr(node, "elts", None)
+    if not isinstance(node, (ast.Tuple, ast.List, ast.Set, ast.Dict)) or not items:
+        return False
+    return all(_is_level_name(k) for k in items)
+
+
+def _written_again(folder: Path, owners: dict[str, str]) -> list[str]:
+    """Where a module other than the idea's owner writes the level table again (a comparison with a
+    level name, a collection of level names) or compares with the status literal "finished"."""
+    found = []
+    for path in sorted(folder.rglob("*.py")):
+        where = path.relative_to(folder).as_posix()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            operands = [node.left, *node.comparators] if isinstance(node, ast.Compare) else []
+            if where != owners["levels"] and (_lists_level_names(node) or any(map(_is_level_name, operands))):
+                found.append(f"{where}:{node.lineno} level names")
+            if where != owners["status"] and any(isinstance(o, ast.Constant) and o.value == rss6core.FINISHED
+                                                 for o in operands):
+                found.append(f"{where}:{node.lineno} \"finished\"")
+    return sorted(set(found))
+
+
+def test_the_core_writes_the_level_table_and_finished_once():
+    """A level's properties are asked of rss6core.levels, not by comparing or listing level names; the
+    status "finished" is compared as status.FINISHED."""
+    assert _written_again(CORE, {"levels": "levels.py", "status": "status.py"}) == []
+
+
+def test_written_again_finds_level_names_and_finished(tmp_path):
+    (tmp_path / "a.py").write_text('CHEAP = ("rigid", "quasi-static")\nBY = {"paper": 1, "contact": 2}\n'
+                                   'if model == "contact" or "paper" in x or s != "finished":\n    pass\n'
+                                   'OTHER = ("uniform", "paper")\nz = f(model="elastic")\n')
+    assert _written_again(tmp_path, {"levels": "-", "status": "-"}) == [
+        "a.py:1 level names", "a.py:2 level names", "a.py:3 \"finished\"", "a.py:3 level names"]
 
 
 def test_pipeline_imports_the_core_through_its_facade_only():

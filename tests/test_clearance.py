@@ -8,7 +8,6 @@ from scipy import stats
 from rss6core.clearance import (UNIFORM_BLOCKS, clearances_from_named_uniforms, draw_clearances, realization_rng,
                                 sphere_directions, uniform_dimension)
 from rss6core.kinematics import rigid_motion
-from rss6core.models import simulate
 from rss6core.quasi_static import quasi_static_error
 
 N = 1500  # realisations: 9000 samples per law
@@ -147,7 +146,32 @@ def test_worst_case_bound_is_attained(paper):
     assert abs(d[1, k]) == pytest.approx(bound[0, k], rel=1e-9)
 
 
-def test_quasi_static_errors_are_of_the_clearance_order(paper):
-    r = simulate(paper, "quasi-static", realization=3)
-    peak = np.abs(r.displacement[:, :3]).max()
-    assert 0.2 * paper.clearance.spherical_C < peak < 10 * paper.clearance.spherical_C
+def _mean_square_error(scene, motion):
+    """E[d_k^2] (T, 6) of the quasi-static error over the sampling laws, written out: d = G^-1 s with
+    s_i = n_i . (e_A + e_C - e_B), legs and joints independent, so E[d_k^2] = (sum_i g_ki E[s_i])^2 +
+    sum_i g_ki^2 Var(s_i), where (x, z, w orthonormal, directions uniform) Var(n . e_A) = E[rho^2]/2
+    (1 - (n.w)^2) + Var(a) (n.w)^2 and a sphere's E[(n . e)^2] = E[k^2] E[(n.u)^2] delta^2 = delta^2/9."""
+    _, Ginv, n = _worst_case_bound(scene, motion)
+    nw = np.einsum("tli,li->tl", n, scene.geometry.w)
+    c, law = scene.clearance, scene.sampling
+    rho = stats.truncnorm(-law.radial_mean / law.radial_std, (1 - law.radial_mean) / law.radial_std,
+                          loc=law.radial_mean * c.revolute_radial, scale=law.radial_std * c.revolute_radial)
+    axial = stats.truncnorm((-1 - law.axial_mean) / law.axial_std, (1 - law.axial_mean) / law.axial_std,
+                            loc=law.axial_mean * c.revolute_axial, scale=law.axial_std * c.revolute_axial)
+    var = (rho.moment(2) / 2 * (1 - nw ** 2) + axial.var() * nw ** 2
+           + (c.spherical_C ** 2 + c.spherical_B ** 2) / 9)
+    mean = np.einsum("tkl,tl->tk", Ginv, axial.mean() * nw)
+    return mean ** 2 + np.einsum("tkl,tl->tk", Ginv ** 2, var)
+
+
+def test_quasi_static_mean_square_error_is_that_of_the_sampling_laws(paper, draws):
+    """The clearance-order claim made exact: over N = 1500 draws, the mean of d_k^2 at three instants
+    (six components each) equals the closed form of :func:`_mean_square_error` within 4.5 standard
+    errors of the sample mean (about 13 % of the value here; the draws are seeded, so the test is
+    deterministic)."""
+    assert paper.sampling.direction == "uniform" and paper.sampling.size_tolerance == 0.0  # the closed form's laws
+    motion = rigid_motion(paper, np.array([0.3, 0.55, 0.9]))   # three different poses
+    d2 = np.array([quasi_static_error(paper, motion, draw, "drawn")[0] for draw in draws]) ** 2   # (N, 3, 6)
+    se = d2.std(axis=0, ddof=1) / np.sqrt(len(d2))
+    z = (d2.mean(axis=0) - _mean_square_error(paper, motion)) / se
+    assert np.abs(z).max() < 4.5, z

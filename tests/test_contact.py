@@ -6,8 +6,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from rss6core.clearance import draw_clearances
-from rss6core.contact_dynamics import _ball, simulate_contact
+from rss6core.contact_dynamics import CompiledStepper, _ball, simulate_contact
 from rss6core.contact_kernel import balance_next, coarsest_next
+from rss6core.contact_numpy import NumpyStepper
 from rss6core.integrators import Integrator, correct, predict
 from rss6core.contact_laws import (coulomb_friction, friction_factor, hertz_stiffness,
                                    lankarani_nikravesh, poisson_ratio)
@@ -194,7 +195,7 @@ def test_newton_predictor_extrapolates_polynomials_exactly_in_both_engines():
     """The first Newton iterate of a step is the polynomial through the last accepted accelerations,
     at uneven steps: exact for a quadratic history (degree 2 once two steps are known), a line after
     one step, the last value before any; the compiled twin gives the same at the joint nodes."""
-    from rss6core.contact_dynamics import _extrapolated
+    from rss6core.contact_numpy import _extrapolated
     from rss6core.contact_kernel import _predict
     rng = np.random.default_rng(7)
     N, nc = 6 * 52 + 6, 27
@@ -396,9 +397,29 @@ def test_paper_level_keeps_every_leg_closed_with_its_virtual_lengths(paper):
     assert np.abs(gap).max() < 2e-6                      # closed to second order, (0.5 mm)^2 / L
 
 
-def test_paper_level_contact_forces_vanish_because_draws_stay_inside(paper):
-    draw = paper_draw(paper, 0, 0, len(paper.times))
-    assert np.all(paper_contact_forces(paper, draw, paper.time_step) == 0.0)
+def test_paper_level_contact_forces_are_hertz_beyond_the_clearance_and_zero_inside(paper):
+    """The paper's draws stay inside their clearances (|e| <= size at every step, the reason its
+    eq. 17 forces vanish), and there the forces are zero; a spherical joint held 1 um beyond its
+    clearance at a constant depth (zero penetration rate: eq. 17's damping term vanishes) carries
+    Hertz's K delta^n, K written out here for a ball in a socket of the same material, in its own
+    column (joints A, C, B by leg) and nowhere else."""
+    steps, leg, depth = 200, 2, 1e-6
+    draw = paper_draw(paper, 0, 0, steps)
+    w = paper.geometry.w
+    radial = draw.e_A - np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
+    for e, size in ((radial, draw.radial_size), (draw.e_C, draw.size_C), (draw.e_B, draw.size_B)):
+        assert np.all(np.linalg.norm(e, axis=-1) <= size)
+    assert np.array_equal(paper_contact_forces(paper, draw, paper.time_step), np.zeros((steps, 18)))
+    e_C = draw.e_C.copy()
+    e_C[:, leg] *= ((draw.size_C[leg] + depth) / np.linalg.norm(e_C[:, leg], axis=-1))[:, None]
+    forces = paper_contact_forces(paper, dataclasses.replace(draw, e_C=e_C), paper.time_step)
+    ct, mat = paper.contact, paper.material
+    sigma = 2 * (1 - (mat.youngs_modulus / (2 * mat.shear_modulus) - 1) ** 2) / mat.youngs_modulus
+    R_ball, R_socket = ct.sphere_radius, ct.sphere_radius + draw.size_C[leg]
+    K = 4 / (3 * sigma) * np.sqrt(R_ball * R_socket / (R_socket - R_ball))
+    column = 6 + leg
+    np.testing.assert_allclose(forces[:, column], K * depth ** ct.exponent, rtol=1e-8)
+    assert not np.any(np.delete(forces, column, axis=1))
 
 
 def test_paper_level_velocity_error_grows_like_one_over_the_time_step(smoke):
@@ -520,8 +541,8 @@ def test_adaptive_step_converges_where_the_fixed_base_step_does_not(smoke):
     assert np.all(run.steps < 0.5 * 0.03 / 12.5e-6)   # it refined only where it had to
 
 
-@pytest.mark.parametrize("engine", ["compiled", "numpy"])
-def test_refinement_rescues_a_step_where_newton_fails(smoke, engine):
+@pytest.mark.parametrize("stepper", [CompiledStepper, NumpyStepper], ids=["compiled", "numpy"])
+def test_refinement_rescues_a_step_where_newton_fails(smoke, stepper):
     """1 ms is beyond Newton's reach at the smoke scene's start-up; with refinements allowed the
     failing steps are retried as halves, and the run, mostly at 1 ms, is no further from a fine
     fixed-step run than the fixed 0.5 ms run (twice the steps) is.  Newton's extrapolated first
@@ -529,13 +550,13 @@ def test_refinement_rescues_a_step_where_newton_fails(smoke, engine):
     that retry the rescue took 34 steps and the fixed 0.5 ms run failed."""
     scene = _with(smoke, trajectory=dict(duration=0.02))
     draws = [draw_clearances(scene, 1, r) for r in range(2)]
-    fixed = simulate_contact(scene, draws, dt=1e-3, refinements=0, engine=engine)
+    fixed = simulate_contact(scene, draws, dt=1e-3, refinements=0, stepper=stepper)
     assert fixed.status == ["failed"] * 2 and "Newton" in fixed.message[0]
-    rescued = simulate_contact(scene, draws, dt=1e-3, tolerance=0.0, refinements=3, engine=engine)
+    rescued = simulate_contact(scene, draws, dt=1e-3, tolerance=0.0, refinements=3, stepper=stepper)
     assert rescued.status == ["finished"] * 2 and np.all(rescued.refined > 0)
     assert np.all(rescued.steps < 1.5 * 0.02 / 1e-3)
-    fine = simulate_contact(scene, draws, dt=1.25e-4, refinements=0, engine=engine)
-    half = simulate_contact(scene, draws, dt=5e-4, refinements=0, engine=engine)
+    fine = simulate_contact(scene, draws, dt=1.25e-4, refinements=0, stepper=stepper)
+    half = simulate_contact(scene, draws, dt=5e-4, refinements=0, stepper=stepper)
     assert half.status == ["finished"] * 2
     assert (np.abs(rescued.displacement - fine.displacement)[..., :3].max()
             < np.abs(half.displacement - fine.displacement)[..., :3].max())
@@ -555,7 +576,7 @@ def test_compiled_and_numpy_contact_engines_agree(smoke, integrator, adaptive):
     draws = [draw_clearances(scene, 2, r) for r in range(2)]
     method = make_integrator(integrator)
     compiled = simulate_contact(scene, draws, integrator=method, **adaptive)
-    reference = simulate_contact(scene, draws, integrator=method, engine="numpy", **adaptive)
+    reference = simulate_contact(scene, draws, integrator=method, stepper=NumpyStepper, **adaptive)
     assert compiled.status == reference.status == ["finished"] * 2
     # Newton's first iterate is extrapolated from three accelerations, which the compiled code
     # (fused multiply-adds) and numpy round differently; where the stopping test is that close, one
@@ -568,17 +589,17 @@ def test_compiled_and_numpy_contact_engines_agree(smoke, integrator, adaptive):
     for q in ("displacement", "velocity", "acceleration", "peak", "contact_peak"):
         a, b = getattr(compiled, q), getattr(reference, q)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * np.abs(b).max())
-    with pytest.raises(ValueError, match="engine"):
-        simulate_contact(scene, draws, engine="fortran")
+    with pytest.raises(ValueError, match="contact stepper must be a ContactStepper class"):
+        simulate_contact(scene, draws, stepper="fortran")
 
 
-@pytest.mark.parametrize("engine", ["compiled", "numpy"])
-def test_a_diverging_realisation_is_stopped_and_reported(smoke, engine):
+@pytest.mark.parametrize("stepper", [CompiledStepper, NumpyStepper], ids=["compiled", "numpy"])
+def test_a_diverging_realisation_is_stopped_and_reported(smoke, stepper):
     """A displacement beyond the divergence limit ends the realisation at that step, with a message
     naming the time, the size and the limit; its history stops there, and nothing is kept after."""
     scene = _with(smoke, trajectory=dict(duration=0.01))
     draws = [draw_clearances(scene, 0, r) for r in range(2)]
-    run = simulate_contact(scene, draws, divergence_limit=1e-9, engine=engine)
+    run = simulate_contact(scene, draws, divergence_limit=1e-9, stepper=stepper)
     assert run.status == ["failed"] * 2
     assert all(m.startswith("displacement ") and "exceeds the 1e-09 m divergence limit" in m
                and m.endswith("at t = 0.0001 s, step 1, with a 0.0001 s step") for m in run.message)
@@ -591,7 +612,8 @@ def test_results_carry_the_draw_an_ensemble_file_records(smoke, model):
     """The clearance levels hand back each realisation's draw (the paper level: its sizes and
     first-step eccentricities), so that an ensemble chunk need not redraw it: the same as drawing
     it again, per realisation."""
-    from rss6core.models import default_time_step, stored_draw
+    from rss6core.levels import default_time_step
+    from rss6core.models import stored_draw
     scene = _with(smoke, trajectory=dict(duration=0.05))
     results = simulate_batch(scene, model, seed=5, realizations=[2, 7])
     for r, result in zip((2, 7), results):

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from rss6core import draw_clearances, parse_scene
-from rss6core.contact_dynamics import _joints, build_joint_model, simulate_contact
+from rss6core.contact_dynamics import CompiledStepper, _joints, build_joint_model, simulate_contact
+from rss6core.contact_numpy import NumpyStepper
 from rss6core.contact_start import (RESIDUAL_TOLERANCE, _penetrated, contact_initial_state,
                                     equilibrium_state, static_residual)
 from rss6core.elastic import quasi_static_state
@@ -91,13 +92,13 @@ def test_equilibrium_start_has_no_startup_impact(smoke):
     draws = [draw_clearances(smoke, 0, r) for r in range(2)]
     first = {}
     for start in ("drawn", "equilibrium"):
-        batch = simulate_contact(_with_start(smoke, start), draws, engine="compiled",
+        batch = simulate_contact(_with_start(smoke, start), draws, stepper=CompiledStepper,
                                  initial=contact_initial_state)
         early = batch.t <= 0.05 + 1e-12
         first[start] = np.abs(batch.acceleration[:, early]).max((1, 2))
         if start == "equilibrium":
             assert np.abs(batch.acceleration[:, 0]).max() < 1e-6
-            ref = simulate_contact(_with_start(smoke, start), draws, engine="numpy",
+            ref = simulate_contact(_with_start(smoke, start), draws, stepper=NumpyStepper,
                                    initial=contact_initial_state)
             np.testing.assert_allclose(ref.displacement[:, 0], batch.displacement[:, 0], rtol=0, atol=1e-15)
     assert np.all(first["equilibrium"] <= 0.1 * first["drawn"])

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from rss6core.clearance import draw_clearances
-from rss6core.contact_dynamics import simulate_contact
+from rss6core.contact_dynamics import CompiledStepper, simulate_contact
+from rss6core.contact_numpy import NumpyStepper
 from rss6core.models import simulate
-from rss6core.status import FAILED, FINISHED, failure_message
+from rss6core.status import FAILED, FINISHED, check_history, failure_message
 
 # "<what> at t = <t> s, step <k>, with a <h> s step"
 FORMAT = re.compile(r"^(?P<what>.+) at t = (?P<t>[-+.e0-9]+) s, step (?P<step>\d+), "
@@ -30,11 +31,18 @@ def test_failure_message_wording():
     assert failure_message("x diverged", 0.001, 5, 0.001) == "x diverged at t = 0.001 s, step 5, with a 0.001 s step"
 
 
-def test_rigid_level_finishes_in_the_common_vocabulary(smoke):
-    """The rigid level's error is zero by definition: nothing can diverge (a trajectory outside the
-    workspace is refused as a SceneError before any step)."""
-    r = simulate(smoke, "rigid")
-    assert (r.status, r.message) == (FINISHED, "")
+@pytest.mark.parametrize("dt", [1e-3, 4e-4])
+def test_rigid_level_reports_as_a_level_that_steps(smoke, dt):
+    """The rigid level takes no step (its error is zero by definition) yet reports in the common
+    vocabulary as the elastic level, which does step, reports the same run: the same output times,
+    status, message and step count at the scene's step and at another; and its zero history is what
+    the common check (check_history) finds finished in as many steps."""
+    rigid, elastic = simulate(smoke, "rigid", dt=dt), simulate(smoke, "elastic", dt=dt)
+    assert elastic.status == FINISHED
+    assert np.array_equal(rigid.t, elastic.t) and rigid.t[1] == pytest.approx(dt)
+    assert (rigid.status, rigid.message, rigid.steps) == (elastic.status, elastic.message, elastic.steps)
+    assert (rigid.status, rigid.message, rigid.steps) == check_history(rigid.displacement, rigid.t, "rigid")
+    assert not any(np.any(q) for q in (rigid.displacement, rigid.velocity, rigid.acceleration))
 
 
 @pytest.mark.parametrize("model", ["quasi-static", "paper"])
@@ -63,19 +71,19 @@ def test_an_explicit_step_far_beyond_the_critical_one_fails_the_dynamic_levels(s
     assert np.all(np.isnan(r.displacement[step:]))
 
 
-@pytest.mark.parametrize("engine", ["compiled", "numpy"])
-def test_contact_level_divergence_and_newton_failure_in_the_common_format(smoke, engine, monkeypatch):
+@pytest.mark.parametrize("stepper", [CompiledStepper, NumpyStepper], ids=["compiled", "numpy"])
+def test_contact_level_divergence_and_newton_failure_in_the_common_format(smoke, stepper, monkeypatch):
     import rss6core.contact_dynamics as cd
     scene = _with(smoke, trajectory=dict(duration=0.01))
     draws = [draw_clearances(scene, 0, r) for r in range(2)]
-    run = simulate_contact(scene, draws, divergence_limit=1e-9, engine=engine)
+    run = simulate_contact(scene, draws, divergence_limit=1e-9, stepper=stepper)
     assert run.status == [FAILED] * 2
     for m in run.message:
         what, t, step, h = _parts(m)
         assert what.startswith("displacement ") and "exceeds the 1e-09 m divergence limit" in what
         assert (t, step, h) == (1e-4, 1, 1e-4)
     monkeypatch.setattr(cd, "MAX_ITERATIONS", 0)       # no Newton update: no step converges
-    run = simulate_contact(scene, draws, engine=engine)
+    run = simulate_contact(scene, draws, stepper=stepper)
     assert run.status == [FAILED] * 2
     for m in run.message:
         what, t, step, h = _parts(m)
