@@ -500,9 +500,9 @@ def _require_arguments(p) -> None:
                    help="a requirement QUANTITY:DIRECTIONS OP VALUE UNIT@STATISTIC[/WINDOW], e.g. "
                         "'displacement:x,y<=0.05mm@q95' or '...@q95/steady' (window whole, startup or "
                         "steady; default whole) (repeatable): fails when the statistic's one-sided "
-                        "bound on the limit's side violates the limit, passes when the other one-sided "
-                        "bound meets it, else undecided; exit 0 if all pass, 1 if any fails, 3 if none "
-                        "fails but some are undecided (default: none)")
+                        "95 %% bound (rss6 stats: --confidence) on the limit's side violates the limit, "
+                        "passes when the other one-sided bound meets it, else undecided; exit 0 if all "
+                        "pass, 1 if any fails, 3 if none fails but some are undecided (default: none)")
     p.add_argument("--undecided", choices=("fail", "pass"),
                    help="count undecided requirements as failed (exit 1) or passed (exit 0) "
                         "(default: neither, exit 3)")
