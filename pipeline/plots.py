@@ -17,12 +17,13 @@ import numpy as np  # noqa: E402
 
 __all__ = ["plot_ensemble", "plot_run", "ensemble_figures", "run_figures", "figure_unit", "family_units",
            "draw_abs_envelope", "mark_steady", "mark_stored_maxima", "stored_maxima", "envelope_marks",
-           "legend_entries", "draw_envelope", "steady_samples", "Resolution", "resolution",
+           "legend_entries", "draw_envelope", "steady_samples", "Resolution", "resolutions", "closure_gain",
            "output_grid", "figure_title", "save_figure", "plain_ticks", "sensitivity_figures",
            "plot_sensitivity"]
 
-from rss6core import parse_scene  # noqa: E402
-from rss6core.contact_dynamics import TOL_DISPLACEMENT  # noqa: E402
+from rss6core import parse_scene, rigid_motion  # noqa: E402
+from rss6core.contact_dynamics import TOL_DISPLACEMENT, TOL_VELOCITY  # noqa: E402
+from rss6core.quasi_static import closure_matrix  # noqa: E402
 
 from .stats import (MIN_N_MEAN, ensemble_stats, estimates, in_window, quantile_estimates,  # noqa: E402
                     running_mean_interval, windows_of)
@@ -73,6 +74,10 @@ ROUND_OFF = 1e-9        # relative: rss6's errors computed two mathematically eq
 #                         by 3e-12 relative at most (docs/performance.md); 1e-9 leaves 300x margin
 ROUND_OFF_FLOOR = 1e-15  # SI: errors are differences of poses, rates and accelerations of order 0.1-10
 #                          SI, whose double-precision round-off is about 1e-16 of that
+# relative: the contact level's accuracy with its adaptive step (paper scenes: 0.2 ms -> 12.5 us,
+# 1e-8 m) against a converged reference, largest over the velocity and the acceleration statistics
+# (docs/guide.md, "Speed and accuracy": rss6 tradeoff configs/paper.toml -n 4)
+CONTACT_ACCURACY = {"velocity": 0.0075, "acceleration": 0.036}
 
 
 @dataclass(frozen=True)
@@ -87,36 +92,45 @@ class Resolution:
         return max(self.absolute, self.relative * abs(value))
 
 
-def resolution(ds, quantity: str, direction: str) -> Resolution:
-    """The resolution of a file's level for ``quantity`` in ``direction``: round-off (ROUND_OFF)
-    everywhere but at the contact level, whose adaptive step bounds each step's local error of every
-    joint's relative displacement by the scene's contact_tolerance_m (Newton's TOL_DISPLACEMENT
-    where the step is fixed): see :func:`_contact_resolution`."""
+def resolutions(ds, quantity: str) -> dict[str, Resolution]:
+    """{direction: Resolution} of a file's level for ``quantity``: round-off (ROUND_OFF) at every
+    level but contact (:func:`_contact_resolutions`)."""
     if ds.attrs.get("model") != "contact":
-        return Resolution(ROUND_OFF_FLOOR, ROUND_OFF, "round-off")
-    return _contact_resolution(parse_scene(ds.attrs["scene_toml"]), quantity, direction)
+        return dict.fromkeys(_DIRS, Resolution(ROUND_OFF_FLOOR, ROUND_OFF, "round-off"))
+    return _contact_resolutions(parse_scene(ds.attrs["scene_toml"]), quantity)
 
 
-def _contact_resolution(scene, quantity: str, direction: str) -> Resolution:
-    """Two realisations that reach the same motion differ by up to twice the error each carries,
-    which the step's tolerance eps bounds: 2 eps for a translation (the platform's is the joints'
-    displacement, carried through the legs at a gain of about 1), 2 eps / platform radius for a
-    rotation (a joint at the platform's rim moved by eps turns it by eps / radius).  Velocity and
-    acceleration: CONTACT_RELATIVE (see there)."""
+def closure_gain(scene) -> np.ndarray:
+    """(direction,) the largest platform pose error (m/m, rad/m) that leg closures each off by 1 m
+    can give, over the scene's trajectory: the row sums of |G^-1| of the linearised leg closure G
+    (rss6core.quasi_static.closure_matrix, docs/model.md section 3)."""
+    G, _ = closure_matrix(rigid_motion(scene, scene.times))
+    return np.abs(np.linalg.inv(G)).sum(axis=-1).max(axis=0)
+
+
+def _contact_resolutions(scene, quantity: str) -> dict[str, Resolution]:
+    """The contact level's step bounds every joint's relative displacement error per step by eps
+    (contact_tolerance_m; Newton's TOL_DISPLACEMENT where the step is fixed): carried to the platform
+    through the legs' closure (:func:`closure_gain`), and doubled as two realisations each off by
+    that can differ by twice it.  Velocity and acceleration with the adaptive step: twice its
+    documented relative accuracy (CONTACT_ACCURACY); with a fixed step, Newton's TOL_VELOCITY
+    carried likewise, and round-off for the acceleration."""
     sim = scene.simulation
     adaptive = sim.contact_refinements > 0 and sim.contact_tolerance > 0
-    eps = sim.contact_tolerance if adaptive else TOL_DISPLACEMENT
-    what = (f"{_si(eps, 'm')} contact tolerance" if adaptive else f"Newton's {_si(eps, 'm')} tolerance")
-    if quantity != "displacement":
-        rel = CONTACT_RELATIVE[quantity]
-        return Resolution(ROUND_OFF_FLOOR, rel, f"{rel * 100:g} % relative, {what}")
-    if direction in FAMILIES[0]:
-        return Resolution(2 * eps, ROUND_OFF, f"2 x the solver's {what}")
-    return Resolution(2 * eps / scene.geometry.platform_radius, ROUND_OFF,
-                      f"2 x the solver's {what} / {scene.geometry.platform_radius:g} m platform radius")
-
-
-CONTACT_RELATIVE = {"velocity": 1e-4, "acceleration": 1e-3}   # PROVISIONAL
+    if adaptive and quantity != "displacement":
+        a = CONTACT_ACCURACY[quantity]
+        return dict.fromkeys(_DIRS, Resolution(ROUND_OFF_FLOOR, 2 * a, f"twice the level's {100 * a:g} % "
+                                                                       f"accuracy in {quantity}"))
+    if quantity == "acceleration":
+        return dict.fromkeys(_DIRS, Resolution(ROUND_OFF_FLOOR, ROUND_OFF, "round-off"))
+    eps, base = (TOL_DISPLACEMENT, "m") if quantity == "displacement" else (TOL_VELOCITY, "m/s")
+    what = f"Newton's {_si(eps, base)} tolerance"
+    if adaptive:
+        eps, what = sim.contact_tolerance, f"{_si(sim.contact_tolerance, 'm')} contact tolerance"
+    gains = dict(zip(_DIRS, closure_gain(scene)))
+    return {d: Resolution(2 * g * eps, ROUND_OFF, f"twice the {what} through the legs' closure, "
+                                                  f"x {g:.2g}" + ("" if d in FAMILIES[0] else " rad/m"))
+            for d, g in gains.items()}
 
 
 def figure_title(what: str, ds, n: int | None = None, width: int = 110) -> str:
@@ -302,13 +316,13 @@ def _histograms(ds, q: str, finished, sds):
     per direction family; a panel whose spread the level's numerics do not resolve says so."""
     peaks = {w: _peaks(ds, q, finished, w) for w in _marked_windows(ds)}      # (R, 6) each
     peaks = {w: p for w, p in peaks.items() if np.isfinite(p).any()} or {"whole": _peaks(ds, q, finished)}
-    units = family_units(q, *peaks.values())
+    units, res = family_units(q, *peaks.values()), resolutions(ds, q)
     fig, axes = plt.subplots(2 * len(peaks), 3, figsize=(13, 1 + 5.5 * len(peaks)), constrained_layout=True)
     fig.suptitle(figure_title(f"per-realisation max |{q} error| per analysis window", ds, int(finished.sum())))
     t_s = float(ds.attrs.get("steady_after_s", np.nan))
     for i, (w, peak) in enumerate(peaks.items()):
         for k, (ax, d) in enumerate(zip(axes.ravel()[6 * i:6 * i + 6], _DIRS)):
-            panel = _Panel(q, d, w, i, units[d], resolution(ds, q, d), window_label(w, t_s))
+            panel = _Panel(q, d, w, i, units[d], res[d], window_label(w, t_s))
             _histogram_panel(ax, peak[:, k], in_window(sds, w)["max_abs_error"].sel(
                 statistic="q95", quantity=q, direction=d), panel)
     fig.supxlabel(_histogram_key(t_s, sds), fontsize=9)
@@ -358,20 +372,19 @@ def _histogram_panel(ax, peak, q95, panel: _Panel) -> None:
 
 def _unresolved_note(ax, x, panel: _Panel) -> None:
     """In place of a histogram of maxima ``x`` (R,) SI whose spread is within the level's
-    resolution (a histogram of solver noise): how many agree to what, and their common value,
-    rounded to the decade above the resolution."""
+    resolution (a histogram of numerical noise): how many agree to what, and their median, its
+    last digit of the resolution's order."""
     (f, unit), res = panel.unit, panel.resolution
     limit, base = res.limit(np.max(x)), _BASE[panel.quantity][panel.direction not in FAMILIES[0]]
-    decimals = max(0, int(-np.floor(np.log10(limit * f))) - 1)
+    decimals = max(0, int(-np.floor(np.log10(limit * f))))
     value = f"{np.median(x) * f:.{decimals}f} {unit}"
     text = [f"all {x.size} realisations agree within {_si(limit, base)}", f"({res.source}):", value,
-            f"spread {_si(np.ptp(x), base)}: numerical noise,", "no histogram drawn"]
+            f"spread {_si(np.ptp(x), base)}, below what the level resolves: no histogram"]
     if x.size == 1:
         text = ["one realisation:", value]
-    ax.text(0.5, 0.5, "\n".join(text), transform=ax.transAxes, ha="center", va="center", fontsize=9,
-            gid="within resolution")
-    ax.set_xticks([])
-    ax.set_yticks([])
+    ax.text(0.5, 0.5, "\n".join(textwrap.fill(line, 46) for line in text), transform=ax.transAxes,
+            ha="center", va="center", fontsize=9, gid="within resolution")
+    ax.set(xticks=[], yticks=[], ylabel="")
 
 
 def _si(value: float, unit: str) -> str:
