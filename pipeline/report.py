@@ -21,8 +21,8 @@ from rss6core import default_integrator, default_time_step, parse_scene, rigid_m
 
 from .run import WORKER_TIMEOUT_S, EnsembleSpec, dask_client, run_ensemble
 from .scenes import find_scene
-from .plots import (draw_abs_envelope, envelope_marks, envelope_unit, figure_unit, legend_entries, mark_steady,
-                    mark_stored_maxima, plain_ticks, plt, save_figure)
+from .plots import (draw_envelope, envelope_marks, family_units, legend_entries, plain_ticks, plt, save_figure,
+                    steady_samples)
 from . import report_text as text
 from .scene_variant import scene_variant
 from .stats import ensemble_stats, in_window, min_n_for_quantile
@@ -163,8 +163,9 @@ def rigid_figure(scene, t):
     labels = ("x", "y", "z", "n1", "n2", "n3")
     for row, (q, values) in enumerate((("displacement", pm.pose), ("velocity", pm.pose_rate),
                                        ("acceleration", pm.pose_acc))):
+        units = family_units(q, values)
         for k in range(6):
-            f, unit = figure_unit(q, DIRECTIONS[k], values[:, k])
+            f, unit = units[DIRECTIONS[k]]
             ax = axes[row, k]
             ax.plot(t, values[:, k] * f, color="0.3", lw=1.2)
             ax.set(title=f"{labels[k]} {q}", ylabel=f"[{unit}]")
@@ -179,46 +180,83 @@ def _error_figure(scene, quantity: str, runs: dict, out: Path) -> Path:
     return save_figure(error_figure(scene, quantity, runs), out / f"{scene.name}_{quantity}.png")
 
 
+@dataclass(frozen=True)
+class _LevelErrors:
+    """One level's ensemble in an error figure: its file, the finished realisations' errors
+    (R, T, direction) SI, and its stored maxima and those above the sampled envelope (envelope_marks)."""
+    ds: object
+    err: np.ndarray
+    stored: dict
+    finer: dict
+
+    @classmethod
+    def of(cls, ds, quantity: str) -> "_LevelErrors":
+        err = ds["error"].sel(quantity=quantity).transpose("realization", "time", "direction")
+        err = err.values[ds["status"].values.astype(str) == "finished"]
+        return cls(ds, err, *envelope_marks(ds, ensemble_stats(ds, window=None), quantity, err))
+
+    def rows(self) -> list[str]:
+        """The figure rows of this level: one realisation, the envelope, and the steady window's
+        envelope on axes of its own where the file has a steady window."""
+        return ["signed", "envelope"] + (["steady"] if steady_samples(self.ds).any() else [])
+
+
 def error_figure(scene, quantity: str, runs: dict):
     """Like the paper's figs. 11-16: the platform error (actual minus rigid) of the elastic level
-    (ideal joints) and, per clearance level, one realisation (signed, left) and the envelope of
-    |error| over the ensemble (right) per direction, with the file's stored maxima where they exceed
-    the envelope's samples (the contact level's come from every internal step).  ``runs``: the
-    scene's opened files by role."""
+    (ideal joints) and, per clearance level, one realisation (signed), the envelope of |error| over
+    the ensemble and that envelope over the steady window alone (which start-up impacts would
+    flatten), per direction, with the file's stored maxima where they exceed the envelope's samples
+    (the contact level's come from every internal step); one unit per direction family.  ``runs``:
+    the scene's opened files by role."""
     elastic = runs["elastic"]
     el = elastic["error"].sel(quantity=quantity).transpose("time", "direction").values
-    fig, axes = plt.subplots(2 * len(LEVELS), 6, figsize=(19, 5.2 * len(LEVELS) + 0.8),
-                             constrained_layout=True, sharex=True)
+    levels = {level: _LevelErrors.of(runs[level], quantity) for level in LEVELS}
+    units = family_units(quantity, el, *(a for lv in levels.values() for a in (lv.err, *lv.stored.values())))
+    rows = [(level, row) for level, lv in levels.items() for row in lv.rows()]
+    fig, axes = plt.subplots(len(rows), 6, figsize=(19, 2.6 * len(rows) + 0.8), constrained_layout=True)
     fig.suptitle(f"scene {scene.name} ({_clearance_mm(scene)} mm clearances): platform {quantity} "
                  "error, actual minus ideal rigid motion; levels " + ", ".join(LEVELS))
-    for i, level in enumerate(LEVELS):
-        ds = runs[level]
-        t = ds["time"].values
-        err = ds["error"].sel(quantity=quantity).transpose("realization", "time", "direction")
-        err = err.values[ds["status"].values.astype(str) == "finished"]        # (R, T, 6)
-        stored, finer = envelope_marks(ds, ensemble_stats(ds, window=None), quantity, err)
-        for k, d in enumerate(DIRECTIONS):
-            f, unit = envelope_unit(quantity, d, err[..., k], stored, k)
-            signed, envelope = axes[2 * i, k], axes[2 * i + 1, k]
-            signed.plot(t, err[0, :, k] * f, color="C3", lw=0.8, label=f"{level}: realisation 0")
-            signed.plot(elastic["time"].values, el[:, k] * f, color="k", lw=1.0,
-                        label="elastic, ideal joints")
-            signed.set(title=f"{level}: {d} error", ylabel=f"[{unit}]")
-            draw_abs_envelope(envelope, t, err[..., k] * f, color="k", ls="--", lw=0.7)
-            mark_stored_maxima(envelope, finer, k, f)
-            mark_steady(envelope, ds)
-            envelope.set(title=f"{level}: |{d} error|, n = {err.shape[0]}", ylabel=f"[{unit}]")
-            envelope.set_ylim(bottom=0)
-            for ax in (signed, envelope):
-                ax.grid(alpha=0.3)
-                plain_ticks(ax)
-        axes[2 * i, 0].legend(fontsize=7, loc="best")
-        labelled = legend_entries(axes[2 * i + 1])
-        axes[2 * i + 1, 0].legend(labelled.values(), [textwrap.fill(x, 28) for x in labelled], fontsize=7,
-                                  loc="best")
-    for ax in axes[-1]:
-        ax.set_xlabel("time [s]")
+    for r, (level, row) in enumerate(rows):
+        lv = levels[level]
+        for k, (ax, d) in enumerate(zip(axes[r], DIRECTIONS)):
+            if row == "signed":
+                _signed_panel(ax, lv, elastic, el, k, units[d], level)
+            else:
+                _envelope_panel(ax, lv, k, units[d], level, row == "steady")
+            if r and row != "steady":
+                ax.sharex(axes[0, k])
+            if row == "signed":
+                ax.tick_params(labelbottom=False)   # the envelope below shares its time axis
+            else:
+                ax.set_xlabel("time [s]")
+            ax.grid(alpha=0.3)
+            plain_ticks(ax)
+        if row != "steady":
+            _row_legend(axes[r], wrap=row == "envelope")
     return fig
+
+
+def _signed_panel(ax, lv: _LevelErrors, elastic, el, k: int, unit: tuple, level: str) -> None:
+    """Realisation 0 of a level and the elastic level's error in direction ``k``, signed."""
+    f, name = unit
+    ax.plot(lv.ds["time"].values, lv.err[0, :, k] * f, color="C3", lw=0.8, label=f"{level}: realisation 0")
+    ax.plot(elastic["time"].values, el[:, k] * f, color="k", lw=1.0, label="elastic, ideal joints")
+    ax.set(title=f"{level}: {DIRECTIONS[k]} error", ylabel=f"[{name}]")
+
+
+def _envelope_panel(ax, lv: _LevelErrors, k: int, unit: tuple, level: str, steady: bool) -> None:
+    """A level's envelope of |error| in direction ``k`` over the whole run or the steady window."""
+    f, name = unit
+    draw_envelope(ax, lv.ds, lv.err[..., k], lv.finer, k, f, steady=steady)
+    when = f"t >= {float(lv.ds.attrs['steady_after_s']):g} s" if steady else f"n = {lv.err.shape[0]}"
+    ax.set(title=f"{level}: |{DIRECTIONS[k]} error|, {when}", ylabel=f"[{name}]")
+
+
+def _row_legend(axes, wrap: bool) -> None:
+    """One legend in a row's first panel with every label of the row (wrapped for envelopes)."""
+    labelled = legend_entries(axes)
+    labels = [textwrap.fill(x, 28) for x in labelled] if wrap else list(labelled)
+    axes[0].legend(labelled.values(), labels, fontsize=7, loc="best")
 
 
 def _open_run(path):
