@@ -23,7 +23,7 @@ from rss6core import (BeamTheory, Integrator, build_elastic_model, degrees_of_fr
                       quasi_static_state, simulate_batch, simulate_elastic)
 
 from .stats import estimates
-from .store import DIRECTIONS, QUANTITIES, error_summaries
+from .store import DIRECTIONS, MIXED_UNITS, QUANTITIES, _unit_table, error_summaries
 
 __all__ = ["Setting", "STATISTICS", "measure", "relative_errors", "default_settings", "tradeoff",
            "pareto_front", "recommend", "write_tradeoff", "stability", "write_stability"]
@@ -181,15 +181,17 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
          "failed": ("setting", [runs[s]["failed"] for s in settings]),
          "statistic_value": (("setting", "quantity", "direction", "statistic"),
                              np.stack([runs[s]["statistics"] for s in settings]),
-                             {"units": "m, rad, m s-1, rad s-1, m s-2, rad s-2 by quantity and "
-                                       "direction (translations x, y, z; rotations rx, ry, rz)"}),
+                             {"long_name": "statistic of the setting's ensemble", "units": MIXED_UNITS}),
          "relative_error": (("setting", "quantity", "direction", "statistic"), rel, {"units": "1"}),
          "reference_change": (("quantity", "direction", "statistic"), convergence,
                               {"units": "1", "long_name": "reference vs its step halved and mesh "
                                                           "doubled"})},
         coords={"setting": [s.label for s in settings], "quantity": list(QUANTITIES),
-                "direction": list(DIRECTIONS), "statistic": list(STATISTICS)},
-        attrs={"reference": reference.label, "reference_check": check.label,
+                "direction": list(DIRECTIONS), "statistic": list(STATISTICS),
+                "unit": (("quantity", "direction"), _unit_table(), {"long_name": "SI unit of each element"})},
+        attrs={"title": f"rss6 speed/accuracy trade-off, scene {scene.name!r}",
+               "history": f"rss6 tradeoff {scene.name} -n {n} --seed {seed}",
+               "reference": reference.label, "reference_check": check.label,
                "reference_check_seconds_per_realization": fine["seconds_per_realization"],
                "realizations": n, "seed": seed, "scene_name": scene.name, "scene_toml": scene.source_text,
                "settle_time_s": scene.simulation.settle_time})
@@ -394,7 +396,8 @@ def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon
     adaptive = _adaptive(scene)
     for scale in (1.0, 10.0):
         sweep(short, "contact", sim.contact_integrator, contact_steps, scale, adaptive=adaptive)
-    return _stability_dataset(rows, limit, tolerance, n, seed, scene)
+    return _stability_dataset(rows, limit, tolerance, n, seed, scene).assign_attrs(
+        history=f"rss6 stability {scene.name} --tolerance {tolerance:g} -n {n} --seed {seed} --horizon {horizon:g}")
 
 
 def _explicit_sweep(scene, limit, steps, tolerance, seed, log):
@@ -468,7 +471,8 @@ def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene
         ds[f"{lim}_s"] = ("sweep", [_limit(ds, name, lim) for name in names],
                           {"units": "s", "long_name": lim.replace("_", " ") + " time step (NaN: none)"})
     ds = ds.assign_coords(sweep=names)
-    ds.attrs = {"central_difference_limit_s": limit, "tolerance": tolerance, "realizations": n,
+    ds.attrs = {"title": f"rss6 time-step stability map, scene {scene.name!r}",
+                "central_difference_limit_s": limit, "tolerance": tolerance, "realizations": n,
                 "seed": seed, "scene_name": scene.name, "scene_toml": scene.source_text}
     return ds
 
