@@ -7,7 +7,6 @@ from importlib import resources
 from pathlib import Path
 
 import netCDF4
-import numpy as np
 import pytest
 
 import pipeline.store as store
@@ -97,6 +96,22 @@ def test_the_checksum_is_the_same_for_any_chunking_and_a_rerun(merged, tmp_path)
     import xarray as xr
     with xr.open_dataset(merged, engine="netcdf4", decode_times=False) as raw:   # what readers compute
         assert file_checksums(raw) == sums[0]
+
+
+def test_history_checksums_do_not_depend_on_the_blocks_they_are_written_and_read_in(tmp_path, monkeypatch):
+    """A merge streams the histories from the parts one block at a time (here one realisation):
+    the checksums are those of the same values written at once, and they verify when the file is
+    read whole and when it is read lazily in blocks."""
+    monkeypatch.setattr(store, "HISTORY_BLOCK", 1)
+    spec = _spec("full")
+    streamed = tmp_path / "streamed.nc"
+    ensemble(spec, 4, streamed, workers=1, chunk=2, progress=False)
+    at_once = tmp_path / "at_once.nc"
+    write_netcdf(run_chunk(spec, [0, 1, 2, 3]), at_once)
+    with netCDF4.Dataset(streamed) as a, netCDF4.Dataset(at_once) as b:
+        assert json.loads(a.getncattr(CHECKSUM)) == json.loads(b.getncattr(CHECKSUM))
+    assert store.load_netcdf(streamed).encoding.get("rss6_unverified") is None       # verified whole
+    assert store.load_netcdf(streamed, lazy=True)["error"].data.numblocks[0] == 4     # and in blocks
 
 
 # edits of a file without checksums (an earlier rss6's, or the attribute deleted): the bounds
