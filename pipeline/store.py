@@ -1,8 +1,11 @@
 """netCDF files (CF-1.10, via xarray) for single runs; SI units in every ``units`` attribute.
 
 The direction dimension mixes translations (x, y, z in m) and rotations
-(rx, ry, rz in rad), so a variable's ``units`` attribute names both and the
-coordinate ``unit`` (quantity, direction) gives each element's unit exactly.
+(rx, ry, rz in rad), so in memory a variable's ``units`` attribute names both and
+the coordinate ``unit`` (quantity, direction) gives each element's unit exactly;
+in a file each such variable is split into one variable per unit (see the CF
+mapping below). Every file records checksums of its values, which every reader
+verifies.
 """
 from __future__ import annotations
 
@@ -14,7 +17,6 @@ import warnings
 
 import dask
 import numpy as np
-import pandas as pd
 import xarray as xr
 
 from rss6core import __version__
@@ -50,11 +52,12 @@ STORES = ("summary", "full")   # --store: summaries only, or also the error hist
 
 
 def _provenance(scene, title: str, *, model: str, integrator: str, dt: float,
-                elements: int, history: str) -> dict:
+                elements: int, history: str | None = None) -> dict:
     """Global attributes every rss6 file carries: conventions, what made it (``history``: the
-    command, without the machine-dependent options, so the same command gives the same file),
-    version, scene text, settings."""
-    return {"Conventions": "CF-1.10", "title": title, "history": history, "source": f"rss6 {__version__}",
+    command, without the machine-dependent options, so the same command gives the same file;
+    by default the title), version, scene text, settings."""
+    return {"Conventions": "CF-1.10", "title": title, "history": history or f"rss6: {title}",
+            "source": f"rss6 {__version__}",
             "rss6_version": __version__, "scene_name": scene.name, "scene_toml": scene.source_text,
             "model": model, "integrator": integrator, "time_step_s": dt,
             "elements_per_link": elements, "settle_time_s": scene.simulation.settle_time,
@@ -387,8 +390,9 @@ def verify_checksums(ds: xr.Dataset, path) -> bool:
 
 
 def netcdf_size(ds: xr.Dataset) -> int:
-    """Bytes the values of ``ds`` take in a netCDF4 file (without its ~100 kB of metadata, 4 kB per variable): the
-    numbers, and per string its UTF-8 bytes padded to 8 plus 32 bytes of HDF5 overhead."""
+    """Bytes the values of ``ds`` take in a netCDF4 file (without its metadata, about 4 kB per
+    variable, ~100 kB for an ensemble): the numbers, and per string its UTF-8 bytes padded to 8
+    plus 32 bytes of HDF5 overhead."""
     total = 0
     for var in ds.variables.values():
         if var.dtype.kind in "OUS":
@@ -507,26 +511,36 @@ def _join_units(ds: xr.Dataset) -> xr.Dataset:
     return out
 
 
-def _joined(ds: xr.Dataset, name: str, names: list) -> xr.DataArray:
+def _joined(ds: xr.Dataset, name: str, names: list) -> xr.Variable:
     """Variable ``name`` from its parts ``names`` (see :func:`_split_units`), its quantities and
-    directions in the order of the Dataset's labels."""
-    by_quantity = {}
-    for part in names:
-        var = ds[part]
-        family = next(f for f in FAMILIES if f in var.dims)
-        by_quantity.setdefault(str(var.attrs[_PART_QUANTITY]), []).append(
-            var.rename({family: "direction"}))
-    keep = dict(join="outer", coords="minimal", compat="override", combine_attrs="drop")
-    out = xr.concat([xr.concat(p, dim="direction", **keep) for p in by_quantity.values()],
-                    dim=pd.Index(list(by_quantity), name="quantity"), **keep)
-    order = {d: [str(v) for v in ds[d].values] for d in ("quantity", "direction")}
-    if any([str(v) for v in out[d].values] != labels for d, labels in order.items()):
-        out = out.sel(order)
+    directions in the order of the Dataset's labels; stacked as arrays (dask ones stay lazy)."""
     first = ds[names[0]]
+    dims = str(first.attrs[_PART_DIMS]).split()
+    inner = [d for d in dims if d != "quantity"]         # a part's dims, with its family as direction
+    by_quantity, labels = {}, {}
+    for part in names:
+        var = ds[part].variable
+        family = next(f for f in FAMILIES if f in var.dims)
+        q = str(var.attrs[_PART_QUANTITY])
+        by_quantity.setdefault(q, []).append(var.transpose(*[family if d == "direction" else d
+                                                             for d in inner]).data)
+        labels.setdefault(q, []).extend(str(v) for v in ds[family].values)
+    lib = np
+    if any(dask.is_dask_collection(x) for xs in by_quantity.values() for x in xs):
+        import dask.array as lib   # histories read lazily (imported here: it takes 0.1 s)
+    axis = inner.index("direction")
+    data = lib.stack([lib.concatenate(xs, axis=axis) for xs in by_quantity.values()],
+                     axis=dims.index("quantity"))
+    quantities, directions = list(by_quantity), next(iter(labels.values()))
+    want_q, want_d = ([str(v) for v in ds[d].values] for d in ("quantity", "direction"))
+    if quantities != want_q:
+        data = lib.take(data, [quantities.index(q) for q in want_q], axis=dims.index("quantity"))
+    if directions != want_d:
+        data = lib.take(data, [directions.index(d) for d in want_d], axis=dims.index("direction"))
     attrs = {k: v for k, v in first.attrs.items()
              if k not in ("units", "long_name", _PART_OF, _PART_DIMS, _PART_QUANTITY)}
     attrs = {"long_name": attrs.pop("rss6_long_name", name), "units": MIXED_UNITS, **attrs}
-    return out.transpose(*str(first.attrs[_PART_DIMS]).split()).assign_attrs(attrs).rename(name)
+    return xr.Variable(dims, data, attrs)
 
 
 def cf_encode(ds: xr.Dataset) -> tuple[xr.Dataset, dict]:
@@ -570,15 +584,16 @@ def cf_decode(ds: xr.Dataset) -> xr.Dataset:
                                  if not (k.startswith("rss6_") and k[5:] in _MOVED)},
                               **{k[5:]: v for k, v in attrs.items()
                                  if k.startswith("rss6_") and k[5:] in _MOVED}}
-    ds.attrs.pop(CHECKSUM, None)
+    ds.attrs = {k: v for k, v in ds.attrs.items() if k != CHECKSUM}
     return ds
 
 
 def labelled(ds: xr.Dataset) -> xr.Dataset:
     """A Dataset opened with plain xarray (``xr.open_dataset(f)``) as rss6 holds it in memory: label
     coordinates (``.sel(quantity="displacement", direction="x", statistic="q95")``), the error
-    variables joined over (quantity, direction) again, ``elapsed_time`` as ``time``."""
-    return cf_decode(ds)
+    variables joined over (quantity, direction) again, ``elapsed_time`` as ``time``. ``ds`` itself
+    is left as it is."""
+    return cf_decode(ds.copy())
 
 
 # --- ensembles -------------------------------------------------------------
