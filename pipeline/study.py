@@ -165,12 +165,15 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
     rel = np.stack([relative_errors(runs[s]["statistics"], ref) for s in settings])
     convergence = relative_errors(ref, fine["statistics"])
     ds = xr.Dataset(
-        {"model": ("setting", [s.model for s in settings]),
-         "integrator": ("setting", [s.integrator for s in settings]),
+        {"model": ("setting", [s.model for s in settings], {"long_name": "model level"}),
+         "integrator": ("setting", [s.integrator for s in settings], {"long_name": "time integrator"}),
          "dt": ("setting", [s.dt for s in settings], {"units": "s", "long_name": "time step"}),
-         "elements_per_link": ("setting", [s.elements for s in settings]),
-         "beam_theory": ("setting", [(s.beam or scene.beam).label for s in settings]),
-         "stiffness_scale": ("setting", [s.stiffness_scale for s in settings]),
+         "elements_per_link": ("setting", [s.elements for s in settings],
+                               {"units": "1", "long_name": "beam elements per crank and per rod"}),
+         "beam_theory": ("setting", [(s.beam or scene.beam).label for s in settings],
+                         {"long_name": "beam theory of the links"}),
+         "stiffness_scale": ("setting", [s.stiffness_scale for s in settings],
+                             {"units": "1", "long_name": "contact stiffness factor"}),
          "tolerance": ("setting", [s.tolerance for s in settings],
                        {"units": "m", "long_name": "adaptive contact step's local error bound "
                                                     "(0: fixed step)"}),
@@ -178,16 +181,19 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
                          {"units": "1", "long_name": "halvings of the contact step allowed"}),
          "seconds_per_realization": ("setting", [runs[s]["seconds_per_realization"] for s in settings],
                                      {"units": "s", "long_name": "wall time per realisation, batched"}),
-         "failed": ("setting", [runs[s]["failed"] for s in settings]),
+         "failed": ("setting", [runs[s]["failed"] for s in settings],
+                    {"units": "1", "long_name": "failed realisations"}),
          "statistic_value": (("setting", "quantity", "direction", "statistic"),
                              np.stack([runs[s]["statistics"] for s in settings]),
                              {"long_name": "statistic of the setting's ensemble", "units": MIXED_UNITS}),
-         "relative_error": (("setting", "quantity", "direction", "statistic"), rel, {"units": "1"}),
+         "relative_error": (("setting", "quantity", "direction", "statistic"), rel,
+                            {"units": "1", "long_name": "relative error of the statistic against the "
+                                                        "reference setting's"}),
          "reference_change": (("quantity", "direction", "statistic"), convergence,
                               {"units": "1", "long_name": "reference vs its step halved and mesh "
                                                           "doubled"})},
-        coords={"setting": [s.label for s in settings], "quantity": list(QUANTITIES),
-                "direction": list(DIRECTIONS), "statistic": list(STATISTICS),
+        coords={"setting": ("setting", [s.label for s in settings], {"long_name": "setting"}),
+                "quantity": list(QUANTITIES), "direction": list(DIRECTIONS), "statistic": list(STATISTICS),
                 "unit": (("quantity", "direction"), _unit_table(), {"long_name": "SI unit of each element"})},
         attrs={"title": f"rss6 speed/accuracy trade-off, scene {scene.name!r}",
                "history": f"rss6 tradeoff {scene.name} -n {n} --seed {seed}",
@@ -196,9 +202,9 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
                "realizations": n, "seed": seed, "scene_name": scene.name, "scene_toml": scene.source_text,
                "settle_time_s": scene.simulation.settle_time})
     ds["max_relative_error"] = ds["relative_error"].max(("quantity", "direction", "statistic"))
-    ds["max_relative_error"].attrs["units"] = "1"
-    ds["modes"] = ("setting", [degrees_of_freedom(scene, s.model, s.elements) for s in settings])
-    ds["modes"].attrs["long_name"] = "modes kept (no modal reduction is offered: all DOFs)"
+    ds["max_relative_error"].attrs.update(units="1", long_name="largest relative_error of the setting")
+    ds["modes"] = ("setting", [degrees_of_freedom(scene, s.model, s.elements) for s in settings],
+                   {"units": "1", "long_name": "modes kept (no modal reduction is offered: all DOFs)"})
     return ds
 
 
@@ -396,8 +402,7 @@ def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon
     adaptive = _adaptive(scene)
     for scale in (1.0, 10.0):
         sweep(short, "contact", sim.contact_integrator, contact_steps, scale, adaptive=adaptive)
-    return _stability_dataset(rows, limit, tolerance, n, seed, scene).assign_attrs(
-        history=f"rss6 stability {scene.name} --tolerance {tolerance:g} -n {n} --seed {seed} --horizon {horizon:g}")
+    return _stability_dataset(rows, limit, tolerance, n, seed, scene, horizon)
 
 
 def _explicit_sweep(scene, limit, steps, tolerance, seed, log):
@@ -451,7 +456,8 @@ _RUN_VARIABLES = {   # name: (CSV column, attributes)
     "status": ("status", {"long_name": "stable, inaccurate or failed"}),
     "max_rel_change": ("max_rel_change", {"units": "1", "long_name": "largest relative change of "
                                           "the statistics vs the sweep's finest step"}),
-    "seconds_per_realization": ("seconds_per_realization", {"units": "s"}),
+    "seconds_per_realization": ("seconds_per_realization", {"units": "s", "long_name": "wall time per "
+                                                                       "realisation, batched"}),
     "velocity_mean_peak": ("velocity_mean_peak_m_s", {
         "units": "m s-1", "long_name": "mean over realisations of max |velocity error|, largest "
                                        "of x, y, z"}),
@@ -460,7 +466,8 @@ _RUN_VARIABLES = {   # name: (CSV column, attributes)
 _LIMITS = ("largest_not_failed", "smallest_failed", "largest_accurate")
 
 
-def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene) -> xr.Dataset:
+def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene,
+                       horizon: float = 0.2) -> xr.Dataset:
     """The sweeps' rows as variables along ``run`` and each sweep's limits (s, NaN: none) along
     ``sweep``."""
     ds = xr.Dataset({k: ("run", [r[k] for r in rows], attrs) for k, (_, attrs) in _RUN_VARIABLES.items()})
@@ -472,6 +479,8 @@ def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene
                           {"units": "s", "long_name": lim.replace("_", " ") + " time step (NaN: none)"})
     ds = ds.assign_coords(sweep=names)
     ds.attrs = {"title": f"rss6 time-step stability map, scene {scene.name!r}",
+                "history": f"rss6 stability {scene.name} --tolerance {tolerance:g} -n {n} --seed {seed} "
+                           f"--horizon {horizon:g}",
                 "central_difference_limit_s": limit, "tolerance": tolerance, "realizations": n,
                 "seed": seed, "scene_name": scene.name, "scene_toml": scene.source_text}
     return ds

@@ -184,10 +184,26 @@ def _every_kind(folder: Path) -> dict:
                                   "-n", "3", "--low-n", "6", "--workers", "1"]}
     for kind, command in commands.items():
         assert main([*command, "-o", str(files[kind])]) == 0, kind
-    return files
+    return files | _study_files(folder)
 
 
-@pytest.mark.slow   # six commands, the multi-fidelity one at the paper level: about a minute
+def _study_files(folder: Path) -> dict:
+    """tradeoff.nc of two quasi-static settings, and stability.nc of two made-up sweep rows (the
+    real sweeps take minutes; the file's form is the same)."""
+    from pipeline.scenes import find_scene
+    from pipeline.study import Setting, _stability_dataset, tradeoff, write_stability, write_tradeoff
+    scene = find_scene("smoke")
+    settings = [Setting("quasi-static", "newmark", 2e-3, 4), Setting("quasi-static", "newmark", 1e-3, 4)]
+    write_tradeoff(tradeoff(scene, 1, 0, settings, settings[1], log=lambda *a: None), folder, 0.05)
+    row = dict(level="elastic", integrator="newmark", dt_s=1e-3, stiffness_scale=1.0, horizon_s=0.2,
+               status="stable", max_rel_change=0.01, seconds_per_realization=0.1,
+               velocity_mean_peak=1e-3, reason="")
+    rows = [row, row | dict(dt_s=2e-3, status="failed", reason="diverged")]
+    write_stability(_stability_dataset(rows, 1e-4, 0.05, 1, 0, scene), folder)
+    return {"tradeoff": folder / "tradeoff.nc", "stability": folder / "stability.nc"}
+
+
+@pytest.mark.slow   # six commands and two studies, the multi-fidelity one at the paper level: 1-2 minutes
 def test_compliance_checker_exits_0_on_every_kind_of_file(tmp_path, capsys):
     """`compliance-checker --test=cf:1.10 FILE` at its default criteria (a warning fails it too) on
     each kind, and each has title, history and source without a folder in them."""
