@@ -3,6 +3,8 @@ refactoring): python benchmarks/compare_ensembles.py A.nc B.nc
 
 Per numeric variable: max |a - b| / max(|a|, |b|) over the entries where they differ (both NaN
 counts as equal; NaN against a number as 1); prints each variable's figure and the overall one.
+The files are compared as rss6 reads them (pipeline.labelled), so a file with the error variables
+split by unit (rss6 after issue 36) compares with one that holds them whole.
 """
 import sys
 
@@ -29,8 +31,9 @@ def relative_differences(a: xr.Dataset, b: xr.Dataset) -> dict:
 
 
 def main(argv):
+    from pipeline import labelled
     with xr.open_dataset(argv[0]) as a, xr.open_dataset(argv[1]) as b:
-        diffs = relative_differences(a, b)
+        diffs = relative_differences(labelled(a), labelled(b))
         only = sorted(set(a.variables) ^ set(b.variables))
     for name, d in diffs.items():
         print(f"{name:40s} {d:.3e}")

@@ -132,7 +132,7 @@ def _simulate(args) -> int:
         raise SceneError(f"{args.config}: {exc}") from None
     wall = time.perf_counter() - start
     ds = run_dataset(scene, result, model=model, integrator=integrator, dt=dt, elements=elements,
-                     wall_time=wall)
+                     wall_time=wall, seed=args.seed, realization=args.realization)
     if args.output:
         write_netcdf(ds, args.output)
     summary = error_summary(ds)

@@ -10,11 +10,12 @@ import functools
 import math
 
 import numpy as np
+import xarray as xr
 
 from rss6core import FINISHED, INTEGRATORS, MODELS, STATUSES, SceneError, parse_scene, time_grid
 
 from .store import (DIRECTIONS, ENSEMBLE_ATTRS, MIXED_UNITS, PROVENANCE, QUANTITIES, STORES, WINDOWS,
-                    EnsembleFileError, _unit_table, load_netcdf)
+                    EnsembleFileError, _unit_table, load_netcdf, note_unverified)
 
 __all__ = ["check_ensemble", "check_run", "open_results"]
 
@@ -95,6 +96,48 @@ def _values(ds, path, finished: np.ndarray) -> None:
         if bad.any():
             first = ds["realization"].values[finished][bad][0]
             raise EnsembleFileError(f"{path}: {name} is not finite in finished realisation {first}")
+
+
+# relative slack of the bounds below: the reductions' round-off is below 1e-12 of the values (a
+# mean of n <= 1e5 samples), a changed value is off by far more
+SLACK = 1e-9
+
+
+def _invariants(ds, path) -> None:
+    """Bounds the summaries obey by construction (store.window_reductions): a window's maximum is
+    at most the whole run's, which is the larger of the startup and steady maxima; a mean is at
+    most its window's maximum; the whole run's mean lies between the startup and steady means
+    (their weighted average). NaN (no value) bounds nothing."""
+    peak, mean = ds["max_abs_error"], ds["mean_abs_error"]
+    parts = ["startup", "steady"]
+    for w in parts:
+        _refuse_above(path, "max_abs_error", peak.sel(window=w), peak.sel(window="whole"),
+                      f"the {w} maximum", "the whole-run maximum")
+    _refuse_above(path, "max_abs_error", peak.sel(window="whole"),
+                  peak.sel(window=parts).max("window", skipna=False),
+                  "the whole-run maximum", "the larger of the startup and steady maxima")
+    _refuse_above(path, "mean_abs_error", mean, peak, "the mean", "the maximum over the same window")
+    whole, split = mean.sel(window="whole"), mean.sel(window=parts)
+    _refuse_above(path, "mean_abs_error", whole, split.max("window"), "the whole-run mean",
+                  "the larger of the startup and steady means")
+    _refuse_above(path, "mean_abs_error", split.min("window"), whole,
+                  "the smaller of the startup and steady means", "the whole-run mean")
+
+
+def _refuse_above(path, name: str, value, bound, what: str, than: str) -> None:
+    """EnsembleFileError naming the file, ``name`` and the first element where ``value`` exceeds
+    ``bound`` (DataArrays, broadcast by dimension name) beyond SLACK."""
+    value, bound = xr.broadcast(value, bound)
+    with np.errstate(invalid="ignore"):
+        above = value.values > bound.values + SLACK * np.abs(bound.values)
+    if not above.any():
+        return
+    at = tuple(np.argwhere(above)[0])
+    where = ", ".join(f"{'realisation' if d == 'realization' else d} {value[d].values[i]}"
+                      for d, i in zip(value.dims, at) if d in value.coords)
+    raise EnsembleFileError(f"{path}: {name}: {what} ({value.values[at]:.6g}) is above {than} "
+                            f"({bound.values[at]:.6g}) at {where}, which cannot happen: the file "
+                            "was altered; rerun the command that wrote it")
 
 
 def _plain(value):
@@ -262,6 +305,7 @@ def check_ensemble(ds, path) -> None:
     _attributes(ds, path, status.values == FINISHED)
     _ensemble_attributes(ds, path, status.values)
     _values(ds, path, status.values == FINISHED)
+    _invariants(ds, path)
 
 
 def check_run(ds, path) -> None:
@@ -276,13 +320,17 @@ def check_run(ds, path) -> None:
     _attributes(ds, path, np.array([status == FINISHED]))
     one = ds[list(SUMMARIES)].expand_dims(realization=[0], axis=1).assign_attrs(ds.attrs)
     _values(one, path, np.array([status == FINISHED]))
+    _invariants(ds, path)
 
 
 def open_results(path):
-    """An ensemble file (``rss6 run``) or a single-run file (``rss6 simulate -o``), checked."""
-    from .store import open_ensemble
+    """An ensemble file (``rss6 run``) or a single-run file (``rss6 simulate -o``), checked (a file
+    without checksums with a note on stderr)."""
+    from .store import checked_ensemble
     ds = load_netcdf(path)
     if "realization" not in ds.dims and "rss6_version" in ds.attrs and "error" in ds:
         check_run(ds, path)
-        return ds
-    return open_ensemble(path)
+    else:
+        ds = checked_ensemble(ds, path)
+    note_unverified(ds, path)
+    return ds

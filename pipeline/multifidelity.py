@@ -57,7 +57,7 @@ __all__ = ["MIN_N_MF", "ESTIMATORS", "ControlVariateMean", "control_variate_mean
            "optimal_low_ratio", "cost_ratio", "paired_values", "multifidelity_dataset",
            "format_multifidelity", "to_json", "level_paths"]
 
-HISTORY = "rss6 multifidelity"   # how a multi-fidelity file's history attribute begins
+HISTORY = "rss6 multifidelity"   # how the last line of a multi-fidelity file's history begins
 MIN_N_MF = 32   # smallest N whose interval coverage was measured >= 93 % on all laws (module doc)
 ESTIMATORS = ("multifidelity", "high_only")
 
@@ -260,16 +260,29 @@ def _costs(ds: xr.Dataset, y: np.ndarray, name: str, cost: float, width, confide
                                     "multi-fidelity low realisations for the relative half-width"})}
 
 
+def _name(path) -> str:
+    """A source file by its name alone (a folder path says where it was, not what it is)."""
+    from pathlib import Path
+    return Path(str(path)).name
+
+
+def _history(high, low, sources) -> str:
+    """The two ensembles' histories, then this command's line (last, starting with HISTORY)."""
+    from .store import derived_history
+    line = f"{HISTORY} of {_name(sources[0])} and {_name(sources[1])}"
+    return derived_history(high, derived_history(low, line))
+
+
 def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
     from rss6core import __version__
     a = high.attrs
     return {"Conventions": "CF-1.10", "source": f"rss6 {__version__}", "rss6_version": __version__,
             "title": f"rss6 multi-fidelity means: {a['model']} level with {low.attrs['model']} "
                      f"as control variate, scene {a.get('scene_name', '')!r}",
-            "history": f"{HISTORY} of {sources[0]} and {sources[1]}",
+            "history": _history(high, low, sources),
             "scene_name": a.get("scene_name", ""), "scene_toml": a["scene_toml"], "seed": a["seed"],
             "high_model": a["model"], "low_model": low.attrs["model"],
-            "high_file": str(sources[0]), "low_file": str(sources[1]),
+            "high_file": _name(sources[0]), "low_file": _name(sources[1]),
             "n_high": n_pairs, "n_low": int(_finished(low).sum()),
             "n_high_failed": int((~_finished(high)).sum()), "n_low_failed": int((~_finished(low)).sum()),
             "confidence": confidence,
@@ -374,7 +387,8 @@ def check_multifidelity_output(path, create_dirs: bool = False):
     if path.exists():
         try:
             with netCDF4.Dataset(path) as nc:
-                ours = str(getattr(nc, "history", "")).startswith(HISTORY)
+                lines = str(getattr(nc, "history", "")).splitlines()
+            ours = bool(lines) and lines[-1].startswith(HISTORY)   # the last line: its own
         except OSError:
             ours = False
         if not ours:

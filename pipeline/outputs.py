@@ -192,17 +192,37 @@ class PartsManifest:
             os.replace(incoming, final)
         return final
 
-    def verify(self, path: Path) -> None:
-        """Refuse a part the manifest does not list or whose bytes changed since it was written."""
+    def problem(self, path: Path) -> str | None:
+        """Why part ``path`` cannot be used (not listed in the manifest, or its bytes changed since it
+        was written), or None."""
         entry = self.entries.get(path.name)
         if entry is None:
-            raise EnsembleFileError(f"{path}: not listed in {self.path} (not written by this run); "
-                                    "delete it to recompute its realisations")
+            return (f"not listed in {self.path.name}" if self.path.exists()
+                    else f"no {self.path.name} vouches for it")
         if sha256(path) != entry["sha256"]:
             r = entry["realizations"]
-            raise EnsembleFileError(f"{path}: its checksum differs from the one recorded when it was "
-                                    f"written (changed since); delete it and rerun to recompute "
-                                    f"realisations {r[0]}-{r[-1]}")
+            return f"changed since it was written (checksum differs; realisations {r[0]}-{r[-1]})"
+        return None
+
+    def verify(self, path: Path) -> None:
+        """Refuse a part the manifest does not list or whose bytes changed since it was written."""
+        self.refuse({path: self.problem(path)})
+
+    def refuse(self, problems: dict) -> None:
+        """One EnsembleFileError naming every bad part of ``problems`` ({part: why or None}) and the
+        one command that recovers: removing them (the folder, when all its parts are bad), after
+        which the rerun computes their realisations again."""
+        bad = {path: why for path, why in problems.items() if why}
+        if not bad:
+            return
+        import shlex
+        every = len(bad) == len(self.parts())
+        remove = (f"rm -r {shlex.quote(str(self.folder))}" if every
+                  else "rm " + " ".join(shlex.quote(str(p)) for p in bad))
+        listed = "; ".join(f"{p.name}: {why}" for p, why in bad.items())
+        raise EnsembleFileError(f"{self.folder}: {len(bad)} of {len(self.parts())} stored parts cannot "
+                                f"be used ({listed}); recover with `{remove}` and rerun the same command "
+                                "(it computes their realisations again)")
 
     def parts(self) -> list[Path]:
         return sorted(self.folder.glob("*.nc"))

@@ -116,7 +116,7 @@ def _hold(realizations: list[int]) -> None:
 
 def _finish(parts: list, scene, spec: EnsembleSpec):
     """The realisations as one ensemble Dataset with the spec's provenance and sampler."""
-    return finish_ensemble(parts, scene, **_kw(spec)).assign_attrs(spec.sampler_attrs())
+    return finish_ensemble(parts, scene, **_kw(spec))
 
 
 def _simulate(spec: EnsembleSpec, realizations: list[int]) -> list:
@@ -143,7 +143,7 @@ def _alone(scene, spec: EnsembleSpec, realization: int):
 
 def _kw(spec: EnsembleSpec) -> dict:
     return dict(model=spec.model, integrator=spec.integrator, dt=spec.dt,
-                elements=spec.elements, seed=spec.seed, store=spec.store)
+                elements=spec.elements, seed=spec.seed, store=spec.store, sampler=spec.sampler_attrs())
 
 
 def _check_identity(path, attrs: dict, spec: EnsembleSpec) -> None:
@@ -174,17 +174,34 @@ def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest) -> tuple[
     between writing it and removing the parts) add only what the file lacks.
     """
     pieces, done = [], set()
-    for path in manifest.parts():
-        manifest.verify(path)
-    candidates = ([output] if output.exists() else []) + manifest.parts()
-    for path in candidates:
-        ds = open_ensemble(path, lazy=True)
+    parts = _checked_parts(manifest, spec)
+    final = [(output, open_ensemble(output, lazy=True))] if output.exists() else []
+    for path, ds in final:
         _check_identity(path, ds.attrs, spec)
+    for _, ds in final + parts:
         new = [int(r) for r in ds["realization"].values if int(r) not in done]
         if new:
             pieces.append(ds.sel(realization=new))
             done.update(new)
     return pieces, done
+
+
+def _checked_parts(manifest: PartsManifest, spec: EnsembleSpec) -> list:
+    """Every stored part with its Dataset (histories on disk), after checking them all: the bad
+    ones are named together in one EnsembleFileError (:meth:`PartsManifest.refuse`). A part the
+    manifest vouches for is not read again for its checksums (its bytes were)."""
+    problems, parts = {}, []
+    for path in manifest.parts():
+        problems[path] = manifest.problem(path)
+        if problems[path] is None:
+            try:
+                ds = open_ensemble(path, lazy=True, verify=False)
+                _check_identity(path, ds.attrs, spec)
+                parts.append((path, ds))
+            except EnsembleFileError as exc:
+                problems[path] = str(exc).removeprefix(f"{path}: ")
+    manifest.refuse(problems)
+    return parts
 
 
 def parts_dir(output: Path) -> Path:
@@ -501,7 +518,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
         annotated = any(str(merged.attrs.get(k)) != str(v) for k, v in extra.items())
         if not up_to_date or annotated:
             write_netcdf(merged.assign_attrs(extra), output)   # streams the histories from the parts
-            merged = open_ensemble(output, lazy=True)
+            merged = open_ensemble(output, lazy=True, verify=False)   # just written
         if manifest.folder.exists():
             shutil.rmtree(manifest.folder)
     return EnsembleOutcome(merged, len(todo), len(done), not up_to_date)
@@ -532,7 +549,8 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
                 for ds in _finished(client, futures, scheduler, worker_timeout, interrupted):
                     first, last = int(ds.realization[0]), int(ds.realization[-1])
                     path = manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
-                    written.append(load_netcdf(path, lazy=True) if "time" in ds.dims else ds)
+                    written.append(load_netcdf(path, lazy=True, verify=False) if "time" in ds.dims
+                                   else ds)
                     if bar:
                         bar.advance(ds.sizes["realization"])
         except BaseException:

@@ -24,8 +24,8 @@ import xarray as xr
 from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, prepare_level,
                       size_band)
 
-from .store import (DIRECTIONS, JOINTS, QUANTITIES, WINDOWS, _provenance, _unit_table, check_window, window_label,
-                    window_summaries)
+from .store import (DIRECTIONS, JOINTS, QUANTITIES, WINDOWS, _provenance, _unit_table, check_window, command_line,
+                    window_label, window_summaries)
 
 __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
            "clearance_draws_from_uniforms", "Design", "designs", "sample_design",
@@ -260,8 +260,13 @@ def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int
                             {"long_name": "platform pose direction, base frame"}),
               "unit": (("quantity", "direction"), _unit_table(),
                        {"long_name": "SI unit of the statistic (the indices are dimensionless)"})}
+    joints = " --per-joint" if any(r.design.name == "joints" for r in results) else ""
+    history = command_line("sensitivity", scene, model=spec.model, integrator=spec.integrator, dt=spec.dt,
+                           elements=spec.elements, options=f"--seed {spec.seed} -n {n} --confidence "
+                                                            f"{confidence:g} --window {window}{joints}")
     attrs = _provenance(scene, f"rss6 Sobol' indices: {spec.model} level, scene {scene.name!r}",
-                        model=spec.model, integrator=spec.integrator, dt=spec.dt, elements=spec.elements)
+                        model=spec.model, integrator=spec.integrator, dt=spec.dt, elements=spec.elements,
+                        history=history)
     evaluations = {f"evaluations_{r.design.name}": n * (len(r.design.groups) + 2) for r in results}
     attrs |= {"seed": spec.seed, "n_base_samples": n, **evaluations, "confidence": confidence, "window": window,
               "sampler": "SALib sobol.sample: Saltelli's scheme on scrambled Sobol' points, "

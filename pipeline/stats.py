@@ -412,7 +412,31 @@ def finished_values(ds: xr.Dataset, variable: str, window: str = "whole") -> xr.
 
 
 def _source(ds: xr.Dataset) -> str:
-    return str(ds.encoding.get("source", "an in-memory Dataset"))
+    """The name of the file ``ds`` was read from (never its folder), or 'an in-memory Dataset'."""
+    from pathlib import Path
+    source = ds.encoding.get("source")
+    return Path(str(source)).name if source else "an in-memory Dataset"
+
+
+# what a statistics file keeps of its source's provenance (rss6_version as source_rss6_version)
+SOURCE_ATTRS = ("scene_name", "model", "integrator", "time_step_s", "elements_per_link", "seed",
+                "realization")
+
+
+def _provenance(ds: xr.Dataset, confidence: float) -> dict:
+    """Title, history (the source's, then this command's line), source, and the source ensemble's
+    scene, level, settings, seed, rss6 version and file name."""
+    from rss6core import __version__
+
+    from .store import derived_history
+    name, a = _source(ds), ds.attrs
+    what = f": {a['model']} level, scene {a.get('scene_name', '')!r}" if "model" in a else ""
+    return {"title": f"rss6 statistics of {name}{what}",
+            "history": derived_history(ds, f"rss6 stats {name} --confidence {confidence:g} "
+                                           "(finished realisations only)"),
+            "source": f"rss6 {__version__}", "rss6_version": __version__, "source_file": name,
+            **({"source_rss6_version": a["rss6_version"]} if "rss6_version" in a else {}),
+            **{k: a[k] for k in SOURCE_ATTRS if k in a}}
 
 
 def ensemble_stats(ds: xr.Dataset, confidence: float = 0.95, window: str | None = "whole",
@@ -488,8 +512,8 @@ def _rqmc_attrs(replicates: int, confidence: float) -> dict:
 def _attrs(ds, n: int, failed: int, confidence: float) -> dict:
     needed = {k: min_n_for_quantile(p, confidence) for k, p in QUANTILES.items()}
     steady = {"steady_after_s": ds.attrs["steady_after_s"]} if "steady_after_s" in ds.attrs else {}
-    return {**steady, "n_finished": n, "n_failed": failed, "confidence": confidence,
-            "history": f"rss6 stats of {_source(ds)} (finished realisations only)",
+    return {**_provenance(ds, confidence), **steady, "n_finished": n, "n_failed": failed,
+            "confidence": confidence,
             "interval_mean": f"union of Student t and Hall (1992) skewness-corrected t; NaN for "
                              f"n < {MIN_N_MEAN}",
             "interval_std": f"Bonett (2006); NaN for n < {MIN_N_STD}",

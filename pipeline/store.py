@@ -1,12 +1,16 @@
 """netCDF files (CF-1.10, via xarray) for single runs; SI units in every ``units`` attribute.
 
 The direction dimension mixes translations (x, y, z in m) and rotations
-(rx, ry, rz in rad), so a variable's ``units`` attribute names both and the
-coordinate ``unit`` (quantity, direction) gives each element's unit exactly.
+(rx, ry, rz in rad), so in memory a variable's ``units`` attribute names both and
+the coordinate ``unit`` (quantity, direction) gives each element's unit exactly;
+in a file each such variable is split into one variable per unit (see the CF
+mapping below). Every file records checksums of its values, which every reader
+verifies.
 """
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import signal
 import threading
 import warnings
@@ -20,7 +24,8 @@ from rss6core import __version__
 __all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "WINDOWS", "PROVENANCE", "ENSEMBLE_ATTRS", "STORES", "display_unit",
            "error_summaries", "window_summaries", "window_masks", "window_reductions", "window_label",
            "run_dataset", "chunk_dataset", "write_netcdf", "cf_encode", "cf_decode", "check_free_space",
-           "netcdf_size"]
+           "netcdf_size", "labelled", "load_netcdf", "open_ensemble", "checked_ensemble",
+           "verify_checksums", "file_checksums", "note_unverified", "CHECKSUM", "FAMILIES"]
 
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
 QUANTITIES = ("displacement", "velocity", "acceleration")
@@ -47,14 +52,33 @@ STORES = ("summary", "full")   # --store: summaries only, or also the error hist
 
 
 def _provenance(scene, title: str, *, model: str, integrator: str, dt: float,
-                elements: int) -> dict:
-    """Global attributes every rss6 file carries: conventions, version, scene text, settings."""
-    return {"Conventions": "CF-1.10", "title": title, "source": f"rss6 {__version__}",
+                elements: int, history: str | None = None) -> dict:
+    """Global attributes every rss6 file carries: conventions, what made it (``history``: the
+    command, without the machine-dependent options, so the same command gives the same file;
+    by default the title), version, scene text, settings."""
+    return {"Conventions": "CF-1.10", "title": title, "history": history or f"rss6: {title}",
+            "source": f"rss6 {__version__}",
             "rss6_version": __version__, "scene_name": scene.name, "scene_toml": scene.source_text,
             "model": model, "integrator": integrator, "time_step_s": dt,
             "elements_per_link": elements, "settle_time_s": scene.simulation.settle_time,
             "steady_after_s": scene.simulation.steady_after,
             **({"contact_start": scene.simulation.contact_start} if model == "contact" else {})}
+
+
+def command_line(command: str, scene, *, model: str, integrator: str, dt: float, elements: int,
+                 options: str = "") -> str:
+    """A history line: the rss6 command and the options that fix its results (the scene by name;
+    its text is the file's scene_toml), e.g. 'rss6 run smoke --model contact ... -n 16'."""
+    start = f" --start {scene.simulation.contact_start}" if model == "contact" else ""
+    return (f"rss6 {command} {scene.name} --model {model} --integrator {integrator} --dt {dt} "
+            f"--elements {elements}{start}" + (f" {options}" if options else ""))
+
+
+def derived_history(source: xr.Dataset, line: str) -> str:
+    """The history of a file made from ``source``: its history, then ``line`` (CF: each command that
+    derives a file appends itself)."""
+    previous = str(source.attrs.get("history", "")).strip()
+    return f"{previous}\n{line}" if previous else line
 
 
 def _unit_table() -> np.ndarray:
@@ -145,8 +169,11 @@ _WINDOW_ATTRS = {"long_name": "analysis window: whole run, startup t < steady_af
 
 
 def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elements: int,
-                wall_time: float) -> xr.Dataset:
-    """One simulation as a self-describing Dataset: error histories, summaries, provenance."""
+                wall_time: float, seed: int | None = None, realization: int | None = None) -> xr.Dataset:
+    """One simulation as a self-describing Dataset: error histories, summaries, provenance (with
+    the ``seed`` and ``realization`` of its clearance draw when given)."""
+    drawn = {k: v for k, v in (("seed", seed), ("realization", realization)) if v is not None}
+    options = " ".join(f"--{k} {v}" for k, v in drawn.items())
     err = _history(result)
     summary_attrs = {"units": MIXED_UNITS, "cell_methods": "time: maximum"}
     peak, mean = window_summaries(result, scene.simulation.settle_time, scene.simulation.steady_after)
@@ -178,7 +205,10 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
         },
         attrs={
             **_provenance(scene, f"rss6 {model} simulation of scene {scene.name!r}", model=model,
-                          integrator=integrator, dt=dt, elements=elements),
+                          integrator=integrator, dt=dt, elements=elements,
+                          history=command_line("simulate", scene, model=model, integrator=integrator,
+                                               dt=dt, elements=elements, options=options)),
+            **drawn,
             "status": result.status,
             "status_message": result.message,
             "steps": result.steps,
@@ -243,41 +273,126 @@ def write_netcdf(ds: xr.Dataset, path) -> None:
 class _InOrderWriter:
     """xarray's array writer, writing each variable as soon as it is defined; a dask-backed one
     block by block (strings at once: they are small and their heap layout then matches), stopping
-    between blocks once ``interrupted`` (a list) is not empty."""
+    between blocks once ``interrupted`` (a list) is not empty. It takes each variable's checksum
+    (:class:`_Checksum`) from the values as they are written."""
     lock = None
 
     def __init__(self, interrupted: list):
         self.interrupted = interrupted
+        self.digests = {}
 
     def add(self, source, target, region=None) -> None:
         if region is not None:
             raise ValueError("region writes are not used by rss6")
+        digest = _Checksum(source)
         if not dask.is_dask_collection(source):
             target[...] = source
+            digest.update(np.asarray(source))
         elif source.dtype.kind in "OUS":
-            target[...] = source.compute()
+            values = source.compute()
+            target[...] = values
+            digest.update(values)
         else:
-            edges = [np.cumsum((0,) + tuple(c)) for c in source.chunks]
-            for block in np.ndindex(*source.numblocks):
+            source = _rows(source)
+            edges = np.cumsum((0,) + tuple(source.chunks[0])) if source.ndim else [0, 1]
+            for i in range(source.numblocks[0] if source.ndim else 1):
                 if self.interrupted:
                     raise KeyboardInterrupt
-                where = tuple(slice(e[i], e[i + 1]) for e, i in zip(edges, block))
-                target[where] = source.blocks[block].compute()
+                values = source.blocks[i].compute() if source.ndim else source.compute()
+                target[slice(edges[i], edges[i + 1]) if source.ndim else ...] = values
+                digest.update(values)
+        self.digests[target.variable_name] = digest.hexdigest()
+
+
+def _rows(array):
+    """A dask array cut along its first axis only, so its blocks in order are its values in C order."""
+    return array.rechunk({i: -1 for i in range(1, array.ndim)}) if array.ndim > 1 else array
+
+
+class _Checksum:
+    """sha256 of a variable's values in C order, canonical: little-endian numbers with every NaN
+    the same NaN, strings as UTF-8 each ended by a NUL; headed by the type and shape. So the
+    digest does not depend on how the values were cut into blocks, on the worker count or on the
+    machine, only on the values."""
+
+    def __init__(self, array):
+        kind = "str" if array.dtype.kind in "OUS" else np.dtype(array.dtype).newbyteorder("<").str
+        self._sha = hashlib.sha256(f"{kind} {tuple(array.shape)}\n".encode())
+
+    def update(self, values) -> None:
+        values = np.asarray(values)
+        if values.dtype.kind in "OUS":
+            self._sha.update(b"".join((v.decode() if isinstance(v, bytes) else str(v)).encode() + b"\0"
+                                      for v in values.ravel()))
+            return
+        if values.dtype.kind in "fc":
+            values = np.where(np.isnan(values), np.nan, values)
+        self._sha.update(np.ascontiguousarray(values, values.dtype.newbyteorder("<")).tobytes())
+
+    def hexdigest(self) -> str:
+        return self._sha.hexdigest()
 
 
 def _stream_to_netcdf(ds: xr.Dataset, path, encoding: dict, interrupted: list) -> None:
-    """``ds.to_netcdf(path)`` (netCDF4, NETCDF4 format) with :class:`_InOrderWriter`."""
+    """``ds.to_netcdf(path)`` (netCDF4, NETCDF4 format) with :class:`_InOrderWriter`, and the
+    values' checksums (global attribute CHECKSUM) written last."""
+    import json
+
     from xarray.backends import NetCDF4DataStore
     store = NetCDF4DataStore.open(path, mode="w", format="NETCDF4")
     try:
-        ds.dump_to_store(store, writer=_InOrderWriter(interrupted), encoding=encoding)
+        writer = _InOrderWriter(interrupted)
+        ds.dump_to_store(store, writer=writer, encoding=encoding)
+        store.ds.setncattr(CHECKSUM, json.dumps(writer.digests, sort_keys=True))
     finally:
         store.close()
 
 
+def file_checksums(ds: xr.Dataset) -> dict:
+    """{variable: sha256} of a Dataset as read from a file before :func:`cf_decode` (the digests
+    :class:`_InOrderWriter` records); dask-backed variables are read block by block."""
+    out = {}
+    for name, var in ds.variables.items():
+        digest = _Checksum(var)
+        if dask.is_dask_collection(var.data) and var.ndim:
+            data = _rows(var.data)
+            for i in range(data.numblocks[0]):
+                digest.update(data.blocks[i].compute())
+        else:
+            digest.update(var.values)
+        out[str(name)] = digest.hexdigest()
+    return out
+
+
+def verify_checksums(ds: xr.Dataset, path) -> bool:
+    """EnsembleFileError naming the file and the first variable whose values differ from the
+    checksum written with the file (changed since), or that was added or removed; False when the
+    file has no checksum (written by an earlier rss6 or by another program), True when it holds."""
+    import json
+    text = ds.attrs.get(CHECKSUM)
+    if text is None:
+        return False
+    try:
+        recorded = json.loads(str(text))
+        assert isinstance(recorded, dict)
+    except (ValueError, AssertionError):
+        raise EnsembleFileError(f"{path}: attribute {CHECKSUM} is not the JSON rss6 writes; the file "
+                                "was edited after rss6 wrote it: rerun the command that wrote it") from None
+    got = file_checksums(ds)
+    for name in sorted(set(recorded) | set(got)):
+        if recorded.get(name) != got.get(name):
+            what = ("was added to" if name not in recorded else "was removed from" if name not in got
+                    else "has values that no longer match its checksum in")
+            raise EnsembleFileError(f"{path}: variable {name} {what} attribute {CHECKSUM}: the file was "
+                                    "altered after rss6 wrote it; rerun the command that wrote it, "
+                                    "or restore the file")
+    return True
+
+
 def netcdf_size(ds: xr.Dataset) -> int:
-    """Bytes the values of ``ds`` take in a netCDF4 file (without its ~30 kB of metadata): the
-    numbers, and per string its UTF-8 bytes padded to 8 plus 32 bytes of HDF5 overhead."""
+    """Bytes the values of ``ds`` take in a netCDF4 file (without its metadata, about 4 kB per
+    variable, ~100 kB for an ensemble): the numbers, and per string its UTF-8 bytes padded to 8
+    plus 32 bytes of HDF5 overhead."""
     total = 0
     for var in ds.variables.values():
         if var.dtype.kind in "OUS":
@@ -301,13 +416,22 @@ def check_free_space(path, needed: int) -> None:
 
 
 # --- CF mapping --------------------------------------------------------------
-# CF wants UDUNITS units, labels as auxiliary string variables (not string coordinate variables),
-# cell_methods naming dimensions the variable has, no axis "E" and no fill value on coordinates.
-# What CF cannot say is kept under an ``rss6_`` attribute and restored when the file is read.
+# CF wants UDUNITS units, one per variable; labels as auxiliary string variables (CF coordinate
+# variables are numeric), cell_methods naming dimensions the variable has, no axis "E" and no fill
+# value on coordinates. The error variables mix units over (quantity, direction), so each is
+# stored split into one variable per quantity and direction family (translation x, y, z in m,
+# m s-1, m s-2; rotation rx, ry, rz in rad, rad s-1, rad s-2), each with its CF ``units``, and
+# joined again when the file is read. What CF cannot say is kept under an ``rss6_`` attribute and
+# restored when the file is read.
 
 _LABEL = "_label"
 _ELAPSED = "elapsed_time"   # the file's name of ``time``: CF keeps "time" for calendar times
 _MOVED = ("units", "cell_methods", "axis", "standard_name", "long_name")
+FAMILIES = {"translation": DIRECTIONS[:3], "rotation": DIRECTIONS[3:]}   # direction families
+_PART_OF = "rss6_part_of"     # a split variable: the variable it is part of, its dims, its quantity
+_PART_DIMS = "rss6_dims"
+_PART_QUANTITY = "rss6_quantity"
+CHECKSUM = "rss6_sha256"      # global attribute: {variable: sha256 of its values} as JSON
 
 
 def _cf_attrs(name: str, var: xr.DataArray) -> dict:
@@ -327,26 +451,121 @@ def _cf_attrs(name: str, var: xr.DataArray) -> dict:
     return {**attrs, **{f"rss6_{k}": v for k, v in moved.items()}}
 
 
+def _splittable(ds: xr.Dataset, name) -> bool:
+    """A variable of mixed units over (quantity, direction) with rss6's labels there."""
+    var = ds[name]
+    return (var.attrs.get("units") == MIXED_UNITS and {"quantity", "direction"} <= set(var.dims)
+            and set(map(str, ds["quantity"].values)) <= set(QUANTITIES)
+            and set(map(str, ds["direction"].values)) <= set(DIRECTIONS))
+
+
+def _split_units(ds: xr.Dataset) -> xr.Dataset:
+    """Each mixed-unit variable as one variable per quantity and direction family, in its place:
+    ``max_abs_error`` -> ``max_abs_error_displacement_translation`` (units m, direction x, y, z
+    along dimension ``translation``), ... ``max_abs_error_acceleration_rotation`` (rad s-2)."""
+    mixed = [name for name in ds.data_vars if _splittable(ds, name)]
+    if not mixed:
+        return ds
+    directions = [str(d) for d in ds["direction"].values]
+    families = {f: [d for d in directions if d in members] for f, members in FAMILIES.items()}
+    data = {}
+    for name, var in ds.data_vars.items():
+        if name not in mixed:
+            data[name] = var
+            continue
+        attrs = {k: v for k, v in var.attrs.items() if k not in ("units", "long_name")}
+        for q in map(str, ds["quantity"].values):
+            for i, (family, members) in enumerate(families.items()):
+                if members:
+                    part = var.sel(quantity=q, direction=members, drop=True).rename(direction=family)
+                    data[f"{name}_{q}_{family}"] = part.assign_attrs(
+                        long_name=f"{var.attrs.get('long_name', name)}: {q}, {family}",
+                        units=UNITS[q][i], **attrs, rss6_long_name=var.attrs.get("long_name", name),
+                        **{_PART_OF: name, _PART_DIMS: " ".join(var.dims), _PART_QUANTITY: q})
+    coords = {f: (f, members, {"long_name": f"platform pose {family_name}"})
+              for f, members, family_name in (("translation", families["translation"], "translation direction"),
+                                              ("rotation", families["rotation"], "rotation axis"))
+              if members}
+    return xr.Dataset(data, coords={**ds.coords, **coords}, attrs=ds.attrs)
+
+
+def _join_units(ds: xr.Dataset) -> xr.Dataset:
+    """Undo :func:`_split_units` (labels already index coordinates): each split variable's parts
+    joined over (quantity, direction) in the file's label order, in the place of its first part."""
+    parts = {}
+    for name, var in ds.data_vars.items():
+        if _PART_OF in var.attrs:
+            parts.setdefault(str(var.attrs[_PART_OF]), []).append(name)
+    if not parts:
+        return ds
+    data, joined = {}, {}
+    for name, var in ds.data_vars.items():
+        whole = str(var.attrs.get(_PART_OF, ""))
+        if not whole:
+            data[name] = var
+        elif whole not in joined:
+            joined[whole] = data[whole] = _joined(ds, whole, parts[whole])
+    families = [f for f in FAMILIES if f in ds.coords]
+    out = xr.Dataset(data, coords=ds.coords, attrs=ds.attrs).drop_vars(families)
+    out.encoding = dict(ds.encoding)   # the file it was read from (``source``)
+    return out
+
+
+def _joined(ds: xr.Dataset, name: str, names: list) -> xr.Variable:
+    """Variable ``name`` from its parts ``names`` (see :func:`_split_units`), its quantities and
+    directions in the order of the Dataset's labels; stacked as arrays (dask ones stay lazy)."""
+    first = ds[names[0]]
+    dims = str(first.attrs[_PART_DIMS]).split()
+    inner = [d for d in dims if d != "quantity"]         # a part's dims, with its family as direction
+    by_quantity, labels = {}, {}
+    for part in names:
+        var = ds[part].variable
+        family = next(f for f in FAMILIES if f in var.dims)
+        q = str(var.attrs[_PART_QUANTITY])
+        by_quantity.setdefault(q, []).append(var.transpose(*[family if d == "direction" else d
+                                                             for d in inner]).data)
+        labels.setdefault(q, []).extend(str(v) for v in ds[family].values)
+    lib = np
+    if any(dask.is_dask_collection(x) for xs in by_quantity.values() for x in xs):
+        import dask.array as lib   # histories read lazily (imported here: it takes 0.1 s)
+    axis = inner.index("direction")
+    data = lib.stack([lib.concatenate(xs, axis=axis) for xs in by_quantity.values()],
+                     axis=dims.index("quantity"))
+    quantities, directions = list(by_quantity), next(iter(labels.values()))
+    want_q, want_d = ([str(v) for v in ds[d].values] for d in ("quantity", "direction"))
+    if quantities != want_q:
+        data = lib.take(data, [quantities.index(q) for q in want_q], axis=dims.index("quantity"))
+    if directions != want_d:
+        data = lib.take(data, [directions.index(d) for d in want_d], axis=dims.index("direction"))
+    attrs = {k: v for k, v in first.attrs.items()
+             if k not in ("units", "long_name", _PART_OF, _PART_DIMS, _PART_QUANTITY)}
+    attrs = {"long_name": attrs.pop("rss6_long_name", name), "units": MIXED_UNITS, **attrs}
+    return xr.Variable(dims, data, attrs)
+
+
 def cf_encode(ds: xr.Dataset) -> tuple[xr.Dataset, dict]:
     """Any Dataset rss6 writes, as CF-1.10 allows it, and the netCDF encoding to write it with."""
     out = ds.rename({"time": _ELAPSED}) if "time" in ds.variables else ds.copy()
-    labelled = [d for d in ds.dims if d in ds.coords and ds[d].dtype.kind in "OUS"]
+    out = _split_units(out)
+    labelled = sorted(d for d in out.dims if d in out.coords and out[d].dtype.kind in "OUS")
     if labelled:   # one drop and one assignment: each costs xarray an alignment (ms)
         out = out.drop_vars(labelled).assign_coords(
-            {dim + _LABEL: ((dim,), ds[dim].values.astype(str).astype(object),
-                            {"long_name": ds[dim].attrs.get("long_name", dim)})
+            {dim + _LABEL: ((dim,), out[dim].values.astype(str).astype(object),
+                            {"long_name": out[dim].attrs.get("long_name", dim)})
              for dim in labelled})
-    for name in out.variables:
-        out[name].attrs = _cf_attrs(name, out[name])
-    if "Conventions" not in out.attrs:   # files without rss6's provenance (statistics, studies)
-        out.attrs = {"Conventions": "CF-1.10", **out.attrs}
+    for name, var in out.variables.items():
+        var.attrs = _cf_attrs(name, out[name])
+        var.encoding.pop("coordinates", None)   # a file read earlier: xarray lists them afresh
+    out.attrs = {"Conventions": "CF-1.10", "source": f"rss6 {__version__}",
+                 **{k: v for k, v in out.attrs.items() if k != CHECKSUM}}
     encoding = {name: {"_FillValue": None} for name in out.coords
                 if out[name].dtype.kind == "f"}
     return out, encoding
 
 
 def cf_decode(ds: xr.Dataset) -> xr.Dataset:
-    """Undo :func:`cf_encode`: string labels back as coordinates, ``rss6_`` attributes restored."""
+    """Undo :func:`cf_encode`: string labels back as coordinates, split variables joined,
+    ``rss6_`` attributes restored (the checksum attribute dropped: it describes the file)."""
     labels = {str(name)[:-len(_LABEL)]: ds[name] for name in ds.variables
               if str(name).endswith(_LABEL) and ds[name].dims == (str(name)[:-len(_LABEL)],)}
     if labels:   # one drop and one assignment: each costs xarray an alignment (ms)
@@ -354,6 +573,7 @@ def cf_decode(ds: xr.Dataset) -> xr.Dataset:
             {dim: (dim, label.values.astype(str).astype(object),
                    {k: v for k, v in label.attrs.items() if k != "long_name" or v != dim})
              for dim, label in labels.items()})
+    ds = _join_units(ds)
     if _ELAPSED in ds.variables:
         ds = ds.rename({_ELAPSED: "time"})
         ds["time"].attrs.pop("long_name", None)
@@ -364,7 +584,16 @@ def cf_decode(ds: xr.Dataset) -> xr.Dataset:
                                  if not (k.startswith("rss6_") and k[5:] in _MOVED)},
                               **{k[5:]: v for k, v in attrs.items()
                                  if k.startswith("rss6_") and k[5:] in _MOVED}}
+    ds.attrs = {k: v for k, v in ds.attrs.items() if k != CHECKSUM}
     return ds
+
+
+def labelled(ds: xr.Dataset) -> xr.Dataset:
+    """A Dataset opened with plain xarray (``xr.open_dataset(f)``) as rss6 holds it in memory: label
+    coordinates (``.sel(quantity="displacement", direction="x", statistic="q95")``), the error
+    variables joined over (quantity, direction) again, ``elapsed_time`` as ``time``. ``ds`` itself
+    is left as it is."""
+    return cf_decode(ds.copy())
 
 
 # --- ensembles -------------------------------------------------------------
@@ -431,8 +660,9 @@ def chunk_dataset(results: list, draws: list, realizations: list[int], store: st
 
 
 def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: str, dt: float,
-                    elements: int, seed: int, store: str) -> xr.Dataset:
-    """Concatenate realisations (sorted) and add coordinates and provenance."""
+                    elements: int, seed: int, store: str, sampler: dict | None = None) -> xr.Dataset:
+    """Concatenate realisations (sorted) and add coordinates and provenance (``sampler``: the
+    attributes of a QMC design, pipeline/sampler.py; none for plain Monte Carlo)."""
     ds = xr.concat(parts, dim="realization", data_vars="minimal", coords="minimal",
                    compat="override", join="override") if len(parts) > 1 else parts[0]
     if not (np.diff(ds["realization"].values) > 0).all():   # (lazy histories: no reindexing)
@@ -444,15 +674,28 @@ def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: s
         component=("component", ["x", "y", "z"], {"long_name": "base-frame vector component"}),
         unit=(("quantity", "direction"), _unit_table(), {"long_name": "SI unit of each element"}),
         window=("window", list(WINDOWS), _WINDOW_ATTRS))
+    sampler = sampler or {}
+    history = command_line("run", scene, model=model, integrator=integrator, dt=dt, elements=elements,
+                           options=_run_options(ds["realization"].values, seed, store, sampler))
     ds.attrs = {
         **_provenance(scene, f"rss6 ensemble: {model} level, scene {scene.name!r}", model=model,
-                      integrator=integrator, dt=dt, elements=elements),
+                      integrator=integrator, dt=dt, elements=elements, history=history),
         "seed": seed,
         "store": store,
         "n_realizations": int(ds.sizes["realization"]),
         "n_failed": int((ds["status"].values != "finished").sum()),
+        **sampler,
     }
     return ds
+
+
+def _run_options(realizations: np.ndarray, seed: int, store: str, sampler: dict) -> str:
+    """The options of ``rss6 run`` that fix an ensemble's values; realisations 0..n-1 as ``-n n``,
+    another set (a part of a run) by its range."""
+    qmc = f" --sampler qmc --replicates {sampler['qmc_replicates']}" if sampler else ""
+    r = [int(v) for v in realizations]
+    size = f"-n {len(r)}" if r == list(range(len(r))) else f"(realisations {r[0]}-{r[-1]})"
+    return f"--seed {seed} --store {store}{qmc} {size}"
 
 
 def identity(attrs: dict) -> dict:
@@ -466,11 +709,14 @@ def identity(attrs: dict) -> dict:
 HISTORY_BLOCK = 64   # realisations per block of a history read lazily (a merge holds one block)
 
 
-def load_netcdf(path, lazy: bool = False) -> xr.Dataset:
+def load_netcdf(path, lazy: bool = False, verify: bool = True) -> xr.Dataset:
     """Any netCDF file fully into memory; EnsembleFileError names the file if it is missing or unreadable.
 
     ``lazy``: the variables over time (histories) stay on disk as dask arrays of HISTORY_BLOCK
     realisations, read block by block when used; the file stays open while the Dataset is used.
+    ``verify``: the values are checked against the checksums written with the file
+    (:func:`verify_checksums`; read once more, block by block, when ``lazy``); a file without them
+    is marked ``encoding["rss6_unverified"]`` (see :func:`note_unverified`).
     """
     import os
     if not os.path.exists(path):
@@ -485,12 +731,31 @@ def load_netcdf(path, lazy: bool = False) -> xr.Dataset:
             for var in ds.variables.values():
                 if _ELAPSED not in var.dims:
                     var.load()
-            return _forget_string_widths(cf_decode(ds.assign(histories)))
-        with xr.open_dataset(path, engine="netcdf4", decode_times=False) as ds:
-            return _forget_string_widths(cf_decode(ds.load()))
+            ds = ds.assign(histories)
+        else:
+            with xr.open_dataset(path, engine="netcdf4", decode_times=False) as opened:
+                ds = opened.load()
     except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...
         raise EnsembleFileError(f"{path}: not a readable netCDF file "
                                 f"(truncated or corrupt?): {exc}") from None
+    verified = verify and verify_checksums(ds, path)
+    try:
+        out = _forget_string_widths(cf_decode(ds))
+    except Exception as exc:  # a foreign file whose variables look like rss6's split ones
+        raise EnsembleFileError(f"{path}: not a file rss6 reads: {type(exc).__name__}: {exc}") from None
+    if verify and not verified:
+        out.encoding["rss6_unverified"] = True
+    return out
+
+
+def note_unverified(ds: xr.Dataset, path, stream=None) -> None:
+    """One line on stderr when ``ds`` was read from a file without checksums: it is accepted (an
+    earlier rss6's results stay usable; its values pass every consistency check), but a change
+    to its values could not be seen."""
+    import sys
+    if ds.encoding.get("rss6_unverified"):
+        print(f"rss6: note: {path}: no checksum of its values ({CHECKSUM}; written by an earlier "
+              "rss6 or by another program): checked for consistency only", file=stream or sys.stderr)
 
 
 def _forget_string_widths(ds: xr.Dataset) -> xr.Dataset:
@@ -503,10 +768,14 @@ def _forget_string_widths(ds: xr.Dataset) -> xr.Dataset:
     return ds
 
 
-def open_ensemble(path, lazy: bool = False) -> xr.Dataset:
-    """Open an ensemble file into memory (``lazy``: its histories stay on disk, see
-    :func:`load_netcdf`); EnsembleFileError names the file and the problem."""
-    ds = load_netcdf(path, lazy)
+def open_ensemble(path, lazy: bool = False, verify: bool = True) -> xr.Dataset:
+    """Open an ensemble file into memory (``lazy``: its histories stay on disk; ``verify``: its
+    checksums checked, see :func:`load_netcdf`); EnsembleFileError names the file and the problem."""
+    return checked_ensemble(load_netcdf(path, lazy, verify), path)
+
+
+def checked_ensemble(ds: xr.Dataset, path) -> xr.Dataset:
+    """``ds`` (read from ``path``) if it is a well-formed rss6 ensemble, else EnsembleFileError."""
     missing = [k for k in ("max_abs_error", "mean_abs_error", "status") if k not in ds]
     if missing or "rss6_version" not in ds.attrs or "realization" not in ds.dims:
         raise EnsembleFileError(f"{path}: not an rss6 ensemble file (missing "

@@ -23,7 +23,7 @@ from rss6core import (BeamTheory, Integrator, build_elastic_model, degrees_of_fr
                       quasi_static_state, simulate_batch, simulate_elastic)
 
 from .stats import estimates
-from .store import DIRECTIONS, QUANTITIES, error_summaries
+from .store import DIRECTIONS, MIXED_UNITS, QUANTITIES, _unit_table, error_summaries
 
 __all__ = ["Setting", "STATISTICS", "measure", "relative_errors", "default_settings", "tradeoff",
            "pareto_front", "recommend", "write_tradeoff", "stability", "write_stability"]
@@ -165,12 +165,15 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
     rel = np.stack([relative_errors(runs[s]["statistics"], ref) for s in settings])
     convergence = relative_errors(ref, fine["statistics"])
     ds = xr.Dataset(
-        {"model": ("setting", [s.model for s in settings]),
-         "integrator": ("setting", [s.integrator for s in settings]),
+        {"model": ("setting", [s.model for s in settings], {"long_name": "model level"}),
+         "integrator": ("setting", [s.integrator for s in settings], {"long_name": "time integrator"}),
          "dt": ("setting", [s.dt for s in settings], {"units": "s", "long_name": "time step"}),
-         "elements_per_link": ("setting", [s.elements for s in settings]),
-         "beam_theory": ("setting", [(s.beam or scene.beam).label for s in settings]),
-         "stiffness_scale": ("setting", [s.stiffness_scale for s in settings]),
+         "elements_per_link": ("setting", [s.elements for s in settings],
+                               {"units": "1", "long_name": "beam elements per crank and per rod"}),
+         "beam_theory": ("setting", [(s.beam or scene.beam).label for s in settings],
+                         {"long_name": "beam theory of the links"}),
+         "stiffness_scale": ("setting", [s.stiffness_scale for s in settings],
+                             {"units": "1", "long_name": "contact stiffness factor"}),
          "tolerance": ("setting", [s.tolerance for s in settings],
                        {"units": "m", "long_name": "adaptive contact step's local error bound "
                                                     "(0: fixed step)"}),
@@ -178,25 +181,30 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
                          {"units": "1", "long_name": "halvings of the contact step allowed"}),
          "seconds_per_realization": ("setting", [runs[s]["seconds_per_realization"] for s in settings],
                                      {"units": "s", "long_name": "wall time per realisation, batched"}),
-         "failed": ("setting", [runs[s]["failed"] for s in settings]),
+         "failed": ("setting", [runs[s]["failed"] for s in settings],
+                    {"units": "1", "long_name": "failed realisations"}),
          "statistic_value": (("setting", "quantity", "direction", "statistic"),
                              np.stack([runs[s]["statistics"] for s in settings]),
-                             {"units": "m, rad, m s-1, rad s-1, m s-2, rad s-2 by quantity and "
-                                       "direction (translations x, y, z; rotations rx, ry, rz)"}),
-         "relative_error": (("setting", "quantity", "direction", "statistic"), rel, {"units": "1"}),
+                             {"long_name": "statistic of the setting's ensemble", "units": MIXED_UNITS}),
+         "relative_error": (("setting", "quantity", "direction", "statistic"), rel,
+                            {"units": "1", "long_name": "relative error of the statistic against the "
+                                                        "reference setting's"}),
          "reference_change": (("quantity", "direction", "statistic"), convergence,
                               {"units": "1", "long_name": "reference vs its step halved and mesh "
                                                           "doubled"})},
-        coords={"setting": [s.label for s in settings], "quantity": list(QUANTITIES),
-                "direction": list(DIRECTIONS), "statistic": list(STATISTICS)},
-        attrs={"reference": reference.label, "reference_check": check.label,
+        coords={"setting": ("setting", [s.label for s in settings], {"long_name": "setting"}),
+                "quantity": list(QUANTITIES), "direction": list(DIRECTIONS), "statistic": list(STATISTICS),
+                "unit": (("quantity", "direction"), _unit_table(), {"long_name": "SI unit of each element"})},
+        attrs={"title": f"rss6 speed/accuracy trade-off, scene {scene.name!r}",
+               "history": f"rss6 tradeoff {scene.name} -n {n} --seed {seed}",
+               "reference": reference.label, "reference_check": check.label,
                "reference_check_seconds_per_realization": fine["seconds_per_realization"],
                "realizations": n, "seed": seed, "scene_name": scene.name, "scene_toml": scene.source_text,
                "settle_time_s": scene.simulation.settle_time})
     ds["max_relative_error"] = ds["relative_error"].max(("quantity", "direction", "statistic"))
-    ds["max_relative_error"].attrs["units"] = "1"
-    ds["modes"] = ("setting", [degrees_of_freedom(scene, s.model, s.elements) for s in settings])
-    ds["modes"].attrs["long_name"] = "modes kept (no modal reduction is offered: all DOFs)"
+    ds["max_relative_error"].attrs.update(units="1", long_name="largest relative_error of the setting")
+    ds["modes"] = ("setting", [degrees_of_freedom(scene, s.model, s.elements) for s in settings],
+                   {"units": "1", "long_name": "modes kept (no modal reduction is offered: all DOFs)"})
     return ds
 
 
@@ -394,7 +402,7 @@ def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon
     adaptive = _adaptive(scene)
     for scale in (1.0, 10.0):
         sweep(short, "contact", sim.contact_integrator, contact_steps, scale, adaptive=adaptive)
-    return _stability_dataset(rows, limit, tolerance, n, seed, scene)
+    return _stability_dataset(rows, limit, tolerance, n, seed, scene, horizon)
 
 
 def _explicit_sweep(scene, limit, steps, tolerance, seed, log):
@@ -448,7 +456,8 @@ _RUN_VARIABLES = {   # name: (CSV column, attributes)
     "status": ("status", {"long_name": "stable, inaccurate or failed"}),
     "max_rel_change": ("max_rel_change", {"units": "1", "long_name": "largest relative change of "
                                           "the statistics vs the sweep's finest step"}),
-    "seconds_per_realization": ("seconds_per_realization", {"units": "s"}),
+    "seconds_per_realization": ("seconds_per_realization", {"units": "s", "long_name": "wall time per "
+                                                                       "realisation, batched"}),
     "velocity_mean_peak": ("velocity_mean_peak_m_s", {
         "units": "m s-1", "long_name": "mean over realisations of max |velocity error|, largest "
                                        "of x, y, z"}),
@@ -457,7 +466,8 @@ _RUN_VARIABLES = {   # name: (CSV column, attributes)
 _LIMITS = ("largest_not_failed", "smallest_failed", "largest_accurate")
 
 
-def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene) -> xr.Dataset:
+def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene,
+                       horizon: float = 0.2) -> xr.Dataset:
     """The sweeps' rows as variables along ``run`` and each sweep's limits (s, NaN: none) along
     ``sweep``."""
     ds = xr.Dataset({k: ("run", [r[k] for r in rows], attrs) for k, (_, attrs) in _RUN_VARIABLES.items()})
@@ -468,7 +478,10 @@ def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene
         ds[f"{lim}_s"] = ("sweep", [_limit(ds, name, lim) for name in names],
                           {"units": "s", "long_name": lim.replace("_", " ") + " time step (NaN: none)"})
     ds = ds.assign_coords(sweep=names)
-    ds.attrs = {"central_difference_limit_s": limit, "tolerance": tolerance, "realizations": n,
+    ds.attrs = {"title": f"rss6 time-step stability map, scene {scene.name!r}",
+                "history": f"rss6 stability {scene.name} --tolerance {tolerance:g} -n {n} --seed {seed} "
+                           f"--horizon {horizon:g}",
+                "central_difference_limit_s": limit, "tolerance": tolerance, "realizations": n,
                 "seed": seed, "scene_name": scene.name, "scene_toml": scene.source_text}
     return ds
 

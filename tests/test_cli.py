@@ -94,16 +94,17 @@ def test_simulate_json_and_netcdf(configs, tmp_path, capsys):
     assert out["wall_time_s"] > 0 and out["status"] == "finished"
     with netCDF4.Dataset(out_file) as nc:
         assert nc.Conventions == "CF-1.10" and nc.model == "elastic"
-        assert nc.variables["error"].dimensions == ("quantity", "elapsed_time", "direction")
+        assert nc.variables["error_velocity_rotation"].dimensions == ("elapsed_time", "rotation")
+        assert nc.variables["error_velocity_rotation"].units == "rad s-1"   # one unit per variable
         assert nc.variables["elapsed_time"].units == "s"  # CF keeps "time" for calendar times
-        stored = nc.variables["max_abs_error"][:]
+        stored = nc.variables["max_abs_error_displacement_translation"][:]   # (window, x y z)
         assert "elements_per_link" in nc.scene_toml
     # the file's summaries are the JSON's numbers
-    assert stored[0, 0, 2] == pytest.approx(out["max_abs_error"]["displacement"]["z"], rel=1e-12)
+    assert stored[0, 2] == pytest.approx(out["max_abs_error"]["displacement"]["z"], rel=1e-12)
     by_window = out["max_abs_error_by_window"]       # windows whole, startup, steady in the file
     assert set(by_window) == {"startup", "steady"}
     for k, window in ((1, "startup"), (2, "steady")):
-        assert stored[k, 0, 2] == by_window[window]["displacement"]["z"]
+        assert stored[k, 2] == by_window[window]["displacement"]["z"]
     assert np.array_equal(stored[0], np.maximum(stored[1], stored[2]))
 
 

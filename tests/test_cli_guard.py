@@ -283,7 +283,7 @@ def test_a_tampered_part_is_refused_by_name(tamper, tmp_path):
     write_netcdf(ds, part)
     with pytest.raises(EnsembleFileError, match=part.name) as exc:
         ensemble(spec, 4, out, workers=1, progress=False)
-    assert "delete it" in str(exc.value) and not out.exists()
+    assert "recover with `rm " in str(exc.value) and not out.exists()
 
 
 def test_fewer_or_as_many_realisations_as_stored_leave_the_file_alone(tmp_path, capsys):

@@ -1,0 +1,228 @@
+"""Values changed after rss6 wrote them are caught: the checksums of a file's values (verified by
+every reader), the bounds the summaries obey by construction, and a parts folder checked whole."""
+import json
+import shlex
+import subprocess
+from importlib import resources
+from pathlib import Path
+
+import netCDF4
+import pytest
+
+import pipeline.store as store
+from pipeline.cli import main
+from pipeline.outputs import PartsManifest
+from pipeline.run import EnsembleSpec, ensemble, parts_dir, run_chunk
+from pipeline.scenes import PACKAGE
+from pipeline.store import CHECKSUM, EnsembleFileError, file_checksums, open_ensemble, write_netcdf
+
+SMOKE = Path(str(resources.files(PACKAGE))) / "smoke.toml"
+N = 6
+
+
+def _spec(store_mode: str = "summary") -> EnsembleSpec:
+    return EnsembleSpec(SMOKE.read_text(), str(SMOKE), "quasi-static", "newmark", 1e-3, 4, 5, store_mode)
+
+
+@pytest.fixture(scope="module")
+def merged(tmp_path_factory, cluster_client):
+    """A merged ensemble (N realisations, chunks of 2 on the shared 2-worker cluster)."""
+    path = tmp_path_factory.mktemp("merged") / "ens.nc"
+    ensemble(_spec(), N, path, chunk=2, progress=False, client=cluster_client)
+    return path
+
+
+def _edit(path: Path, variable: str, index: tuple, factor: float = 10.0, keep_checksum=True) -> None:
+    """Multiply one stored value by ``factor`` in place, as netCDF4 would for a user; optionally
+    delete the checksum attribute too (a file of an earlier rss6, or a thorough tamperer)."""
+    with netCDF4.Dataset(path, "a") as nc:
+        var = nc.variables[variable]
+        var[index] = var[index] * factor
+        if not keep_checksum:
+            nc.delncattr(CHECKSUM)
+
+
+def _one_line(capsys, *needles) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("rss6: error: ") and "Traceback" not in err, err
+    for needle in needles:
+        assert needle in err, err
+    return err
+
+
+def _copy(src: Path, dst: Path) -> Path:
+    dst.write_bytes(src.read_bytes())
+    return dst
+
+
+def test_one_value_times_ten_is_refused_by_stats_plot_and_resume(merged, tmp_path, capsys):
+    """The issue's case: one realisation's whole-run x maximum x 10, edited with netCDF4."""
+    assert main(["stats", str(merged)]) == 0
+    capsys.readouterr()
+    bad = _copy(merged, tmp_path / "bad.nc")
+    _edit(bad, "max_abs_error_displacement_translation", (0, 3, 0))
+    assert main(["stats", str(bad)]) == 2
+    _one_line(capsys, f"{bad}: variable max_abs_error_displacement_translation ", CHECKSUM)
+    assert main(["plot", str(bad), "-o", str(tmp_path / "plots")]) == 2
+    _one_line(capsys, f"{bad}: variable max_abs_error_displacement_translation ")
+    with pytest.raises(EnsembleFileError, match=f"{bad}: variable max_abs_error_displacement_translation "):
+        ensemble(_spec(), N + 2, bad, workers=1, progress=False)   # a resume reads it first
+    assert not parts_dir(bad).exists()
+
+
+def test_a_changed_history_value_is_refused_when_the_file_is_resumed(tmp_path):
+    """The histories of a full file are read lazily, block by block, and checked all the same."""
+    spec = _spec("full")
+    out = tmp_path / "full.nc"
+    ensemble(spec, 3, out, workers=1, progress=False)
+    _edit(out, "error_acceleration_rotation", (2, 150, 1), factor=1.0 + 1e-12)   # one ulp-sized change
+    with pytest.raises(EnsembleFileError, match=f"{out}: variable error_acceleration_rotation "):
+        ensemble(spec, 4, out, workers=1, progress=False)
+
+
+def test_the_checksum_is_the_same_for_any_chunking_and_a_rerun(merged, tmp_path):
+    """Same seed, same values, same checksums: N realisations in chunks of 2 on 2 workers (the
+    fixture), all in one chunk on 1 worker, and computed here in one process and written."""
+    other = tmp_path / "one_chunk.nc"
+    ensemble(_spec(), N, other, workers=1, chunk=N, progress=False)
+    here = tmp_path / "here.nc"
+    write_netcdf(run_chunk(_spec(), list(range(N))), here)
+    sums = []
+    for path in (merged, other, here):
+        with netCDF4.Dataset(path) as nc:
+            sums.append(json.loads(nc.getncattr(CHECKSUM)))
+    assert sums[0] == sums[1] == sums[2]
+    assert "max_abs_error_displacement_translation" in sums[0] and "status" in sums[0]
+    import xarray as xr
+    with xr.open_dataset(merged, engine="netcdf4", decode_times=False) as raw:   # what readers compute
+        assert file_checksums(raw) == sums[0]
+
+
+def test_history_checksums_do_not_depend_on_the_blocks_they_are_written_and_read_in(tmp_path, monkeypatch):
+    """A merge streams the histories from the parts one block at a time (here one realisation):
+    the checksums are those of the same values written at once, and they verify when the file is
+    read whole and when it is read lazily in blocks."""
+    monkeypatch.setattr(store, "HISTORY_BLOCK", 1)
+    spec = _spec("full")
+    streamed = tmp_path / "streamed.nc"
+    ensemble(spec, 4, streamed, workers=1, chunk=2, progress=False)
+    at_once = tmp_path / "at_once.nc"
+    write_netcdf(run_chunk(spec, [0, 1, 2, 3]), at_once)
+    with netCDF4.Dataset(streamed) as a, netCDF4.Dataset(at_once) as b:
+        assert json.loads(a.getncattr(CHECKSUM)) == json.loads(b.getncattr(CHECKSUM))
+    assert store.load_netcdf(streamed).encoding.get("rss6_unverified") is None       # verified whole
+    assert store.load_netcdf(streamed, lazy=True)["error"].data.numblocks[0] == 4     # and in blocks
+
+
+# edits of a file without checksums (an earlier rss6's, or the attribute deleted): the bounds
+# between the summaries catch what makes the values impossible. Each edit: (variable, index,
+# new value from the file's variables), windows whole, startup, steady along the first axis.
+def _times(factor, name, index):
+    return lambda nc: nc[name][index] * factor
+
+
+def _mean_between(nc):
+    """A whole-run mean above both window means but below the maximum (only the bound that the
+    whole-run mean is their weighted average catches it)."""
+    mean, peak = nc["mean_abs_error_displacement_rotation"], nc["max_abs_error_displacement_rotation"]
+    split = max(mean[1, 1, 1], mean[2, 1, 1])
+    assert split < peak[0, 1, 1]
+    return (split + peak[0, 1, 1]) / 2
+
+
+IMPOSSIBLE = {
+    "whole-run maximum x 10": (("max_abs_error_displacement_translation", (0, 3, 0)),
+                               _times(10, "max_abs_error_displacement_translation", (0, 3, 0)),
+                               "max_abs_error: the whole-run maximum"),
+    "startup maximum above the whole run's": (("max_abs_error_velocity_rotation", (1, 2, 2)),
+                                              _times(1.5, "max_abs_error_velocity_rotation", (0, 2, 2)),
+                                              "max_abs_error: the startup maximum"),
+    "steady maximum above the whole run's": (("max_abs_error_acceleration_translation", (2, 0, 1)),
+                                             _times(1.01, "max_abs_error_acceleration_translation", (0, 0, 1)),
+                                             "max_abs_error: the steady maximum"),
+    "mean above its maximum": (("mean_abs_error_velocity_translation", (2, 4, 0)),
+                               _times(1.01, "max_abs_error_velocity_translation", (2, 4, 0)),
+                               "mean_abs_error: the mean"),
+    "whole-run mean above both windows' means": (("mean_abs_error_displacement_rotation", (0, 1, 1)),
+                                                 _mean_between, "mean_abs_error: the whole-run mean"),
+}
+
+
+@pytest.mark.parametrize("case", list(IMPOSSIBLE))
+def test_impossible_values_are_refused_by_name(merged, tmp_path, capsys, case):
+    (variable, index), value, message = IMPOSSIBLE[case]
+    bad = _copy(merged, tmp_path / "bad.nc")
+    with netCDF4.Dataset(bad, "a") as nc:
+        nc[variable][index] = value(nc)
+        nc.delncattr(CHECKSUM)
+    assert main(["stats", str(bad)]) == 2
+    _one_line(capsys, f"{bad}: {message}", "cannot happen")
+
+
+def test_a_file_without_checksums_is_read_with_a_note(merged, tmp_path, capsys):
+    """An earlier rss6's file: its results stay usable (they may have cost hours), with one note."""
+    old = _copy(merged, tmp_path / "old.nc")
+    with netCDF4.Dataset(old, "a") as nc:
+        nc.delncattr(CHECKSUM)
+    assert main(["stats", str(old), "--json"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)["n_finished"] == N
+    assert out.err.strip() == (f"rss6: note: {old}: no checksum of its values ({CHECKSUM}; written by "
+                               "an earlier rss6 or by another program): checked for consistency only")
+
+
+def test_a_file_in_the_layout_before_the_split_by_unit_is_read(tmp_path, capsys, monkeypatch):
+    """rss6 up to 0.2.0 wrote each error variable whole (per-element units in 'unit', no CF units)
+    and no checksums: such a file reads as the same Dataset, with the note."""
+    ds = run_chunk(_spec(), [0, 1, 2])
+    old = tmp_path / "old.nc"
+    with monkeypatch.context() as m:
+        m.setattr(store, "_split_units", lambda d: d)
+        write_netcdf(ds, old)
+    with netCDF4.Dataset(old, "a") as nc:
+        assert nc.variables["max_abs_error"].rss6_units == store.MIXED_UNITS
+        nc.delncattr(CHECKSUM)
+    import xarray as xr
+    xr.testing.assert_identical(open_ensemble(old), ds)
+    assert main(["stats", str(old)]) == 0
+    assert "no checksum" in capsys.readouterr().err
+
+
+def _three_parts(out: Path) -> PartsManifest:
+    manifest = PartsManifest(parts_dir(out), _spec().attrs())
+    for r in (0, 2, 4):
+        manifest.write(run_chunk(_spec(), [r, r + 1]), f"chunk-{r:07d}-{r + 1:07d}.nc")
+    return manifest
+
+
+def test_two_tampered_parts_are_named_in_one_run_with_the_command_that_recovers(merged, tmp_path):
+    out = tmp_path / "out.nc"
+    manifest = _three_parts(out)
+    first, _, last = manifest.parts()
+    _edit(first, "mean_abs_error_displacement_translation", (0, 1, 2))
+    _edit(last, "steps", (0,), factor=2)
+    with pytest.raises(EnsembleFileError) as exc:
+        ensemble(_spec(), N, out, workers=1, progress=False)
+    message = str(exc.value)
+    assert len(message.splitlines()) == 1 and message.startswith(f"{manifest.folder}: 2 of 3 stored parts")
+    assert f"{first.name}: changed since it was written" in message and "realisations 0-1" in message
+    assert f"{last.name}: changed since it was written" in message and "realisations 4-5" in message
+    command = message.split("recover with `")[1].split("`")[0]
+    assert command == f"rm {shlex.quote(str(first))} {shlex.quote(str(last))}"
+    subprocess.run(command, shell=True, check=True)   # the one command, then the same rerun
+    outcome = ensemble(_spec(), N, out, workers=1, progress=False)
+    assert outcome.stored_before == 2 and outcome.computed == 4
+    with netCDF4.Dataset(out) as a, netCDF4.Dataset(merged) as b:
+        assert a.getncattr(CHECKSUM) == b.getncattr(CHECKSUM)   # the same values as a clean run
+
+
+def test_parts_without_their_manifest_are_all_named_and_the_folder_is_the_command(tmp_path):
+    out = tmp_path / "out.nc"
+    manifest = _three_parts(out)
+    manifest.path.unlink()
+    with pytest.raises(EnsembleFileError) as exc:
+        ensemble(_spec(), N, out, workers=1, progress=False)
+    message = str(exc.value)
+    assert message.startswith(f"{manifest.folder}: 3 of 3 stored parts")
+    assert all(f"{p.name}: no manifest.json vouches for it" in message for p in manifest.parts())
+    assert f"recover with `rm -r {shlex.quote(str(manifest.folder))}`" in message
