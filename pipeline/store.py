@@ -364,6 +364,18 @@ def file_checksums(ds: xr.Dataset) -> dict:
     return out
 
 
+CHECKSUMS_SINCE = (0, 3)   # the first rss6 version whose files carry CHECKSUM
+
+
+def _writes_checksums(version) -> bool:
+    """Whether rss6 ``version`` (a file's ``rss6_version``) writes checksums: a file of such a
+    version without them was altered; one of an earlier rss6 (or of no rss6) is read with a note."""
+    try:
+        return tuple(int(p) for p in str(version).split(".")[:2]) >= CHECKSUMS_SINCE
+    except ValueError:
+        return False
+
+
 def verify_checksums(ds: xr.Dataset, path) -> bool:
     """EnsembleFileError naming the file and the first variable whose values differ from the
     checksum written with the file (changed since), or that was added or removed; False when the
@@ -371,6 +383,10 @@ def verify_checksums(ds: xr.Dataset, path) -> bool:
     import json
     text = ds.attrs.get(CHECKSUM)
     if text is None:
+        if _writes_checksums(ds.attrs.get("rss6_version")):
+            raise EnsembleFileError(f"{path}: attribute {CHECKSUM} is missing, although rss6 "
+                                    f"{ds.attrs['rss6_version']} writes it: the file was altered after rss6 "
+                                    "wrote it; rerun the command that wrote it, or restore the file")
         return False
     try:
         recorded = json.loads(str(text))

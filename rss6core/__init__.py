@@ -80,7 +80,7 @@ from .scene import CLEARANCE_RADII, Scene, SceneError, load_scene, parse_scene
 from .status import FAILED, FINISHED, STATUSES
 from .sections import crank_inertia, rod_inertia
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII", "RELATIVE_BAND_REACH",
            "MODELS", "MODEL_LEVELS", "ModelLevel", "model_level", "models_with", "INTEGRATORS", "CONTACT_STARTS",
            "simulate", "simulate_batch", "prepare_level", "Level",

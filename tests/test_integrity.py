@@ -154,7 +154,8 @@ def test_impossible_values_are_refused_by_name(merged, tmp_path, capsys, case):
     bad = _copy(merged, tmp_path / "bad.nc")
     with netCDF4.Dataset(bad, "a") as nc:
         nc[variable][index] = value(nc)
-        nc.delncattr(CHECKSUM)
+        nc.delncattr(CHECKSUM)           # as if an earlier rss6 had written it: the bounds still hold
+        nc.rss6_version = "0.2.0"
     assert main(["stats", str(bad)]) == 2
     _one_line(capsys, f"{bad}: {message}", "cannot happen")
 
@@ -164,11 +165,26 @@ def test_a_file_without_checksums_is_read_with_a_note(merged, tmp_path, capsys):
     old = _copy(merged, tmp_path / "old.nc")
     with netCDF4.Dataset(old, "a") as nc:
         nc.delncattr(CHECKSUM)
+        nc.rss6_version = "0.2.0"
     assert main(["stats", str(old), "--json"]) == 0
     out = capsys.readouterr()
     assert json.loads(out.out)["n_finished"] == N
     assert out.err.strip() == (f"rss6: note: {old}: no checksum of its values ({CHECKSUM}; written by "
                                "an earlier rss6 or by another program): checked for consistency only")
+
+
+def test_a_checksum_removed_from_a_file_of_a_version_that_writes_it_is_refused(merged, tmp_path, capsys):
+    """Deleting the attribute is no way around the check: this rss6 writes it, so its absence in a
+    file of this version means the file was altered."""
+    bare = _copy(merged, tmp_path / "bare.nc")
+    _edit(bare, _first_error_variable(bare), (0, 0, 0), keep_checksum=False)
+    assert main(["stats", str(bare)]) == 2
+    _one_line(capsys, str(bare), CHECKSUM, "is missing")
+
+
+def _first_error_variable(path: Path) -> str:
+    with netCDF4.Dataset(path) as nc:
+        return next(v for v in nc.variables if v.startswith("max_abs_error_"))
 
 
 def test_a_file_in_the_layout_before_the_split_by_unit_is_read(tmp_path, capsys, monkeypatch):
@@ -182,8 +198,9 @@ def test_a_file_in_the_layout_before_the_split_by_unit_is_read(tmp_path, capsys,
     with netCDF4.Dataset(old, "a") as nc:
         assert nc.variables["max_abs_error"].rss6_units == store.MIXED_UNITS
         nc.delncattr(CHECKSUM)
+        nc.rss6_version = "0.2.0"
     import xarray as xr
-    xr.testing.assert_identical(open_ensemble(old), ds)
+    xr.testing.assert_identical(open_ensemble(old), ds.assign_attrs(rss6_version="0.2.0"))
     assert main(["stats", str(old)]) == 0
     assert "no checksum" in capsys.readouterr().err
 
