@@ -24,9 +24,7 @@ __all__ = ["plot_ensemble", "plot_run", "ensemble_figures", "run_figures", "figu
            "output_grid", "figure_title", "save_figure", "plain_ticks", "sensitivity_figures",
            "plot_sensitivity"]
 
-from rss6core import parse_scene, rigid_motion  # noqa: E402
-from rss6core.contact_dynamics import TOL_DISPLACEMENT, TOL_VELOCITY  # noqa: E402
-from rss6core.quasi_static import closure_matrix  # noqa: E402
+from rss6core import TOL_DISPLACEMENT, TOL_VELOCITY, closure_matrix, parse_scene, rigid_motion  # noqa: E402
 
 from .stats import (MIN_N_MEAN, ensemble_stats, estimates, in_window, quantile_estimates,  # noqa: E402
                     running_mean_interval, windows_of)

@@ -19,6 +19,7 @@ Running a level
 - models_with: the names of the levels with a yes/no property (e.g. "draws_clearances").
 - INTEGRATORS: the time integrators a level accepts by name.
 - CONTACT_STARTS: the contact level's initial states by name (drawn, equilibrium).
+- TOL_DISPLACEMENT, TOL_VELOCITY: the contact level's Newton tolerances on the joints (m, m/s).
 - simulate: one realisation of a level along the scene's trajectory.
 - simulate_batch: many realisations of one level, sharing what they share.
 - prepare_level: a level on a scene with what all its realisations share computed once.
@@ -32,6 +33,7 @@ Running a level
 - default_integrator: a scene's integrator for a level.
 - natural_frequencies: undamped angular frequencies (rad/s) of the elastic robot at one instant.
 - degrees_of_freedom: how many unknowns a level solves for.
+- closure_matrix: the quasi-static level's linearised leg closure at one instant (platform error per eccentricity).
 
 Compiled kernels (numba; the contact level's)
 - level_kernels: the compiled kernels a level calls (none but the contact level's).
@@ -68,13 +70,14 @@ from .beam import BEAM_THEORIES, BeamTheory
 from .clearance import (RELATIVE_BAND_REACH, SIZE_UNIFORMS, UNIFORM_BLOCKS, ClearanceDraw,
                         clearances_from_named_uniforms, clearances_from_uniforms, draw_clearances, size_band,
                         uniform_dimension)
-from .contact_options import CONTACT_STARTS
+from .contact_options import CONTACT_STARTS, TOL_DISPLACEMENT, TOL_VELOCITY
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
 from .kernels import compile_kernels, kernel_cache_folder, kernels_to_compile, level_kernels
 from .kinematics import rigid_motion
 from .levels import (MODEL_LEVELS, MODELS, ModelLevel, default_integrator, default_time_step, model_level,
                      models_with)
+from .quasi_static import closure_matrix
 from .models import Level, degrees_of_freedom, natural_frequencies, prepare_level, simulate, simulate_batch, stored_draw
 from .scene import CLEARANCE_RADII, Scene, SceneError, load_scene, parse_scene
 from .status import FAILED, FINISHED, STATUSES
@@ -83,6 +86,7 @@ from .sections import crank_inertia, rod_inertia
 __version__ = "0.3.0"
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII", "RELATIVE_BAND_REACH",
            "MODELS", "MODEL_LEVELS", "ModelLevel", "model_level", "models_with", "INTEGRATORS", "CONTACT_STARTS",
+           "TOL_DISPLACEMENT", "TOL_VELOCITY", "closure_matrix",
            "simulate", "simulate_batch", "prepare_level", "Level",
            "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
            "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",

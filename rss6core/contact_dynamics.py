@@ -43,7 +43,7 @@ from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_fr
                        platform_point_map, scene_link_matrices, split)
 from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Records, Settings, State, System,
                              Out, advance_chunk, make_scratch, make_work, newton_step)
-from .contact_options import MAX_CONTACT_REFINEMENTS
+from .contact_options import MAX_CONTACT_REFINEMENTS, TOL_DISPLACEMENT, TOL_VELOCITY
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
 from .elastic import quasi_static_state
@@ -56,8 +56,6 @@ from .status import DIVERGENCE_LIMIT, FAILED, FINISHED, contact_failure
 __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactStepper", "CompiledStepper",
            "Progress", "JointSolution", "StepSolution", "StartState", "drawn_start"]
 
-TOL_DISPLACEMENT = 1e-12   # m: Newton stops when the update moves no joint by more
-TOL_VELOCITY = 1e-9        # m/s: ... and changes no joint velocity by more (explicit steps)
 MAX_ITERATIONS = 60
 
 

@@ -14,34 +14,43 @@ from __future__ import annotations
 import dataclasses
 import os
 
-__all__ = ["level_kernels", "kernels_to_compile", "compile_kernels", "kernel_cache_folder", "KERNELS"]
+from .levels import MODELS, model_level
 
-KERNELS = {"contact": ("advance_chunk", "newton_step")}   # level -> entry points of .contact_kernel
+__all__ = ["level_kernels", "kernels_to_compile", "compile_kernels", "kernel_cache_folder", "ENTRY_POINTS"]
+
+ENTRY_POINTS = ("advance_chunk", "newton_step")   # .contact_kernel's, called by the contact-joint levels
+
+
+def _entry_points(model: str) -> tuple[str, ...]:
+    """The compiled entry points ``model`` calls: the contact kernel's where its joints are contact
+    pairs (the level table's ``contact_joints``), none elsewhere."""
+    return ENTRY_POINTS if model_level(model).contact_joints else ()
 
 
 def level_kernels(model: str) -> tuple[str, ...]:
     """Names of the compiled kernels ``model`` calls (none for the levels without any)."""
-    return tuple(f"contact_kernel.{name}" for name in KERNELS.get(model, ()))
+    return tuple(f"contact_kernel.{name}" for name in _entry_points(model))
 
 
 def kernels_to_compile(model: str) -> list[str]:
     """The kernels of ``model`` this process would compile before running it: neither compiled here
     already nor in numba's on-disk cache for this machine and source."""
-    if not KERNELS.get(model):
+    if not _entry_points(model):
         return []
     return [f"contact_kernel.{name}" for name, kernel in _dispatchers(model) if not _cached(kernel)]
 
 
 def kernel_cache_folder() -> str:
     """Where numba keeps the compiled kernels (``NUMBA_CACHE_DIR``, else beside the source)."""
-    return str(dict(_dispatchers("contact"))["advance_chunk"]._cache._cache_path)
+    from . import contact_kernel
+    return str(contact_kernel.advance_chunk._cache._cache_path)
 
 
 def compile_kernels(scene) -> dict[str, float]:
     """Compile every level's kernels not yet cached, into numba's on-disk cache, by running the
     contact level on ``scene`` for two output steps; returns seconds spent compiling per kernel
     compiled (empty when all were cached: then this takes about a second)."""
-    todo = {name for model in KERNELS for name in kernels_to_compile(model)}
+    todo = {name for model in MODELS for name in kernels_to_compile(model)}
     if not todo:
         return {}
     from numba.core import event
@@ -56,7 +65,7 @@ def compile_kernels(scene) -> dict[str, float]:
 
 def _dispatchers(model: str) -> list:
     from . import contact_kernel
-    return [(name, getattr(contact_kernel, name)) for name in KERNELS[model]]
+    return [(name, getattr(contact_kernel, name)) for name in _entry_points(model)]
 
 
 def _cached(kernel) -> bool:
