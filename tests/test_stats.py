@@ -17,7 +17,7 @@ from pipeline.run import EnsembleSpec, run_ensemble
 from pipeline.stats import (in_window, MIN_N_MEAN, MIN_N_STD, QUANTILES, STATISTICS, ensemble_stats,
                             mean_interval, min_n_for_quantile, quantile_interval, quantile_ranks,
                             std_interval, to_json)
-from pipeline.store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, _provenance, load_netcdf
+from pipeline.store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, _provenance, load_netcdf, write_netcdf
 from pipeline.scenes import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
@@ -144,7 +144,7 @@ def test_mixed_file_uses_finished_realisations_only(tmp_path, capsys):
     assert mixed.attrs["n_finished"] == 37 and mixed.attrs["n_failed"] == 3
     xr.testing.assert_identical(mixed.drop_attrs(), clean.drop_attrs())
     path = tmp_path / "mixed.nc"
-    _file(_synthetic(values, status)).to_netcdf(path)
+    write_netcdf(_file(_synthetic(values, status)), path)
     assert main(["stats", str(path), "--quantity", "velocity"]) == 0
     assert "37 finished realisations (3 failed)" in capsys.readouterr().out
 
@@ -155,7 +155,7 @@ def _raise(name):
 
 def test_json_is_strict_with_null_for_missing_numbers(tmp_path, capsys):
     path = tmp_path / "small.nc"
-    _file(_synthetic(np.random.default_rng(3).gamma(2.0, size=(3, 12, 6)))).to_netcdf(path)
+    write_netcdf(_file(_synthetic(np.random.default_rng(3).gamma(2.0, size=(3, 12, 6)))), path)
     assert main(["stats", str(path), "--json", "-o", str(tmp_path / "s.nc")]) == 0
     js = json.loads(capsys.readouterr().out, parse_constant=_raise)
     cell = js["max_abs_error"]["displacement"]["z"]
@@ -173,7 +173,7 @@ def test_json_is_strict_with_null_for_missing_numbers(tmp_path, capsys):
 
 def test_text_table_shows_dashes_and_the_n_needed(tmp_path, capsys):
     path = tmp_path / "small.nc"
-    _file(_synthetic(np.random.default_rng(4).gamma(2.0, size=(3, 32, 6)))).to_netcdf(path)
+    write_netcdf(_file(_synthetic(np.random.default_rng(4).gamma(2.0, size=(3, 32, 6)))), path)
     assert main(["stats", str(path), "--direction", "z"]) == 0
     out = capsys.readouterr().out
     assert "q95: no 95 % interval below n = 59 (n = 32 here)" in out
