@@ -2,7 +2,7 @@
 
 Run on demand: ``python benchmarks/cluster_cost.py [--pairs P] [--json]``.
 For each of P pairs, alternating which goes first, a cluster of 2 workers is started with rss6's
-settings (``pipeline.run.QUIET_CLUSTER``: no worker profiler, slower dashboard monitors) and one
+settings (``pipeline.ensemble.run.QUIET_CLUSTER``: no worker profiler, slower dashboard monitors) and one
 with dask's defaults for those keys; each measures
 - idle: the CPU seconds of the main process (scheduler, nannies, client) and of the workers over
   10 s without tasks;
@@ -32,7 +32,7 @@ def _measure(quiet: bool, tmp: str) -> dict:
     """Idle CPU of a 2-worker cluster and a 1000-realisation run on a 1-worker cluster."""
     from dask.distributed import Client
 
-    import pipeline.run as run
+    import pipeline.ensemble.run as run
     from rss6core import load_scene
     from rss6core.models import default_integrator, default_time_step
     settings = getattr(run, "QUIET_CLUSTER", {})   # {} in an rss6 before it: both arms are dask's
@@ -49,7 +49,7 @@ def _measure(quiet: bool, tmp: str) -> dict:
         spec = run.EnsembleSpec(scene.source_text, str(CONFIG), "paper", default_integrator(scene, "paper"),
                                 default_time_step(scene, "paper"), scene.simulation.elements_per_link, 0)
         with run.local_cluster(1) as cluster, Client(cluster) as client:
-            client.run(lambda: __import__("pipeline.run"))
+            client.run(lambda: __import__("pipeline.ensemble.run"))
             pid = next(iter(client.run(os.getpid).values()))
             main0, worker0, start = _cpu(os.getpid()), _cpu(pid), time.perf_counter()
             run.run_ensemble(spec, 1000, Path(tempfile.mkdtemp(dir=tmp)) / "p.nc", client=client,

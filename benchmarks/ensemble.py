@@ -47,7 +47,7 @@ for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 from rss6core import load_scene  # noqa: E402
-from pipeline.run import default_chunk  # noqa: E402
+from pipeline.ensemble.run import default_chunk  # noqa: E402
 from rss6core.models import default_integrator, default_time_step, simulate_batch  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
@@ -108,11 +108,11 @@ def _throughput(scene, config, model, n, workers, tmp):
     seconds its tasks computed (dask's task stream): how busy the pipeline kept the workers."""
     from dask.distributed import Client, get_task_stream
 
-    from pipeline.run import EnsembleSpec, local_cluster, run_ensemble
+    from pipeline.ensemble.run import EnsembleSpec, local_cluster, run_ensemble
     spec = EnsembleSpec(scene.source_text, str(config), model, default_integrator(scene, model),
                         default_time_step(scene, model), scene.simulation.elements_per_link, 0)
     with local_cluster(workers) as cluster, Client(cluster) as client:
-        client.run(lambda: __import__("pipeline.run"))     # imports off the clock (solver, xarray)
+        client.run(lambda: __import__("pipeline.ensemble.run"))     # imports off the clock (solver, xarray)
         fresh = Path(tempfile.mkdtemp(dir=tmp)) / f"{model}-{workers}.nc"   # nothing stored to resume
         with get_task_stream(client) as stream:
             start = time.perf_counter()

@@ -105,7 +105,7 @@ def phases(n: int) -> list:
         marks.append((what, round(time.perf_counter() - start, 2)))
 
     import pipeline.cli as cli
-    import pipeline.run as run
+    import pipeline.ensemble.run as run
     mark("imports done")
     client, finished = run._client, run._finished
 
@@ -144,7 +144,7 @@ def _cpu_ms(f, items) -> tuple[float, list]:
 
 def _chunk_parts(scene, level, spec, realizations: list) -> dict:
     """CPU ms per realisation of each part of the paper level for one chunk."""
-    from pipeline.run import run_chunk
+    from pipeline.ensemble.run import run_chunk
     from rss6core.paper_method import output_step, paper_contact_forces, paper_draw, paper_result
     steps, k = len(level.elastic.t), range(len(realizations))
     t_draw, draws = _cpu_ms(lambda r: paper_draw(scene, 0, r, steps), realizations)
@@ -160,7 +160,7 @@ def parts() -> dict:
     """CPU ms per realisation of the paper level's parts (median of three chunks of 63)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"
-    from pipeline.run import EnsembleSpec, run_chunk
+    from pipeline.ensemble.run import EnsembleSpec, run_chunk
     from rss6core import load_scene
     from rss6core.models import prepare_level
     scene = load_scene(CONFIG)

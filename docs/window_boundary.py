@@ -13,7 +13,7 @@ import sys
 
 import numpy as np
 
-from pipeline.store import QUANTITIES, load_netcdf
+from pipeline.files.store import QUANTITIES, load_netcdf
 from rss6core import parse_scene
 
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 import importlib
 
 # public name -> the module that defines it
-_PUBLIC = {"open_ensemble": "store", "labelled": "store", "load_netcdf": "store",
-           "ensemble_stats": "stats", "run_ensemble": "run", "EnsembleSpec": "run"}
+_PUBLIC = {"open_ensemble": "files.store", "labelled": "files.store", "load_netcdf": "files.store",
+           "ensemble_stats": "analysis.stats", "run_ensemble": "ensemble.run", "EnsembleSpec": "ensemble.run"}
 
 __all__ = sorted(_PUBLIC)
 

@@ -14,8 +14,8 @@ import numpy as np
 
 from rss6core import CONTACT_STARTS, INTEGRATORS, MODELS, SceneError, __version__
 
-from .scenes import find_scene, scene_names
-from .summary import contact_peaks, error_summary, format_errors, format_summary, scene_summary
+from .scenes.catalogue import find_scene, scene_names
+from .analysis.summary import contact_peaks, error_summary, format_errors, format_summary, scene_summary
 
 
 def _positive_float(text: str) -> float:
@@ -98,7 +98,7 @@ def _with_start(args, scene):
         return scene
     from rss6core import parse_scene
 
-    from .scene_variant import scene_variant
+    from .scenes.variant import scene_variant
     text = scene_variant(scene.source_text, {"simulation": {"contact_start": args.start}},
                          scene.source_path, add=True)
     return parse_scene(text, scene.source_path)
@@ -106,7 +106,7 @@ def _with_start(args, scene):
 
 def _refuse_clearance_free_default(args, scene, model: str) -> None:
     """An ensemble of a level without clearances is N identical runs: only on explicit request."""
-    from .summary import CLEARANCE_LEVELS, run_default_level
+    from .analysis.summary import CLEARANCE_LEVELS, run_default_level
     if args.model is None and run_default_level(scene) is None:
         raise SceneError(f"scene {scene.name!r}: its model {model!r} has no clearances, so every "
                          f"realisation would be the same; pass --model with a clearance level "
@@ -118,8 +118,8 @@ def _simulate(args) -> int:
 
     from rss6core import simulate
 
-    from .store import run_dataset, write_netcdf
-    from .outputs import check_new_output
+    from .files.store import run_dataset, write_netcdf
+    from .files.outputs import check_new_output
     scene = _with_start(args, find_scene(args.config))
     model, integrator, dt, elements = _settings(args, scene)
     if args.output:
@@ -162,7 +162,7 @@ def _note_compiling(model: str) -> None:
     from rss6core import kernels_to_compile
     cold = kernels_to_compile(model)
     if cold:
-        from .run import compile_note
+        from .ensemble.run import compile_note
         print(f"rss6 simulate: {compile_note(cold)}", file=sys.stderr, flush=True)
 
 
@@ -186,9 +186,9 @@ def _warm(args) -> int:
 
 
 def _run(args) -> int:
-    from .outputs import check_output_path
-    from .run import EnsembleSpec, SchedulerUnavailable, ensemble, parts_dir
-    from .summary import failure_reasons
+    from .files.outputs import check_output_path
+    from .ensemble.run import EnsembleSpec, SchedulerUnavailable, ensemble, parts_dir
+    from .analysis.summary import failure_reasons
     specs, verdicts = _requirements(args), []
     targets = _until_targets(args)
     _known_windows(specs + targets)
@@ -199,14 +199,14 @@ def _run(args) -> int:
     _check_until_cap(targets, args.n, replicates)
     output = check_output_path(args.output or f"{scene.name}_{model}.nc", args.parents)
     _warn_oversubscription(args.workers, args.scheduler)
-    _import_meanwhile("distributed", "pipeline.gate")   # gate imports stats (scipy.stats)
+    _import_meanwhile("distributed", "pipeline.analysis.gate")   # gate imports stats (scipy.stats)
     spec = EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements,
                         args.seed, args.store, qmc_replicates=replicates)
     until = None
     kept = f"finished chunks are kept in {parts_dir(output)}"
     try:
         if targets:
-            from .until import run_until
+            from .analysis.until import run_until
             until = run_until(spec, targets, args.n, output, workers=args.workers,
                               scheduler=args.scheduler, chunk=args.chunk,
                               annotate=_annotate(specs, verdicts), worker_timeout=args.worker_timeout)
@@ -221,8 +221,8 @@ def _run(args) -> int:
         return 2
     except KeyboardInterrupt:
         return _interrupted(kept)
-    from .stats import ensemble_stats, format_stats
-    from .gate import exit_code, format_verdicts
+    from .analysis.stats import ensemble_stats, format_stats
+    from .analysis.gate import exit_code, format_verdicts
     ds = outcome.dataset
     print(_outcome_line(outcome, output, args.n if until is None else until.n, model))
     reasons = failure_reasons(ds)
@@ -231,7 +231,7 @@ def _run(args) -> int:
     if reasons and ds.attrs["n_failed"] == ds.sizes["realization"]:
         print("rss6: every realisation failed; no statistics", file=sys.stderr)
         return 1
-    from .store import QUANTITIES
+    from .files.store import QUANTITIES
     contact = model == "contact"   # its velocity and acceleration measure the robot; start-up impacts
     shown = {"quantity": list(QUANTITIES) if contact else ["displacement"],
              "window": ["whole", "steady"] if contact else ["whole"]}
@@ -248,7 +248,7 @@ def _run(args) -> int:
 
 def _known_windows(specs: list) -> None:
     """A --require or --until naming a window the files do not have is a one-line error before any work."""
-    from .store import WINDOWS
+    from .files.store import WINDOWS
     for s in specs:
         if s.window is not None and s.window not in WINDOWS:
             raise SceneError(f"{s.text!r}: unknown window {s.window!r}; choose one of "
@@ -257,7 +257,7 @@ def _known_windows(specs: list) -> None:
 
 def _until_targets(args) -> list:
     """The --until targets, parsed before any work; a malformed one is a one-line error."""
-    from .until import UntilError, parse_targets
+    from .analysis.until import UntilError, parse_targets
     try:
         return parse_targets(args.until)
     except UntilError as exc:
@@ -266,7 +266,7 @@ def _until_targets(args) -> list:
 
 def _check_until_cap(targets: list, cap: int, replicates: int | None) -> None:
     """A --until target no n up to -n can meet is a one-line error before any work."""
-    from .until import UntilError, check_cap
+    from .analysis.until import UntilError, check_cap
     try:
         check_cap(targets, cap, replicates)
     except UntilError as exc:
@@ -277,8 +277,8 @@ def _replicates(args, scene, model: str, dt: float) -> int | None:
     """R for --sampler qmc (None for mc), checked before any work against -n and the level."""
     from rss6core import time_grid, uniform_dimension
 
-    from .sampler import DEFAULT_REPLICATES, check_qmc
-    from .summary import CLEARANCE_LEVELS
+    from .ensemble.sampler import DEFAULT_REPLICATES, check_qmc
+    from .analysis.summary import CLEARANCE_LEVELS
     if args.sampler == "mc":
         if args.replicates is not None:
             raise SceneError("--replicates applies to --sampler qmc only")
@@ -389,8 +389,8 @@ def _tracked(paths: list) -> list[str]:
 def _report(args) -> int:
     from pathlib import Path
 
-    from .report import ReportPlan, write_report
-    from .run import SchedulerUnavailable
+    from .studies.report import ReportPlan, write_report
+    from .ensemble.run import SchedulerUnavailable
     out = Path(args.output)
     tracked = [] if args.overwrite_tracked else _tracked([out / "results.md", out / "results"])
     if tracked:
@@ -425,7 +425,7 @@ def _selection(sds, args):
 
 def _requirements(args) -> list:
     """The --require specs, parsed before any work; a malformed one is a one-line error."""
-    from .spec import SpecError, parse_specs
+    from .analysis.spec import SpecError, parse_specs
     if args.undecided is not None and not args.require:
         raise SceneError(f"--undecided {args.undecided}: applies with --require only")
     try:
@@ -437,7 +437,7 @@ def _requirements(args) -> list:
 def _judge(ds, specs: list, confidence: float = 0.95) -> list:
     """Verdicts of the specs on an ensemble (or single-run) Dataset; a window the file lacks is a
     one-line error."""
-    from .gate import judge_all
+    from .analysis.gate import judge_all
     try:
         return judge_all(specs, ds, confidence)
     except ValueError as exc:
@@ -445,11 +445,11 @@ def _judge(ds, specs: list, confidence: float = 0.95) -> list:
 
 
 def _stats(args) -> int:
-    from .filecheck import open_results
-    from .gate import check_confidence, exit_code, format_verdicts, verdicts_json
-    from .stats import ensemble_stats, format_stats, to_json
-    from .outputs import check_new_output
-    from .store import write_netcdf
+    from .files.check import open_results
+    from .analysis.gate import check_confidence, exit_code, format_verdicts, verdicts_json
+    from .analysis.stats import ensemble_stats, format_stats, to_json
+    from .files.outputs import check_new_output
+    from .files.store import write_netcdf
     specs = _requirements(args)
     _known_windows(specs)
     if specs:
@@ -481,7 +481,7 @@ def _stats(args) -> int:
 def _window_of(sds, window: str):
     """The statistics of analysis window ``window`` only (dimension kept); SceneError names an unknown
     one, or a file without windows."""
-    from .stats import windows_of
+    from .analysis.stats import windows_of
     if window not in windows_of(sds):
         raise SceneError(f"--window: unknown window {window!r}; the file has "
                          f"{', '.join(windows_of(sds)) or 'no analysis windows'}")
@@ -490,7 +490,7 @@ def _window_of(sds, window: str):
 
 def _verdict_attrs(verdicts: list) -> dict:
     """File attributes of the verdicts: the overall one and each as strict JSON (SI values)."""
-    from .gate import overall, verdicts_json
+    from .analysis.gate import overall, verdicts_json
     return {"requirements_verdict": overall(verdicts),
             "requirements": json.dumps(verdicts_json(verdicts), allow_nan=False)}
 
@@ -509,10 +509,10 @@ def _require_arguments(p) -> None:
 
 
 def _plot(args) -> int:
-    from .filecheck import open_results
-    from .plots import plot_ensemble, plot_run
-    from .outputs import check_output_folder
-    from .store import EnsembleFileError
+    from .files.check import open_results
+    from .analysis.plots import plot_ensemble, plot_run
+    from .files.outputs import check_output_folder
+    from .files.store import EnsembleFileError
     check_output_folder(args.output, args.parents)
     ds = open_results(args.file)
     if "realization" not in ds.dims:                      # rss6 simulate -o: one run's histories
@@ -536,7 +536,7 @@ def _plot(args) -> int:
 
 def _level_spec(args, scene, level: str):
     """The ensemble spec of one level of ``rss6 multifidelity``: the scene's settings for it."""
-    from .run import EnsembleSpec
+    from .ensemble.run import EnsembleSpec
     model, integrator, dt, elements = _settings(
         argparse.Namespace(model=level, integrator=None, dt=None, elements=None), scene)
     return EnsembleSpec(scene.source_text, str(args.config), model, integrator, dt, elements,
@@ -544,11 +544,11 @@ def _level_spec(args, scene, level: str):
 
 
 def _multifidelity(args) -> int:
-    from .multifidelity import (check_multifidelity_output, format_multifidelity, level_paths,
-                                multifidelity_dataset, to_json)
-    from .run import SchedulerUnavailable, ensemble, parts_dir
-    from .store import check_window, write_netcdf
-    from .summary import CLEARANCE_LEVELS
+    from .studies.multifidelity import (check_multifidelity_output, format_multifidelity, level_paths,
+                                        multifidelity_dataset, to_json)
+    from .ensemble.run import SchedulerUnavailable, ensemble, parts_dir
+    from .files.store import check_window, write_netcdf
+    from .analysis.summary import CLEARANCE_LEVELS
     if args.high == args.low:
         raise SceneError(f"--low {args.low}: must differ from --high (the same level is no control "
                          "variate)")
@@ -598,7 +598,7 @@ def _multifidelity(args) -> int:
 
 
 def _multifidelity_parser(sub) -> None:
-    from .store import WINDOWS
+    from .files.store import WINDOWS
     mf = sub.add_parser("multifidelity", help="means of a dear level with a cheap level on more "
                         "realisations as control variate (multi-fidelity Monte Carlo)")
     mf.add_argument("config", nargs="?", default="paper",
@@ -637,8 +637,8 @@ def _multifidelity_parser(sub) -> None:
 
 
 def _tradeoff(args) -> int:
-    from .outputs import check_output_folder
-    from .study import tradeoff, write_tradeoff
+    from .files.outputs import check_output_folder
+    from .studies.study import tradeoff, write_tradeoff
     scene = find_scene(args.config)
     check_output_folder(args.output, args.parents)
     print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")
@@ -660,8 +660,8 @@ def _tradeoff(args) -> int:
 
 
 def _stability(args) -> int:
-    from .outputs import check_output_folder
-    from .study import stability, write_stability
+    from .files.outputs import check_output_folder
+    from .studies.study import stability, write_stability
     scene = find_scene(args.config)
     check_output_folder(args.output, args.parents)
     print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
@@ -681,11 +681,11 @@ def _sensitivity(args) -> int:
     import time
     from pathlib import Path
 
-    from .outputs import OutputLock, check_new_output
-    from .plots import plot_sensitivity
-    from .run import EnsembleSpec
-    from .sensitivity import SensitivityError, format_joints, format_sensitivity, sensitivity
-    from .store import load_netcdf, write_netcdf
+    from .files.outputs import OutputLock, check_new_output
+    from .analysis.plots import plot_sensitivity
+    from .ensemble.run import EnsembleSpec
+    from .studies.sensitivity import SensitivityError, format_joints, format_sensitivity, sensitivity
+    from .files.store import load_netcdf, write_netcdf
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
     output = check_new_output(args.output or f"{scene.name}_{model}_sobol.nc", "rss6 sensitivity",
@@ -713,10 +713,10 @@ def _sensitivity(args) -> int:
 
 
 def _budget(args) -> int:
-    from .budget import BudgetError, budget, format_budget
-    from .outputs import check_output_folder
-    from .run import EnsembleSpec
-    from .spec import SpecError, parse_spec
+    from .studies.budget import BudgetError, budget, format_budget
+    from .files.outputs import check_output_folder
+    from .ensemble.run import EnsembleSpec
+    from .analysis.spec import SpecError, parse_spec
     try:
         specs = [parse_spec(t) for t in args.spec]
     except SpecError as exc:
@@ -737,8 +737,8 @@ def _budget(args) -> int:
 
 
 def _sensitivity_parser(sub) -> None:
-    from .sensitivity import LEVELS, MIN_N
-    from .store import WINDOWS
+    from .studies.sensitivity import LEVELS, MIN_N
+    from .files.store import WINDOWS
     se = sub.add_parser("sensitivity", help="Sobol' indices of the error statistics by joint family "
                                             "(and joint), with bootstrap intervals (SALib)")
     se.add_argument("config", nargs="?", default="paper",
@@ -874,7 +874,7 @@ def _simulate_parser(sub) -> None:
 
 
 def _run_parser(sub) -> None:
-    from .store import STORES
+    from .files.store import STORES
     run = sub.add_parser("run", help="run a Monte Carlo ensemble of clearance realisations")
     run.add_argument("config", nargs="?", default="paper",
                      help="scene TOML file or embedded scene name (default: paper)")
@@ -895,7 +895,7 @@ def _run_parser(sub) -> None:
     run.add_argument("--workers", type=_positive_int,
                      help="local dask workers, one thread each (default 2)")
     _scheduler_options(run)
-    from .run import MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL
+    from .ensemble.run import MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL
     larger = ", ".join(f"{n} for {m}" for m, n in MAX_AUTO_CHUNK_BY_MODEL.items())
     run.add_argument("--chunk", type=_positive_int,
                      help="realisations per task (default: n cut into a multiple of the workers "
@@ -992,7 +992,7 @@ def _scheduler_options(parser) -> None:
 def _cluster_options(args) -> None:
     """--worker-timeout only with --scheduler (rss6's own local workers are never missing), --workers
     only without it (the scheduler's workers are its own); their defaults filled in."""
-    from .run import WORKER_TIMEOUT_S
+    from .ensemble.run import WORKER_TIMEOUT_S
     if getattr(args, "scheduler", None) and getattr(args, "workers", None) is not None:
         raise SceneError(f"--workers {args.workers}: sets the local cluster; with --scheduler the "
                          "scheduler's own workers run the tasks")
@@ -1010,7 +1010,7 @@ def _cluster_options(args) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    from .store import EnsembleFileError
+    from .files.store import EnsembleFileError
     try:
         _cluster_options(args)
         return args.func(args)

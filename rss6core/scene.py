@@ -529,7 +529,7 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
 def load_scene(path: str | Path) -> Scene:
     """Load and check a scene from a TOML file; SceneError naming the file if it cannot be read.
 
-    Shipped scenes are found by name in ``pipeline.scenes``, not here: the core reads files only.
+    Shipped scenes are found by name in ``pipeline.scenes.catalogue``, not here: the core reads files only.
     """
     try:
         text = Path(path).read_text(encoding="utf-8")

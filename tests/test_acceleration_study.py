@@ -6,9 +6,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline.acceleration_study import (BURSTS, TIMOSHENKO, converged, default_variants,
-                                         high_pass, main, markdown, window_maxima)
-from pipeline.study import Setting, _scene_for, default_settings
+from pipeline.studies.accelerations import (BURSTS, TIMOSHENKO, converged, default_variants, high_pass, main, markdown,
+                                            window_maxima)
+from pipeline.studies.study import Setting, _scene_for, default_settings
 from rss6core import BeamTheory, natural_frequencies
 from rss6core.contact_dynamics import build_joint_model
 

@@ -102,7 +102,7 @@ def _reach(graph: dict[str, set[str]], start: str) -> set[str]:
 def test_reading_a_scene_and_the_paper_level_do_not_load_the_contact_kernel(paper):
     """Reading a scene, the facade and the pipeline's run module leave numba unloaded (it costs a
     paper-level run 0.3 s of import in its main process and in the workers' fork server)."""
-    code = ("import sys, pipeline.run, rss6core\n"
+    code = ("import sys, pipeline.ensemble.run, rss6core\n"
             f"s = rss6core.load_scene({str(paper.source_path)!r})\n"
             "assert rss6core.simulate_batch(s, 'paper', realizations=[0])[0].status == 'finished'\n"
             "print(sorted(m for m in ('numba', 'rss6core.contact_kernel') if m in sys.modules))")

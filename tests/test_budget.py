@@ -7,12 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pipeline.budget import BudgetError, Trial, _sweep, round_down, scaled_scene
+from pipeline.studies.budget import BudgetError, Trial, _sweep, round_down, scaled_scene
 from pipeline.cli import main
-from pipeline.gate import judge_all
-from pipeline.run import EnsembleSpec, run_chunk
-from pipeline.spec import parse_spec
-from pipeline.stats import ensemble_stats
+from pipeline.analysis.gate import judge_all
+from pipeline.ensemble.run import EnsembleSpec, run_chunk
+from pipeline.analysis.spec import parse_spec
+from pipeline.analysis.stats import ensemble_stats
 
 SPEC = "displacement:x,y,z<=0.1mm@q95"
 N = 64
@@ -144,8 +144,8 @@ def test_a_level_without_clearances_is_refused(configs, tmp_path, capsys):
 def test_geometric_limit_and_a_spec_that_passes_beyond_it(configs, tmp_path, capsys):
     """smoke: 0.25 mm clearances on 10 mm pins and balls reach the radius at scale 40; a spec that the
     quasi-static level meets beyond that is one line and exit 2, not a budget of 4 cm gaps."""
-    from pipeline.budget import geometric_limit
-    from pipeline.scenes import find_scene
+    from pipeline.studies.budget import geometric_limit
+    from pipeline.scenes.catalogue import find_scene
     assert geometric_limit(find_scene("smoke")) == pytest.approx(0.010 / 0.25e-3)
     from rss6core import parse_scene      # a relative size band draws up to twice the nominal size
     banded = (configs / "smoke.toml").read_text().replace("size_tolerance = 0.0 ", "size_tolerance = 0.1 ")

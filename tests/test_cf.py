@@ -7,9 +7,9 @@ import pytest
 import xarray as xr
 
 from pipeline.cli import main
-from pipeline.run import EnsembleSpec, run_chunk
-from pipeline.store import load_netcdf, write_netcdf
-from pipeline.scenes import PACKAGE
+from pipeline.ensemble.run import EnsembleSpec, run_chunk
+from pipeline.files.store import load_netcdf, write_netcdf
+from pipeline.scenes.catalogue import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
 
@@ -76,7 +76,7 @@ def test_statistics_file_is_cf(tmp_path):
 
 def test_multifidelity_file_is_cf(tmp_path):
     """`rss6 multifidelity -o F.nc`: the combined Dataset of two smoke ensembles on the same draws."""
-    from pipeline.multifidelity import multifidelity_dataset
+    from pipeline.studies.multifidelity import multifidelity_dataset
     spec = EnsembleSpec(SMOKE.read_text(), str(SMOKE), "paper", "newmark", 1e-3, 4, 0, "summary")
     path = tmp_path / "mf.nc"
     low = run_chunk(EnsembleSpec(SMOKE.read_text(), str(SMOKE), "quasi-static", "newmark", 1e-3, 4,
@@ -166,7 +166,7 @@ def test_the_public_names_import_from_pipeline_lazily():
             "from pipeline import open_ensemble, ensemble_stats, run_ensemble, labelled; "
             "print(open_ensemble.__module__, ensemble_stats.__module__, run_ensemble.__module__)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.split() == ["pipeline.store", "pipeline.stats", "pipeline.run"]
+    assert out.split() == ["pipeline.files.store", "pipeline.analysis.stats", "pipeline.ensemble.run"]
 
 
 def _every_kind(folder: Path) -> dict:
@@ -190,8 +190,8 @@ def _every_kind(folder: Path) -> dict:
 def _study_files(folder: Path) -> dict:
     """tradeoff.nc of two quasi-static settings, and stability.nc of two made-up sweep rows (the
     real sweeps take minutes; the file's form is the same)."""
-    from pipeline.scenes import find_scene
-    from pipeline.study import Setting, _stability_dataset, tradeoff, write_stability, write_tradeoff
+    from pipeline.scenes.catalogue import find_scene
+    from pipeline.studies.study import Setting, _stability_dataset, tradeoff, write_stability, write_tradeoff
     scene = find_scene("smoke")
     settings = [Setting("quasi-static", "newmark", 2e-3, 4), Setting("quasi-static", "newmark", 1e-3, 4)]
     write_tradeoff(tradeoff(scene, 1, 0, settings, settings[1], log=lambda *a: None), folder, 0.05)

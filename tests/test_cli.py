@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from pipeline.scenes import scene_names
+from pipeline.scenes.catalogue import scene_names
 
 
 def test_check_json_paper(configs, capsys):

@@ -12,13 +12,13 @@ import pytest
 import xarray as xr
 
 from pipeline.cli import _warn_oversubscription, main
-from pipeline.outputs import OutputLock, PartsManifest
-from pipeline.run import TEST_HOLD_ENV, EnsembleSpec, ensemble, run_chunk
-from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
-from pipeline.summary import failure_reasons
+from pipeline.files.outputs import OutputLock, PartsManifest
+from pipeline.ensemble.run import TEST_HOLD_ENV, EnsembleSpec, ensemble, run_chunk
+from pipeline.files.store import EnsembleFileError, open_ensemble, write_netcdf
+from pipeline.analysis.summary import failure_reasons
 from importlib import resources
 
-from pipeline.scenes import PACKAGE
+from pipeline.scenes.catalogue import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))
 
@@ -32,7 +32,7 @@ def _spec(n_seed=3):
 
 def _holding(first: int, release: Path) -> dict:
     """The environment of a run whose chunks from realisation ``first`` on wait until ``release``
-    exists (pipeline.run.TEST_HOLD_ENV): a test then acts in a known state, not after a time."""
+    exists (pipeline.ensemble.run.TEST_HOLD_ENV): a test then acts in a known state, not after a time."""
     return dict(os.environ, **{TEST_HOLD_ENV: f"{first}:{release}"})
 
 
@@ -348,7 +348,7 @@ def test_report_refuses_to_overwrite_tracked_files(tmp_path, capsys):
 def test_progress_starts_at_once_and_gives_an_eta():
     import io
 
-    from pipeline.run import _Progress
+    from pipeline.ensemble.run import _Progress
     stream = io.StringIO()
     bar = _Progress(10, 2, stream)
     bar.begin(4, "2 workers")

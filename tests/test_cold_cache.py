@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.run import TEST_HOLD_ENV
+from pipeline.ensemble.run import TEST_HOLD_ENV
 
 SMOKE = Path(__file__).resolve().parent.parent / "configs" / "smoke.toml"
 KERNELS = "contact_kernel.advance_chunk, contact_kernel.newton_step"

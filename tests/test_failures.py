@@ -3,12 +3,12 @@ file is the same whatever the chunk size and the worker count, failures included
 import numpy as np
 import xarray as xr
 
-import pipeline.run as run
+import pipeline.ensemble.run as run
 from rss6core import Level
-from pipeline.run import EnsembleSpec, run_chunk, run_ensemble
-from pipeline.scene_variant import scene_variant
-from pipeline.scenes import scene_text
-from pipeline.store import finish_ensemble
+from pipeline.ensemble.run import EnsembleSpec, run_chunk, run_ensemble
+from pipeline.scenes.variant import scene_variant
+from pipeline.scenes.catalogue import scene_text
+from pipeline.files.store import finish_ensemble
 
 SMOKE_TEXT = scene_text("smoke")
 PER_REALISATION = ["status", "status_message", "max_abs_error", "mean_abs_error", "eccentricity"]

@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline.store import chunk_dataset, load_netcdf, window_masks, window_reductions, write_netcdf
+from pipeline.files.store import chunk_dataset, load_netcdf, window_masks, window_reductions, write_netcdf
 from rss6core import SimulationResult
 from rss6core.clearance import _combine, draw_clearances, realization_rng, sphere_directions
 from rss6core.contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
@@ -99,7 +99,7 @@ def test_a_chunk_is_its_realisations_one_by_one(paper):
 def test_a_lazy_ensemble_keeps_only_its_histories_on_disk(paper, tmp_path):
     """load_netcdf(lazy=True): the histories as dask arrays in blocks of realisations, every other
     variable in memory, and the values those of an eager read."""
-    from pipeline.run import EnsembleSpec, run_chunk
+    from pipeline.ensemble.run import EnsembleSpec, run_chunk
     spec = EnsembleSpec(paper.source_text, "paper.toml", "quasi-static", "newmark", 0.01, 2, 0,
                         store="full")
     write_netcdf(run_chunk(spec, [0, 1, 2]), tmp_path / "q.nc")

@@ -15,13 +15,13 @@ import xarray as xr
 from matplotlib.text import Text
 
 from pipeline.cli import main
-from pipeline.filecheck import open_results
-from pipeline.plots import CONTACT_ACCURACY, QUANTITIES, ensemble_figures, family_units, figure_unit, run_figures
-from pipeline.report import LEVELS, error_figure, rigid_figure
-from pipeline.stats import (MIN_N_MEAN, ensemble_stats, estimates, min_n_for_quantile,
-                            running_mean_interval)
-from pipeline.store import WINDOWS, open_ensemble, window_masks, write_netcdf
-from pipeline.study import recommend, stability_figure, tradeoff_figure
+from pipeline.files.check import open_results
+from pipeline.analysis.plots import (CONTACT_ACCURACY, QUANTITIES, ensemble_figures, family_units, figure_unit,
+                                     run_figures)
+from pipeline.studies.report import LEVELS, error_figure, rigid_figure
+from pipeline.analysis.stats import MIN_N_MEAN, ensemble_stats, estimates, min_n_for_quantile, running_mean_interval
+from pipeline.files.store import WINDOWS, open_ensemble, window_masks, write_netcdf
+from pipeline.studies.study import recommend, stability_figure, tradeoff_figure
 
 SMOKE = str(Path(__file__).resolve().parent.parent / "configs" / "smoke.toml")
 SLACK = 0.5   # px: boxes that merely touch do not overlap
@@ -184,7 +184,7 @@ def _hist_unit(ds, q: str, d: str) -> tuple[float, str]:
 
 
 def test_histogram_markers_and_convergence_interval_come_from_stats(full_ensemble):
-    """Mean lines sit at pipeline.stats' numbers; the interval starts at MIN_N_MEAN; the y range is
+    """Mean lines sit at pipeline.analysis.stats' numbers; the interval starts at MIN_N_MEAN; the y range is
     not below zero."""
     ds = open_ensemble(full_ensemble)
     figs = ensemble_figures(ds)
@@ -276,11 +276,10 @@ def test_plot_command_on_a_failed_simulate_file_gives_one_line(simulate_file, tm
 def test_sensitivity_figures_are_legible(smoke, tmp_path):
     """The bar charts of `rss6 sensitivity --per-joint` (18 joint labels per panel), drawn from a file
     of made-up indices shaped like the command's (the numbers do not change the layout)."""
-    from pipeline.run import EnsembleSpec
-    from pipeline.sensitivity import (SobolIndices, clearance_inputs, designs,
-                                      sensitivity_dataset)
-    from pipeline.plots import sensitivity_figures
-    from pipeline.store import load_netcdf
+    from pipeline.ensemble.run import EnsembleSpec
+    from pipeline.studies.sensitivity import SobolIndices, clearance_inputs, designs, sensitivity_dataset
+    from pipeline.analysis.plots import sensitivity_figures
+    from pipeline.files.store import load_netcdf
     inputs = clearance_inputs(smoke)
     rng = np.random.default_rng(0)
     results = []
@@ -365,7 +364,7 @@ def test_run_figures_mark_stored_maxima_above_the_output_grid(simulate_file):
 
 def test_envelope_marks_the_stored_maximum_over_realisations(full_ensemble):
     """The envelope's max curve names the output grid; where the file's stored maxima exceed it
-    (contact-like file), a dashed line sits at pipeline.stats' max over realisations per window."""
+    (contact-like file), a dashed line sits at pipeline.analysis.stats' max over realisations per window."""
     ds = _contact_like(open_ensemble(full_ensemble).load(), "velocity", {"startup": 14.0})
     figs = ensemble_figures(ds)
     try:
@@ -389,7 +388,7 @@ def test_envelope_marks_the_stored_maximum_over_realisations(full_ensemble):
 
 def test_report_envelopes_mark_the_stored_maxima_over_realisations(smoke, full_ensemble, simulate_file):
     """rss6 report's error figure: the contact level's envelope panels (stored maxima above the
-    samples, a contact-like file) carry the dashed line at pipeline.stats' max over realisations in
+    samples, a contact-like file) carry the dashed line at pipeline.analysis.stats' max over realisations in
     each window where it exceeds them; the paper level's (a plain file) carry none."""
     plain = open_ensemble(full_ensemble).load()
     contact = _contact_like(plain, "velocity", {"startup": 14.0})
@@ -451,7 +450,7 @@ def _contact_ensemble(ds, spread: float, rate_spread: float = 0.005, startup: fl
     acceleration maxima at their means spread over the fraction ``rate_spread`` of them; the
     start-up velocity and acceleration errors (histories and maxima) ``startup`` times larger, as at
     the contact level, whose start-up impacts exceed the steady ones a hundredfold."""
-    from pipeline.scene_variant import scene_variant
+    from pipeline.scenes.variant import scene_variant
     ds = ds.copy(deep=True)
     text = scene_variant(ds.attrs["scene_toml"], {"simulation": {"contact_tolerance_m": EPS,
                                                                  "contact_refinements": 4}}, add=True)
@@ -529,8 +528,8 @@ def test_resolution_of_each_level(smoke, full_ensemble):
     """The contact level's: twice the step's tolerance through the legs' closure, whose gain is
     checked against the worst of every sign combination solved for; Newton's tolerance where the
     step is fixed; twice the documented accuracy for rates.  Every other level: round-off."""
-    from pipeline.plots import CONTACT_ACCURACY, ROUND_OFF, closure_gain, resolutions
-    from pipeline.scene_variant import scene_variant
+    from pipeline.analysis.plots import CONTACT_ACCURACY, ROUND_OFF, closure_gain, resolutions
+    from pipeline.scenes.variant import scene_variant
     from rss6core.contact_dynamics import TOL_DISPLACEMENT, TOL_VELOCITY
     gain = _worst_closure_gain(smoke)
     np.testing.assert_allclose(closure_gain(smoke), gain, rtol=1e-9)

@@ -9,9 +9,9 @@ import pytest
 from rss6core import __version__
 
 from pipeline.cli import main
-from pipeline.run import EnsembleSpec, run_ensemble
-from pipeline.store import ENSEMBLE_ATTRS, PROVENANCE, EnsembleFileError, load_netcdf, open_ensemble, write_netcdf
-from pipeline.scenes import PACKAGE
+from pipeline.ensemble.run import EnsembleSpec, run_ensemble
+from pipeline.files.store import ENSEMBLE_ATTRS, PROVENANCE, EnsembleFileError, load_netcdf, open_ensemble, write_netcdf
+from pipeline.scenes.catalogue import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
 

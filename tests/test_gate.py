@@ -8,10 +8,10 @@ import pytest
 import xarray as xr
 from scipy import stats as sps
 
-from pipeline.gate import exit_code, format_verdicts, judge, judge_all, verdicts_json
-from pipeline.spec import STANDARD_GRAVITY, SpecError, parse_spec
-from pipeline.stats import (MIN_N_STD, QUANTILES, STATISTICS, mean_bounds, one_sided_ranks,
-                            quantile_bounds, quantile_decision_n, rqmc_intervals)
+from pipeline.analysis.gate import exit_code, format_verdicts, judge, judge_all, verdicts_json
+from pipeline.analysis.spec import STANDARD_GRAVITY, SpecError, parse_spec
+from pipeline.analysis.stats import (MIN_N_STD, QUANTILES, STATISTICS, mean_bounds, one_sided_ranks, quantile_bounds,
+                                     quantile_decision_n, rqmc_intervals)
 
 DIRECTIONS = ["x", "y", "z", "rx", "ry", "rz"]
 
@@ -162,7 +162,7 @@ def test_quantile_decisions_are_the_exact_binomial_tests(n, statistic, op):
 @pytest.mark.parametrize("spec_text", ["displacement:x<=1mm@q95", "displacement:x>=1mm@q05"])
 def test_the_gate_decides_on_those_bounds_at_every_count(spec_text):
     """End to end at n = 20, every count of violating realisations: the gate's outcome is the
-    binomial tests' (above), its bounds those of pipeline.stats; q95 fails from 4 violations
+    binomial tests' (above), its bounds those of pipeline.analysis.stats; q95 fails from 4 violations
     (P(Bin(20, 0.05) >= 3) = 7.5 %, >= 4: 1.6 %) and never passes (no upper bound below n = 59)."""
     spec, n = parse_spec(spec_text), 20
     allowed = 0.05

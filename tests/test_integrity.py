@@ -9,12 +9,12 @@ from pathlib import Path
 import netCDF4
 import pytest
 
-import pipeline.store as store
+import pipeline.files.store as store
 from pipeline.cli import main
-from pipeline.outputs import PartsManifest
-from pipeline.run import EnsembleSpec, ensemble, parts_dir, run_chunk
-from pipeline.scenes import PACKAGE
-from pipeline.store import CHECKSUM, EnsembleFileError, file_checksums, open_ensemble, write_netcdf
+from pipeline.files.outputs import PartsManifest
+from pipeline.ensemble.run import EnsembleSpec, ensemble, parts_dir, run_chunk
+from pipeline.scenes.catalogue import PACKAGE
+from pipeline.files.store import CHECKSUM, EnsembleFileError, file_checksums, open_ensemble, write_netcdf
 
 SMOKE = Path(str(resources.files(PACKAGE))) / "smoke.toml"
 N = 6

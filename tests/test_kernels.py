@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-import pipeline.run as run
+import pipeline.ensemble.run as run
 from pipeline.cli import main
 
 
@@ -37,7 +37,7 @@ def test_one_compiled_overload_per_kernel_serves_every_scene_start_and_step():
     fixed and adaptive steps, two scenes: one signature per kernel, all from the cache."""
     found = _python("""
 import dataclasses, json
-from pipeline.scenes import find_scene
+from pipeline.scenes.catalogue import find_scene
 from rss6core import compile_kernels, kernels_to_compile, prepare_level
 import rss6core.contact_kernel as ck
 compile_kernels(find_scene("smoke"))   # the cache filled, if it was not (a fresh tree: minutes)

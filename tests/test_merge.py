@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-import pipeline.store as store
-from pipeline.outputs import PartsManifest
-from pipeline.run import EnsembleSpec, ensemble, run_chunk
-from pipeline.scenes import PACKAGE
-from pipeline.store import EnsembleFileError, netcdf_size, open_ensemble, write_netcdf
+import pipeline.files.store as store
+from pipeline.files.outputs import PartsManifest
+from pipeline.ensemble.run import EnsembleSpec, ensemble, run_chunk
+from pipeline.scenes.catalogue import PACKAGE
+from pipeline.files.store import EnsembleFileError, netcdf_size, open_ensemble, write_netcdf
 
 SMOKE = Path(str(resources.files(PACKAGE))) / "smoke.toml"
 N = 6
@@ -137,7 +137,7 @@ def test_an_interrupt_or_a_full_disk_during_the_merge_keeps_every_part(tmp_path,
 def test_parts_with_shorter_strings_first_merge_without_cutting_longer_ones(tmp_path):
     """A part holding only 'failed' read back before one holding 'finished': the merged file keeps
     'finished' whole (the first part's read width '<U6' once cut it to 'finish')."""
-    from pipeline.run import _merged
+    from pipeline.ensemble.run import _merged
     spec = _spec()
     first, second = run_chunk(spec, [0]), run_chunk(spec, [1])
     first["status"].values[:] = np.array(["failed"], dtype=object)
@@ -157,7 +157,7 @@ def test_chunks_of_summaries_merge_as_they_came_or_as_read_back_to_the_same_byte
     """A run merges its summary chunks as the workers sent them and the chunks of an earlier run as
     read back from their parts: any mix of the two, failed realisations (longer and shorter
     strings) included, gives the same file."""
-    from pipeline.run import _merged
+    from pipeline.ensemble.run import _merged
     spec = _summary_spec()
     first, second = run_chunk(spec, [0, 1]), run_chunk(spec, [2, 3])
     first["status"].values[:] = np.array(["failed", "failed"], dtype=object)

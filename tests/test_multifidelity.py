@@ -1,4 +1,4 @@
-"""pipeline.multifidelity: measured coverage of the multi-fidelity interval, unbiasedness, the
+"""pipeline.studies.multifidelity: measured coverage of the multi-fidelity interval, unbiasedness, the
 variance reduction against its closed form, a real rss6 pair, and `rss6 multifidelity`."""
 import json
 
@@ -8,11 +8,11 @@ import xarray as xr
 from scipy import stats as sps
 
 from pipeline.cli import main
-from pipeline.multifidelity import (MIN_N_MF, control_variate_mean, cost_ratio, format_multifidelity,
-                                    level_paths, multifidelity_dataset, optimal_low_ratio, paired_values,
-                                    variance_reduction)
-from pipeline.run import EnsembleSpec, run_chunk
-from pipeline.store import WINDOWS, EnsembleFileError, load_netcdf, window_label
+from pipeline.studies.multifidelity import (MIN_N_MF, control_variate_mean, cost_ratio, format_multifidelity,
+                                            level_paths, multifidelity_dataset, optimal_low_ratio, paired_values,
+                                            variance_reduction)
+from pipeline.ensemble.run import EnsembleSpec, run_chunk
+from pipeline.files.store import WINDOWS, EnsembleFileError, load_netcdf, window_label
 
 CONF = 0.95
 LAWS = {"normal": sps.norm(), "gamma(2)": sps.gamma(2.0), "Laplace": sps.laplace()}

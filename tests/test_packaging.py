@@ -8,7 +8,7 @@ import pytest
 
 import pipeline
 import rss6core
-from pipeline.scenes import scene_names
+from pipeline.scenes.catalogue import scene_names
 
 REPO = Path(__file__).resolve().parents[1]
 

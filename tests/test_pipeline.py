@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from pipeline.outputs import PartsManifest
-from pipeline.run import (MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL, TEST_HOLD_ENV, EnsembleSpec, default_chunk,
-                          run_chunk, run_ensemble)
-from pipeline.stats import ensemble_stats
-from pipeline.store import EnsembleFileError, open_ensemble, write_netcdf
-from pipeline.scenes import scene_text
+from pipeline.files.outputs import PartsManifest
+from pipeline.ensemble.run import (MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL, TEST_HOLD_ENV, EnsembleSpec, default_chunk,
+                                   run_chunk, run_ensemble)
+from pipeline.analysis.stats import ensemble_stats
+from pipeline.files.store import EnsembleFileError, open_ensemble, write_netcdf
+from pipeline.scenes.catalogue import scene_text
 
 SMOKE = "smoke"                    # the shipped scene, by name
 SMOKE_TEXT = scene_text(SMOKE)
@@ -218,7 +218,7 @@ def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(referen
     import dask
     from dask.distributed import Client, Lock
 
-    from pipeline.run import QUIET_CLUSTER, local_cluster
+    from pipeline.ensemble.run import QUIET_CLUSTER, local_cluster
     ref, _ = reference
     monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
     taken = []
@@ -245,7 +245,7 @@ def test_a_second_local_cluster_starts_without_a_port_warning():
     import socket
     import warnings
 
-    from pipeline.run import local_cluster
+    from pipeline.ensemble.run import local_cluster
     with socket.socket() as holder, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         with contextlib.suppress(OSError):      # already taken: the same situation

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from pipeline.report import OFF, PAPER_VALUES, _only, with_clearance
-from pipeline.store import EnsembleFileError, open_ensemble
+from pipeline.studies.report import OFF, PAPER_VALUES, _only, with_clearance
+from pipeline.files.store import EnsembleFileError, open_ensemble
 from rss6core import parse_scene
 
 
@@ -109,5 +109,5 @@ def test_report_reuses_its_files_and_names_a_corrupt_one(configs, report, tmp_pa
     elastic = copy / "results-data" / "smoke_elastic.nc"
     elastic.write_bytes(elastic.read_bytes()[:500])
     with pytest.raises(EnsembleFileError, match="smoke_elastic.nc"):
-        from pipeline.report import ReportPlan, write_report
+        from pipeline.studies.report import ReportPlan, write_report
         write_report([str(configs / "smoke.toml")], copy, ReportPlan(3, 2))

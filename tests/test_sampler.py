@@ -7,11 +7,11 @@ import xarray as xr
 from scipy import stats as sps
 from scipy.stats import qmc
 
-from pipeline.run import EnsembleSpec, run_chunk
-from pipeline.sampler import QMC_TAG, QMCDesign, check_qmc, design_of
-from pipeline.stats import MIN_POINTS_RQMC, STATISTICS, ensemble_stats, estimates, rqmc_intervals
-from rss6core.clearance import (ClearanceDraw, clearances_from_uniforms, draw_clearances,
-                                realization_rng, uniform_dimension)
+from pipeline.ensemble.run import EnsembleSpec, run_chunk
+from pipeline.ensemble.sampler import QMC_TAG, QMCDesign, check_qmc, design_of
+from pipeline.analysis.stats import MIN_POINTS_RQMC, STATISTICS, ensemble_stats, estimates, rqmc_intervals
+from rss6core.clearance import (ClearanceDraw, clearances_from_uniforms, draw_clearances, realization_rng,
+                                uniform_dimension)
 from rss6core.kinematics import rigid_motion
 from rss6core.quasi_static import quasi_static_error
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rss6core import SceneError, parse_scene
-from pipeline.scenes import find_scene, scene_names
+from pipeline.scenes.catalogue import find_scene, scene_names
 from rss6core import load_scene
 
 

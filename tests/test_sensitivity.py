@@ -8,11 +8,11 @@ import pytest
 from scipy import stats as sps
 
 from pipeline.cli import main
-from pipeline.run import EnsembleSpec
-from pipeline.scene_variant import scene_variant
-from pipeline.sensitivity import (FAMILIES, clearance_draws_from_uniforms, clearance_inputs, designs,
-                                  evaluate_statistics, sample_design, sobol_indices)
-from pipeline.store import WINDOWS, error_summaries, load_netcdf
+from pipeline.ensemble.run import EnsembleSpec
+from pipeline.scenes.variant import scene_variant
+from pipeline.studies.sensitivity import (FAMILIES, clearance_draws_from_uniforms, clearance_inputs, designs,
+                                          evaluate_statistics, sample_design, sobol_indices)
+from pipeline.files.store import WINDOWS, error_summaries, load_netcdf
 from rss6core import parse_scene, prepare_level
 from rss6core.clearance import draw_clearances, realization_rng
 from rss6core.kinematics import rigid_motion
@@ -254,7 +254,7 @@ def main_code(argv) -> int:
 def test_the_joint_table_lists_the_largest_joints_from_the_file(sobol_file):
     """--per-joint: per quantity and direction the three joints of largest ST, largest first, with
     the intervals the file holds; no table without the joint design."""
-    from pipeline.sensitivity import format_joints
+    from pipeline.studies.sensitivity import format_joints
     ds = load_netcdf(sobol_file)
     lines = format_joints(ds).splitlines()
     assert len(lines) == 2 + 18 and "of 18; all in the file" in lines[0]
@@ -271,7 +271,7 @@ def test_the_joint_table_lists_the_largest_joints_from_the_file(sobol_file):
 def test_total_estimates_outside_zero_one_get_a_note_naming_the_worst(sobol_file):
     """No index lies outside [0, 1], but an estimate at small N can: the table says so and names the
     estimate farthest out; with every estimate inside, no note."""
-    from pipeline.sensitivity import format_sensitivity
+    from pipeline.studies.sensitivity import format_sensitivity
     ds = load_netcdf(sobol_file)
     inside = ds.assign(max_abs_error_sobol=ds["max_abs_error_sobol"].clip(0, 1))
     assert "note:" not in format_sensitivity(inside)
@@ -285,7 +285,7 @@ def test_total_estimates_outside_zero_one_get_a_note_naming_the_worst(sobol_file
 
 def test_the_largest_family_is_named_with_its_overlap():
     import xarray as xr
-    from pipeline.sensitivity import _dominant
+    from pipeline.studies.sensitivity import _dominant
 
     def cell(est, half):
         est = np.asarray(est)

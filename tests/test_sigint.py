@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.run import TEST_HOLD_ENV
+from pipeline.ensemble.run import TEST_HOLD_ENV
 
 
 def _interrupt_a_run(tmp_path, kill):
-    """Start a quasi-static run of two chunks whose second waits (pipeline.run.TEST_HOLD_ENV) for a
+    """Start a quasi-static run of two chunks whose second waits (pipeline.ensemble.run.TEST_HOLD_ENV) for a
     release file that never comes, and SIGINT it (by ``kill``) once the first chunk is stored: the
     second is then in flight whatever the machine's speed."""
     out = tmp_path / "cut.nc"
@@ -51,8 +51,8 @@ def test_sigint_to_a_run_exits_130_and_keeps_the_finished_chunks(tmp_path):
 def test_ctrl_c_while_waiting_for_dask_is_raised_by_rss6_not_inside_dask(monkeypatch):
     """A Ctrl-C that arrives while the main thread waits in dask's client is held and raised by
     _finished before its next wait: never inside dask's locks (where it could hang the shutdown)."""
-    import pipeline.run as run
-    from pipeline.store import sigint_deferred
+    import pipeline.ensemble.run as run
+    from pipeline.files.store import sigint_deferred
     waits = []
 
     def wait_in_dask(client, pending):   # stands for dask.distributed.wait: Ctrl-C meanwhile

@@ -1,4 +1,4 @@
-"""pipeline.stats: rank choice against brute force, measured coverage of every interval type,
+"""pipeline.analysis.stats: rank choice against brute force, measured coverage of every interval type,
 rss6's own data, mixed files, strict JSON."""
 from importlib import resources
 from pathlib import Path
@@ -13,12 +13,12 @@ from scipy import stats as sps
 from rss6core import load_scene
 
 from pipeline.cli import main
-from pipeline.run import EnsembleSpec, run_ensemble
-from pipeline.stats import (in_window, MIN_N_MEAN, MIN_N_STD, QUANTILES, STATISTICS, ensemble_stats,
-                            mean_interval, min_n_for_quantile, quantile_interval, quantile_ranks,
-                            std_interval, to_json)
-from pipeline.store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, _provenance, load_netcdf, write_netcdf
-from pipeline.scenes import PACKAGE
+from pipeline.ensemble.run import EnsembleSpec, run_ensemble
+from pipeline.analysis.stats import (in_window, MIN_N_MEAN, MIN_N_STD, QUANTILES, STATISTICS, ensemble_stats,
+                                     mean_interval, min_n_for_quantile, quantile_interval, quantile_ranks, std_interval,
+                                     to_json)
+from pipeline.files.store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, _provenance, load_netcdf, write_netcdf
+from pipeline.scenes.catalogue import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
 

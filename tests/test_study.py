@@ -7,8 +7,8 @@ import pytest
 import xarray as xr
 
 from pipeline.cli import main
-from pipeline.study import STATISTICS, pareto_front, recommend, relative_errors
-from pipeline.store import DIRECTIONS, QUANTITIES, load_netcdf
+from pipeline.studies.study import STATISTICS, pareto_front, recommend, relative_errors
+from pipeline.files.store import DIRECTIONS, QUANTITIES, load_netcdf
 from rss6core.contact_dynamics import simulate_contact
 from rss6core.clearance import draw_clearances
 
@@ -68,7 +68,7 @@ def test_stability_map_and_the_explicit_limit(stability_dir):
     assert all(np.isfinite(float(r[c])) for r in rows for c in ("dt_s", "max_rel_change",
                                                                  "seconds_per_realization"))
     explicit = [r for r in rows if r["integrator"].startswith("central-difference")]
-    from pipeline.scenes import find_scene
+    from pipeline.scenes.catalogue import find_scene
     from rss6core.models import natural_frequencies
     limit = 2.0 / natural_frequencies(find_scene(SMOKE))[-1]
     for r in explicit:      # stable below 2/omega_max, diverging above it (within 3 %)

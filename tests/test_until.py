@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from pipeline.stats import ensemble_stats, min_n_for_quantile
-from pipeline.store import open_ensemble
-from pipeline.until import GROWTH, UntilError, checkpoints, parse_target, widths
+from pipeline.analysis.stats import ensemble_stats, min_n_for_quantile
+from pipeline.files.store import open_ensemble
+from pipeline.analysis.until import GROWTH, UntilError, checkpoints, parse_target, widths
 
 
 def test_a_relative_target_over_every_direction():

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from pipeline.filecheck import open_results
-from pipeline.stats import ensemble_stats, in_window, to_json
-from pipeline.store import WINDOWS, cf_encode, window_masks, window_summaries, write_netcdf
+from pipeline.files.check import open_results
+from pipeline.analysis.stats import ensemble_stats, in_window, to_json
+from pipeline.files.store import WINDOWS, cf_encode, window_masks, window_summaries, write_netcdf
 from rss6core import SimulationResult, parse_scene
 from rss6core.clearance import draw_clearances
 from rss6core.contact_dynamics import CompiledStepper, simulate_contact

@@ -21,11 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, prepare_level,
-                      size_band)
+from rss6core import FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, prepare_level, size_band
 
-from .store import (DIRECTIONS, JOINTS, QUANTITIES, WINDOWS, _provenance, _unit_table, check_window, command_line,
-                    window_label, window_summaries)
+from ..files.store import (DIRECTIONS, JOINTS, QUANTITIES, WINDOWS, _provenance, _unit_table, check_window,
+                           command_line, window_label, window_summaries)
 
 __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
            "clearance_draws_from_uniforms", "Design", "designs", "sample_design",
@@ -185,7 +184,7 @@ def _client(workers: int):
         return
     from dask.distributed import Client
 
-    from .run import local_cluster
+    from ..ensemble.run import local_cluster
     cluster = local_cluster(workers)
     client = Client(cluster)
     try:

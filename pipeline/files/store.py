@@ -796,6 +796,6 @@ def checked_ensemble(ds: xr.Dataset, path) -> xr.Dataset:
     if missing or "rss6_version" not in ds.attrs or "realization" not in ds.dims:
         raise EnsembleFileError(f"{path}: not an rss6 ensemble file (missing "
                                 f"{', '.join(missing) or 'rss6 attributes'})")
-    from .filecheck import check_ensemble   # filecheck imports this module
+    from .check import check_ensemble   # filecheck imports this module
     check_ensemble(ds, path)
     return ds

@@ -14,8 +14,8 @@ import xarray as xr
 
 from rss6core import FINISHED, INTEGRATORS, MODELS, STATUSES, SceneError, parse_scene, time_grid
 
-from .store import (DIRECTIONS, ENSEMBLE_ATTRS, MIXED_UNITS, PROVENANCE, QUANTITIES, STORES, WINDOWS,
-                    EnsembleFileError, _unit_table, load_netcdf, note_unverified)
+from .store import (DIRECTIONS, ENSEMBLE_ATTRS, MIXED_UNITS, PROVENANCE, QUANTITIES, STORES, WINDOWS, EnsembleFileError,
+                    _unit_table, load_netcdf, note_unverified)
 
 __all__ = ["check_ensemble", "check_run", "open_results"]
 

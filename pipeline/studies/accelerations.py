@@ -9,7 +9,7 @@ histories.  The friction-excited ~100 Hz bursts are measured as the max over eac
 acceleration minus its running mean over BURST_PERIOD (which removes the slow trajectory-rate
 part).  One command reruns it::
 
-    python -m pipeline.acceleration_study paper -n 6 -o docs/study   # about 5 min, 2 cores
+    python -m pipeline.studies.accelerations paper -n 6 -o docs/study   # about 5 min, 2 cores
 
 and writes DIR/acceleration_maxima.csv (every realisation) and DIR/acceleration_maxima.md (medians,
 spread, the convergence verdict).
@@ -27,7 +27,7 @@ import numpy as np
 
 from rss6core import BeamTheory, SceneError, simulate_batch
 
-from .store import DIRECTIONS
+from ..files.store import DIRECTIONS
 
 __all__ = ["BURSTS", "Variant", "default_variants", "window_maxima", "measure",
            "converged", "study", "markdown", "main"]
@@ -182,9 +182,9 @@ def write(runs: dict, outdir, scene_name: str, n: int, seed: int) -> Path:
 
 
 def main(argv=None) -> int:
-    """``python -m pipeline.acceleration_study SCENE -n N -o DIR [--meshes 1 2 4 8 16 32]``."""
-    from .scenes import find_scene
-    p = argparse.ArgumentParser(prog="python -m pipeline.acceleration_study", description=__doc__.split("\n")[0])
+    """``python -m pipeline.studies.accelerations SCENE -n N -o DIR [--meshes 1 2 4 8 16 32]``."""
+    from ..scenes.catalogue import find_scene
+    p = argparse.ArgumentParser(prog="python -m pipeline.studies.accelerations", description=__doc__.split("\n")[0])
     p.add_argument("scene", help="scene name or TOML file")
     p.add_argument("-n", type=int, default=6, help="realisations per variant (same seed for all)")
     p.add_argument("--seed", type=int, default=0)
@@ -196,7 +196,7 @@ def main(argv=None) -> int:
     try:
         scene = find_scene(args.scene)
     except SceneError as exc:
-        print(f"python -m pipeline.acceleration_study: {exc}", file=sys.stderr)
+        print(f"python -m pipeline.studies.accelerations: {exc}", file=sys.stderr)
         return 2
     print(f"acceleration study: {scene.name}, {args.n} realisations per variant (seed {args.seed})")
     runs = study(scene, args.n, args.seed, default_variants(tuple(args.meshes)))

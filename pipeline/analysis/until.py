@@ -145,7 +145,7 @@ class Width:
 
 
 def widths(targets: list[Target], sds) -> list[Width]:
-    """The half-widths of every target and direction in a statistics Dataset (pipeline.stats)."""
+    """The half-widths of every target and direction in a statistics Dataset (pipeline.analysis.stats)."""
     out = []
     for t in targets:
         da = sds[t.variable].sel(statistic=t.statistic, quantity=t.quantity)
@@ -207,8 +207,8 @@ def _stored(output, spec):
     """The ensemble already in ``output`` (identity checked), or None."""
     from pathlib import Path
 
-    from .run import _check_identity
-    from .store import open_ensemble
+    from ..ensemble.run import _check_identity
+    from ..files.store import open_ensemble
     if not Path(output).exists():
         return None
     ds = open_ensemble(output)
@@ -221,7 +221,7 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
               annotate=None, worker_timeout: float | None = None, stream=None) -> UntilOutcome:
     """Extend ``output`` through :func:`checkpoints` until every target is met or ``cap`` is reached;
     each check's widths are printed to ``stream`` and written into the file (``until_*``)."""
-    from .run import WORKER_TIMEOUT_S, default_chunk, ensemble
+    from ..ensemble.run import WORKER_TIMEOUT_S, default_chunk, ensemble
     from .stats import ensemble_stats
     stream = stream or sys.stderr
     points = checkpoints(targets, cap, spec.qmc_replicates)
@@ -273,6 +273,6 @@ def _cluster(workers: int, scheduler: str | None, needed: bool):
     batches (a cluster per batch would cost its start-up every check)."""
     if scheduler or not needed:
         return scheduler, None
-    from .run import local_cluster
+    from ..ensemble.run import local_cluster
     cluster = local_cluster(workers)
     return cluster.scheduler_address, cluster

@@ -49,8 +49,8 @@ from scipy import stats as sps
 
 from rss6core import FINISHED
 
-from .stats import BOUNDS, MIN_N_MEAN, VARIABLES, in_window, mean_interval
-from .store import window_label
+from ..analysis.stats import BOUNDS, MIN_N_MEAN, VARIABLES, in_window, mean_interval
+from ..files.store import window_label
 
 __all__ = ["MIN_N_MF", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
            "variance_reduction", "estimated_variance_reduction", "adjusted_correlation",
@@ -162,7 +162,7 @@ def paired_values(high: xr.Dataset, low: xr.Dataset, name: str, window: str = "w
 def _check_pairing(high: xr.Dataset, low: xr.Dataset, high_path, low_path) -> None:
     """The pairs must be the same draws: same seed and scene, equal recorded draws (sizes, and
     eccentricities unless a level is the paper level, which records its first step's)."""
-    from .store import EnsembleFileError
+    from ..files.store import EnsembleFileError
     for key in ("seed", "scene_toml"):
         if str(high.attrs.get(key)) != str(low.attrs.get(key)):
             raise EnsembleFileError(f"{low_path}: a different {key} than {high_path}; the "
@@ -268,7 +268,7 @@ def _name(path) -> str:
 
 def _history(high, low, sources) -> str:
     """The two ensembles' histories, then this command's line (last, starting with HISTORY)."""
-    from .store import derived_history
+    from ..files.store import derived_history
     line = f"{HISTORY} of {_name(sources[0])} and {_name(sources[1])}"
     return derived_history(high, derived_history(low, line))
 
@@ -289,7 +289,7 @@ def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
             "estimator": "two-model multi-fidelity Monte Carlo (control variate, optimal fitted "
                          "coefficient, low mean from all low realisations)",
             "interval_multifidelity": f"Student t, N - 2 degrees of freedom; NaN for N < {MIN_N_MF}",
-            "interval_high_only": f"pipeline.stats mean interval; NaN for n < {MIN_N_MEAN}",
+            "interval_high_only": f"pipeline.analysis.stats mean interval; NaN for n < {MIN_N_MEAN}",
             "min_n_multifidelity": MIN_N_MF,
             "statistics_offered": "mean only (quantiles and exceedance probabilities: see "
                                   "pipeline/multifidelity.py)",
@@ -336,7 +336,7 @@ def _extra_columns(mds: xr.Dataset, name: str) -> dict:
 
 
 def _row(mds: xr.Dataset, name: str, q, d) -> str:
-    from .store import display_unit
+    from ..files.store import display_unit
     f, unit = display_unit(str(q), str(d))
     m = mds[f"{name}_mean"].sel(quantity=q, direction=d)
 
@@ -381,8 +381,8 @@ def check_multifidelity_output(path, create_dirs: bool = False):
     (a rerun resumes the two ensembles and rewrites it); any other file is refused, not overwritten."""
     import netCDF4
 
-    from .outputs import check_output_path
-    from .store import EnsembleFileError
+    from ..files.outputs import check_output_path
+    from ..files.store import EnsembleFileError
     path = check_output_path(path, create_dirs)
     if path.exists():
         try:

@@ -2,7 +2,7 @@
 ensemble, and the error histories of a single run (``rss6 simulate -o``).
 
 Every builder returns a matplotlib Figure (tests check its text for overlaps) and the ``plot_*``
-functions save them.  Statistics drawn come from :mod:`pipeline.stats`.  Within a figure each
+functions save them.  Statistics drawn come from :mod:`pipeline.analysis.stats`.  Within a figure each
 direction family (translations, rotations) has one unit; the steady window has envelope panels of
 its own; a histogram whose spread the level's numerics do not resolve (:func:`resolutions`) is a
 note with the common value instead."""
@@ -28,8 +28,8 @@ from rss6core import TOL_DISPLACEMENT, TOL_VELOCITY, closure_matrix, parse_scene
 
 from .stats import (MIN_N_MEAN, ensemble_stats, estimates, in_window, quantile_estimates,  # noqa: E402
                     running_mean_interval, windows_of)
-from .store import DIRECTIONS as _DIRS  # noqa: E402
-from .store import WINDOWS, window_label, window_masks, window_reductions  # noqa: E402
+from ..files.store import DIRECTIONS as _DIRS  # noqa: E402
+from ..files.store import WINDOWS, window_label, window_masks, window_reductions  # noqa: E402
 
 QUANTITIES = ("displacement", "velocity", "acceleration")
 _BASE = {"displacement": ("m", "rad"), "velocity": ("m/s", "rad/s"),
@@ -199,7 +199,7 @@ def _marked_windows(ds) -> list[str]:
 
 def stored_maxima(ds, sds, q: str) -> dict[str, np.ndarray]:
     """{window: (direction,) SI} the file's maximum |q error| per window of _marked_windows, over
-    the finished realisations (``sds``: :func:`pipeline.stats.ensemble_stats`, every window)."""
+    the finished realisations (``sds``: :func:`pipeline.analysis.stats.ensemble_stats`, every window)."""
     return {w: in_window(sds, w)["max_abs_error"].sel(statistic="max", bound="estimate", quantity=q)
             .transpose("direction").values for w in _marked_windows(ds)}
 
@@ -350,7 +350,7 @@ BARS_TOP = 0.6   # axes fraction the tallest bar reaches: the q95 interval bar a
 
 def _histogram_panel(ax, peak, q95, panel: _Panel) -> None:
     """One window's and direction's histogram of maxima ``peak`` (R,) SI, with its mean and the q95
-    cell of pipeline.stats; where their spread is within the level's resolution, a note instead."""
+    cell of pipeline.analysis.stats; where their spread is within the level's resolution, a note instead."""
     (f, unit), d, w, i = panel.unit, panel.direction, panel.window, panel.colour
     ax.set(xlabel=f"max |{d} error| [{unit}]", ylabel="realisations", title=f"{d}, {panel.label}")
     x = peak[np.isfinite(peak)]
@@ -399,7 +399,7 @@ def _si(value: float, unit: str) -> str:
 
 def _mark_q95(ax, cell, f: float, i: int, window: str) -> None:
     """A dashed line at the q95 estimate of ``cell`` (bound: estimate, lower, upper; SI, shown times
-    ``f``) and, only where pipeline.stats gives one, its interval as a capped bar above the bars."""
+    ``f``) and, only where pipeline.analysis.stats gives one, its interval as a capped bar above the bars."""
     est, lo, hi = (float(cell.sel(bound=b)) * f for b in ("estimate", "lower", "upper"))
     text = f"{window}, q95 est. {est:.3g}"
     if np.isfinite(lo) and np.isfinite(hi):

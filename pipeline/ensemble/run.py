@@ -30,12 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import (FAILED, SimulationResult, __version__, parse_scene, prepare_level, stored_draw,
-                     time_grid)
+from rss6core import FAILED, SimulationResult, __version__, parse_scene, prepare_level, stored_draw, time_grid
 
-from .outputs import OutputLock, PartsManifest
-from .store import (EnsembleFileError, finish_ensemble, identity, load_netcdf, open_ensemble,
-                    chunk_dataset, sigint_deferred, write_netcdf)
+from ..files.outputs import OutputLock, PartsManifest
+from ..files.store import (EnsembleFileError, finish_ensemble, identity, load_netcdf, open_ensemble, chunk_dataset,
+                           sigint_deferred, write_netcdf)
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
            "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable", "parts_dir", "compile_note"]
@@ -318,9 +317,9 @@ QUIET_CLUSTER = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.tick.interval": "200ms",
                  "distributed.admin.system-monitor.interval": "2s",
                  "distributed.worker.memory.monitor-interval": "1s"}
-# what a worker needs: rss6core, numpy, xarray, ... through pipeline.run; xarray imports dask.array
-# at its first Dataset, the level's design pipeline.sampler (0.2-0.3 s per worker in its first task)
-WORKER_IMPORTS = ["distributed", "pipeline.run", "dask.array", "pipeline.sampler"]
+# what a worker needs: rss6core, numpy, xarray, ... through pipeline.ensemble.run; xarray imports dask.array
+# at its first Dataset, the level's design pipeline.ensemble.sampler (0.2-0.3 s per worker in its first task)
+WORKER_IMPORTS = ["distributed", "pipeline.ensemble.run", "dask.array", "pipeline.ensemble.sampler"]
 
 
 def _preload_worker_imports() -> None:

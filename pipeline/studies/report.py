@@ -19,15 +19,15 @@ import numpy as np
 
 from rss6core import default_integrator, default_time_step, parse_scene, rigid_motion, simulate, size_band
 
-from .run import WORKER_TIMEOUT_S, EnsembleSpec, dask_client, run_ensemble
-from .scenes import find_scene
-from .plots import (draw_envelope, envelope_marks, family_units, legend_entries, plain_ticks, plt, save_figure,
-                    steady_samples)
+from ..ensemble.run import WORKER_TIMEOUT_S, EnsembleSpec, dask_client, run_ensemble
+from ..scenes.catalogue import find_scene
+from ..analysis.plots import (draw_envelope, envelope_marks, family_units, legend_entries, plain_ticks, plt,
+                              save_figure, steady_samples)
 from . import report_text as text
-from .scene_variant import scene_variant
-from .stats import ensemble_stats, in_window, min_n_for_quantile
-from .store import (DIRECTIONS, EnsembleFileError, display_unit, load_netcdf, open_ensemble, run_dataset,
-                    window_label, write_netcdf)
+from ..scenes.variant import scene_variant
+from ..analysis.stats import ensemble_stats, in_window, min_n_for_quantile
+from ..files.store import (DIRECTIONS, EnsembleFileError, display_unit, load_netcdf, open_ensemble, run_dataset,
+                           window_label, write_netcdf)
 
 __all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "PAPER_VALUES", "OFF"]
 
@@ -70,7 +70,7 @@ class ReportPlan:
 
 def with_clearance(text: str, values: dict[str, float], source: str = "<report>") -> str:
     """Scene TOML text with keys of its [clearance] table set to ``values`` (m), made on the parsed
-    data; its first line records the override (see pipeline.scene_variant)."""
+    data; its first line records the override (see pipeline.scenes.variant)."""
     return scene_variant(text, {"clearance": values}, source)
 
 
@@ -115,7 +115,7 @@ def run_scene(config, data: Path, plan: ReportPlan, client=None) -> dict[str, Pa
     return paths
 
 
-# --- statistics: every number from pipeline.stats.ensemble_stats ---------------------------
+# --- statistics: every number from pipeline.analysis.stats.ensemble_stats ---------------------------
 
 def _stat(sds, stat: str, quantity: str, direction: str, statistic: str = "q50",
           bound: str = "estimate") -> float:
@@ -378,7 +378,7 @@ def _displacement_fields(scene, st: dict, paper_dx: float) -> dict:
 
 def _explanations(scene, st: dict, dt: float, by_window, start: str, t_s: float) -> list[str]:
     """The physical reasons for the large differences from the paper, filled from this run's
-    statistics (templates in pipeline.report_text); ``dt``: the paper level's step, s;
+    statistics (templates in pipeline.studies.report_text); ``dt``: the paper level's step, s;
     ``by_window``: the contact level's statistics by window, ``start`` its initial state and
     ``t_s`` its window boundary, s."""
     mm = _clearance_mm(scene)

@@ -1,7 +1,7 @@
 """``rss6 budget``: the largest common clearance scale factor for which requirement specs pass.
 
 A spec passes at the run's confidence when its statistic's one-sided upper bound meets the
-limit (pipeline.gate), so for an upper limit the answer is the largest scale s at which that
+limit (pipeline.analysis.gate), so for an upper limit the answer is the largest scale s at which that
 upper bound is within it, with every [clearance] size of the scene times s.
 
 - quasi-static: exact scaling from one ensemble.  Every draw law scales with the clearance
@@ -27,13 +27,13 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from .gate import Verdict, check_confidence, judge_all
-from .run import EnsembleSpec, ensemble
-from .scene_variant import scene_variant
-from .spec import Spec
-from .stats import no_interval_at
-from .store import WINDOWS
-from .summary import CLEARANCE_LEVELS
+from ..analysis.gate import Verdict, check_confidence, judge_all
+from ..ensemble.run import EnsembleSpec, ensemble
+from ..scenes.variant import scene_variant
+from ..analysis.spec import Spec
+from ..analysis.stats import no_interval_at
+from ..files.store import WINDOWS
+from ..analysis.summary import CLEARANCE_LEVELS
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
            "BudgetError"]

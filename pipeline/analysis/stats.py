@@ -428,7 +428,7 @@ def _provenance(ds: xr.Dataset, confidence: float) -> dict:
     scene, level, settings, seed, rss6 version and file name."""
     from rss6core import __version__
 
-    from .store import derived_history
+    from ..files.store import derived_history
     name, a = _source(ds), ds.attrs
     what = f": {a['model']} level, scene {a.get('scene_name', '')!r}" if "model" in a else ""
     return {"title": f"rss6 statistics of {name}{what}",
@@ -460,7 +460,7 @@ def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False) ->
         raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
     if one_sided and not confidence > 0.5:
         raise ValueError(f"one-sided bounds need a confidence above 0.5, got {confidence!r}")
-    from .sampler import design_of
+    from ..ensemble.sampler import design_of
     ens, design = _as_ensemble(ds), design_of(ds.attrs)
     finished = np.asarray(ens["status"].values == "finished")
     data = {}
@@ -482,7 +482,7 @@ def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False) ->
         attrs |= _rqmc_attrs(design.replicates, confidence)
     if one_sided:
         attrs["bounds"] = ("one-sided: 'lower' and 'upper' are each a bound at the confidence on its "
-                           "own side (pipeline.stats, one-sided bounds)")
+                           "own side (pipeline.analysis.stats, one-sided bounds)")
     coords = {"statistic": list(STATISTICS), "bound": list(BOUNDS),
               "quantity": ens["quantity"].values, "direction": ens["direction"].values}
     if "unit" in ds.coords:
@@ -580,7 +580,7 @@ def format_stats(sds: xr.Dataset) -> str:
     rad/s, rad/s^2): per quantity, direction and variable the estimates, then the lower and upper
     confidence bounds ('-' where none is given, with the reason below the table); one table per
     analysis window, labelled, when the statistics have several."""
-    from .store import window_label
+    from ..files.store import window_label
     if "window" not in sds.dims:
         return "\n".join(_table_lines(sds) + ["notes:"] + [f"  {t}" for t in _missing_notes(sds)])
     lines = []
@@ -593,7 +593,7 @@ def format_stats(sds: xr.Dataset) -> str:
 
 def _table_lines(sds: xr.Dataset) -> list[str]:
     """The lines of one window's table (the first one says what the rows are)."""
-    from .store import display_unit
+    from ..files.store import display_unit
     a = sds.attrs
     lines = [f"{a['n_finished']} finished realisations ({a['n_failed']} failed); 'max' rows: "
              "per-realisation max |error|, 'mean' rows: per-realisation mean |error|; 'lower' and "
