@@ -16,6 +16,7 @@ from rss6core import CONTACT_STARTS, INTEGRATORS, MODELS, SceneError, __version_
 
 from .scenes.catalogue import find_scene, scene_names
 from .analysis.summary import contact_peaks, error_summary, format_errors, format_summary, scene_summary
+from .vocabulary import CONFIDENCE, FINISHED
 
 
 def _positive_float(text: str) -> float:
@@ -151,7 +152,7 @@ def _simulate(args) -> int:
                 f"{k} {v:.4g}" for k, v in summary["max_contact_force_N"].items())
                 + (" (the paper's method keeps every joint inside its clearance, so eq. 17 gives none)"
                    if model == "paper" and not any(summary["max_contact_force_N"].values()) else ""))
-    if result.status != "finished":
+    if result.status != FINISHED:
         print(f"rss6: run failed: {result.message}", file=sys.stderr)
         return 1
     return 0
@@ -231,7 +232,7 @@ def _run(args) -> int:
     if reasons and ds.attrs["n_failed"] == ds.sizes["realization"]:
         print("rss6: every realisation failed; no statistics", file=sys.stderr)
         return 1
-    from .files.store import QUANTITIES
+    from .vocabulary import QUANTITIES
     contact = model == "contact"   # its velocity and acceleration measure the robot; start-up impacts
     shown = {"quantity": list(QUANTITIES) if contact else ["displacement"],
              "window": ["whole", "steady"] if contact else ["whole"]}
@@ -248,7 +249,7 @@ def _run(args) -> int:
 
 def _known_windows(specs: list) -> None:
     """A --require or --until naming a window the files do not have is a one-line error before any work."""
-    from .files.store import WINDOWS
+    from .vocabulary import WINDOWS
     for s in specs:
         if s.window is not None and s.window not in WINDOWS:
             raise SceneError(f"{s.text!r}: unknown window {s.window!r}; choose one of "
@@ -434,7 +435,7 @@ def _requirements(args) -> list:
         raise SceneError(str(exc)) from None
 
 
-def _judge(ds, specs: list, confidence: float = 0.95) -> list:
+def _judge(ds, specs: list, confidence: float = CONFIDENCE) -> list:
     """Verdicts of the specs on an ensemble (or single-run) Dataset; a window the file lacks is a
     one-line error."""
     from .analysis.gate import judge_all
@@ -516,12 +517,12 @@ def _plot(args) -> int:
     check_output_folder(args.output, args.parents)
     ds = open_results(args.file)
     if "realization" not in ds.dims:                      # rss6 simulate -o: one run's histories
-        if str(ds.attrs.get("status", "finished")) != "finished":
+        if str(ds.attrs.get("status", FINISHED)) != FINISHED:
             raise EnsembleFileError(f"{args.file}: nothing to plot, the run failed "
                                     f"({ds.attrs.get('status_message', 'no reason recorded')})")
         paths = plot_run(ds, args.output)
     else:
-        if not (ds["status"].values.astype(str) == "finished").any():
+        if not (ds["status"].values.astype(str) == FINISHED).any():
             message = str(ds["status_message"].values.astype(str)[0])
             raise EnsembleFileError(f"{args.file}: nothing to plot, all {ds.sizes['realization']} "
                                     f"realisations failed (first reason: {message})")
@@ -598,7 +599,7 @@ def _multifidelity(args) -> int:
 
 
 def _multifidelity_parser(sub) -> None:
-    from .files.store import WINDOWS
+    from .vocabulary import WINDOWS
     mf = sub.add_parser("multifidelity", help="means of a dear level with a cheap level on more "
                         "realisations as control variate (multi-fidelity Monte Carlo)")
     mf.add_argument("config", nargs="?", default="paper",
@@ -617,7 +618,7 @@ def _multifidelity_parser(sub) -> None:
     mf.add_argument("--parents", action="store_true", help="create the output's missing folders")
     mf.add_argument("--seed", type=_nonnegative_int, default=0,
                     help="random seed, 0 or more (default 0)")
-    mf.add_argument("--confidence", type=_fraction, default=0.95,
+    mf.add_argument("--confidence", type=_fraction, default=CONFIDENCE,
                     help="confidence of the two-sided intervals, in (0, 1) (default 0.95)")
     mf.add_argument("--cost-ratio", type=_positive_float, metavar="C",
                     help="cost of one high realisation over one low one (e.g. from rss6 tradeoff); "
@@ -738,7 +739,7 @@ def _budget(args) -> int:
 
 def _sensitivity_parser(sub) -> None:
     from .studies.sensitivity import LEVELS, MIN_N
-    from .files.store import WINDOWS
+    from .vocabulary import WINDOWS
     se = sub.add_parser("sensitivity", help="Sobol' indices of the error statistics by joint family "
                                             "(and joint), with bootstrap intervals (SALib)")
     se.add_argument("config", nargs="?", default="paper",
@@ -757,7 +758,7 @@ def _sensitivity_parser(sub) -> None:
     se.add_argument("--per-joint", action="store_true",
                     help="also the indices of each of the 18 joints (a second design)")
     se.add_argument("--seed", type=_nonnegative_int, default=0, help="random seed (default 0)")
-    se.add_argument("--confidence", type=_fraction, default=0.95,
+    se.add_argument("--confidence", type=_fraction, default=CONFIDENCE,
                     help="confidence of the bootstrap intervals (default 0.95)")
     se.add_argument("--window", choices=WINDOWS, default="whole",
                     help="analysis window of the statistics: whole (t >= the scene's settle_time_s), "
@@ -785,7 +786,7 @@ def _budget_parser(sub) -> None:
                                            "(default: budget_SCENE_MODEL); rerunning resumes")
     bu.add_argument("--parents", action="store_true", help="create the output's missing folders")
     bu.add_argument("--seed", type=_nonnegative_int, default=0, help="random seed (default 0)")
-    bu.add_argument("--confidence", type=_fraction, default=0.95,
+    bu.add_argument("--confidence", type=_fraction, default=CONFIDENCE,
                     help="confidence of the one-sided bounds the specs are judged on, above 0.5 "
                          "(default 0.95)")
     bu.add_argument("--tolerance", type=_positive_float, default=0.05,
@@ -817,7 +818,7 @@ def _stats_parser(sub) -> None:
                     help="print one strict JSON object (SI units; null where no number)")
     st.add_argument("-o", "--output", help="also write the statistics Dataset to this new netCDF file")
     st.add_argument("--parents", action="store_true", help="create the output's missing folders")
-    st.add_argument("--confidence", type=_fraction, default=0.95,
+    st.add_argument("--confidence", type=_fraction, default=CONFIDENCE,
                     help="confidence of the two-sided intervals, in (0, 1), and of each one-sided bound "
                          "a --require is decided on, then above 0.5 (default 0.95)")
     st.add_argument("--window", help="analysis window: whole, startup (t < the scene's "
@@ -874,7 +875,7 @@ def _simulate_parser(sub) -> None:
 
 
 def _run_parser(sub) -> None:
-    from .files.store import STORES
+    from .vocabulary import STORES
     run = sub.add_parser("run", help="run a Monte Carlo ensemble of clearance realisations")
     run.add_argument("config", nargs="?", default="paper",
                      help="scene TOML file or embedded scene name (default: paper)")

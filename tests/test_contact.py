@@ -10,8 +10,7 @@ from rss6core.contact_dynamics import CompiledStepper, _ball, simulate_contact
 from rss6core.contact_kernel import balance_next, coarsest_next
 from rss6core.contact_numpy import NumpyStepper
 from rss6core.integrators import Integrator, correct, predict
-from rss6core.contact_laws import (coulomb_friction, friction_factor, hertz_stiffness,
-                                   lankarani_nikravesh, poisson_ratio)
+from rss6core.contact_laws import coulomb_friction, friction_factor, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from rss6core.kinematics import rigid_motion
 from rss6core.models import simulate, simulate_batch
 from rss6core.paper_method import PaperClosure, paper_contact_forces, paper_draw

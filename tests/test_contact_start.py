@@ -8,8 +8,8 @@ import pytest
 from rss6core import draw_clearances, parse_scene
 from rss6core.contact_dynamics import CompiledStepper, _joints, build_joint_model, simulate_contact
 from rss6core.contact_numpy import NumpyStepper
-from rss6core.contact_start import (RESIDUAL_TOLERANCE, _penetrated, contact_initial_state,
-                                    equilibrium_state, static_residual)
+from rss6core.contact_start import (RESIDUAL_TOLERANCE, _penetrated, contact_initial_state, equilibrium_state,
+                                    static_residual)
 from rss6core.elastic import quasi_static_state
 from rss6core.kinematics import rigid_motion
 from rss6core.quasi_static import closure_matrix, quasi_static_error

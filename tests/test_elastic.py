@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from rss6core.assembly import (StepSolver, build_elastic_model, dense_matrices, end_maps,
-                               frame_coupling_forces, rigid_loads)
+from rss6core.assembly import (StepSolver, build_elastic_model, dense_matrices, end_maps, frame_coupling_forces,
+                               rigid_loads)
 from rss6core.elastic import elastic_energy, simulate_elastic
 from rss6core.integrators import Integrator
 from rss6core.kinematics import rigid_motion

@@ -20,7 +20,8 @@ from pipeline.analysis.plots import (CONTACT_ACCURACY, QUANTITIES, ensemble_figu
                                      run_figures)
 from pipeline.studies.report import LEVELS, error_figure, rigid_figure
 from pipeline.analysis.stats import MIN_N_MEAN, ensemble_stats, estimates, min_n_for_quantile, running_mean_interval
-from pipeline.files.store import WINDOWS, open_ensemble, window_masks, write_netcdf
+from pipeline.files.store import open_ensemble, window_masks, write_netcdf
+from pipeline.vocabulary import WINDOWS
 from pipeline.studies.study import recommend, stability_figure, tradeoff_figure
 
 SMOKE = str(Path(__file__).resolve().parent.parent / "configs" / "smoke.toml")

@@ -2,8 +2,7 @@
 import numpy as np
 import pytest
 
-from rss6core.kinematics import (forward_kinematics, inverse_kinematics, platform_joints,
-                                 rigid_motion)
+from rss6core.kinematics import forward_kinematics, inverse_kinematics, platform_joints, rigid_motion
 from rss6core.trajectory import platform_motion, rotation
 
 

@@ -14,10 +14,11 @@ from rss6core import load_scene
 
 from pipeline.cli import main
 from pipeline.ensemble.run import EnsembleSpec, run_ensemble
-from pipeline.analysis.stats import (in_window, MIN_N_MEAN, MIN_N_STD, QUANTILES, STATISTICS, ensemble_stats,
-                                     mean_interval, min_n_for_quantile, quantile_interval, quantile_ranks, std_interval,
-                                     to_json)
-from pipeline.files.store import DIRECTIONS, MIXED_UNITS, QUANTITIES, UNITS, _provenance, load_netcdf, write_netcdf
+from pipeline.analysis.stats import (in_window, MIN_N_MEAN, MIN_N_STD, ensemble_stats, mean_interval,
+                                     min_n_for_quantile, quantile_interval, quantile_ranks, std_interval, to_json)
+from pipeline.vocabulary import QUANTILES, STATISTICS
+from pipeline.files.store import MIXED_UNITS, UNITS, _provenance, load_netcdf, write_netcdf
+from pipeline.vocabulary import DIRECTIONS, QUANTITIES
 from pipeline.scenes.catalogue import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes

@@ -10,7 +10,8 @@ import pytest
 from pipeline.cli import main
 from pipeline.files.check import open_results
 from pipeline.analysis.stats import ensemble_stats, in_window, to_json
-from pipeline.files.store import WINDOWS, cf_encode, window_masks, window_summaries, write_netcdf
+from pipeline.files.store import cf_encode, window_masks, window_summaries, write_netcdf
+from pipeline.vocabulary import WINDOWS
 from rss6core import SimulationResult, parse_scene
 from rss6core.clearance import draw_clearances
 from rss6core.contact_dynamics import CompiledStepper, simulate_contact

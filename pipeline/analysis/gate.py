@@ -29,8 +29,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .spec import Spec
-from .stats import (QUANTILE_DECISION_CAP, QUANTILES, ensemble_stats, finished_values, interval_floor,
-                    quantile_decision_n)
+from ..vocabulary import CONFIDENCE, QUANTILES
+from .stats import QUANTILE_DECISION_CAP, ensemble_stats, finished_values, interval_floor, quantile_decision_n
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
            "overall", "judge", "judge_all", "verdicts_json"]
@@ -205,7 +205,7 @@ def _judge(spec: Spec, ds, bounds) -> list[Verdict]:
     return out
 
 
-def judge_all(specs: list[Spec], ds, confidence: float = 0.95) -> list[Verdict]:
+def judge_all(specs: list[Spec], ds, confidence: float = CONFIDENCE) -> list[Verdict]:
     """Every spec's verdicts, in the order given, on an ensemble (or single-run) Dataset at
     ``confidence``; ValueError names a window the file lacks or a confidence not above 0.5."""
     if not specs:
@@ -215,7 +215,7 @@ def judge_all(specs: list[Spec], ds, confidence: float = 0.95) -> list[Verdict]:
     return [v for s in specs for v in _judge(s, ds, bounds)]
 
 
-def judge(spec: Spec, ds, confidence: float = 0.95) -> list[Verdict]:
+def judge(spec: Spec, ds, confidence: float = CONFIDENCE) -> list[Verdict]:
     """Verdicts of one spec, one per direction (see :func:`judge_all`)."""
     return judge_all([spec], ds, confidence)
 

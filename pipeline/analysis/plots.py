@@ -26,15 +26,17 @@ __all__ = ["plot_ensemble", "plot_run", "ensemble_figures", "run_figures", "figu
 
 from rss6core import TOL_DISPLACEMENT, TOL_VELOCITY, closure_matrix, parse_scene, rigid_motion  # noqa: E402
 
+from ..files.store import window_label, window_masks, window_reductions  # noqa: E402
+from ..vocabulary import DIRECTIONS as _DIRS  # noqa: E402
+from ..vocabulary import FAMILIES as _FAMILIES  # noqa: E402
+from ..vocabulary import QUANTITIES, WINDOWS  # noqa: E402
 from .stats import (MIN_N_MEAN, ensemble_stats, estimates, in_window, quantile_estimates,  # noqa: E402
                     running_mean_interval, windows_of)
-from ..files.store import DIRECTIONS as _DIRS  # noqa: E402
-from ..files.store import WINDOWS, window_label, window_masks, window_reductions  # noqa: E402
+from ..vocabulary import CONFIDENCE, FINISHED
 
-QUANTITIES = ("displacement", "velocity", "acceleration")
 _BASE = {"displacement": ("m", "rad"), "velocity": ("m/s", "rad/s"),
          "acceleration": ("m/s$^2$", "rad/s$^2$")}
-FAMILIES = (("x", "y", "z"), ("rx", "ry", "rz"))   # translations, rotations: one unit each per figure
+FAMILIES = tuple(_FAMILIES.values())   # translations, rotations: one unit each per figure
 
 
 def figure_unit(quantity: str, direction: str, values=None) -> tuple[float, str]:
@@ -417,7 +419,7 @@ def _histogram_key(t_s: float, sds) -> str:
     return f"startup: t < {t_s:g} s; steady: t >= {t_s:g} s; {marks}" if np.isfinite(t_s) else marks
 
 
-def _convergence(ds, q: str, finished, confidence: float = 0.95):
+def _convergence(ds, q: str, finished, confidence: float = CONFIDENCE):
     peak = _peaks(ds, q, finished)
     n = np.arange(1, peak.shape[0] + 1)
     iid = str(ds.attrs.get("sampler", "mc")) == "mc"   # a QMC prefix has no running iid interval
@@ -457,7 +459,7 @@ def _convergence_range(mean, lo, hi) -> tuple[float, float]:
 
 def ensemble_figures(ds):
     """{file name: Figure} of an ensemble; envelopes only when the file holds full histories."""
-    finished = ds["status"].values.astype(str) == "finished"
+    finished = ds["status"].values.astype(str) == FINISHED
     if not finished.any():
         raise ValueError("no finished realisation to plot")
     sds, figs = ensemble_stats(ds, window=None), {}

@@ -25,13 +25,12 @@ import math
 import re
 from dataclasses import dataclass
 
-__all__ = ["OPERATORS", "STATISTICS", "Spec", "SpecError", "parse_spec", "parse_specs"]
+from ..vocabulary import FAMILIES, QUANTITIES, REQUIRABLE, SUMMARIES
 
-QUANTITIES = ("displacement", "velocity", "acceleration")
-TRANSLATIONS = ("x", "y", "z")
-ROTATIONS = ("rx", "ry", "rz")
-STATISTICS = ("mean", "std", "q05", "q50", "q95", "q99")
-MEASURES = {"max": "max_abs_error", "mean": "mean_abs_error"}
+__all__ = ["OPERATORS", "Spec", "SpecError", "parse_spec", "parse_specs"]
+
+TRANSLATIONS, ROTATIONS = FAMILIES["translation"], FAMILIES["rotation"]
+MEASURES = dict(zip(("max", "mean"), SUMMARIES))   # the summary a spec's ":max" or ":mean" names
 OPERATORS = ("<=", "<", ">=", ">")
 STANDARD_GRAVITY = 9.80665  # m/s^2
 
@@ -132,8 +131,8 @@ def _statistic(text: str, token: str) -> tuple[str, str, str | None]:
     if stat == "max":
         raise _fail(text, "statistic 'max' has no confidence interval (the sample maximum estimates "
                           "no population parameter); bound a quantile such as q99 instead")
-    if stat not in STATISTICS:
-        raise _fail(text, f"unknown statistic {stat!r} (choose from {', '.join(STATISTICS)})")
+    if stat not in REQUIRABLE:
+        raise _fail(text, f"unknown statistic {stat!r} (choose from {', '.join(REQUIRABLE)})")
     if measure not in MEASURES:
         raise _fail(text, f"unknown measure {measure!r} after ':' (choose from max, mean)")
     if "/" in token and window is None:

@@ -81,6 +81,8 @@ import numpy as np
 import xarray as xr
 from scipy import stats as sps
 
+from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
+
 __all__ = ["QUANTILES", "STATISTICS", "BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "quantile_ranks",
            "min_n_for_quantile", "quantile_estimates", "estimates", "mean_interval",
            "running_mean_interval", "std_interval", "quantile_interval", "ensemble_stats",
@@ -89,10 +91,7 @@ __all__ = ["QUANTILES", "STATISTICS", "BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "quan
            "BoundRanks", "one_sided_ranks", "quantile_bounds", "mean_bounds", "one_sided_bounds",
            "quantile_decision_n", "QUANTILE_DECISION_CAP", "finished_values"]
 
-QUANTILES = {"q05": 0.05, "q50": 0.5, "q95": 0.95, "q99": 0.99}
-STATISTICS = ("mean", "std", *QUANTILES, "max")
 BOUNDS = ("estimate", "lower", "upper")
-VARIABLES = ("max_abs_error", "mean_abs_error")
 MIN_N_MEAN = 8      # smallest n whose coverage was measured (>= 94 % on all three laws)
 MIN_N_STD = 200     # Bonett: >= 93 % measured on all three laws from here
 MIN_POINTS_RQMC = {"mean": 16, "std": 32, "q05": 128, "q50": 16, "q95": 128, "q99": 256}
@@ -400,15 +399,15 @@ def _as_ensemble(ds: xr.Dataset) -> xr.Dataset:
     """A single-run file (``rss6 simulate -o``) as a one-realisation ensemble."""
     if "realization" in ds.dims:
         return ds
-    out = ds[list(VARIABLES)].expand_dims(realization=[0], axis=1)
-    return out.assign(status=("realization", [ds.attrs.get("status", "finished")]))
+    out = ds[list(SUMMARIES)].expand_dims(realization=[0], axis=1)
+    return out.assign(status=("realization", [ds.attrs.get("status", FINISHED)]))
 
 
 def finished_values(ds: xr.Dataset, variable: str, window: str = "whole") -> xr.DataArray:
     """``variable`` of the finished realisations of an ensemble (or single-run) Dataset in analysis
     window ``window`` (realization, quantity, direction); SI."""
     ens = _as_ensemble(in_window(ds, window))
-    return ens[variable].isel(realization=np.flatnonzero(ens["status"].values == "finished"))
+    return ens[variable].isel(realization=np.flatnonzero(ens["status"].values == FINISHED))
 
 
 def _source(ds: xr.Dataset) -> str:
@@ -439,7 +438,7 @@ def _provenance(ds: xr.Dataset, confidence: float) -> dict:
             **{k: a[k] for k in SOURCE_ATTRS if k in a}}
 
 
-def ensemble_stats(ds: xr.Dataset, confidence: float = 0.95, window: str | None = "whole",
+def ensemble_stats(ds: xr.Dataset, confidence: float = CONFIDENCE, window: str | None = "whole",
                    one_sided: bool = False) -> xr.Dataset:
     """Statistics (statistic, bound, quantity, direction) of ``max_abs_error`` and
     ``mean_abs_error`` over the finished realisations of an ensemble (or single-run) Dataset, in
@@ -462,9 +461,9 @@ def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False) ->
         raise ValueError(f"one-sided bounds need a confidence above 0.5, got {confidence!r}")
     from ..ensemble.sampler import design_of
     ens, design = _as_ensemble(ds), design_of(ds.attrs)
-    finished = np.asarray(ens["status"].values == "finished")
+    finished = np.asarray(ens["status"].values == FINISHED)
     data = {}
-    for name in VARIABLES:
+    for name in SUMMARIES:
         var = ens[name].transpose("realization", "quantity", "direction")
         x = var.values[finished]                                          # (n, Q, D)
         flat = _summaries(x.reshape(x.shape[0], x.shape[1] * x.shape[2]), confidence, one_sided)
@@ -537,15 +536,15 @@ def to_json(sds: xr.Dataset) -> dict:
     if "window" in sds.dims:
         top = "whole" if "whole" in windows_of(sds) else windows_of(sds)[0]
         out = to_json(in_window(sds, top)) | {"window": top}
-        out["by_window"] = {w: {name: _json_table(in_window(sds, w)[name]) for name in VARIABLES}
+        out["by_window"] = {w: {name: _json_table(in_window(sds, w)[name]) for name in SUMMARIES}
                             for w in windows_of(sds)}
         return out
     out = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in sds.attrs.items()}
-    out["units"] = {name: sds[name].attrs.get("units", "") for name in VARIABLES}
+    out["units"] = {name: sds[name].attrs.get("units", "") for name in SUMMARIES}
     if "unit" in sds.coords:
         out["unit"] = {str(q): {str(d): str(sds["unit"].sel(quantity=q, direction=d).item())
                                 for d in sds.direction.values} for q in sds.quantity.values}
-    for name in VARIABLES:
+    for name in SUMMARIES:
         out[name] = _json_table(sds[name])
     return out
 
@@ -603,7 +602,7 @@ def _table_lines(sds: xr.Dataset) -> list[str]:
     for q in sds.quantity.values:
         for d in sds.direction.values:
             f, unit = display_unit(str(q), str(d))
-            for name in VARIABLES:
+            for name in SUMMARIES:
                 v = sds[name].sel(quantity=q, direction=d)
                 for b in BOUNDS:
                     head = f"{q:<13s}{d:<4s}{name.split('_')[0]:<5s}{unit:<8s}" if b == "estimate" \

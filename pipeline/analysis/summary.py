@@ -7,7 +7,8 @@ import numpy as np
 
 from rss6core import crank_inertia, inverse_dynamics, natural_frequencies, rigid_motion, rod_inertia
 
-from ..files.store import DIRECTIONS, display_unit
+from ..files.store import display_unit
+from ..vocabulary import DIRECTIONS, FINISHED
 
 __all__ = ["scene_summary", "format_summary", "error_summary", "format_errors", "failure_reasons"]
 
@@ -163,7 +164,7 @@ def failure_reasons(ds, shown: int = 5) -> list[str]:
     messages alike but for their numbers: time, step, size), most frequent first, at most ``shown``,
     each with its first realisation's message; empty when none failed."""
     status = ds["status"].values.astype(str)
-    failed = status != "finished"
+    failed = status != FINISHED
     if not failed.any():
         return []
     messages = ds["status_message"].values.astype(str)[failed]

@@ -28,13 +28,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..vocabulary import CONFIDENCE
 from .spec import SpecError, _statistic, _subject, _unit_factor
 
 __all__ = ["Target", "UntilError", "parse_target", "parse_targets", "checkpoints", "widths",
            "run_until", "GROWTH", "CONFIDENCE"]
 
 GROWTH = 1.25        # mc: each checked n is the previous one times this, rounded up
-CONFIDENCE = 0.95    # the confidence of rss6 run's statistics
 _WIDTH = re.compile(r"\s*((?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(%?)\s*(.*)$")
 
 

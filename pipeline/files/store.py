@@ -21,15 +21,14 @@ import xarray as xr
 
 from rss6core import __version__
 
+from ..vocabulary import DIRECTIONS, FAMILIES, FINISHED, QUANTITIES, STORES, WINDOWS
+
 __all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "WINDOWS", "PROVENANCE", "ENSEMBLE_ATTRS", "STORES", "display_unit",
            "error_summaries", "window_summaries", "window_masks", "window_reductions", "window_label",
            "run_dataset", "chunk_dataset", "write_netcdf", "cf_encode", "cf_decode", "check_free_space",
            "netcdf_size", "labelled", "load_netcdf", "open_ensemble", "checked_ensemble",
            "verify_checksums", "file_checksums", "note_unverified", "CHECKSUM", "FAMILIES"]
 
-DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
-QUANTITIES = ("displacement", "velocity", "acceleration")
-WINDOWS = ("whole", "startup", "steady")   # analysis windows: [0, T], [0, t_s), [t_s, T]
 UNITS = {"displacement": ("m", "rad"), "velocity": ("m s-1", "rad s-1"),
          "acceleration": ("m s-2", "rad s-2")}
 _DISPLAY = {"displacement": ("mm", "rad"), "velocity": ("mm/s", "rad/s"),
@@ -48,7 +47,6 @@ MIXED_UNITS = "m or rad, per direction (see coordinate 'unit'); time derivatives
 # the global attributes :func:`_provenance` gives every file (contact-level files also contact_start)
 PROVENANCE = ("Conventions", "title", "source", "rss6_version", "scene_name", "scene_toml", "model",
               "integrator", "time_step_s", "elements_per_link", "settle_time_s", "steady_after_s")
-STORES = ("summary", "full")   # --store: summaries only, or also the error histories
 
 
 def _provenance(scene, title: str, *, model: str, integrator: str, dt: float,
@@ -443,7 +441,6 @@ def check_free_space(path, needed: int) -> None:
 _LABEL = "_label"
 _ELAPSED = "elapsed_time"   # the file's name of ``time``: CF keeps "time" for calendar times
 _MOVED = ("units", "cell_methods", "axis", "standard_name", "long_name")
-FAMILIES = {"translation": DIRECTIONS[:3], "rotation": DIRECTIONS[3:]}   # direction families
 _PART_OF = "rss6_part_of"     # a split variable: the variable it is part of, its dims, its quantity
 _PART_DIMS = "rss6_dims"
 _PART_QUANTITY = "rss6_quantity"
@@ -699,7 +696,7 @@ def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: s
         "seed": seed,
         "store": store,
         "n_realizations": int(ds.sizes["realization"]),
-        "n_failed": int((ds["status"].values != "finished").sum()),
+        "n_failed": int((ds["status"].values != FINISHED).sum()),
         **sampler,
     }
     return ds

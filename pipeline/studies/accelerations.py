@@ -27,7 +27,7 @@ import numpy as np
 
 from rss6core import BeamTheory, SceneError, simulate_batch
 
-from ..files.store import DIRECTIONS
+from ..vocabulary import DIRECTIONS, FINISHED
 
 __all__ = ["BURSTS", "Variant", "default_variants", "window_maxima", "measure",
            "converged", "study", "markdown", "main"]
@@ -88,7 +88,7 @@ def measure(scene, variant: Variant, n: int, seed: int = 0) -> dict:
                              variant.elements, seed, range(n))
     wall = (time.perf_counter() - start) / n
     acc = np.stack([r.acceleration for r in results])
-    bad = np.array([r.status != "finished" for r in results])
+    bad = np.array([r.status != FINISHED for r in results])
     t = results[0].t
     steady = window_maxima(t, acc, scene.simulation.steady_after)
     fast = high_pass(t, acc)

@@ -32,7 +32,7 @@ from ..ensemble.run import EnsembleSpec, ensemble
 from ..scenes.variant import scene_variant
 from ..analysis.spec import Spec
 from ..analysis.stats import no_interval_at
-from ..files.store import WINDOWS
+from ..vocabulary import CONFIDENCE, WINDOWS
 from ..analysis.summary import CLEARANCE_LEVELS
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
@@ -176,7 +176,7 @@ def _sweep(run, tolerance: float) -> list[Trial]:
     return trials
 
 
-def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float = 0.95,
+def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float = CONFIDENCE,
            workers: int = 2, tolerance: float = 0.05) -> Budget:
     """The largest common clearance scale factor for which every spec passes (module doc)."""
     _check_request(spec.model, specs, n, confidence)

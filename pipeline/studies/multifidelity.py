@@ -49,8 +49,9 @@ from scipy import stats as sps
 
 from rss6core import FINISHED
 
-from ..analysis.stats import BOUNDS, MIN_N_MEAN, VARIABLES, in_window, mean_interval
+from ..analysis.stats import BOUNDS, MIN_N_MEAN, in_window, mean_interval
 from ..files.store import window_label
+from ..vocabulary import CONFIDENCE, SUMMARIES
 
 __all__ = ["MIN_N_MF", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
            "variance_reduction", "estimated_variance_reduction", "adjusted_correlation",
@@ -111,7 +112,7 @@ def cost_ratio(rho, cost_high_over_low: float, low_ratio=None):
     return (1 - (1 - 1 / r) * rho2) * (1 + r / cost_high_over_low)
 
 
-def control_variate_mean(y: np.ndarray, x: np.ndarray, confidence: float = 0.95) -> ControlVariateMean:
+def control_variate_mean(y: np.ndarray, x: np.ndarray, confidence: float = CONFIDENCE) -> ControlVariateMean:
     """The multi-fidelity mean of ``y`` (N, ...) with the control variate ``x`` (M, ...), M >= N,
     whose first N rows are the same draws as ``y``'s; all values finite."""
     y, x = np.asarray(y, float), np.asarray(x, float)
@@ -204,7 +205,7 @@ def _estimates(high: xr.Dataset, low: xr.Dataset, name: str, confidence: float) 
     }
 
 
-def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float = 0.95,
+def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float = CONFIDENCE,
                           sources=("high", "low"), cost_high_over_low: float | None = None,
                           width: float | None = None, window: str = "whole") -> xr.Dataset:
     """Multi-fidelity and high-only means of every per-realisation summary (SI units, the source
@@ -216,7 +217,7 @@ def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float =
     high, low = in_window(high, window), in_window(low, window)
     _check_pairing(high, low, *sources)
     data = {}
-    for name in VARIABLES:
+    for name in SUMMARIES:
         data |= _estimates(high, low, name, confidence)
     n_pairs = int(np.sum(_finished(high) & np.isin(high["realization"].values,
                                                     low["realization"].values[_finished(low)])))
@@ -225,7 +226,7 @@ def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float =
                                   "direction": high["direction"].values,
                                   "unit": high["unit"]})
     if cost_high_over_low is not None:
-        for name in VARIABLES:
+        for name in SUMMARIES:
             ds = ds.assign(_costs(ds, paired_values(high, low, name)[0], name, cost_high_over_low,
                                   width, confidence))
     where = {"window": window, "analysis_window": window_label(window, steady_after)}
@@ -312,7 +313,7 @@ def to_json(mds: xr.Dataset) -> dict:
     fields = [f for f in ("correlation", "coefficient", "variance_reduction", "equivalent_n",
                           "optimal_low_ratio", "cost_ratio", "plain_n_for_width", "high_n_for_width",
                           "low_n_for_width") if f"max_abs_error_{f}" in mds]
-    for name in VARIABLES:
+    for name in SUMMARIES:
         out[name] = {str(q): {str(d): {
             **{f"{e}_{b}": _number(mds[f"{name}_mean"].sel(estimator=e, bound=b, quantity=q,
                                                           direction=d))

@@ -26,8 +26,9 @@ from ..analysis.plots import (draw_envelope, envelope_marks, family_units, legen
 from . import report_text as text
 from ..scenes.variant import scene_variant
 from ..analysis.stats import ensemble_stats, in_window, min_n_for_quantile
-from ..files.store import (DIRECTIONS, EnsembleFileError, display_unit, load_netcdf, open_ensemble, run_dataset,
-                           window_label, write_netcdf)
+from ..files.store import (EnsembleFileError, display_unit, load_netcdf, open_ensemble, run_dataset, window_label,
+                           write_netcdf)
+from ..vocabulary import DIRECTIONS, FINISHED
 
 __all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "PAPER_VALUES", "OFF"]
 
@@ -192,7 +193,7 @@ class _LevelErrors:
     @classmethod
     def of(cls, ds, quantity: str) -> "_LevelErrors":
         err = ds["error"].sel(quantity=quantity).transpose("realization", "time", "direction")
-        err = err.values[ds["status"].values.astype(str) == "finished"]
+        err = err.values[ds["status"].values.astype(str) == FINISHED]
         return cls(ds, err, *envelope_marks(ds, ensemble_stats(ds, window=None), quantity, err))
 
     def rows(self) -> list[str]:

@@ -23,8 +23,8 @@ import xarray as xr
 
 from rss6core import FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, prepare_level, size_band
 
-from ..files.store import (DIRECTIONS, JOINTS, QUANTITIES, WINDOWS, _provenance, _unit_table, check_window,
-                           command_line, window_label, window_summaries)
+from ..files.store import JOINTS, _provenance, _unit_table, check_window, command_line, window_label, window_summaries
+from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, WINDOWS
 
 __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
            "clearance_draws_from_uniforms", "Design", "designs", "sample_design",
@@ -34,7 +34,6 @@ __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs
 FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
 LEVELS = ("quasi-static", "contact")     # the levels whose error is a function of one draw
 INDICES = ("S1", "ST")
-STATISTICS = ("max_abs_error", "mean_abs_error")
 BOUNDS = ("estimate", "lower", "upper")
 RESAMPLES = 500                          # bootstrap resamples of the rows per index (SALib default 100)
 MIN_N = 64                               # smallest base sample whose interval coverage was measured
@@ -154,7 +153,7 @@ def evaluate_statistics(spec, inputs: ClearanceInputs, u: np.ndarray, client=Non
     in this process); SensitivityError if any row failed."""
     workers = max(1, len(client.nthreads())) if client is not None else 1
     chunk = chunk or max(1, min(256, -(-len(u) // (4 * workers))))
-    out, failures = np.empty((len(u), len(STATISTICS), len(QUANTITIES), len(DIRECTIONS))), []
+    out, failures = np.empty((len(u), len(SUMMARIES), len(QUANTITIES), len(DIRECTIONS))), []
     for part, (stats, messages) in _run_chunks(spec, inputs, u, _chunks(len(u), chunk), client, window):
         out[part] = stats
         failures += [m for m in messages if m]
@@ -237,7 +236,7 @@ def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int
     the statistics over the analysis ``window``."""
     groups = [g for r in results for g in r.design.groups]
     data = {}
-    for s, name in enumerate(STATISTICS):
+    for s, name in enumerate(SUMMARIES):
         values = np.concatenate([r.values.reshape(r.values.shape[:3] + (2, 3, 6))[..., s, :, :]
                                  for r in results], axis=2)
         what = "maximum" if name == "max_abs_error" else "mean"
@@ -294,7 +293,7 @@ def _check_window(scene, window: str) -> None:
         raise SensitivityError(str(exc)) from None
 
 
-def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = 0.95, workers: int = 2,
+def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFIDENCE, workers: int = 2,
                 announce=None, window: str = "whole") -> xr.Dataset:
     """Sobol' indices of the level ``spec.model`` with N base rows per design (a power of 2), of the
     statistics over the analysis ``window`` (WINDOWS: whole run, startup or steady)."""

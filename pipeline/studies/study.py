@@ -23,12 +23,13 @@ from rss6core import (BeamTheory, Integrator, build_elastic_model, degrees_of_fr
                       quasi_static_state, simulate_batch, simulate_elastic)
 
 from ..analysis.stats import estimates
-from ..files.store import DIRECTIONS, MIXED_UNITS, QUANTITIES, _unit_table, error_summaries
+from ..files.store import MIXED_UNITS, _unit_table, error_summaries
+from ..vocabulary import DIRECTIONS, FINISHED, QUANTITIES
 
-__all__ = ["Setting", "STATISTICS", "measure", "relative_errors", "default_settings", "tradeoff",
+__all__ = ["Setting", "TRADEOFF_STATISTICS", "measure", "relative_errors", "default_settings", "tradeoff",
            "pareto_front", "recommend", "write_tradeoff", "stability", "write_stability"]
 
-STATISTICS = ("mean", "q95")
+TRADEOFF_STATISTICS = ("mean", "q95")
 RELATIVE_FLOOR = 1e-3
 
 
@@ -76,8 +77,8 @@ def measure(scene, setting: Setting, n: int, seed: int = 0) -> dict:
                              setting.elements, seed, range(n), setting.tolerance, setting.refinements)
     wall = (time.perf_counter() - start) / n
     peaks = np.stack([error_summaries(r, scene.simulation.settle_time)[0] for r in results])  # (n, 3, 6)
-    failed = [r for r in results if r.status != "finished"]
-    stats = estimates(peaks, STATISTICS)            # (3, 6, statistic), failed runs left out
+    failed = [r for r in results if r.status != FINISHED]
+    stats = estimates(peaks, TRADEOFF_STATISTICS)            # (3, 6, statistic), failed runs left out
     return {"seconds_per_realization": wall, "statistics": stats, "failed": len(failed),
             "message": failed[0].message if failed else ""}
 
@@ -193,7 +194,7 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
                               {"units": "1", "long_name": "reference vs its step halved and mesh "
                                                           "doubled"})},
         coords={"setting": ("setting", [s.label for s in settings], {"long_name": "setting"}),
-                "quantity": list(QUANTITIES), "direction": list(DIRECTIONS), "statistic": list(STATISTICS),
+                "quantity": list(QUANTITIES), "direction": list(DIRECTIONS), "statistic": list(TRADEOFF_STATISTICS),
                 "unit": (("quantity", "direction"), _unit_table(), {"long_name": "SI unit of each element"})},
         attrs={"title": f"rss6 speed/accuracy trade-off, scene {scene.name!r}",
                "history": f"rss6 tradeoff {scene.name} -n {n} --seed {seed}",
@@ -235,7 +236,7 @@ def recommend(ds: xr.Dataset, tolerance: float) -> dict:
 
 
 def _columns() -> list[str]:
-    return [f"rel_err_{q}_{d}_{s}" for q in QUANTITIES for d in DIRECTIONS for s in STATISTICS]
+    return [f"rel_err_{q}_{d}_{s}" for q in QUANTITIES for d in DIRECTIONS for s in TRADEOFF_STATISTICS]
 
 
 def write_tradeoff(ds: xr.Dataset, outdir, tolerance: float) -> dict:
@@ -425,7 +426,7 @@ def _explicit_sweep(scene, limit, steps, tolerance, seed, log):
         r = simulate_elastic(still, model.elements, Integrator.central_difference(), h, model=model,
                              initial=(d, v, a), divergence_limit=1e-3)
         peaks = error_summaries(r)[0]
-        runs[h] = {"statistics": np.stack([peaks, peaks], -1), "failed": int(r.status != "finished"),
+        runs[h] = {"statistics": np.stack([peaks, peaks], -1), "failed": int(r.status != FINISHED),
                    "message": r.message, "seconds_per_realization": time.perf_counter() - start}
     return _rows(runs, "elastic", "central-difference (undamped)", 1.0, H, tolerance, log,
                  lambda h: f"dt {h:.4g} s = {h / limit:.3f} x 2/omega_max")

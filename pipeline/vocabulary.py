@@ -1,0 +1,30 @@
+"""The words every part of the pipeline shares, each written once: quantities, directions and their
+families, analysis windows, statistics and quantiles, summaries, stores, the default confidence,
+and the kinds of user mistake that end a command with one line and exit code 2.
+
+A leaf: it imports nothing of the pipeline, so every part may import it."""
+from __future__ import annotations
+
+from rss6core import FINISHED
+
+__all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "WINDOWS", "QUANTILES", "STATISTICS", "REQUIRABLE",
+           "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "UserError", "OptionError"]
+
+QUANTITIES = ("displacement", "velocity", "acceleration")   # of the platform's pose error
+DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")             # translations (m), rotations (rad)
+FAMILIES = {"translation": DIRECTIONS[:3], "rotation": DIRECTIONS[3:]}   # one unit each
+WINDOWS = ("whole", "startup", "steady")   # analysis windows: [settle, T], [0, t_s), [t_s, T]
+QUANTILES = {"q05": 0.05, "q50": 0.5, "q95": 0.95, "q99": 0.99}   # name -> probability
+STATISTICS = ("mean", "std", *QUANTILES, "max")   # the statistics of an ensemble, in table order
+REQUIRABLE = tuple(s for s in STATISTICS if s != "max")   # those with an interval, for --require
+SUMMARIES = ("max_abs_error", "mean_abs_error")   # per-realisation summaries over a window
+STORES = ("summary", "full")   # --store: summaries only, or also the error histories
+CONFIDENCE = 0.95   # the default confidence of every interval, bound and verdict
+
+
+class UserError(ValueError):
+    """A mistake of the user's (an option, a file, a spec): one line, exit code 2, no traceback."""
+
+
+class OptionError(UserError):
+    """An option value or a combination of options that cannot work; the message names the option."""
