@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from pipeline.cli import _warn_oversubscription, main
+from pipeline.cli import main
+from pipeline.commands.messages import warn_oversubscription
 from pipeline.files.outputs import OutputLock, PartsManifest
 from pipeline.ensemble.run import TEST_HOLD_ENV, EnsembleSpec, ensemble, run_chunk
 from pipeline.files.store import EnsembleFileError, open_ensemble, write_netcdf
@@ -171,10 +172,10 @@ def test_elastic_default_without_clearances_is_refused(tmp_path, capsys):
 
 
 def test_workers_beyond_the_cores_are_warned_about(capsys):
-    _warn_oversubscription((os.cpu_count() or 1) + 1, None)
+    warn_oversubscription((os.cpu_count() or 1) + 1, None)
     assert "exceeds" in capsys.readouterr().err
-    _warn_oversubscription(1, None)
-    _warn_oversubscription(1000, "tcp://elsewhere:8786")  # an external cluster has its own cores
+    warn_oversubscription(1, None)
+    warn_oversubscription(1000, "tcp://elsewhere:8786")  # an external cluster has its own cores
     assert capsys.readouterr().err == ""
 
 

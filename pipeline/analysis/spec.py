@@ -25,7 +25,7 @@ import math
 import re
 from dataclasses import dataclass
 
-from ..vocabulary import FAMILIES, QUANTITIES, REQUIRABLE, SUMMARIES
+from ..vocabulary import FAMILIES, QUANTITIES, REQUIRABLE, SUMMARIES, UserError
 
 __all__ = ["OPERATORS", "Spec", "SpecError", "parse_spec", "parse_specs"]
 
@@ -41,7 +41,7 @@ _NUMBER = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*)$")
 _OPERATOR = re.compile(r"<=|>=|=<|=>|==|!=|<|>|=")
 
 
-class SpecError(ValueError):
+class SpecError(UserError):
     """A requirement spec that cannot be parsed; the message is one line naming the bad token."""
 
 

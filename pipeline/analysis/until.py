@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..vocabulary import CONFIDENCE
+from ..vocabulary import CONFIDENCE, UserError
 from .spec import SpecError, _statistic, _subject, _unit_factor
 
 __all__ = ["Target", "UntilError", "parse_target", "parse_targets", "checkpoints", "widths",
@@ -38,7 +38,7 @@ GROWTH = 1.25        # mc: each checked n is the previous one times this, rounde
 _WIDTH = re.compile(r"\s*((?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(%?)\s*(.*)$")
 
 
-class UntilError(ValueError):
+class UntilError(UserError):
     """A malformed ``--until`` target or an impossible stopping rule; one line naming the token."""
 
 

@@ -21,7 +21,7 @@ import xarray as xr
 
 from rss6core import __version__
 
-from ..vocabulary import DIRECTIONS, FAMILIES, FINISHED, QUANTITIES, STORES, WINDOWS
+from ..vocabulary import DIRECTIONS, FAMILIES, FINISHED, QUANTITIES, STORES, UserError, WINDOWS
 
 __all__ = ["DIRECTIONS", "QUANTITIES", "UNITS", "WINDOWS", "PROVENANCE", "ENSEMBLE_ATTRS", "STORES", "display_unit",
            "error_summaries", "window_summaries", "window_masks", "window_reductions", "window_label",
@@ -617,7 +617,7 @@ IDENTITY = ("scene_toml", "model", "integrator", "time_step_s", "elements_per_li
             "sampler", "qmc_replicates")   # the last two absent (None) in mc files
 
 
-class EnsembleFileError(ValueError):
+class EnsembleFileError(UserError):
     """A file that is not a complete rss6 ensemble, or one from a different run."""
 
 

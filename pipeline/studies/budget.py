@@ -32,7 +32,7 @@ from ..ensemble.run import EnsembleSpec, ensemble
 from ..scenes.variant import scene_variant
 from ..analysis.spec import Spec
 from ..analysis.stats import no_interval_at
-from ..vocabulary import CONFIDENCE, WINDOWS
+from ..vocabulary import CONFIDENCE, UserError, WINDOWS
 from ..analysis.summary import CLEARANCE_LEVELS
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
@@ -44,7 +44,7 @@ DIGITS = 4            # significant digits the factor is rounded down to
 MAX_DOUBLINGS = 12    # the sweep looks for a passing and a failing scale within 2^-12..2^12
 
 
-class BudgetError(ValueError):
+class BudgetError(UserError):
     """A budget that cannot be computed (a lower-limit spec, no interval at this n, zero error)."""
 
 

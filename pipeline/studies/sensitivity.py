@@ -24,7 +24,7 @@ import xarray as xr
 from rss6core import FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, prepare_level, size_band
 
 from ..files.store import JOINTS, _provenance, _unit_table, check_window, command_line, window_label, window_summaries
-from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, WINDOWS
+from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, UserError, WINDOWS
 
 __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
            "clearance_draws_from_uniforms", "Design", "designs", "sample_design",
@@ -42,7 +42,7 @@ COVERAGE_NOTE = ("95 % intervals measured on the closed-form case (quasi-static 
                  "97.7 %, 97.5 % at N = 256; not measured for the maxima and means over time")
 
 
-class SensitivityError(ValueError):
+class SensitivityError(UserError):
     """A sensitivity request that cannot be answered (level, sample size, failed evaluations)."""
 
 

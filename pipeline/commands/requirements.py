@@ -1,0 +1,51 @@
+"""--require for rss6 run and rss6 stats: the specs parsed before any work, judged on a Dataset,
+and written into a file's attributes."""
+from __future__ import annotations
+
+import json
+
+from ..vocabulary import CONFIDENCE, WINDOWS, OptionError
+
+
+def requirements(args) -> list:
+    """The --require specs; a malformed one raises SpecError (one line)."""
+    from ..analysis.spec import parse_specs
+    if args.undecided is not None and not args.require:
+        raise OptionError(f"--undecided {args.undecided}: applies with --require only")
+    return parse_specs(args.require)
+
+
+def known_windows(specs: list) -> None:
+    """A --require or --until naming a window the files do not have is a one-line error before any work."""
+    for s in specs:
+        if s.window is not None and s.window not in WINDOWS:
+            raise OptionError(f"{s.text!r}: unknown window {s.window!r}; choose one of {', '.join(WINDOWS)}")
+
+
+def judge(ds, specs: list, confidence: float = CONFIDENCE) -> list:
+    """Verdicts of the specs on an ensemble (or single-run) Dataset; a window the file lacks is a
+    one-line error."""
+    from ..analysis.gate import judge_all
+    try:
+        return judge_all(specs, ds, confidence)
+    except ValueError as exc:
+        raise OptionError(str(exc)) from None
+
+
+def verdict_attrs(verdicts: list) -> dict:
+    """File attributes of the verdicts: the overall one and each as strict JSON (SI values)."""
+    from ..analysis.gate import overall, verdicts_json
+    return {"requirements_verdict": overall(verdicts),
+            "requirements": json.dumps(verdicts_json(verdicts), allow_nan=False)}
+
+
+def annotator(specs: list, verdicts: list):
+    """The hook that judges the finished ensemble and puts the verdicts in its attributes; the
+    verdicts are also appended to ``verdicts`` for the caller."""
+    if not specs:
+        return None
+
+    def annotate(ds) -> dict:
+        verdicts[:] = judge(ds, specs)
+        return verdict_attrs(verdicts)
+    return annotate

@@ -1,0 +1,66 @@
+"""rss6 sensitivity: Sobol' indices of the error statistics by joint family (and joint), SALib."""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from rss6core import models_with
+
+from ..ensemble.settings import resolve_cluster, resolve_level
+from ..scenes.catalogue import find_scene
+from .messages import interrupted, warn_oversubscription
+from .options import (add_confidence, add_model, add_parents, add_scene, add_seed, add_window_choice, add_workers,
+                      positive_int)
+
+
+def add_parser(sub) -> None:
+    from ..studies.sensitivity import MIN_N
+    p = sub.add_parser("sensitivity", help="Sobol' indices of the error statistics by joint family "
+                                           "(and joint), with bootstrap intervals (SALib)")
+    add_scene(p)
+    add_model(p, "model level (default quasi-static; contact costs about 0.4 s per evaluation on the paper "
+                 "scene)", choices=models_with("function_of_one_draw"), default="quasi-static")
+    p.add_argument("-n", type=positive_int, default=1024,
+                   help=f"base sample N, a power of 2 of at least {MIN_N}; the level is evaluated "
+                        "N (G + 2) times for G groups: 6 N for the 4 families, 20 N more for the "
+                        "18 joints (default 1024)")
+    p.add_argument("-o", "--output", help="netCDF file of the indices (default: SCENE_MODEL_sobol.nc)")
+    add_parents(p)
+    p.add_argument("--plots", help="folder of the bar charts (default: OUTPUT's name + _plots)")
+    p.add_argument("--no-plots", action="store_true", help="write no bar charts")
+    p.add_argument("--per-joint", action="store_true",
+                   help="also the indices of each of the 18 joints (a second design)")
+    add_seed(p)
+    add_confidence(p, "confidence of the bootstrap intervals")
+    add_window_choice(p, "statistics")
+    add_workers(p, what="local dask workers (1: in this process)")
+    p.set_defaults(main=main)
+
+
+def main(args) -> int:
+    from ..analysis.plots import plot_sensitivity
+    from ..files.outputs import OutputLock, check_new_output
+    from ..files.store import load_netcdf, write_netcdf
+    from ..studies.sensitivity import format_joints, format_sensitivity, sensitivity
+    cluster = resolve_cluster(args.workers)
+    level = resolve_level(find_scene(args.config), args.config, model=args.model)
+    output = check_new_output(args.output or f"{level.scene.name}_{level.model}_sobol.nc", "rss6 sensitivity",
+                              args.parents)
+    warn_oversubscription(cluster.workers, None)
+    start = time.perf_counter()
+    with OutputLock(output):
+        try:
+            ds = sensitivity(level.ensemble_spec(args.seed), args.n, args.per_joint, args.confidence,
+                             cluster.workers, window=args.window,
+                             announce=lambda line: print(f"rss6 sensitivity: {line}", file=sys.stderr))
+        except KeyboardInterrupt:
+            return interrupted(None)
+        write_netcdf(ds, output)
+    plots = Path(args.plots or output.with_name(output.stem + "_plots"))
+    paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
+    print(f"wrote {output} in {time.perf_counter() - start:.1f} s" + (f"; bar charts in {plots}/" if paths else ""))
+    print(format_sensitivity(ds))
+    if args.per_joint:
+        print(format_joints(ds))
+    return 0

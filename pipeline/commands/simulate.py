@@ -1,0 +1,78 @@
+"""rss6 simulate: one deterministic simulation, its error summary printed and optionally written."""
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+from rss6core import FINISHED, SceneError, model_level
+
+from ..analysis.summary import contact_peaks, error_summary, format_errors
+from ..ensemble.settings import resolve_level
+from ..scenes.catalogue import find_scene
+from .messages import note_compiling
+from .options import (LEVELS_HELP, add_json, add_level_settings, add_model, add_parents, add_scene, add_seed,
+                      nonnegative_int)
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("simulate", help="run one deterministic simulation")
+    add_scene(p)
+    add_model(p, f"model level (default: the scene's). {LEVELS_HELP}")
+    add_level_settings(p)
+    add_seed(p, "random seed of the run")
+    p.add_argument("--realization", type=nonnegative_int, default=0,
+                   help="which clearance realisation of the seeded run (default 0)")
+    p.add_argument("-o", "--output", help="write the error histories to this netCDF file "
+                   "(default: none); its folder must exist unless --parents is given")
+    add_parents(p)
+    add_json(p, "print one JSON object (SI units)")
+    p.set_defaults(main=main)
+
+
+def main(args) -> int:
+    from rss6core import simulate
+
+    from ..files.outputs import check_new_output
+    from ..files.store import run_dataset, write_netcdf
+    level = resolve_level(find_scene(args.config), args.config, model=args.model, integrator=args.integrator,
+                          dt=args.dt, elements=args.elements, start=args.start)
+    if args.output:
+        check_new_output(args.output, "rss6 simulate", args.parents)
+    note_compiling(level.model)
+    start = time.perf_counter()
+    try:
+        result = simulate(level.scene, level.model, level.integrator, level.dt, level.elements, args.seed,
+                          args.realization)
+    except ValueError as exc:  # a time step that does not divide the duration, ...
+        raise SceneError(f"{args.config}: {exc}") from None
+    wall = time.perf_counter() - start
+    ds = run_dataset(level.scene, result, model=level.model, integrator=level.integrator, dt=level.dt,
+                     elements=level.elements, wall_time=wall, seed=args.seed, realization=args.realization)
+    if args.output:
+        write_netcdf(ds, args.output)
+    summary = error_summary(ds)
+    if result.contact_force_peak is not None:
+        summary["max_contact_force_N"] = contact_peaks(result.contact_force_peak)
+    _print(args, level, result, summary, wall)
+    if result.status != FINISHED:
+        print(f"rss6: run failed: {result.message}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _print(args, level, result, summary: dict, wall: float) -> None:
+    if args.json:
+        print(json.dumps({**summary, "wall_time_s": wall, "status": result.status,
+                          "message": result.message, "model": level.model, "integrator": level.integrator,
+                          "time_step_s": level.dt, "elements_per_link": level.elements}, indent=2))
+        return
+    print(f"scene {level.scene.name!r}, model {level.model}, {level.integrator}, dt = {level.dt:g} s, "
+          f"{level.elements} elements per link: {result.status} in {wall:.2f} s")
+    print(format_errors(summary))
+    if "max_contact_force_N" in summary:
+        forces = summary["max_contact_force_N"]
+        closed = model_level(level.model).redraws_every_step and not any(forces.values())
+        print("max contact force (N): " + ", ".join(f"{k} {v:.4g}" for k, v in forces.items())
+              + (" (the paper's method keeps every joint inside its clearance, so eq. 17 gives none)"
+                 if closed else ""))

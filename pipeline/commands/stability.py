@@ -1,0 +1,33 @@
+"""rss6 stability: time-step sweeps of each integrator, stable, inaccurate or failed."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..scenes.catalogue import find_scene
+from .options import add_study_arguments, positive_float
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("stability", help="time-step sweeps: stable, inaccurate or failed")
+    add_study_arguments(p, "stability", 2, "change vs the finest step that counts as inaccurate")
+    p.add_argument("--horizon", type=positive_float, default=0.2,
+                   help="simulated time of the contact sweeps, s (default 0.2)")
+    p.set_defaults(main=main)
+
+
+def main(args) -> int:
+    from ..files.outputs import check_output_folder
+    from ..studies.study import stability, write_stability
+    scene = find_scene(args.config)
+    check_output_folder(args.output, args.parents)
+    print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
+    ds = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
+    write_stability(ds, args.output)
+    print(f"wrote {args.output}/stability.csv, stability.nc, stability.png")
+    for name in ds["sweep"].values:
+        print(f"{name}: " + ", ".join(
+            f"{lim.removesuffix('_s').replace('_', ' ')} "
+            + (f"{v:.3g} s" if np.isfinite(v := float(ds[lim].sel(sweep=name))) else "-")
+            for lim in ("largest_not_failed_s", "smallest_failed_s", "largest_accurate_s")))
+    print(f"central-difference 2/omega_max: {ds.attrs['central_difference_limit_s']:.3g} s")
+    return 0

@@ -1,0 +1,83 @@
+"""rss6 stats: error statistics of an ensemble (or simulate) file, their intervals and --require verdicts."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+from ..vocabulary import OptionError
+from .options import add_confidence, add_json, add_parents, add_require
+from .requirements import judge, known_windows, requirements, verdict_attrs
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("stats", help="error statistics of an ensemble file (or a simulate -o file)")
+    p.add_argument("file", help="netCDF file of rss6 run, or of rss6 simulate -o (one realisation: "
+                                "estimates only)")
+    p.add_argument("--quantity", help="displacement, velocity or acceleration (default: all)")
+    p.add_argument("--direction", help="x, y, z, rx, ry or rz (default: all)")
+    add_json(p)
+    p.add_argument("-o", "--output", help="also write the statistics Dataset to this new netCDF file")
+    add_parents(p)
+    add_confidence(p, "confidence of the two-sided intervals, in (0, 1), and of each one-sided bound "
+                      "a --require is decided on, then above 0.5")
+    p.add_argument("--window", help="analysis window: whole, startup (t < the scene's "
+                                    "steady_after_s) or steady; also the window of a --require "
+                                    "without '/WINDOW' (default: every window shown, --require "
+                                    "judged on the whole run)")
+    add_require(p)
+    p.set_defaults(main=main)
+
+
+def main(args) -> int:
+    from ..analysis.gate import check_confidence, exit_code, format_verdicts, verdicts_json
+    from ..analysis.stats import ensemble_stats, format_stats, to_json
+    from ..files.check import open_results
+    from ..files.outputs import check_new_output
+    from ..files.store import write_netcdf
+    specs = requirements(args)
+    known_windows(specs)
+    if specs:
+        try:
+            check_confidence(args.confidence)
+        except ValueError as exc:
+            raise OptionError(f"--{exc} (with --require)") from None
+    if args.output:
+        check_new_output(args.output, "rss6 stats", args.parents)
+    ds = open_results(args.file)
+    full = ensemble_stats(ds, args.confidence, window=None)
+    if args.window is not None:
+        full, specs = _window_of(full, args.window), [replace(s, window=s.window or args.window) for s in specs]
+    verdicts = judge(ds, specs, args.confidence)
+    sds = _selection(full, args)
+    if args.output:
+        write_netcdf(sds.assign_attrs(verdict_attrs(verdicts)) if specs else sds, args.output)
+    if args.json:
+        out = to_json(sds) | ({"requirements": verdicts_json(verdicts)} if specs else {})
+        print(json.dumps(out, indent=2, allow_nan=False))
+    else:
+        print(format_stats(sds))
+        if specs:
+            print(format_verdicts(verdicts))
+    return exit_code(verdicts, args.undecided) if specs else 0
+
+
+def _window_of(sds, window: str):
+    """The statistics of analysis window ``window`` only (dimension kept); an unknown window, or a
+    file without windows, is an OptionError naming it."""
+    from ..analysis.stats import windows_of
+    if window not in windows_of(sds):
+        raise OptionError(f"--window: unknown window {window!r}; the file has "
+                          f"{', '.join(windows_of(sds)) or 'no analysis windows'}")
+    return sds.sel(window=[window])
+
+
+def _selection(sds, args):
+    """The statistics of the quantity and direction asked for; OptionError names an unknown one."""
+    for dim in ("quantity", "direction"):
+        given = getattr(args, dim)
+        allowed = [str(v) for v in sds[dim].values]
+        if given is not None and given not in allowed:
+            raise OptionError(f"--{dim}: unknown {dim} {given!r}; choose one of {', '.join(allowed)}")
+        if given is not None:
+            sds = sds.sel({dim: [given]})
+    return sds

@@ -1,0 +1,101 @@
+"""The settings of a run resolved once, before any work: a level against its scene (model,
+integrator, time step, mesh, initial state), the sampler's replicates and the cluster. Each
+resolver checks everything it resolves and returns an immutable description; a mistake is an
+OptionError naming the option (or a SceneError naming the scene file)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from rss6core import (SceneError, default_integrator, default_time_step, model_level, models_with, parse_scene,
+                      time_grid, uniform_dimension)
+
+from ..scenes.variant import scene_variant
+from ..vocabulary import OptionError
+from .run import WORKER_TIMEOUT_S, EnsembleSpec
+from .sampler import DEFAULT_REPLICATES, check_qmc
+
+LOCAL_WORKERS = 2   # --workers' default where --scheduler is the alternative
+
+
+@dataclass(frozen=True)
+class LevelSettings:
+    """A model level resolved against a scene: what one realisation computes, and how."""
+    scene: object        # rss6core Scene, with the command line's contact start applied
+    config: str          # the scene as the user named it (file path or shipped name)
+    model: str
+    integrator: str
+    dt: float            # time step, s
+    elements: int        # beam elements per link
+
+    def ensemble_spec(self, seed: int, store: str = "summary", replicates: int | None = None) -> EnsembleSpec:
+        return EnsembleSpec(self.scene.source_text, self.config, self.model, self.integrator, self.dt,
+                            self.elements, seed, store, qmc_replicates=replicates)
+
+
+def _with_start(scene, start: str | None):
+    """The scene with ``start`` as its [simulation] contact_start, recorded in the scene text so an
+    ensemble's workers and its file see it."""
+    if start is None or start == scene.simulation.contact_start:
+        return scene
+    text = scene_variant(scene.source_text, {"simulation": {"contact_start": start}}, scene.source_path,
+                         add=True)
+    return parse_scene(text, scene.source_path)
+
+
+def resolve_level(scene, config, *, model: str | None = None, integrator: str | None = None,
+                  dt: float | None = None, elements: int | None = None, start: str | None = None) -> LevelSettings:
+    """The command line's settings, else the scene's; the step is checked against the duration."""
+    sim = scene.simulation
+    model = model or sim.model
+    if start is not None and not model_level(model).contact_start:
+        raise OptionError(f"--start {start}: sets the contact level's initial state; this run is the "
+                          f"{model} level")
+    scene = _with_start(scene, start)
+    step = dt or default_time_step(scene, model)
+    try:
+        time_grid(scene.trajectory.duration, step)
+    except ValueError as exc:
+        if dt:
+            raise OptionError(f"--dt: {exc}") from None
+        raise SceneError(f"{scene.source_path}: time step: {exc}") from None
+    return LevelSettings(scene, str(config), model, integrator or default_integrator(scene, model), step,
+                         elements or sim.elements_per_link)
+
+
+def resolve_replicates(sampler: str, replicates: int | None, n: int, level: LevelSettings) -> int | None:
+    """R for --sampler qmc (None for mc), checked against -n and the level's draws."""
+    if sampler == "mc":
+        if replicates is not None:
+            raise OptionError("--replicates applies to --sampler qmc only")
+        return None
+    if level.model not in models_with("draws_clearances"):
+        raise OptionError(f"--sampler qmc: the {level.model} level draws no clearances")
+    replicates = DEFAULT_REPLICATES if replicates is None else replicates
+    redraws = model_level(level.model).redraws_every_step
+    steps = len(time_grid(level.scene.trajectory.duration, level.dt)) if redraws else None
+    try:
+        check_qmc(n, replicates, uniform_dimension(steps))
+    except ValueError as exc:
+        raise OptionError(str(exc)) from None
+    return replicates
+
+
+@dataclass(frozen=True)
+class ClusterSettings:
+    """Where an ensemble's chunks run: ``workers`` local processes, or an external ``scheduler``."""
+    workers: int
+    scheduler: str | None = None
+    worker_timeout: float = WORKER_TIMEOUT_S   # s without workers before an external run stops
+
+
+def resolve_cluster(workers: int | None, scheduler: str | None = None,
+                    worker_timeout: float | None = None) -> ClusterSettings:
+    """--workers only without --scheduler (its workers are its own), --worker-timeout only with it."""
+    if scheduler and workers is not None:
+        raise OptionError(f"--workers {workers}: sets the local cluster; with --scheduler the "
+                          "scheduler's own workers run the tasks")
+    if worker_timeout is not None and not scheduler:
+        raise OptionError(f"--worker-timeout {worker_timeout:g}: applies with --scheduler only "
+                          "(a local cluster's workers are rss6's own)")
+    return ClusterSettings(LOCAL_WORKERS if workers is None else workers, scheduler,
+                           WORKER_TIMEOUT_S if worker_timeout is None else worker_timeout)
