@@ -16,7 +16,9 @@ PIPELINE = Path(pipeline.__file__).parent
 
 
 def _trees(folder: Path) -> dict[str, ast.Module]:
-    return {p.stem: ast.parse(p.read_text(encoding="utf-8"), str(p)) for p in sorted(folder.glob("*.py"))}
+    """{module path below ``folder`` without .py: parsed source}, sub-packages included."""
+    return {p.relative_to(folder).with_suffix("").as_posix(): ast.parse(p.read_text(encoding="utf-8"), str(p))
+            for p in sorted(folder.rglob("*.py"))}
 
 
 def _imports(tree: ast.Module, everywhere: bool = True) -> list:
@@ -183,6 +185,17 @@ def test_the_core_writes_the_level_table_and_finished_once():
     """A level's properties are asked of rss6core.levels, not by comparing or listing level names; the
     status "finished" is compared as status.FINISHED."""
     assert _written_again(CORE, {"levels": "levels.py", "status": "status.py"}) == []
+
+
+# the pipeline's choices of particular levels (not their properties), each with its reason
+CHOSEN_LEVELS: set[str] = set()
+
+
+def test_the_pipeline_writes_the_level_table_and_finished_nowhere():
+    """The pipeline asks rss6core's level table (model_level, models_with) for a level's properties and
+    compares statuses with FINISHED; dask's own future status "finished" is not rss6's."""
+    found = set(_written_again(PIPELINE, {"levels": "-", "status": "-"}))
+    assert sorted(found - CHOSEN_LEVELS - {"ensemble/run.py:444 \"finished\""}) == []
 
 
 def test_written_again_finds_level_names_and_finished(tmp_path):

@@ -423,7 +423,7 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
     by_window, t_s = ensemble_stats(contact, window=None), float(contact.attrs["steady_after_s"])
     start = parse_scene(contact.attrs["scene_toml"]).simulation.contact_start
     md += ["", "### Start-up and steady operation (contact level)", "",
-           text.WINDOWS.format(steady_after=t_s) + " " + text.START[start], ""]
+           text.WINDOWS_PARAGRAPH.format(steady_after=t_s) + " " + text.START[start], ""]
     md += _window_table(by_window, t_s)
     md += ["", "### Where we differ from the paper, and why", ""]
     return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"]), by_window, start, t_s) + [""]

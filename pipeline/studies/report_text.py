@@ -81,7 +81,7 @@ START = {
                     "differ by their drawn clearance sizes."),
 }
 
-WINDOWS = (
+WINDOWS_PARAGRAPH = (
     "The same statistics in the two analysis windows: startup, t < {steady_after:g} s, while the "
     "joints settle from their initial state, and steady, t >= {steady_after:g} s (the scene's "
     "`steady_after_s`; by default the time from which the paper scene's contact-level errors repeat "

@@ -1,0 +1,115 @@
+"""Every option mistake of every command ends in one line on stderr and exit code 2, before any
+work: a loop over the parser's commands and options, each given a value it must refuse, and the
+combinations of options that cannot work together."""
+import argparse
+
+import pytest
+
+from pipeline.cli import build_parser, main
+
+# a value each free-text option must refuse (options not listed take any text, e.g. paths)
+BAD_TEXT = {"require": "displacement:x<=1parsec@q95", "until": "displacement:x@q95<=5 furlongs",
+            "spec": "displacement:x<=1mm@q101", "quantity": "torque", "direction": "w", "window": "midnight",
+            "output": "{missing}/out", "plots": None, "data": None, "configs": None, "file": None, "config": None}
+# per command, what else must be given for the option to be judged (a file to read, a required option)
+ANY_TEXT = {("report", "output")}   # report creates its output folder, parents included
+NEEDS = {"stats": ["{file}"], "plot": ["{file}"], "budget": ["--spec", "displacement:x<=1mm@q95"],
+         "multifidelity": ["-o", "{tmp}/mf.nc"], "report": ["smoke"]}
+# the entry points that compute (budget and sensitivity check their request first, so they stay)
+WORK = ("pipeline.ensemble.run.ensemble", "pipeline.analysis.until.run_until", "rss6core.simulate",
+        "pipeline.studies.report.write_report", "pipeline.studies.study.tradeoff",
+        "pipeline.studies.study.stability", "rss6core.compile_kernels")
+
+
+def _commands() -> dict[str, argparse.ArgumentParser]:
+    return next(a for a in build_parser()._actions if a.dest == "command").choices
+
+
+def _bad_values(action) -> list[str]:
+    """Values ``action`` must refuse: outside its choices, not a number, below its range, bad text."""
+    if action.nargs == 0:
+        return []
+    if action.choices:
+        return ["no-such-choice"]
+    if action.type is not None:
+        return ["x", "-1"] if action.type is not str else []
+    bad = BAD_TEXT.get(action.dest, "?")
+    assert bad != "?", f"no bad value known for {action.option_strings or action.dest}: add it to BAD_TEXT"
+    return [] if bad is None else [bad]
+
+
+def _cases():
+    for name, parser in _commands().items():
+        for action in parser._actions:
+            if not action.option_strings or action.dest == "help":
+                continue
+            for bad in [] if (name, action.dest) in ANY_TEXT else _bad_values(action):
+                yield pytest.param(name, action.option_strings[-1], bad, id=f"{name} {action.option_strings[-1]} {bad}")
+
+
+@pytest.fixture(scope="module")
+def small_file(tmp_path_factory):
+    """A one-run file (rss6 simulate -o), which stats and plot read like an ensemble."""
+    out = tmp_path_factory.mktemp("run") / "r.nc"
+    assert main(["simulate", "smoke", "--model", "quasi-static", "-o", str(out)]) == 0
+    return out
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Every entry point that computes raises: a mistake must be refused before it."""
+    import importlib
+    for target in WORK:
+        module, _, name = target.rpartition(".")
+        monkeypatch.setattr(importlib.import_module(module), name,
+                            lambda *a, **k: pytest.fail("work started before the mistake was refused"))
+
+
+def _run(argv: list[str], capsys, tmp_path, small_file) -> tuple[int, list[str]]:
+    fill = {"file": str(small_file), "tmp": str(tmp_path), "missing": str(tmp_path / "no" / "such")}
+    argv = [a.format(**fill) for a in argv]
+    try:
+        code = main(argv)
+    except SystemExit as exc:
+        code = exc.code
+    return code, [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+
+
+@pytest.mark.parametrize("command, option, bad", list(_cases()))
+def test_an_option_mistake_is_one_line_and_exit_2(command, option, bad, capsys, tmp_path, small_file, no_work):
+    code, err = _run([command, *NEEDS.get(command, []), option, bad], capsys, tmp_path, small_file)
+    assert code == 2 and len(err) == 1, err
+    assert option in err[0] or bad.format(missing="") in err[0] or "no" in err[0], err
+
+
+COMBINATIONS = [
+    ["run", "smoke", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
+    ["run", "smoke", "--worker-timeout", "5"],
+    ["run", "smoke", "--model", "quasi-static", "--replicates", "4"],
+    ["run", "smoke", "--model", "quasi-static", "--undecided", "pass"],
+    ["run", "smoke", "--model", "quasi-static", "--start", "drawn"],
+    ["run", "smoke", "--model", "elastic", "--sampler", "qmc"],
+    ["run", "smoke", "--model", "quasi-static", "--dt", "0.0007"],
+    ["run", "smoke", "--model", "quasi-static", "-n", "10", "--sampler", "qmc", "--replicates", "4"],
+    ["stats", "{file}", "--undecided", "fail"],
+    ["stats", "{file}", "--require", "displacement:x<=1mm@q95", "--confidence", "0.3"],
+    ["multifidelity", "-o", "{tmp}/m.nc", "--high", "paper", "--low", "paper"],
+    ["multifidelity", "-o", "{tmp}/m.nc", "--low", "elastic"],
+    ["multifidelity", "-o", "{tmp}/m.nc", "-n", "8", "--low-n", "4"],
+    ["multifidelity", "-o", "{tmp}/m.nc", "--width", "0.1"],
+    ["report", "smoke", "--worker-timeout", "5"],
+    ["sensitivity", "smoke", "-n", "100"],
+    ["simulate", "smoke", "--model", "elastic", "--start", "equilibrium"],
+]
+
+
+@pytest.mark.parametrize("argv", COMBINATIONS, ids=" ".join)
+def test_options_that_cannot_work_together_are_one_line_and_exit_2(argv, capsys, tmp_path, small_file, no_work):
+    code, err = _run(argv, capsys, tmp_path, small_file)
+    assert code == 2 and len(err) == 1 and err[0].startswith("rss6"), err
+
+
+def test_the_loop_covers_every_command_and_the_seed_of_each():
+    cases = {(c.values[0], c.values[1]) for c in _cases()}
+    assert {c for c, _ in cases} == set(_commands()) - {"check", "warm", "plot"} | {"plot"}
+    assert {c for c, o in cases if o == "--seed"} >= {"tradeoff", "stability", "report", "run", "simulate"}
