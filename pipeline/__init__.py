@@ -1,8 +1,10 @@
-"""pipeline: ensembles, storage, statistics, plots and the rss6 command line.
+"""pipeline: ensembles, storage, statistics, plots and the rss6 command line, in parts that depend
+one way: vocabulary, scenes/, files/, ensemble/, analysis/, studies/, commands/ and the dispatcher
+cli.py (docs/developer.md).
 
 The public names import from here (``from pipeline import open_ensemble, ensemble_stats,
-run_ensemble, labelled``), each on first use: importing them at once would load dask and xarray
-for every ``rss6`` command, ``rss6 --help`` included.
+run_ensemble, labelled, find_scene``), each on first use: importing them at once would load dask
+and xarray for every ``rss6`` command, ``rss6 --help`` included.
 """
 from __future__ import annotations
 
@@ -10,7 +12,8 @@ import importlib
 
 # public name -> the module that defines it
 _PUBLIC = {"open_ensemble": "files.store", "labelled": "files.store", "load_netcdf": "files.store",
-           "ensemble_stats": "analysis.stats", "run_ensemble": "ensemble.run", "EnsembleSpec": "ensemble.run"}
+           "ensemble_stats": "analysis.stats", "run_ensemble": "ensemble.run", "EnsembleSpec": "ensemble.run",
+           "find_scene": "scenes.catalogue"}
 
 __all__ = sorted(_PUBLIC)
 
