@@ -12,6 +12,7 @@ holds the command lines, the rss6 used and the wall times (provenance, not compa
 absolute path, the tmp folder, the venv and the code's folder are replaced by <OUTDIR>, <TMP>,
 <VENV>, <CODE> in stdout and stderr when recorded. Run ``rss6 warm`` first: a cold numba cache
 costs the contact commands minutes (and only the compile notes on stderr, masked below, differ).
+A recording took 371-437 s on 2 cores shared with a CI job (load 9-11), tradeoff 100-145 s of it.
 
 ``compare`` checks, one line per item: exit codes equal; stdout and stderr equal after the masks
 below; every netCDF file (read raw, ``decode_cf=False``, so encodings count too) has the same
@@ -34,15 +35,20 @@ speed or state, not on the code's results:
   ...``) are dropped (they depend on the numba cache); ``tcp://127.0.0.1:38715`` -> ``tcp://<ADDR>``
   (--until's cluster port is the OS's pick); dask/distributed log lines are dropped (heartbeat
   warnings of a loaded machine).
+Recording twice at one commit, the wall times, the tradeoff costs and speed-up, the progress lines
+and the port differed; the version, compile notes and dask logs are masked as a precaution (a
+change may bump the version; the others depend on the machine's state).
 
-Attributes and values allowed to differ (all found volatile by recording twice at one commit, except
-the version, which a change may bump):
+Attributes and values allowed to differ (all but the version found volatile by recording twice at
+one commit; a change may bump the version):
 - global attribute ``wall_time_s`` (simulate -o, sensitivity): wall time of the computation;
 - global attribute ``reference_check_seconds_per_realization`` (tradeoff): a measured cost;
 - global attributes ``source``, ``rss6_version``, ``source_rss6_version``: the rss6 version;
 - variable ``seconds_per_realization`` (tradeoff.nc) and its entry in the checksum attribute
   ``rss6_sha256`` (the other entries are compared; the JSON is compared per variable), and CSV column
   ``seconds_per_realization`` (tradeoff.csv): measured costs.
+``history`` is compared (rss6 writes into it only the options that fix the results, no machine's
+options), and no rss6 file carries a date.
 """
 from __future__ import annotations
 
@@ -142,6 +148,17 @@ def placeholders(outdir: Path) -> list[tuple[str, str]]:
     return sorted(pairs, key=lambda p: -len(p[0]))
 
 
+def code_commit(paths: list[tuple[str, str]]) -> str:
+    """The git commit of the recorded code's folder (+ ' with changes' if tracked files differ), or ''."""
+    code = next((path for path, mark in paths if mark == "<CODE>"), None)
+    if code is None:
+        return ""
+    head = subprocess.run(["git", "-C", code, "rev-parse", "HEAD"], capture_output=True, text=True)
+    dirty = subprocess.run(["git", "-C", code, "status", "--porcelain", "--untracked-files=no"],
+                           capture_output=True, text=True).stdout.strip()
+    return head.stdout.strip() + (" with changes" if dirty else "") if head.returncode == 0 else ""
+
+
 def run_one(rss6: Path, command: Command, outdir: Path, paths: list[tuple[str, str]]) -> float:
     """Run ``command`` in ``outdir``; write its NAME.stdout, NAME.stderr, NAME.rc; the wall time, s."""
     start = time.perf_counter()
@@ -174,7 +191,8 @@ def record(outdir: Path) -> int:
         rc = (outdir / f"{command.name}.rc").read_text().strip()
         print(f"{command.name:22s} exit {rc:>3s} {walls[command.name]:7.1f} s  rss6 {' '.join(command.args)}")
     total = time.perf_counter() - start
-    manifest = {"rss6": str(rss6), "version": version, "python": sys.executable, "total_wall_s": total,
+    manifest = {"rss6": str(rss6), "version": version, "python": sys.executable, "code": code_commit(paths),
+                "total_wall_s": total,
                 "commands": [{"name": c.name, "argv": ["rss6", *c.args], "wall_s": walls[c.name]}
                              for c in COMMANDS]}
     (outdir / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
