@@ -119,7 +119,8 @@ def _simulate(args) -> int:
 
     from rss6core import simulate
 
-    from .files.store import run_dataset, write_netcdf
+    from .files.records import run_dataset
+    from .files.writing import write_netcdf
     from .files.outputs import check_new_output
     scene = _with_start(args, find_scene(args.config))
     model, integrator, dt, elements = _settings(args, scene)
@@ -446,11 +447,11 @@ def _judge(ds, specs: list, confidence: float = CONFIDENCE) -> list:
 
 
 def _stats(args) -> int:
-    from .files.check import open_results
+    from .files.opening import open_results
     from .analysis.gate import check_confidence, exit_code, format_verdicts, verdicts_json
     from .analysis.stats import ensemble_stats, format_stats, to_json
     from .files.outputs import check_new_output
-    from .files.store import write_netcdf
+    from .files.writing import write_netcdf
     specs = _requirements(args)
     _known_windows(specs)
     if specs:
@@ -510,10 +511,10 @@ def _require_arguments(p) -> None:
 
 
 def _plot(args) -> int:
-    from .files.check import open_results
+    from .files.opening import open_results
     from .analysis.plots import plot_ensemble, plot_run
     from .files.outputs import check_output_folder
-    from .files.store import EnsembleFileError
+    from .files.schema import EnsembleFileError
     check_output_folder(args.output, args.parents)
     ds = open_results(args.file)
     if "realization" not in ds.dims:                      # rss6 simulate -o: one run's histories
@@ -548,7 +549,8 @@ def _multifidelity(args) -> int:
     from .studies.multifidelity import (check_multifidelity_output, format_multifidelity, level_paths,
                                         multifidelity_dataset, to_json)
     from .ensemble.run import SchedulerUnavailable, ensemble, parts_dir
-    from .files.store import check_window, write_netcdf
+    from .files.records import check_window
+    from .files.writing import write_netcdf
     from .analysis.summary import CLEARANCE_LEVELS
     if args.high == args.low:
         raise SceneError(f"--low {args.low}: must differ from --high (the same level is no control "
@@ -686,7 +688,8 @@ def _sensitivity(args) -> int:
     from .analysis.plots import plot_sensitivity
     from .ensemble.run import EnsembleSpec
     from .studies.sensitivity import SensitivityError, format_joints, format_sensitivity, sensitivity
-    from .files.store import load_netcdf, write_netcdf
+    from .files.reading import load_netcdf
+    from .files.writing import write_netcdf
     scene = find_scene(args.config)
     model, integrator, dt, elements = _settings(args, scene)
     output = check_new_output(args.output or f"{scene.name}_{model}_sobol.nc", "rss6 sensitivity",
@@ -1011,7 +1014,7 @@ def _cluster_options(args) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    from .files.store import EnsembleFileError
+    from .files.schema import EnsembleFileError
     try:
         _cluster_options(args)
         return args.func(args)
