@@ -13,7 +13,7 @@ import sys
 
 import numpy as np
 
-from pipeline.files.store import load_netcdf
+from pipeline.files.reading import load_netcdf
 from pipeline.vocabulary import QUANTITIES
 from rss6core import parse_scene
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import importlib
 
 # public name -> the module that defines it
-_PUBLIC = {"open_ensemble": "files.store", "labelled": "files.store", "load_netcdf": "files.store",
+_PUBLIC = {"open_ensemble": "files.opening", "labelled": "files.schema", "load_netcdf": "files.reading",
            "ensemble_stats": "analysis.stats", "run_ensemble": "ensemble.run", "EnsembleSpec": "ensemble.run",
            "find_scene": "scenes.catalogue"}
 

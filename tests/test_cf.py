@@ -8,7 +8,8 @@ import xarray as xr
 
 from pipeline.cli import main
 from pipeline.ensemble.run import EnsembleSpec, run_chunk
-from pipeline.files.store import load_netcdf, write_netcdf
+from pipeline.files.reading import load_netcdf
+from pipeline.files.writing import write_netcdf
 from pipeline.scenes.catalogue import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
@@ -166,7 +167,7 @@ def test_the_public_names_import_from_pipeline_lazily():
             "from pipeline import open_ensemble, ensemble_stats, run_ensemble, labelled; "
             "print(open_ensemble.__module__, ensemble_stats.__module__, run_ensemble.__module__)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.split() == ["pipeline.files.store", "pipeline.analysis.stats", "pipeline.ensemble.run"]
+    assert out.split() == ["pipeline.files.opening", "pipeline.analysis.stats", "pipeline.ensemble.run"]
 
 
 def _every_kind(folder: Path) -> dict:

@@ -15,7 +15,9 @@ from pipeline.cli import main
 from pipeline.commands.messages import warn_oversubscription
 from pipeline.files.outputs import OutputLock, PartsManifest
 from pipeline.ensemble.run import TEST_HOLD_ENV, EnsembleSpec, ensemble, run_chunk
-from pipeline.files.store import EnsembleFileError, open_ensemble, write_netcdf
+from pipeline.files.opening import open_ensemble
+from pipeline.files.schema import EnsembleFileError
+from pipeline.files.writing import write_netcdf
 from pipeline.analysis.summary import failure_reasons
 from importlib import resources
 

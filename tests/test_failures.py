@@ -8,7 +8,7 @@ from rss6core import Level
 from pipeline.ensemble.run import EnsembleSpec, run_chunk, run_ensemble
 from pipeline.scenes.variant import scene_variant
 from pipeline.scenes.catalogue import scene_text
-from pipeline.files.store import finish_ensemble
+from pipeline.files.records import finish_ensemble
 
 SMOKE_TEXT = scene_text("smoke")
 PER_REALISATION = ["status", "status_message", "max_abs_error", "mean_abs_error", "eccentricity"]

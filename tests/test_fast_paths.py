@@ -5,7 +5,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline.files.store import chunk_dataset, load_netcdf, window_masks, window_reductions, write_netcdf
+from pipeline.files.reading import load_netcdf
+from pipeline.files.records import chunk_dataset, window_masks, window_reductions
+from pipeline.files.writing import write_netcdf
 from rss6core import SimulationResult
 from rss6core.clearance import _combine, draw_clearances, realization_rng, sphere_directions
 from rss6core.contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio

@@ -15,12 +15,14 @@ import xarray as xr
 from matplotlib.text import Text
 
 from pipeline.cli import main
-from pipeline.files.check import open_results
+from pipeline.files.opening import open_results
 from pipeline.analysis.plots import (CONTACT_ACCURACY, QUANTITIES, ensemble_figures, family_units, figure_unit,
                                      run_figures)
 from pipeline.studies.report import LEVELS, error_figure, rigid_figure
 from pipeline.analysis.stats import MIN_N_MEAN, ensemble_stats, estimates, min_n_for_quantile, running_mean_interval
-from pipeline.files.store import open_ensemble, window_masks, write_netcdf
+from pipeline.files.opening import open_ensemble
+from pipeline.files.records import window_masks
+from pipeline.files.writing import write_netcdf
 from pipeline.vocabulary import WINDOWS
 from pipeline.studies.study import recommend, stability_figure, tradeoff_figure
 
@@ -280,7 +282,7 @@ def test_sensitivity_figures_are_legible(smoke, tmp_path):
     from pipeline.ensemble.run import EnsembleSpec
     from pipeline.studies.sensitivity import SobolIndices, clearance_inputs, designs, sensitivity_dataset
     from pipeline.analysis.plots import sensitivity_figures
-    from pipeline.files.store import load_netcdf
+    from pipeline.files.reading import load_netcdf
     inputs = clearance_inputs(smoke)
     rng = np.random.default_rng(0)
     results = []

@@ -10,7 +10,10 @@ from rss6core import __version__
 
 from pipeline.cli import main
 from pipeline.ensemble.run import EnsembleSpec, run_ensemble
-from pipeline.files.store import ENSEMBLE_ATTRS, PROVENANCE, EnsembleFileError, load_netcdf, open_ensemble, write_netcdf
+from pipeline.files.opening import open_ensemble
+from pipeline.files.reading import load_netcdf
+from pipeline.files.schema import ENSEMBLE_ATTRS, PROVENANCE, EnsembleFileError
+from pipeline.files.writing import write_netcdf
 from pipeline.scenes.catalogue import PACKAGE
 
 CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from pipeline.files.store import open_ensemble
+from pipeline.files.opening import open_ensemble
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

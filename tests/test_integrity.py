@@ -9,12 +9,17 @@ from pathlib import Path
 import netCDF4
 import pytest
 
-import pipeline.files.store as store
+import pipeline.files.reading as reading
+import pipeline.files.schema as schema
 from pipeline.cli import main
 from pipeline.files.outputs import PartsManifest
 from pipeline.ensemble.run import EnsembleSpec, ensemble, parts_dir, run_chunk
 from pipeline.scenes.catalogue import PACKAGE
-from pipeline.files.store import CHECKSUM, EnsembleFileError, file_checksums, open_ensemble, write_netcdf
+from pipeline.files.checksums import file_checksums
+from pipeline.files.opening import open_ensemble
+from pipeline.files.reading import load_netcdf
+from pipeline.files.schema import CHECKSUM, MIXED_UNITS, EnsembleFileError
+from pipeline.files.writing import write_netcdf
 
 SMOKE = Path(str(resources.files(PACKAGE))) / "smoke.toml"
 N = 6
@@ -102,7 +107,7 @@ def test_history_checksums_do_not_depend_on_the_blocks_they_are_written_and_read
     """A merge streams the histories from the parts one block at a time (here one realisation):
     the checksums are those of the same values written at once, and they verify when the file is
     read whole and when it is read lazily in blocks."""
-    monkeypatch.setattr(store, "HISTORY_BLOCK", 1)
+    monkeypatch.setattr(reading, "HISTORY_BLOCK", 1)
     spec = _spec("full")
     streamed = tmp_path / "streamed.nc"
     ensemble(spec, 4, streamed, workers=1, chunk=2, progress=False)
@@ -110,8 +115,8 @@ def test_history_checksums_do_not_depend_on_the_blocks_they_are_written_and_read
     write_netcdf(run_chunk(spec, [0, 1, 2, 3]), at_once)
     with netCDF4.Dataset(streamed) as a, netCDF4.Dataset(at_once) as b:
         assert json.loads(a.getncattr(CHECKSUM)) == json.loads(b.getncattr(CHECKSUM))
-    assert store.load_netcdf(streamed).encoding.get("rss6_unverified") is None       # verified whole
-    assert store.load_netcdf(streamed, lazy=True)["error"].data.numblocks[0] == 4     # and in blocks
+    assert load_netcdf(streamed).encoding.get("rss6_unverified") is None       # verified whole
+    assert load_netcdf(streamed, lazy=True)["error"].data.numblocks[0] == 4     # and in blocks
 
 
 # edits of a file without checksums (an earlier rss6's, or the attribute deleted): the bounds
@@ -193,10 +198,10 @@ def test_a_file_in_the_layout_before_the_split_by_unit_is_read(tmp_path, capsys,
     ds = run_chunk(_spec(), [0, 1, 2])
     old = tmp_path / "old.nc"
     with monkeypatch.context() as m:
-        m.setattr(store, "_split_units", lambda d: d)
+        m.setattr(schema, "_split_units", lambda d: d)
         write_netcdf(ds, old)
     with netCDF4.Dataset(old, "a") as nc:
-        assert nc.variables["max_abs_error"].rss6_units == store.MIXED_UNITS
+        assert nc.variables["max_abs_error"].rss6_units == MIXED_UNITS
         nc.delncattr(CHECKSUM)
         nc.rss6_version = "0.2.0"
     import xarray as xr

@@ -12,11 +12,15 @@ import numpy as np
 import pytest
 import xarray as xr
 
-import pipeline.files.store as store
+import pipeline.files.reading as reading
+import pipeline.files.writing as writing
 from pipeline.files.outputs import PartsManifest
 from pipeline.ensemble.run import EnsembleSpec, ensemble, run_chunk
 from pipeline.scenes.catalogue import PACKAGE
-from pipeline.files.store import EnsembleFileError, netcdf_size, open_ensemble, write_netcdf
+from pipeline.files.opening import open_ensemble
+from pipeline.files.reading import load_netcdf
+from pipeline.files.schema import EnsembleFileError
+from pipeline.files.writing import netcdf_size, write_netcdf
 
 SMOKE = Path(str(resources.files(PACKAGE))) / "smoke.toml"
 N = 6
@@ -49,19 +53,19 @@ def _merge(out: Path):
 
 def _history_writes(monkeypatch) -> list:
     """The number of blocks in which each dask-backed numeric variable is written."""
-    blocks, add = [], store._InOrderWriter.add
+    blocks, add = [], writing._InOrderWriter.add
 
     def spy(self, source, target, region=None):
-        if store.dask.is_dask_collection(source) and source.dtype.kind == "f":
+        if writing.dask.is_dask_collection(source) and source.dtype.kind == "f":
             blocks.append(source.npartitions)
         return add(self, source, target, region)
-    monkeypatch.setattr(store._InOrderWriter, "add", spy)
+    monkeypatch.setattr(writing._InOrderWriter, "add", spy)
     return blocks
 
 
 def test_streamed_merge_is_the_in_memory_file_and_reads_one_block_at_a_time(tmp_path, chunks,
                                                                              monkeypatch):
-    monkeypatch.setattr(store, "HISTORY_BLOCK", 1)
+    monkeypatch.setattr(reading, "HISTORY_BLOCK", 1)
     out = tmp_path / "out.nc"
     parts = _parts(out, chunks)
     blocks = _history_writes(monkeypatch)
@@ -93,10 +97,10 @@ def test_the_disk_check_asks_for_the_size_of_the_merged_file(tmp_path, chunks, m
 
 def _fail_after_first_block(monkeypatch, action):
     """Run ``action`` after the first history block is written (inside the streamed merge)."""
-    real = store._InOrderWriter.add
+    real = writing._InOrderWriter.add
 
     def add(self, source, target, region=None):
-        if store.dask.is_dask_collection(source) and source.dtype.kind == "f":
+        if writing.dask.is_dask_collection(source) and source.dtype.kind == "f":
             real_target = target
 
             class Target:
@@ -105,13 +109,13 @@ def _fail_after_first_block(monkeypatch, action):
                     action()
             target = Target()
         return real(self, source, target, region)
-    monkeypatch.setattr(store._InOrderWriter, "add", add)
+    monkeypatch.setattr(writing._InOrderWriter, "add", add)
 
 
 @pytest.mark.parametrize("event", ["ctrl-c", "full disk"])
 def test_an_interrupt_or_a_full_disk_during_the_merge_keeps_every_part(tmp_path, chunks,
                                                                         monkeypatch, event):
-    monkeypatch.setattr(store, "HISTORY_BLOCK", 1)
+    monkeypatch.setattr(reading, "HISTORY_BLOCK", 1)
     out = tmp_path / "out.nc"
     parts = _parts(out, chunks)
     before = sorted((p.name, p.read_bytes()) for p in parts.iterdir())
@@ -146,7 +150,7 @@ def test_parts_with_shorter_strings_first_merge_without_cutting_longer_ones(tmp_
     write_netcdf(second, tmp_path / "b.nc")
     merged = _merged([open_ensemble(tmp_path / p, lazy=True) for p in ("a.nc", "b.nc")], spec)
     write_netcdf(merged, tmp_path / "m.nc")
-    assert list(store.load_netcdf(tmp_path / "m.nc")["status"].values) == ["failed", "finished"]
+    assert list(load_netcdf(tmp_path / "m.nc")["status"].values) == ["failed", "finished"]
 
 
 def _summary_spec():
@@ -165,7 +169,7 @@ def test_chunks_of_summaries_merge_as_they_came_or_as_read_back_to_the_same_byte
                                                   "LinAlgError: singular"], dtype=object)
     for name, ds in (("a.nc", first), ("b.nc", second)):
         write_netcdf(ds, tmp_path / name)
-    read = [store.load_netcdf(tmp_path / name, lazy=True) for name in ("a.nc", "b.nc")]
+    read = [load_netcdf(tmp_path / name, lazy=True) for name in ("a.nc", "b.nc")]
     files = []
     for k, pieces in enumerate(([second, first], read[::-1], [second, read[0]], [read[1], first])):
         files.append(tmp_path / f"m{k}.nc")

@@ -12,7 +12,9 @@ from pipeline.studies.multifidelity import (MIN_N_MF, control_variate_mean, cost
                                             level_paths, multifidelity_dataset, optimal_low_ratio, paired_values,
                                             variance_reduction)
 from pipeline.ensemble.run import EnsembleSpec, run_chunk
-from pipeline.files.store import EnsembleFileError, load_netcdf, window_label
+from pipeline.files.reading import load_netcdf
+from pipeline.files.records import window_label
+from pipeline.files.schema import EnsembleFileError
 from pipeline.vocabulary import WINDOWS
 
 CONF = 0.95

@@ -17,7 +17,9 @@ from pipeline.files.outputs import PartsManifest
 from pipeline.ensemble.run import (MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL, TEST_HOLD_ENV, EnsembleSpec, default_chunk,
                                    run_chunk, run_ensemble)
 from pipeline.analysis.stats import ensemble_stats
-from pipeline.files.store import EnsembleFileError, open_ensemble, write_netcdf
+from pipeline.files.opening import open_ensemble
+from pipeline.files.schema import EnsembleFileError
+from pipeline.files.writing import write_netcdf
 from pipeline.scenes.catalogue import scene_text
 
 SMOKE = "smoke"                    # the shipped scene, by name

@@ -7,7 +7,8 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.studies.report import OFF, PAPER_VALUES, _only, with_clearance
-from pipeline.files.store import EnsembleFileError, open_ensemble
+from pipeline.files.opening import open_ensemble
+from pipeline.files.schema import EnsembleFileError
 from rss6core import parse_scene
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.ensemble.run import TEST_HOLD_ENV
-from pipeline.files.store import open_ensemble
+from pipeline.files.opening import open_ensemble
 
 DASK = str(Path(sys.executable).with_name("dask"))
 N = 20    # 10 chunks: the first is stored, the others wait (TEST_HOLD_ENV) until the worker is killed

@@ -12,7 +12,8 @@ from pipeline.ensemble.run import EnsembleSpec
 from pipeline.scenes.variant import scene_variant
 from pipeline.studies.sensitivity import (FAMILIES, clearance_draws_from_uniforms, clearance_inputs, designs,
                                           evaluate_statistics, sample_design, sobol_indices)
-from pipeline.files.store import error_summaries, load_netcdf
+from pipeline.files.reading import load_netcdf
+from pipeline.files.records import error_summaries
 from pipeline.vocabulary import WINDOWS
 from rss6core import parse_scene, prepare_level
 from rss6core.clearance import draw_clearances, realization_rng

@@ -52,7 +52,7 @@ def test_ctrl_c_while_waiting_for_dask_is_raised_by_rss6_not_inside_dask(monkeyp
     """A Ctrl-C that arrives while the main thread waits in dask's client is held and raised by
     _finished before its next wait: never inside dask's locks (where it could hang the shutdown)."""
     import pipeline.ensemble.run as run
-    from pipeline.files.store import sigint_deferred
+    from pipeline.files.writing import sigint_deferred
     waits = []
 
     def wait_in_dask(client, pending):   # stands for dask.distributed.wait: Ctrl-C meanwhile

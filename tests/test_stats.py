@@ -17,7 +17,9 @@ from pipeline.ensemble.run import EnsembleSpec, run_ensemble
 from pipeline.analysis.stats import (in_window, MIN_N_MEAN, MIN_N_STD, ensemble_stats, mean_interval,
                                      min_n_for_quantile, quantile_interval, quantile_ranks, std_interval, to_json)
 from pipeline.vocabulary import QUANTILES, STATISTICS
-from pipeline.files.store import MIXED_UNITS, UNITS, _provenance, load_netcdf, write_netcdf
+from pipeline.files.reading import load_netcdf
+from pipeline.files.schema import MIXED_UNITS, UNITS, _provenance
+from pipeline.files.writing import write_netcdf
 from pipeline.vocabulary import DIRECTIONS, QUANTITIES
 from pipeline.scenes.catalogue import PACKAGE
 

@@ -8,7 +8,7 @@ import xarray as xr
 
 from pipeline.cli import main
 from pipeline.studies.study import TRADEOFF_STATISTICS, pareto_front, recommend, relative_errors
-from pipeline.files.store import load_netcdf
+from pipeline.files.reading import load_netcdf
 from pipeline.vocabulary import DIRECTIONS, QUANTITIES
 from rss6core.contact_dynamics import simulate_contact
 from rss6core.clearance import draw_clearances

@@ -76,7 +76,7 @@ def test_bad_bands_are_one_line_errors_naming_the_key(paper_text, band, message)
 def test_ensemble_file_records_each_realisations_drawn_sizes(tmp_path, configs):
     from pipeline.ensemble.run import EnsembleSpec, run_ensemble
     from pipeline.scenes.catalogue import scene_text
-    from pipeline.files.store import open_ensemble
+    from pipeline.files.opening import open_ensemble
     text = scene_text("smoke") + ('\n[tolerance.spherical_C]\nlaw = "uniform"\nlow_m = 1e-4\nhigh_m = 3e-4\n')
     spec = EnsembleSpec(text, "smoke", "quasi-static", "newmark", 1e-3, 4, 5, "summary")
     run_ensemble(spec, 4, tmp_path / "t.nc", workers=1, chunk=3, progress=False)

@@ -12,7 +12,7 @@ import pytest
 import xarray as xr
 
 from pipeline.analysis.stats import ensemble_stats, min_n_for_quantile
-from pipeline.files.store import open_ensemble
+from pipeline.files.opening import open_ensemble
 from pipeline.analysis.until import GROWTH, UntilError, checkpoints, parse_target, widths
 
 

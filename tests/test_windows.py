@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from pipeline.files.check import open_results
+from pipeline.files.opening import open_results
 from pipeline.analysis.stats import ensemble_stats, in_window, to_json
-from pipeline.files.store import cf_encode, window_masks, window_summaries, write_netcdf
+from pipeline.files.records import window_masks, window_summaries
+from pipeline.files.schema import cf_encode
+from pipeline.files.writing import write_netcdf
 from pipeline.vocabulary import WINDOWS
 from rss6core import SimulationResult, parse_scene
 from rss6core.clearance import draw_clearances

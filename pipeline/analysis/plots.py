@@ -26,7 +26,7 @@ __all__ = ["plot_ensemble", "plot_run", "ensemble_figures", "run_figures", "figu
 
 from rss6core import TOL_DISPLACEMENT, TOL_VELOCITY, closure_matrix, parse_scene, rigid_motion  # noqa: E402
 
-from ..files.store import window_label, window_masks, window_reductions  # noqa: E402
+from ..files.records import window_label, window_masks, window_reductions  # noqa: E402
 from ..vocabulary import DIRECTIONS as _DIRS  # noqa: E402
 from ..vocabulary import FAMILIES as _FAMILIES  # noqa: E402
 from ..vocabulary import QUANTITIES, WINDOWS  # noqa: E402

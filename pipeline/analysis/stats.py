@@ -81,6 +81,7 @@ import numpy as np
 import xarray as xr
 from scipy import stats as sps
 
+from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
 
 __all__ = ["QUANTILES", "STATISTICS", "BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "quantile_ranks",
@@ -418,8 +419,7 @@ def _source(ds: xr.Dataset) -> str:
 
 
 # what a statistics file keeps of its source's provenance (rss6_version as source_rss6_version)
-SOURCE_ATTRS = ("scene_name", "model", "integrator", "time_step_s", "elements_per_link", "seed",
-                "realization")
+SOURCE_ATTRS = ("scene_name", *SETTINGS.values(), "seed", "realization")
 
 
 def _provenance(ds: xr.Dataset, confidence: float) -> dict:
@@ -427,7 +427,7 @@ def _provenance(ds: xr.Dataset, confidence: float) -> dict:
     scene, level, settings, seed, rss6 version and file name."""
     from rss6core import __version__
 
-    from ..files.store import derived_history
+    from ..files.schema import derived_history
     name, a = _source(ds), ds.attrs
     what = f": {a['model']} level, scene {a.get('scene_name', '')!r}" if "model" in a else ""
     return {"title": f"rss6 statistics of {name}{what}",
@@ -579,7 +579,7 @@ def format_stats(sds: xr.Dataset) -> str:
     rad/s, rad/s^2): per quantity, direction and variable the estimates, then the lower and upper
     confidence bounds ('-' where none is given, with the reason below the table); one table per
     analysis window, labelled, when the statistics have several."""
-    from ..files.store import window_label
+    from ..files.records import window_label
     if "window" not in sds.dims:
         return "\n".join(_table_lines(sds) + ["notes:"] + [f"  {t}" for t in _missing_notes(sds)])
     lines = []
@@ -592,7 +592,7 @@ def format_stats(sds: xr.Dataset) -> str:
 
 def _table_lines(sds: xr.Dataset) -> list[str]:
     """The lines of one window's table (the first one says what the rows are)."""
-    from ..files.store import display_unit
+    from ..files.schema import display_unit
     a = sds.attrs
     lines = [f"{a['n_finished']} finished realisations ({a['n_failed']} failed); 'max' rows: "
              "per-realisation max |error|, 'mean' rows: per-realisation mean |error|; 'lower' and "

@@ -7,7 +7,7 @@ import numpy as np
 
 from rss6core import crank_inertia, inverse_dynamics, natural_frequencies, rigid_motion, rod_inertia
 
-from ..files.store import display_unit
+from ..files.schema import display_unit
 from ..vocabulary import DIRECTIONS, FINISHED
 
 __all__ = ["scene_summary", "format_summary", "error_summary", "format_errors", "failure_reasons"]
@@ -136,7 +136,7 @@ def contact_peaks(peak) -> dict:
 def format_errors(summary: dict) -> str:
     """Table of :func:`error_summary` in the paper's display units: the whole run's maxima and means,
     then the maxima of the startup and steady windows."""
-    from ..files.store import window_label
+    from ..files.records import window_label
     head = f"{'':<39s}" + "".join(f"{d:>11s}" for d in DIRECTIONS)
     rows = [("max_abs_error", "whole", summary["max_abs_error"]),
             ("mean_abs_error", "whole", summary["mean_abs_error"])]

@@ -208,7 +208,7 @@ def _stored(output, spec):
     from pathlib import Path
 
     from ..ensemble.run import _check_identity
-    from ..files.store import open_ensemble
+    from ..files.opening import open_ensemble
     if not Path(output).exists():
         return None
     ds = open_ensemble(output)

@@ -60,7 +60,8 @@ def _check_levels(args) -> None:
 
 
 def main(args) -> int:
-    from ..files.store import check_window, write_netcdf
+    from ..files.records import check_window
+    from ..files.writing import write_netcdf
     from ..studies.multifidelity import (check_multifidelity_output, format_multifidelity, level_paths,
                                          multifidelity_dataset, to_json)
     _check_levels(args)

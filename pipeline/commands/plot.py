@@ -18,9 +18,9 @@ def add_parser(sub) -> None:
 
 def main(args) -> int:
     from ..analysis.plots import plot_ensemble, plot_run
-    from ..files.check import open_results
+    from ..files.opening import open_results
     from ..files.outputs import check_output_folder
-    from ..files.store import EnsembleFileError
+    from ..files.schema import EnsembleFileError
     check_output_folder(args.output, args.parents)
     ds = open_results(args.file)
     if "realization" not in ds.dims:                      # rss6 simulate -o: one run's histories

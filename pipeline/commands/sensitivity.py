@@ -41,7 +41,8 @@ def add_parser(sub) -> None:
 def main(args) -> int:
     from ..analysis.plots import plot_sensitivity
     from ..files.outputs import OutputLock, check_new_output
-    from ..files.store import load_netcdf, write_netcdf
+    from ..files.reading import load_netcdf
+    from ..files.writing import write_netcdf
     from ..studies.sensitivity import format_joints, format_sensitivity, sensitivity
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)

@@ -34,7 +34,8 @@ def main(args) -> int:
     from rss6core import simulate
 
     from ..files.outputs import check_new_output
-    from ..files.store import run_dataset, write_netcdf
+    from ..files.records import run_dataset
+    from ..files.writing import write_netcdf
     level = resolve_level(find_scene(args.config), args.config, model=args.model, integrator=args.integrator,
                           dt=args.dt, elements=args.elements, start=args.start)
     if args.output:

@@ -31,9 +31,9 @@ def add_parser(sub) -> None:
 def main(args) -> int:
     from ..analysis.gate import check_confidence, exit_code, format_verdicts, verdicts_json
     from ..analysis.stats import ensemble_stats, format_stats, to_json
-    from ..files.check import open_results
+    from ..files.opening import open_results
     from ..files.outputs import check_new_output
-    from ..files.store import write_netcdf
+    from ..files.writing import write_netcdf
     specs = requirements(args)
     known_windows(specs)
     if specs:

@@ -33,8 +33,11 @@ import numpy as np
 from rss6core import FAILED, SimulationResult, __version__, parse_scene, prepare_level, stored_draw, time_grid
 
 from ..files.outputs import OutputLock, PartsManifest
-from ..files.store import (EnsembleFileError, finish_ensemble, identity, load_netcdf, open_ensemble, chunk_dataset,
-                           sigint_deferred, write_netcdf)
+from ..files.opening import open_ensemble
+from ..files.reading import load_netcdf
+from ..files.records import chunk_dataset, finish_ensemble
+from ..files.schema import EnsembleFileError, ensemble_identity, identity
+from ..files.writing import sigint_deferred, write_netcdf
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
            "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable", "parts_dir", "compile_note"]
@@ -70,9 +73,7 @@ class EnsembleSpec:
         return {} if design is None else design.attrs()
 
     def attrs(self) -> dict:
-        return {"scene_toml": self.scene_text, "model": self.model, "integrator": self.integrator,
-                "time_step_s": self.dt, "elements_per_link": self.elements, "seed": self.seed,
-                "store": self.store, **self.sampler_attrs()}
+        return ensemble_identity(self.scene_text, **_kw(self))
 
 
 NUMERICAL_FAILURES = (ArithmeticError, np.linalg.LinAlgError)   # recorded as a failed realisation

@@ -1,2 +1,5 @@
 """Files: the netCDF schema (names, units, CF encoding), writing and reading with checksums, the
-checks a file must pass before it is used, and the output paths, locks and parts manifests."""
+checks a file must pass before it is used, and the output paths, locks and parts manifests.
+
+Each module imports only those before it: schema < records < checksums < writing < reading < check
+< opening (read, then checked); outputs (paths, locks, manifests) uses schema and writing."""

@@ -2,7 +2,7 @@
 and global attributes consistent with the data, rss6's vocabularies and the recorded scene.
 
 A tampered or foreign file that opens fine must not be summarised silently: each
-check raises store.EnsembleFileError naming the file and the first problem.
+check raises schema.EnsembleFileError naming the file and the first problem.
 """
 from __future__ import annotations
 
@@ -12,15 +12,14 @@ import math
 import numpy as np
 import xarray as xr
 
-from rss6core import FINISHED, INTEGRATORS, MODELS, STATUSES, SceneError, parse_scene, time_grid
+from rss6core import INTEGRATORS, MODELS, STATUSES, SceneError, model_level, models_with, parse_scene, time_grid
 
-from .store import (DIRECTIONS, ENSEMBLE_ATTRS, MIXED_UNITS, PROVENANCE, QUANTITIES, STORES, WINDOWS, EnsembleFileError,
-                    _unit_table, load_netcdf, note_unverified)
+from ..vocabulary import DIRECTIONS, FINISHED, QUANTITIES, STORES, SUMMARIES, WINDOWS
+from .schema import ENSEMBLE_ATTRS, MIXED_UNITS, PROVENANCE, EnsembleFileError, _unit_table
 
-__all__ = ["check_ensemble", "check_run", "open_results"]
+__all__ = ["check_ensemble", "check_run"]
 
-SUMMARIES = ("max_abs_error", "mean_abs_error")
-FORCE_LEVELS = ("paper", "contact")   # the levels that write max_contact_force
+FORCE_LEVELS = models_with("contact_forces")   # the levels that write max_contact_force
 
 
 def _labels(ds, path) -> None:
@@ -104,7 +103,7 @@ SLACK = 1e-9
 
 
 def _invariants(ds, path) -> None:
-    """Bounds the summaries obey by construction (store.window_reductions): a window's maximum is
+    """Bounds the summaries obey by construction (records.window_reductions): a window's maximum is
     at most the whole run's, which is the larger of the startup and steady maxima; a mean is at
     most its window's maximum; the whole run's mean lies between the startup and steady means
     (their weighted average). NaN (no value) bounds nothing."""
@@ -231,7 +230,7 @@ def _scene(ds, path, model: str) -> None:
 def _contact_start(ds, path, model: str, scene_start: str) -> None:
     """contact_start: in every contact-level file and only there, equal to the scene's."""
     start = _plain(ds.attrs.get("contact_start"))
-    if model != "contact":
+    if not model_level(model).contact_start:
         if start is not None:
             raise EnsembleFileError(f"{path}: attribute contact_start in a {model}-level file (only the "
                                     "contact level writes it)")
@@ -244,7 +243,7 @@ def _contact_start(ds, path, model: str, scene_start: str) -> None:
 
 
 def _attributes(ds, path, finished: np.ndarray) -> None:
-    """The provenance every rss6 file carries (store._provenance): present, in rss6's vocabularies,
+    """The provenance every rss6 file carries (schema._provenance): present, in rss6's vocabularies,
     and agreeing with the scene text it records and with the data."""
     _required(ds, path, PROVENANCE, "file")
     model = _settings(ds, path)
@@ -321,16 +320,3 @@ def check_run(ds, path) -> None:
     one = ds[list(SUMMARIES)].expand_dims(realization=[0], axis=1).assign_attrs(ds.attrs)
     _values(one, path, np.array([status == FINISHED]))
     _invariants(ds, path)
-
-
-def open_results(path):
-    """An ensemble file (``rss6 run``) or a single-run file (``rss6 simulate -o``), checked (a file
-    without checksums with a note on stderr)."""
-    from .store import checked_ensemble
-    ds = load_netcdf(path)
-    if "realization" not in ds.dims and "rss6_version" in ds.attrs and "error" in ds:
-        check_run(ds, path)
-    else:
-        ds = checked_ensemble(ds, path)
-    note_unverified(ds, path)
-    return ds

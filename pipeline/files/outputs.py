@@ -13,7 +13,8 @@ import sys
 import time
 from pathlib import Path
 
-from .store import EnsembleFileError, sigint_deferred, write_netcdf
+from .schema import EnsembleFileError
+from .writing import sigint_deferred, write_netcdf
 
 __all__ = ["check_output_path", "OutputLock", "PartsManifest"]
 

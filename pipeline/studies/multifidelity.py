@@ -50,7 +50,7 @@ from scipy import stats as sps
 from rss6core import FINISHED
 
 from ..analysis.stats import BOUNDS, MIN_N_MEAN, in_window, mean_interval
-from ..files.store import window_label
+from ..files.records import window_label
 from ..vocabulary import CONFIDENCE, SUMMARIES
 
 __all__ = ["MIN_N_MF", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
@@ -163,7 +163,7 @@ def paired_values(high: xr.Dataset, low: xr.Dataset, name: str, window: str = "w
 def _check_pairing(high: xr.Dataset, low: xr.Dataset, high_path, low_path) -> None:
     """The pairs must be the same draws: same seed and scene, equal recorded draws (sizes, and
     eccentricities unless a level is the paper level, which records its first step's)."""
-    from ..files.store import EnsembleFileError
+    from ..files.schema import EnsembleFileError
     for key in ("seed", "scene_toml"):
         if str(high.attrs.get(key)) != str(low.attrs.get(key)):
             raise EnsembleFileError(f"{low_path}: a different {key} than {high_path}; the "
@@ -269,7 +269,7 @@ def _name(path) -> str:
 
 def _history(high, low, sources) -> str:
     """The two ensembles' histories, then this command's line (last, starting with HISTORY)."""
-    from ..files.store import derived_history
+    from ..files.schema import derived_history
     line = f"{HISTORY} of {_name(sources[0])} and {_name(sources[1])}"
     return derived_history(high, derived_history(low, line))
 
@@ -337,7 +337,7 @@ def _extra_columns(mds: xr.Dataset, name: str) -> dict:
 
 
 def _row(mds: xr.Dataset, name: str, q, d) -> str:
-    from ..files.store import display_unit
+    from ..files.schema import display_unit
     f, unit = display_unit(str(q), str(d))
     m = mds[f"{name}_mean"].sel(quantity=q, direction=d)
 
@@ -383,7 +383,7 @@ def check_multifidelity_output(path, create_dirs: bool = False):
     import netCDF4
 
     from ..files.outputs import check_output_path
-    from ..files.store import EnsembleFileError
+    from ..files.schema import EnsembleFileError
     path = check_output_path(path, create_dirs)
     if path.exists():
         try:

@@ -26,8 +26,11 @@ from ..analysis.plots import (draw_envelope, envelope_marks, family_units, legen
 from . import report_text as text
 from ..scenes.variant import scene_variant
 from ..analysis.stats import ensemble_stats, in_window, min_n_for_quantile
-from ..files.store import (EnsembleFileError, display_unit, load_netcdf, open_ensemble, run_dataset, window_label,
-                           write_netcdf)
+from ..files.opening import open_ensemble
+from ..files.reading import load_netcdf
+from ..files.records import run_dataset, window_label
+from ..files.schema import EnsembleFileError, display_unit
+from ..files.writing import write_netcdf
 from ..vocabulary import DIRECTIONS, FINISHED
 
 __all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "PAPER_VALUES", "OFF"]

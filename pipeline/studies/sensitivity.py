@@ -23,7 +23,8 @@ import xarray as xr
 
 from rss6core import FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, prepare_level, size_band
 
-from ..files.store import JOINTS, _provenance, _unit_table, check_window, command_line, window_label, window_summaries
+from ..files.records import check_window, window_label, window_summaries
+from ..files.schema import JOINTS, _provenance, _unit_table, command_line
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, UserError, WINDOWS
 
 __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",

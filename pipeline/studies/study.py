@@ -23,7 +23,8 @@ from rss6core import (BeamTheory, Integrator, build_elastic_model, degrees_of_fr
                       quasi_static_state, simulate_batch, simulate_elastic)
 
 from ..analysis.stats import estimates
-from ..files.store import MIXED_UNITS, _unit_table, error_summaries
+from ..files.records import error_summaries
+from ..files.schema import MIXED_UNITS, _unit_table
 from ..vocabulary import DIRECTIONS, FINISHED, QUANTITIES
 
 __all__ = ["Setting", "TRADEOFF_STATISTICS", "measure", "relative_errors", "default_settings", "tradeoff",
@@ -243,7 +244,7 @@ def write_tradeoff(ds: xr.Dataset, outdir, tolerance: float) -> dict:
     """DIR/tradeoff.csv, DIR/tradeoff.nc and DIR/tradeoff.png; returns the recommendation."""
     from pathlib import Path
 
-    from ..files.store import write_netcdf
+    from ..files.writing import write_netcdf
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     header = ["setting", "model", "integrator", "dt_s", "elements_per_link", "beam_theory", "modes",
@@ -505,7 +506,7 @@ def write_stability(ds: xr.Dataset, outdir) -> None:
     """DIR/stability.csv (one line per run, from the Dataset), DIR/stability.nc, DIR/stability.png."""
     from pathlib import Path
 
-    from ..files.store import write_netcdf
+    from ..files.writing import write_netcdf
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     table = ds[list(_RUN_VARIABLES)].to_dataframe()

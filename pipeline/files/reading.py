@@ -1,0 +1,73 @@
+"""Reading a file rss6 wrote: into memory or with its histories left on disk, its checksums verified
+and its CF encoding undone; a file without checksums is noted."""
+from __future__ import annotations
+
+import os
+import sys
+
+import xarray as xr
+
+from .checksums import verify_checksums
+from .schema import _ELAPSED, CHECKSUM, EnsembleFileError, cf_decode
+
+__all__ = ["HISTORY_BLOCK", "load_netcdf", "note_unverified"]
+
+HISTORY_BLOCK = 64   # realisations per block of a history read lazily (a merge holds one block)
+
+
+def load_netcdf(path, lazy: bool = False, verify: bool = True) -> xr.Dataset:
+    """Any netCDF file fully into memory; EnsembleFileError names the file if it is missing or unreadable.
+
+    ``lazy``: the variables over time (histories) stay on disk as dask arrays of HISTORY_BLOCK
+    realisations, read block by block when used; the file stays open while the Dataset is used.
+    ``verify``: the values are checked against the checksums written with the file
+    (:func:`verify_checksums`; read once more, block by block, when ``lazy``); a file without them
+    is marked ``encoding["rss6_unverified"]`` (see :func:`note_unverified`).
+    """
+    if not os.path.exists(path):
+        raise EnsembleFileError(f"{path}: no such file")
+    try:
+        if lazy:
+            # opened without dask: only the histories become dask arrays (loading each small
+            # variable through dask took 3x as long as reading it)
+            ds = xr.open_dataset(path, engine="netcdf4", decode_times=False)
+            histories = {name: var.chunk({"realization": HISTORY_BLOCK})
+                         for name, var in ds.data_vars.items() if {_ELAPSED, "realization"} <= set(var.dims)}
+            for var in ds.variables.values():
+                if _ELAPSED not in var.dims:
+                    var.load()
+            ds = ds.assign(histories)
+        else:
+            with xr.open_dataset(path, engine="netcdf4", decode_times=False) as opened:
+                ds = opened.load()
+    except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...
+        raise EnsembleFileError(f"{path}: not a readable netCDF file "
+                                f"(truncated or corrupt?): {exc}") from None
+    verified = verify and verify_checksums(ds, path)
+    try:
+        out = _forget_string_widths(cf_decode(ds))
+    except Exception as exc:  # a foreign file whose variables look like rss6's split ones
+        raise EnsembleFileError(f"{path}: not a file rss6 reads: {type(exc).__name__}: {exc}") from None
+    if verify and not verified:
+        out.encoding["rss6_unverified"] = True
+    return out
+
+
+def note_unverified(ds: xr.Dataset, path, stream=None) -> None:
+    """One line on stderr when ``ds`` was read from a file without checksums: it is accepted (an
+    earlier rss6's results stay usable; its values pass every consistency check), but a change
+    to its values could not be seen."""
+    if ds.encoding.get("rss6_unverified"):
+        print(f"rss6: note: {path}: no checksum of its values ({CHECKSUM}; written by an earlier "
+              "rss6 or by another program): checked for consistency only", file=stream or sys.stderr)
+
+
+def _forget_string_widths(ds: xr.Dataset) -> xr.Dataset:
+    """Drop the read width of string variables (encoding ``dtype`` '<U6'): a Dataset concatenated
+    from pieces keeps the first piece's encoding, which would cut longer strings on writing
+    ('finished' stored as 'finish' after a piece holding only 'failed')."""
+    for var in ds.variables.values():
+        if var.dtype.kind in "OUS":
+            var.encoding.pop("dtype", None)
+    return ds
+
