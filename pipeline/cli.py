@@ -511,7 +511,8 @@ def _require_arguments(p) -> None:
 
 def _plot(args) -> int:
     from .files.check import open_results
-    from .analysis.plots import plot_ensemble, plot_run
+    from .analysis.ensemble_plots import plot_ensemble
+    from .analysis.run_plots import plot_run
     from .files.outputs import check_output_folder
     from .files.store import EnsembleFileError
     check_output_folder(args.output, args.parents)
@@ -683,7 +684,7 @@ def _sensitivity(args) -> int:
     from pathlib import Path
 
     from .files.outputs import OutputLock, check_new_output
-    from .analysis.plots import plot_sensitivity
+    from .analysis.sensitivity_plots import plot_sensitivity
     from .ensemble.run import EnsembleSpec
     from .studies.sensitivity import SensitivityError, format_joints, format_sensitivity, sensitivity
     from .files.store import load_netcdf, write_netcdf
