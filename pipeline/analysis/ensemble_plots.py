@@ -1,5 +1,7 @@
-"""An ensemble's figures (``rss6 plot``): |error| envelopes over realisations, histograms of the
-per-realisation maxima per analysis window, and the Monte Carlo convergence of their mean."""
+"""An ensemble's figures (``rss6 plot``): |error| envelopes, histograms of maxima, convergence.
+
+The histograms are of the per-realisation maxima per analysis window, the convergence that of
+their running mean."""
 from __future__ import annotations
 
 import textwrap

@@ -1,6 +1,7 @@
-"""Envelopes of |error| over realisations on a file's output grid, and the file's stored maxima (from
-every internal step) marked where they exceed what the samples show: the ensemble figures' and the
-report's envelope panels, and the marks on a single run's histories."""
+"""|error| envelopes over realisations, with the stored maxima marked where the samples miss them.
+
+The envelopes are sampled on a file's output grid, the stored maxima come from every internal step:
+the ensemble figures' and the report's envelope panels, and the marks on a single run's histories."""
 from __future__ import annotations
 
 import numpy as np

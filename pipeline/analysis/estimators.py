@@ -1,5 +1,7 @@
-"""Point and interval estimators on plain numpy arrays (axis 0: realisations); every interval holds its
-stated confidence.  The statistics Dataset of a file (:mod:`pipeline.analysis.stats`) is built from these.
+"""Point and interval estimators on plain numpy arrays, each interval holding its stated confidence.
+
+Axis 0 is the realisations; the statistics Dataset of a file (:mod:`pipeline.analysis.stats`) is
+built from these.
 
 How each interval is chosen (coverage measured by simulation in
 tests/test_stats.py, 2000 trials per cell, n = 8, 16, 32, 100, 300, 1000, on a

@@ -1,5 +1,6 @@
-"""What every rss6 figure shares: the Agg backend (set once, here), display units one per direction
-family, titles, plain ticks, the 2 x 3 panel grid, legends, the steady window's mark and saving."""
+"""What every rss6 figure shares: the Agg backend, units per direction family, titles, legends, saving.
+
+The Agg backend is set once, here; also plain ticks, the 2 x 3 panel grid and the steady window's mark."""
 from __future__ import annotations
 
 import textwrap

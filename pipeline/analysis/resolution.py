@@ -1,5 +1,6 @@
-"""What a level's numerics resolve: the spread (SI) below which per-realisation values are numerical
-noise, so that a histogram of them would show noise (the figures draw a note instead)."""
+"""The spread (SI) below which a level's per-realisation values are numerical noise, per quantity.
+
+A histogram of values within it would show noise: the ensemble figures draw a note instead."""
 from __future__ import annotations
 
 from dataclasses import dataclass
