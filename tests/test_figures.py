@@ -16,14 +16,17 @@ from matplotlib.text import Text
 
 from pipeline.cli import main
 from pipeline.files.opening import open_results
-from pipeline.analysis.plots import (CONTACT_ACCURACY, QUANTITIES, ensemble_figures, family_units, figure_unit,
-                                     run_figures)
+from pipeline.analysis.ensemble_plots import ensemble_figures
+from pipeline.analysis.plot_common import family_units, figure_unit
+from pipeline.analysis.resolution import CONTACT_ACCURACY
+from pipeline.analysis.run_plots import run_figures
 from pipeline.studies.report import LEVELS, error_figure, rigid_figure
-from pipeline.analysis.stats import MIN_N_MEAN, ensemble_stats, estimates, min_n_for_quantile, running_mean_interval
+from pipeline.analysis.estimators import MIN_N_MEAN, estimates, min_n_for_quantile, running_mean_interval
+from pipeline.analysis.stats import ensemble_stats
 from pipeline.files.opening import open_ensemble
 from pipeline.files.records import window_masks
 from pipeline.files.writing import write_netcdf
-from pipeline.vocabulary import WINDOWS
+from pipeline.vocabulary import QUANTITIES, WINDOWS
 from pipeline.studies.study import recommend, stability_figure, tradeoff_figure
 
 SMOKE = str(Path(__file__).resolve().parent.parent / "configs" / "smoke.toml")
@@ -281,7 +284,7 @@ def test_sensitivity_figures_are_legible(smoke, tmp_path):
     of made-up indices shaped like the command's (the numbers do not change the layout)."""
     from pipeline.ensemble.run import EnsembleSpec
     from pipeline.studies.sensitivity import SobolIndices, clearance_inputs, designs, sensitivity_dataset
-    from pipeline.analysis.plots import sensitivity_figures
+    from pipeline.analysis.sensitivity_plots import sensitivity_figures
     from pipeline.files.reading import load_netcdf
     inputs = clearance_inputs(smoke)
     rng = np.random.default_rng(0)
@@ -531,7 +534,7 @@ def test_resolution_of_each_level(smoke, full_ensemble):
     """The contact level's: twice the step's tolerance through the legs' closure, whose gain is
     checked against the worst of every sign combination solved for; Newton's tolerance where the
     step is fixed; twice the documented accuracy for rates.  Every other level: round-off."""
-    from pipeline.analysis.plots import CONTACT_ACCURACY, ROUND_OFF, closure_gain, resolutions
+    from pipeline.analysis.resolution import CONTACT_ACCURACY, ROUND_OFF, closure_gain, resolutions
     from pipeline.scenes.variant import scene_variant
     from rss6core.contact_dynamics import TOL_DISPLACEMENT, TOL_VELOCITY
     gain = _worst_closure_gain(smoke)

@@ -10,8 +10,8 @@ from scipy import stats as sps
 
 from pipeline.analysis.gate import exit_code, format_verdicts, judge, judge_all, verdicts_json
 from pipeline.analysis.spec import STANDARD_GRAVITY, SpecError, parse_spec
-from pipeline.analysis.stats import (MIN_N_STD, mean_bounds, one_sided_ranks, quantile_bounds, quantile_decision_n,
-                                     rqmc_intervals)
+from pipeline.analysis.estimators import (MIN_N_STD, mean_bounds, one_sided_ranks, quantile_bounds,
+                                          quantile_decision_n, rqmc_intervals)
 from pipeline.vocabulary import QUANTILES, STATISTICS
 
 DIRECTIONS = ["x", "y", "z", "rx", "ry", "rz"]

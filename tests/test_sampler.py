@@ -9,7 +9,8 @@ from scipy.stats import qmc
 
 from pipeline.ensemble.run import EnsembleSpec, run_chunk
 from pipeline.ensemble.sampler import QMC_TAG, QMCDesign, check_qmc, design_of
-from pipeline.analysis.stats import MIN_POINTS_RQMC, ensemble_stats, estimates, rqmc_intervals
+from pipeline.analysis.estimators import MIN_POINTS_RQMC, estimates, rqmc_intervals
+from pipeline.analysis.stats import ensemble_stats
 from pipeline.vocabulary import STATISTICS
 from rss6core.clearance import (ClearanceDraw, clearances_from_uniforms, draw_clearances, realization_rng,
                                 uniform_dimension)

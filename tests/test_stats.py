@@ -14,8 +14,9 @@ from rss6core import load_scene
 
 from pipeline.cli import main
 from pipeline.ensemble.run import EnsembleSpec, run_ensemble
-from pipeline.analysis.stats import (in_window, MIN_N_MEAN, MIN_N_STD, ensemble_stats, mean_interval,
-                                     min_n_for_quantile, quantile_interval, quantile_ranks, std_interval, to_json)
+from pipeline.analysis.estimators import (MIN_N_MEAN, MIN_N_STD, mean_interval, min_n_for_quantile,
+                                          quantile_interval, quantile_ranks, std_interval)
+from pipeline.analysis.stats import ensemble_stats, in_window, to_json
 from pipeline.vocabulary import QUANTILES, STATISTICS
 from pipeline.files.reading import load_netcdf
 from pipeline.files.schema import MIXED_UNITS, UNITS, _provenance

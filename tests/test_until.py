@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from pipeline.analysis.stats import ensemble_stats, min_n_for_quantile
+from pipeline.analysis.estimators import min_n_for_quantile
+from pipeline.analysis.stats import ensemble_stats
 from pipeline.files.opening import open_ensemble
 from pipeline.analysis.until import GROWTH, UntilError, checkpoints, parse_target, widths
 

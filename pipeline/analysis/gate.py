@@ -4,8 +4,8 @@ A requirement is decided on whichever side the data already decide, at the state
 confidence c: it fails when the statistic's one-sided bound on the limit's side violates
 the limit (for ``<=`` L: the lower bound exceeds L), passes when the one-sided bound on
 the other side meets it (the upper bound is within L), and is undecided otherwise.  Each
-decision errs with probability at most 1 - c (the bounds: pipeline.analysis.stats, one-sided
-bounds; error rates measured in tests/test_gate.py).  So a q95 limit that all of a few
+decision errs with probability at most 1 - c (the bounds: pipeline.analysis.estimators,
+one-sided bounds; error rates measured in tests/test_gate.py).  So a q95 limit that all of a few
 realisations violate fails from n = 1 (were q95 <= L, all n would exceed L with
 probability at most 0.05^n), while passing one needs n >= 59.
 
@@ -30,7 +30,8 @@ import numpy as np
 
 from .spec import Spec
 from ..vocabulary import CONFIDENCE, QUANTILES
-from .stats import QUANTILE_DECISION_CAP, ensemble_stats, finished_values, interval_floor, quantile_decision_n
+from .estimators import QUANTILE_DECISION_CAP, interval_floor, quantile_decision_n
+from .stats import ensemble_stats, finished_values
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
            "overall", "judge", "judge_all", "verdicts_json"]

@@ -7,378 +7,23 @@ quantiles q05/q50/q95/q99 (numpy's default, linear interpolation) and the
 sample maximum, and two-sided confidence intervals (``lower``, ``upper``; NaN
 where withheld).  Values are SI, in the source file's units.
 
-How each interval is chosen (coverage measured by simulation in
-tests/test_stats.py, 2000 trials per cell, n = 8, 16, 32, 100, 300, 1000, on a
-normal, a gamma(2) (skewness 1.4) and a Laplace (excess kurtosis 3) law;
-rss6's own quasi-static ensembles have skewness about 1 and excess kurtosis
-about 1):
-
-- Quantiles: distribution-free.  With B ~ Binomial(n, p), the order statistics
-  X_(l) <= X_(u) bracket the p-quantile with probability P(l <= B <= u - 1) for
-  any continuous law.  Of the rank pairs reaching the confidence the shortest
-  (u - l) is taken, then the one whose two tail probabilities are closest.  If
-  even (1, n) falls short, no interval exists: the bounds are NaN and
-  ``min_n_for_quantile`` gives the n needed (59 for q95, 299 for q99 at 95 %).
-- Mean: the union of the Student-t interval and Hall's (1992) skewness-
-  corrected t interval.  Student t under-covers on skewed data (gamma(2), n = 8:
-  92 %), Hall's correction under-covers on symmetric heavy tails (Laplace,
-  n = 16: 92.5 %) where the sample skewness is noise; the union holds on both
-  (>= 94 % measured).  Withheld below n = MIN_N_MEAN (not measured there).
-- Std: Bonett's (2006) kurtosis-adjusted interval.  The chi-square interval
-  assumes normal data and covers 81 % for gamma(2) at n = 32, 72 % for the
-  exponential law.  Bonett's interval reaches 93 % on the laws above only
-  from n = MIN_N_STD = 200 (gamma(2), n = 32: 91 %), so below that it is
-  withheld.  On tails heavier than Laplace (Student t5) it stays near 93 %
-  at n <= 1000.
-- Max: no interval.  The sample maximum estimates no population parameter an
-  interval could cover: the next realisation exceeds it with probability
-  1/(n + 1) whatever the law.  A bootstrap of the maximum brackets only the
-  largest value seen, so it is not offered.
-
-No bootstrap runs: none of the intervals above needs one.
-
-One-sided bounds (``ensemble_stats(..., one_sided=True)``; the requirement gate,
-pipeline/gate.py, decides on them): ``lower`` and ``upper`` are each a bound at the
-confidence on its own side (not together an interval at it); error rates of the
-gate's decisions measured in tests/test_gate.py.
-
-- Quantiles: exact binomial order statistics, distribution-free: X_(r) with the
-  largest r such that P(B >= r) >= confidence bounds the p-quantile from below,
-  X_(s) with the smallest s such that P(B <= s - 1) >= confidence from above
-  (``one_sided_ranks``).  The lower bound of q95 exists from n = 1 (if all n
-  realisations exceed a limit L, q95 <= L had probability at most 0.05^n), the
-  upper one from n = 59.
-- Mean: the union interval above at two-sided level 2 confidence - 1, except on
-  the side the sample skewness points to (the upper bound for right-skewed data),
-  where it is the bound of the two-sided interval at the confidence: there
-  Hall's correction removes only part of the skew at small n (lognormal(0.5),
-  n = 20, 2000 samples: the plain one-sided upper bound misses the mean in
-  7.0 %, against 5 % nominal; with this rule in 4.5 %).
-- Std: the two-sided Bonett interval's bounds (one-sided at level 2 confidence - 1
-  they miss 11 % on lognormal(0.5) at n = 200); from n = MIN_N_STD as above.
-- Randomised QMC: Student t over the replicates, one-sided (two-sided level
-  2 confidence - 1), for every statistic; none if a realisation failed.
-
-Randomised quasi-Monte Carlo files (``sampler = "qmc"``, pipeline/sampler.py)
-are not iid samples, so none of the intervals above holds for them.  There the
-R independent scramblings give R independent estimates of each statistic
-(replicate k: its first m = n // R points); the interval is Student t with
-R - 1 degrees of freedom about their average (``rqmc_intervals``).  It is
-given for the mean, std and quantiles once every replicate has at least
-MIN_POINTS_RQMC[statistic] points (a replicate's quantile or std estimate is
-biased by O(1/m); coverage measured in tests/test_sampler.py), never for the
-maximum, and not at all if a realisation failed (a replicate with holes is no
-longer a scrambled net).  Point estimates stay those of all n realisations.
+The intervals, their coverage and the one-sided bounds the requirement gate decides on:
+:mod:`pipeline.analysis.estimators`.  ``to_json`` and ``format_stats`` are the Dataset as strict
+JSON and as the printed table of ``rss6 stats``.
 """
 from __future__ import annotations
 
-import math
-import warnings
-from dataclasses import dataclass
-from functools import lru_cache
-
 import numpy as np
 import xarray as xr
-from scipy import stats as sps
 
 from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
+from .estimators import (BOUNDS, MAX_NOTE, MIN_N_MEAN, MIN_N_STD, MIN_POINTS_RQMC, estimates_and_bounds,
+                         interval_floor, min_n_for_quantile, replicate_groups, rqmc_intervals)
 
-__all__ = ["QUANTILES", "STATISTICS", "BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "quantile_ranks",
-           "min_n_for_quantile", "quantile_estimates", "estimates", "mean_interval",
-           "running_mean_interval", "std_interval", "quantile_interval", "ensemble_stats",
-           "to_json", "format_stats", "MIN_POINTS_RQMC", "rqmc_intervals", "replicate_groups",
-           "interval_floor", "no_interval_at", "in_window", "windows_of", "json_number",
-           "BoundRanks", "one_sided_ranks", "quantile_bounds", "mean_bounds", "one_sided_bounds",
-           "quantile_decision_n", "QUANTILE_DECISION_CAP", "finished_values"]
+__all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
+           "to_json", "format_stats"]
 
-BOUNDS = ("estimate", "lower", "upper")
-MIN_N_MEAN = 8      # smallest n whose coverage was measured (>= 94 % on all three laws)
-MIN_N_STD = 200     # Bonett: >= 93 % measured on all three laws from here
-MIN_POINTS_RQMC = {"mean": 16, "std": 32, "q05": 128, "q50": 16, "q95": 128, "q99": 256}
-MAX_NOTE = ("no interval: the sample maximum estimates no population parameter; the next "
-            "realisation exceeds it with probability 1/(n + 1)")
-_RTOL = 1e-12       # binomial coverage computed in floating point
-QUANTILE_DECISION_CAP = 10 ** 6   # largest n quantile_decision_n looks at
-EXACT_DECISION_SCAN = 5000        # it tries every n up to n + this (the binomial tails jitter)
-
-
-# --- quantiles ----------------------------------------------------------------
-
-@lru_cache(maxsize=4096)
-def quantile_ranks(n: int, p: float, confidence: float) -> tuple[int, int] | None:
-    """1-based ranks (l, u) of the shortest, then most symmetric, order-statistic interval whose
-    binomial coverage P(l <= B <= u - 1), B ~ Bin(n, p), reaches ``confidence``; None if none does."""
-    if n < 2:
-        return None
-    cdf = sps.binom.cdf(np.arange(n + 1), n, p)            # cdf[k] = P(B <= k)
-    below = np.concatenate([[0.0], cdf[:-1]])               # below[l] = P(B <= l - 1) = P(B < l)
-    best = None
-    for lo in range(1, n):
-        # smallest u with cdf[u - 1] >= confidence + below[lo]
-        u = int(np.searchsorted(cdf, below[lo] + confidence - _RTOL, side="left")) + 1
-        if u > n:
-            break
-        u = max(u, lo + 1)
-        key = (u - lo, abs(below[lo] - (1.0 - cdf[u - 1])))
-        if best is None or key < best[0]:
-            best = (key, (lo, u))
-    return None if best is None else best[1]
-
-
-def min_n_for_quantile(p: float, confidence: float) -> int:
-    """Smallest n for which a two-sided order-statistic interval of the p-quantile reaches
-    ``confidence``: the first n with 1 - p^n - (1 - p)^n >= confidence (the ranks 1 and n)."""
-    n = 2
-    while 1.0 - p ** n - (1.0 - p) ** n < confidence - _RTOL:
-        n += 1
-    return n
-
-
-def quantile_estimates(x: np.ndarray, probs, axis: int = 0) -> np.ndarray:
-    """Quantile estimates (numpy's linear interpolation) along ``axis``, NaN values left out;
-    the one quantile estimator of rss6 (statistics tables, studies, figures)."""
-    with warnings.catch_warnings():                         # all-NaN slices give NaN
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return np.nanquantile(np.asarray(x, float), probs, axis=axis)
-
-
-def quantile_interval(sorted_x: np.ndarray, p: float, confidence: float) -> np.ndarray:
-    """(lower, upper) along axis 0 of samples sorted along axis 0; NaN if no interval exists."""
-    ranks = quantile_ranks(sorted_x.shape[0], p, confidence)
-    if ranks is None:
-        return np.full((2,) + sorted_x.shape[1:], np.nan)
-    return np.stack([sorted_x[ranks[0] - 1], sorted_x[ranks[1] - 1]])
-
-
-@dataclass(frozen=True)
-class BoundRanks:
-    """1-based ranks of the order statistics that bound a quantile from one side each (None: no
-    rank reaches the confidence at this n)."""
-
-    lower: int | None
-    upper: int | None
-
-
-@lru_cache(maxsize=4096)
-def one_sided_ranks(n: int, p: float, confidence: float) -> BoundRanks:
-    """Ranks of the one-sided bounds of the p-quantile of a continuous law: ``lower`` the largest r
-    with P(X_(r) <= xi_p) = P(B >= r) >= confidence, ``upper`` the smallest s with
-    P(X_(s) >= xi_p) = P(B <= s - 1) >= confidence, B ~ Bin(n, p)."""
-    ranks = np.arange(1, n + 1)
-    lower = np.flatnonzero(sps.binom.sf(ranks - 1, n, p) >= confidence - _RTOL)
-    upper = np.flatnonzero(sps.binom.cdf(ranks - 1, n, p) >= confidence - _RTOL)
-    return BoundRanks(int(ranks[lower[-1]]) if lower.size else None,
-                      int(ranks[upper[0]]) if upper.size else None)
-
-
-def quantile_bounds(sorted_x: np.ndarray, p: float, confidence: float) -> np.ndarray:
-    """One-sided (lower, upper) bounds of the p-quantile along axis 0 of samples sorted along axis 0,
-    each at ``confidence``; NaN where no order statistic reaches it."""
-    ranks = one_sided_ranks(sorted_x.shape[0], p, confidence)
-    nan = np.full(sorted_x.shape[1:], np.nan)
-    return np.stack([nan if r is None else sorted_x[r - 1] for r in (ranks.lower, ranks.upper)])
-
-
-def quantile_decision_n(n: int, violating: int, allowed: float, confidence: float) -> int | None:
-    """The smallest n' > n at which the one-sided binomial bound decides (either way) whether the
-    share of violating draws exceeds ``allowed`` (1 - p for an upper limit on the p-quantile, p for a
-    lower one), if a share ``violating / n`` of n' draws violate (k' rounded): exact up to
-    n + EXACT_DECISION_SCAN, beyond it the first on a 1 % grid of n' refined within its step; None
-    up to QUANTILE_DECISION_CAP.  Fail: P(Bin(n', allowed) >= k') <= 1 - confidence; pass:
-    P(Bin(n', allowed) <= k') <= 1 - confidence (the ranks of :func:`one_sided_ranks` as counts)."""
-    def first(m: np.ndarray) -> int | None:
-        k = np.rint(violating / n * m)
-        fail = (k >= 1) & (sps.binom.sf(k - 1, m, allowed) <= 1 - confidence + _RTOL)
-        hit = np.flatnonzero(fail | (sps.binom.cdf(k, m, allowed) <= 1 - confidence + _RTOL))
-        return int(m[hit[0]]) if hit.size else None
-
-    top = min(n + EXACT_DECISION_SCAN, QUANTILE_DECISION_CAP)
-    found = first(np.arange(n + 1, top + 1))
-    if found is not None or top == QUANTILE_DECISION_CAP:
-        return found
-    grid = np.unique(np.ceil(top * 1.01 ** np.arange(
-        math.log(QUANTILE_DECISION_CAP / top) / math.log(1.01) + 1)).astype(int))
-    end = first(grid)
-    return None if end is None else first(np.arange(grid[grid < end].max(initial=top) + 1, end + 1))
-
-
-# --- mean and std -----------------------------------------------------------------
-
-def _mean_interval_from_moments(n, mean, std, skew, confidence):
-    """Union of the Student-t and Hall's skewness-corrected intervals (see module doc)."""
-    n, mean, std, skew = np.broadcast_arrays(*(np.asarray(v, float) for v in (n, mean, std, skew)))
-    tq = sps.t.ppf(0.5 + confidence / 2, np.maximum(n - 1, 1))
-    se = std / np.sqrt(n)
-    a = skew / (3 * np.sqrt(n))
-    b = skew / (6 * np.sqrt(n))
-    with np.errstate(all="ignore"):
-        def inverse(v):   # inverse of Hall's g(T) = ((1 + aT)^3 - 1) / (3a) + b
-            return np.where(np.abs(a) > 1e-12, (np.cbrt(1 + 3 * a * (v - b)) - 1) / a, v - b)
-        hall = np.stack([mean - inverse(tq) * se, mean - inverse(-tq) * se])
-    t = np.stack([mean - tq * se, mean + tq * se])
-    hall = np.where(np.isfinite(hall), hall, t)             # zero spread: skewness undefined
-    out = np.stack([np.minimum(t[0], hall[0]), np.maximum(t[1], hall[1])])
-    return np.where(n >= MIN_N_MEAN, out, np.nan)
-
-
-def _moments(x: np.ndarray):
-    """n, mean, std (ddof=1) and the skewness g1 (biased) along axis 0 of finite data."""
-    n = x.shape[0]
-    mean = x.mean(axis=0)
-    d = x - mean
-    m2 = (d ** 2).mean(axis=0)
-    with np.errstate(all="ignore"):
-        skew = np.where(m2 > 0, (d ** 3).mean(axis=0) / m2 ** 1.5, 0.0)
-        std = np.sqrt(m2 * n / (n - 1)) if n > 1 else np.full_like(mean, np.nan)
-    return n, mean, std, skew
-
-
-def mean_interval(x: np.ndarray, confidence: float) -> np.ndarray:
-    """(lower, upper) for the mean along axis 0 of finite data; NaN below MIN_N_MEAN."""
-    n, mean, std, skew = _moments(np.asarray(x, float))
-    return _mean_interval_from_moments(n, mean, std, skew, confidence)
-
-
-def mean_bounds(x: np.ndarray, confidence: float) -> np.ndarray:
-    """One-sided (lower, upper) bounds of the mean along axis 0 of finite data, each at
-    ``confidence`` (module doc: the bound on the side of the sample skewness is the two-sided
-    interval's); NaN below MIN_N_MEAN."""
-    skew = _moments(np.asarray(x, float))[3]
-    one, two = mean_interval(x, 2 * confidence - 1), mean_interval(x, confidence)
-    return np.stack([np.where(skew < 0, two[0], one[0]), np.where(skew > 0, two[1], one[1])])
-
-
-def running_mean_interval(x: np.ndarray, confidence: float):
-    """Running mean of a 1-D sample and its interval after 1, 2, ..., N values (for convergence
-    figures): the same interval as :func:`mean_interval`, from cumulative moments."""
-    x = np.asarray(x, float)
-    n = np.arange(1, len(x) + 1)
-    c = x - x.mean()                                         # shift for round-off
-    s1, s2, s3 = (np.cumsum(c ** k) for k in (1, 2, 3))
-    m = s1 / n
-    m2 = np.maximum(s2 / n - m ** 2, 0.0)
-    m3 = s3 / n - 3 * m * s2 / n + 2 * m ** 3
-    with np.errstate(all="ignore"):
-        skew = np.where(m2 > 0, m3 / m2 ** 1.5, 0.0)
-        std = np.sqrt(m2 * n / np.maximum(n - 1, 1))
-    mean = m + x.mean()
-    return mean, _mean_interval_from_moments(n, mean, std, skew, confidence)
-
-
-def std_interval(x: np.ndarray, confidence: float) -> np.ndarray:
-    """Bonett's (2006) interval for the standard deviation along axis 0 of finite data; NaN below
-    MIN_N_STD."""
-    x = np.asarray(x, float)
-    n = x.shape[0]
-    if n < max(MIN_N_STD, 5):
-        return np.full((2,) + x.shape[1:], np.nan)
-    z = sps.norm.ppf(0.5 + confidence / 2)
-    trimmed = sps.trim_mean(x, 1 / (2 * np.sqrt(n - 4)), axis=0)
-    ss = ((x - x.mean(axis=0)) ** 2).sum(axis=0)
-    c = n / (n - z)
-    with np.errstate(all="ignore"):
-        kurt = n * ((x - trimmed) ** 4).sum(axis=0) / ss ** 2
-        se = c * np.sqrt(np.maximum(kurt - (n - 3) / n, 0.0) / (n - 1))
-        var = ss / (n - 1)
-        out = np.sqrt(np.stack([c * var * np.exp(-z * se), c * var * np.exp(z * se)]))
-    return np.where(ss > 0, out, 0.0)
-
-
-# --- point estimates -------------------------------------------------------------
-
-def estimates(x: np.ndarray, names=STATISTICS) -> np.ndarray:
-    """Point estimates ``names`` (of STATISTICS) along axis 0, NaN values left out; stacked on a
-    new last axis.  The one implementation the tables, the studies and the figures use."""
-    x = np.asarray(x, float)
-    out = []
-    with warnings.catch_warnings(), np.errstate(all="ignore"):
-        warnings.simplefilter("ignore", RuntimeWarning)
-        for name in names:
-            if name == "mean":
-                out.append(np.nanmean(x, axis=0))
-            elif name == "std":
-                out.append(np.nanstd(x, axis=0, ddof=1))
-            elif name == "max":
-                out.append(np.nanmax(x, axis=0))
-            else:
-                out.append(quantile_estimates(x, QUANTILES[name], axis=0))
-    return np.stack(out, axis=-1)
-
-
-def _intervals(x: np.ndarray, confidence: float) -> np.ndarray:
-    """(statistic, 2, cells) lower and upper bounds for finite data x (n, cells)."""
-    sx = np.sort(x, axis=0)
-    rows = [mean_interval(x, confidence), std_interval(x, confidence)]
-    rows += [quantile_interval(sx, p, confidence) for p in QUANTILES.values()]
-    rows.append(np.full((2,) + x.shape[1:], np.nan))        # max: see module doc
-    return np.stack(rows)
-
-
-def one_sided_bounds(x: np.ndarray, confidence: float) -> np.ndarray:
-    """(statistic, 2, cells) one-sided lower and upper bounds, each at ``confidence``, for finite data
-    x (n, cells) (module doc); the bounds the requirement gate decides on."""
-    sx = np.sort(x, axis=0)
-    rows = [mean_bounds(x, confidence), std_interval(x, confidence)]
-    rows += [quantile_bounds(sx, p, confidence) for p in QUANTILES.values()]
-    rows.append(np.full((2,) + x.shape[1:], np.nan))
-    return np.stack(rows)
-
-
-def _summaries(x: np.ndarray, confidence: float, one_sided: bool = False) -> np.ndarray:
-    """(statistic, bound, cells) for finite data x (n, cells); all NaN when n = 0."""
-    if x.shape[0] == 0:
-        return np.full((len(STATISTICS), len(BOUNDS), x.shape[1]), np.nan)
-    est = np.moveaxis(estimates(x), -1, 0)                   # (statistic, cells)
-    bounds = one_sided_bounds(x, confidence) if one_sided else _intervals(x, confidence)
-    return np.concatenate([est[:, None], bounds], axis=1)
-
-
-# --- randomised quasi-Monte Carlo ----------------------------------------------------
-
-def replicate_groups(x: np.ndarray, realizations, replicates: int) -> np.ndarray:
-    """(R, m, cells) of data x (n, cells) whose row j is realisation ``realizations[j]``: replicate
-    k holds points 0..m-1 of scrambling k (realisation k + R i), m = n // R; rows beyond are left out."""
-    order = np.argsort(np.asarray(realizations))
-    m = len(order) // replicates
-    first = x[order[:replicates * m]]                        # realisations 0 .. R m - 1
-    return first.reshape(m, replicates, *x.shape[1:]).swapaxes(0, 1)
-
-
-def rqmc_intervals(groups: np.ndarray, confidence: float) -> np.ndarray:
-    """(statistic, 2, cells): Student t over the R replicate estimates of each statistic of
-    STATISTICS; NaN where a replicate has fewer than MIN_POINTS_RQMC points, and for the max."""
-    R, m = groups.shape[:2]
-    per = np.moveaxis(estimates(np.swapaxes(groups, 0, 1)), -1, 0)   # (statistic, R, cells)
-    # sectioning: centred on the estimate of all R m points, whose O(1/m) bias a replicate
-    # quantile's would carry R times over; the spread of the replicates gives the width
-    centre = np.moveaxis(estimates(groups.reshape(R * m, *groups.shape[2:])), -1, 0)
-    spread = per.std(axis=1, ddof=1) if R > 1 else np.nan * per[:, 0]
-    half = sps.t.ppf(0.5 + confidence / 2, max(R - 1, 1)) * spread / np.sqrt(R)
-    out = np.stack([centre - half, centre + half], axis=1)
-    enough = np.array([R >= 2 and m >= MIN_POINTS_RQMC.get(s, np.inf) for s in STATISTICS])
-    return np.where(enough[:, None, None], out, np.nan)
-
-
-def interval_floor(statistic: str, confidence: float, replicates: int | None = None) -> int:
-    """Smallest n with an interval of ``statistic`` (mc: iid intervals; with ``replicates``: RQMC)."""
-    if replicates is not None:
-        return replicates * MIN_POINTS_RQMC[statistic]
-    if statistic in QUANTILES:
-        return min_n_for_quantile(QUANTILES[statistic], confidence)
-    return {"mean": MIN_N_MEAN, "std": MIN_N_STD}[statistic]
-
-
-def no_interval_at(statistic: str, confidence: float, n: int, replicates: int | None = None) -> str | None:
-    """Why a request capped at ``n`` realisations can get no interval of ``statistic`` (e.g. "q99 has
-    no 95 % interval below n = 299 (-n 100); raise -n"), or None when it can."""
-    floor = interval_floor(statistic, confidence, replicates)
-    if n >= floor:
-        return None
-    return f"{statistic} has no {100 * confidence:g} % interval below n = {floor} (-n {n}); raise -n"
-
-
-# --- the Dataset -------------------------------------------------------------------
 
 def windows_of(ds: xr.Dataset) -> list[str]:
     """The analysis windows of an ensemble, run or statistics Dataset (none without a window dimension)."""
@@ -444,7 +89,8 @@ def ensemble_stats(ds: xr.Dataset, confidence: float = CONFIDENCE, window: str |
     ``mean_abs_error`` over the finished realisations of an ensemble (or single-run) Dataset, in
     analysis window ``window``; ``window=None``: every window of the file, along a leading window
     dimension (a file without windows gives none).  ``one_sided``: ``lower`` and ``upper`` are
-    one-sided bounds, each at ``confidence`` (module doc), not a two-sided interval."""
+    one-sided bounds, each at ``confidence`` (:mod:`pipeline.analysis.estimators`), not a
+    two-sided interval."""
     if window is None and "window" in ds.dims:
         parts = [_window_stats(in_window(ds, w), confidence, one_sided).expand_dims(window=[w])
                  for w in windows_of(ds)]
@@ -466,8 +112,8 @@ def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False) ->
     for name in SUMMARIES:
         var = ens[name].transpose("realization", "quantity", "direction")
         x = var.values[finished]                                          # (n, Q, D)
-        flat = _summaries(x.reshape(x.shape[0], x.shape[1] * x.shape[2]), confidence, one_sided)
-        if design is not None:                                            # not iid: see module doc
+        flat = estimates_and_bounds(x.reshape(x.shape[0], x.shape[1] * x.shape[2]), confidence, one_sided)
+        if design is not None:                          # not iid: see pipeline.analysis.estimators
             flat[:, 1:] = _rqmc_bounds(x.reshape(x.shape[0], -1), ens["realization"].values,
                                        finished, design.replicates,
                                        2 * confidence - 1 if one_sided else confidence)
@@ -498,7 +144,7 @@ def _rqmc_bounds(x: np.ndarray, realizations, finished: np.ndarray, replicates: 
 
 
 def _rqmc_attrs(replicates: int, confidence: float) -> dict:
-    """The attributes that say which intervals a QMC file's statistics carry (module doc)."""
+    """The attributes that say which intervals a QMC file's statistics carry (pipeline.analysis.estimators)."""
     floors = ", ".join(f"{k} {interval_floor(k, confidence, replicates)}" for k in MIN_POINTS_RQMC)
     text = (f"randomised QMC: Student t ({replicates - 1} degrees of freedom) over the "
             f"{replicates} replicate estimates, centred on the estimate of all complete "

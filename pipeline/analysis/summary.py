@@ -5,12 +5,13 @@ import re
 
 import numpy as np
 
-from rss6core import crank_inertia, inverse_dynamics, natural_frequencies, rigid_motion, rod_inertia
+from rss6core import crank_inertia, inverse_dynamics, models_with, natural_frequencies, rigid_motion, rod_inertia
 
 from ..files.schema import display_unit
 from ..vocabulary import DIRECTIONS, FINISHED
 
-__all__ = ["scene_summary", "format_summary", "error_summary", "format_errors", "failure_reasons"]
+__all__ = ["CLEARANCE_LEVELS", "scene_summary", "format_summary", "error_summary", "format_errors",
+           "failure_reasons"]
 
 
 def scene_summary(scene) -> dict:
@@ -59,7 +60,7 @@ def clearance_summary(scene) -> dict:
             "run_default_level": run_default_level(scene)}
 
 
-CLEARANCE_LEVELS = ("quasi-static", "paper", "contact")
+CLEARANCE_LEVELS = models_with("draws_clearances")   # the levels whose realisations draw clearances
 
 
 def run_default_level(scene) -> str | None:

@@ -1,7 +1,7 @@
 """``rss6 run --until``: add realisations until stated confidence-interval half-widths are reached.
 
 A target reads ``QUANTITY:DIRECTIONS@STATISTIC <= HALF-WIDTH``, with the pieces
-of pipeline/spec.py (quantity, directions, statistic with ``:mean`` measure
+of pipeline/analysis/spec.py (quantity, directions, statistic with ``:mean`` measure
 and ``/window``), for example ``displacement:x,y,z,rx,ry,rz@q95<=5%``:
 
 - HALF-WIDTH ``N%``: half the interval's width, (upper - lower) / 2, relative to
@@ -13,7 +13,7 @@ Stopping rule: the ensemble is checked only at the fixed sample sizes of
 :func:`checkpoints` (a function of the targets, the cap ``-n`` and the sampler;
 never of timing), and stops at the first one where every target is met.  A
 statistic without an interval at that n (below its minimum n) is not met.  The
-intervals are those of pipeline/stats.py at the run's confidence (95 %), so
+intervals are those of pipeline/analysis/estimators.py at the run's confidence (95 %), so
 the file at the final n is the file of a plain ``-n FINAL`` run plus the
 ``until_*`` attributes.  A file that already holds realisations (a resumed
 run) is checked at its own n first.
@@ -112,7 +112,7 @@ def parse_targets(texts: list[str] | None) -> list[Target]:
 def check_cap(targets: list[Target], cap: int, replicates: int | None = None) -> None:
     """UntilError, before any work, for a target whose statistic has no interval at the cap ``-n``:
     no check could meet it (as ``rss6 budget`` refuses the same request)."""
-    from .stats import no_interval_at
+    from .estimators import no_interval_at
     for t in targets:
         if why := no_interval_at(t.statistic, CONFIDENCE, cap, replicates):
             raise _fail(t.text, why)
@@ -124,7 +124,7 @@ def checkpoints(targets: list[Target], cap: int, replicates: int | None = None) 
     mc: from the largest minimum n of the targets' statistics, times GROWTH (rounded up) each
     time.  qmc (R ``replicates``): R m with m doubling from the largest minimum points per
     replicate, so each replicate stays a power-of-two prefix of its Sobol' sequence."""
-    from .stats import interval_floor
+    from .estimators import interval_floor
     first = max(interval_floor(t.statistic, CONFIDENCE, replicates) for t in targets)
     out, n = [], first
     while n < cap:

@@ -17,7 +17,8 @@ def add_parser(sub) -> None:
 
 
 def main(args) -> int:
-    from ..analysis.plots import plot_ensemble, plot_run
+    from ..analysis.ensemble_plots import plot_ensemble
+    from ..analysis.run_plots import plot_run
     from ..files.opening import open_results
     from ..files.outputs import check_output_folder
     from ..files.schema import EnsembleFileError

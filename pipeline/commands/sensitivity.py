@@ -39,7 +39,7 @@ def add_parser(sub) -> None:
 
 
 def main(args) -> int:
-    from ..analysis.plots import plot_sensitivity
+    from ..analysis.sensitivity_plots import plot_sensitivity
     from ..files.outputs import OutputLock, check_new_output
     from ..files.reading import load_netcdf
     from ..files.writing import write_netcdf

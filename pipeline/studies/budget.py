@@ -31,7 +31,7 @@ from ..analysis.gate import Verdict, check_confidence, judge_all
 from ..ensemble.run import EnsembleSpec, ensemble
 from ..scenes.variant import scene_variant
 from ..analysis.spec import Spec
-from ..analysis.stats import no_interval_at
+from ..analysis.estimators import no_interval_at
 from ..vocabulary import CONFIDENCE, UserError, WINDOWS
 from ..analysis.summary import CLEARANCE_LEVELS
 

@@ -49,7 +49,8 @@ from scipy import stats as sps
 
 from rss6core import FINISHED
 
-from ..analysis.stats import BOUNDS, MIN_N_MEAN, in_window, mean_interval
+from ..analysis.estimators import BOUNDS, MIN_N_MEAN, mean_interval
+from ..analysis.stats import in_window
 from ..files.records import window_label
 from ..vocabulary import CONFIDENCE, SUMMARIES
 

@@ -21,11 +21,12 @@ from rss6core import default_integrator, default_time_step, parse_scene, rigid_m
 
 from ..ensemble.run import WORKER_TIMEOUT_S, EnsembleSpec, dask_client, run_ensemble
 from ..scenes.catalogue import find_scene
-from ..analysis.plots import (draw_envelope, envelope_marks, family_units, legend_entries, plain_ticks, plt,
-                              save_figure, steady_samples)
+from ..analysis.envelopes import draw_envelope, envelope_marks, steady_samples
+from ..analysis.plot_common import family_units, legend_entries, plain_ticks, plt, save_figure
 from . import report_text as text
 from ..scenes.variant import scene_variant
-from ..analysis.stats import ensemble_stats, in_window, min_n_for_quantile
+from ..analysis.estimators import min_n_for_quantile
+from ..analysis.stats import ensemble_stats, in_window
 from ..files.opening import open_ensemble
 from ..files.reading import load_netcdf
 from ..files.records import run_dataset, window_label

@@ -3,7 +3,7 @@
 Both run the same realisations (same seed) for many settings (model level,
 integrator, time step, elements per link, beam theory) and compare the ensemble statistics
 users query, per quantity and direction: the mean and the 95 % quantile over
-realisations (pipeline.analysis.stats.estimates) of each realisation's max |error| (as
+realisations (pipeline.analysis.estimators.estimates) of each realisation's max |error| (as
 stored in ensemble files: after the scene's settle time, over every internal
 step for the contact level).  Relative errors are taken against a reference setting, with a floor
 of 0.1 % of the largest translation (rotation) statistic of that quantity so
@@ -22,7 +22,7 @@ import xarray as xr
 from rss6core import (BeamTheory, Integrator, build_elastic_model, degrees_of_freedom, natural_frequencies,
                       quasi_static_state, simulate_batch, simulate_elastic)
 
-from ..analysis.stats import estimates
+from ..analysis.estimators import estimates
 from ..files.records import error_summaries
 from ..files.schema import MIXED_UNITS, _unit_table
 from ..vocabulary import DIRECTIONS, FINISHED, QUANTITIES
@@ -282,13 +282,13 @@ _COLOURS = {"rigid": "k", "quasi-static": "tab:green", "elastic": "tab:blue", "p
 
 
 def _plot_tradeoff(ds, path, tolerance, rec) -> None:
-    from ..analysis.plots import save_figure
+    from ..analysis.plot_common import save_figure
     save_figure(tradeoff_figure(ds, tolerance, rec), path)
 
 
 def tradeoff_figure(ds, tolerance, rec):
     """Cost against error of every setting; the Pareto front numbered and named in a side list."""
-    from ..analysis.plots import plt   # the Agg backend, set once there
+    from ..analysis.plot_common import plt   # the Agg backend, set once there
     cost = ds["seconds_per_realization"].values
     err = np.maximum(ds["max_relative_error"].values, 1e-6)
     labels, models = ds["setting"].values, ds["model"].values
@@ -519,7 +519,7 @@ def write_stability(ds: xr.Dataset, outdir) -> None:
 
 
 def _plot_stability(ds, path) -> None:
-    from ..analysis.plots import save_figure
+    from ..analysis.plot_common import save_figure
     save_figure(stability_figure(ds), path)
 
 
@@ -527,7 +527,7 @@ def stability_figure(ds):
     """Per sweep the status of every step, and the paper level's error against the step."""
     from matplotlib.ticker import NullFormatter
 
-    from ..analysis.plots import plt   # the Agg backend, set once there
+    from ..analysis.plot_common import plt   # the Agg backend, set once there
     colour = {"stable": "tab:green", "inaccurate": "tab:orange", "failed": "tab:red"}
     level, status, dt = ds["level"].values, ds["status"].values, ds["dt_s"].values
     names = ds["sweep_name"].values
