@@ -15,8 +15,8 @@ from ..files.records import window_label
 from ..vocabulary import CONFIDENCE, DIRECTIONS, FINISHED, QUANTITIES
 from .envelopes import draw_envelope, envelope_marks, marked_windows, steady_samples
 from .estimators import MIN_N_MEAN, estimates, running_mean_interval
-from .plot_common import (FAMILIES, SI_UNITS, family_units, figure_legend, figure_title, panel_grid, plain_ticks, plt,
-                          save_figures, si_text)
+from .plot_common import (FAMILY_DIRECTIONS, SI_UNITS, family_units, figure_legend, figure_title, panel_grid,
+                          plain_ticks, plt, save_figures, si_text)
 from .resolution import Resolution, resolutions
 from .stats import ensemble_stats, in_window
 
@@ -118,7 +118,7 @@ def _unresolved_note(ax, x, panel: _Panel) -> None:
     resolution (a histogram of numerical noise): how many agree to what, and their median, its
     last digit of the resolution's order."""
     (f, unit), res = panel.unit, panel.resolution
-    limit, base = res.limit(np.max(x)), SI_UNITS[panel.quantity][panel.direction not in FAMILIES[0]]
+    limit, base = res.limit(np.max(x)), SI_UNITS[panel.quantity][panel.direction not in FAMILY_DIRECTIONS[0]]
     decimals = max(0, int(-np.floor(np.log10(limit * f))))
     value = f"{np.median(x) * f:.{decimals}f} {unit}"
     text = [f"all {x.size} realisations agree within {si_text(limit, base)}", f"({res.source}):", value,

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..files.records import window_masks, window_reductions
-from ..vocabulary import WINDOWS
+from ..vocabulary import QUANTILES, WINDOWS
 from .estimators import estimates, quantile_estimates
 from .plot_common import mark_steady
 from .stats import in_window, windows_of
@@ -27,7 +27,7 @@ def draw_abs_envelope(ax, t, e, who: str = "", **peak_style) -> None:
     """|e| of realisations e (R, T) against time t: its 5-95 % band, median and maximum, each
     labelled as sampled on the output grid (the stored maxima may lie higher)."""
     a, grid = np.abs(e), output_grid(t)
-    lo, mid, hi = quantile_estimates(a, [0.05, 0.5, 0.95], axis=0)
+    lo, mid, hi = quantile_estimates(a, [QUANTILES[q] for q in ("q05", "q50", "q95")], axis=0)
     ax.fill_between(t, lo, hi, color="C0", alpha=0.3, lw=0, label=f"{who}5-95 % of |error|, {grid}")
     ax.plot(t, mid, color="C0", lw=1.0, label=f"{who}median |error|, {grid}")
     ax.plot(t, estimates(a, ("max",))[..., 0], label=f"{who}max |error|, {grid}", gid="sampled max",

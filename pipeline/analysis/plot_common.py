@@ -15,12 +15,12 @@ import numpy as np  # noqa: E402
 from ..vocabulary import DIRECTIONS  # noqa: E402
 from ..vocabulary import FAMILIES as _FAMILIES  # noqa: E402
 
-__all__ = ["plt", "SI_UNITS", "FAMILIES", "figure_unit", "family_units", "si_text", "figure_title", "plain_ticks",
-           "panel_grid", "save_figure", "save_figures", "mark_steady", "legend_entries", "figure_legend"]
+__all__ = ["plt", "SI_UNITS", "FAMILY_DIRECTIONS", "figure_unit", "family_units", "si_text", "figure_title",
+           "plain_ticks", "panel_grid", "save_figure", "save_figures", "mark_steady", "legend_entries", "figure_legend"]
 
 SI_UNITS = {"displacement": ("m", "rad"), "velocity": ("m/s", "rad/s"),   # translation, rotation
             "acceleration": ("m/s$^2$", "rad/s$^2$")}
-FAMILIES = tuple(_FAMILIES.values())   # translations, rotations: one unit each per figure
+FAMILY_DIRECTIONS = tuple(_FAMILIES.values())   # translations, rotations: one unit each per figure
 
 
 def figure_unit(quantity: str, direction: str, values=None) -> tuple[float, str]:
@@ -46,10 +46,10 @@ def _direction_peaks(*values) -> np.ndarray:
 
 def family_units(quantity: str, *values) -> dict[str, tuple[float, str]]:
     """{direction: (factor from SI, unit)} of one figure: one :func:`figure_unit` per direction
-    family (FAMILIES), chosen by the family's largest |value| over every array of ``values``
+    family (FAMILY_DIRECTIONS), chosen by the family's largest |value| over every array of ``values``
     ((..., direction) SI), so that no two panels of a family show one quantity in two units."""
     peaks, units = _direction_peaks(*values), {}
-    for family in FAMILIES:
+    for family in FAMILY_DIRECTIONS:
         p = peaks[[DIRECTIONS.index(d) for d in family]]
         units |= dict.fromkeys(family, figure_unit(quantity, family[0], p[np.isfinite(p)]))
     return units

@@ -10,7 +10,7 @@ import numpy as np
 from rss6core import TOL_DISPLACEMENT, TOL_VELOCITY, closure_matrix, models_with, parse_scene, rigid_motion
 
 from ..vocabulary import DIRECTIONS
-from .plot_common import FAMILIES, si_text
+from .plot_common import FAMILY_DIRECTIONS, si_text
 
 __all__ = ["ROUND_OFF", "ROUND_OFF_FLOOR", "CONTACT_ACCURACY", "Resolution", "resolutions", "closure_gain"]
 
@@ -79,5 +79,5 @@ def _contact_resolutions(scene, quantity: str) -> dict[str, Resolution]:
         eps, what = sim.contact_tolerance, f"{si_text(sim.contact_tolerance, 'm')} contact tolerance"
     gains = dict(zip(DIRECTIONS, closure_gain(scene)))
     return {d: Resolution(2 * g * eps, ROUND_OFF, f"twice the {what} through the legs' closure, "
-                                                  f"x {g:.2g}" + ("" if d in FAMILIES[0] else " rad/m"))
+                                                  f"x {g:.2g}" + ("" if d in FAMILY_DIRECTIONS[0] else " rad/m"))
             for d, g in gains.items()}
