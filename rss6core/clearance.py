@@ -16,8 +16,8 @@ SeedSequence([s, r]), so results do not depend on chunking or worker count.
 Every law inverts a CDF, so a draw is a function of a vector of uniforms
 (:func:`clearances_from_uniforms`, at most :func:`uniform_dimension` of them):
 plain Monte Carlo takes them from the realisation's stream, randomised
-quasi-Monte Carlo (pipeline/sampler.py) from a scrambled Sobol' point, and a
-Sobol' sensitivity design (pipeline/sensitivity.py) by name, six per block of
+quasi-Monte Carlo (pipeline/ensemble/sampler.py) from a scrambled Sobol' point, and a
+Sobol' sensitivity design (pipeline/studies/sensitivity.py) by name, six per block of
 :data:`UNIFORM_BLOCKS` (:func:`clearances_from_named_uniforms`).
 """
 from __future__ import annotations

@@ -12,7 +12,7 @@ point r // R of replicate r % R, mapped through the clearance laws' inverse CDFs
 like mc's, does not depend on chunking or workers, and n = R m realisations are
 the first m points of every replicate.  The R replicate estimates are independent
 and unbiased (mean) or nearly so (quantiles, std), which gives the honest
-interval of pipeline/stats.py (Student t over the replicates).
+interval of pipeline/analysis/estimators.py (Student t over the replicates).
 """
 from __future__ import annotations
 

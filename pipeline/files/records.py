@@ -200,7 +200,7 @@ def chunk_dataset(results: list, draws: list, realizations: list[int], store: st
 def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: str, dt: float,
                     elements: int, seed: int, store: str, sampler: dict | None = None) -> xr.Dataset:
     """Concatenate realisations (sorted) and add coordinates and provenance (``sampler``: the
-    attributes of a QMC design, pipeline/sampler.py; none for plain Monte Carlo)."""
+    attributes of a QMC design, pipeline/ensemble/sampler.py; none for plain Monte Carlo)."""
     ds = xr.concat(parts, dim="realization", data_vars="minimal", coords="minimal",
                    compat="override", join="override") if len(parts) > 1 else parts[0]
     if not (np.diff(ds["realization"].values) > 0).all():   # (lazy histories: no reindexing)
