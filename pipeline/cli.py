@@ -163,7 +163,7 @@ def _note_compiling(model: str) -> None:
     from rss6core import kernels_to_compile
     cold = kernels_to_compile(model)
     if cold:
-        from .ensemble.run import compile_note
+        from .ensemble.progress import compile_note
         print(f"rss6 simulate: {compile_note(cold)}", file=sys.stderr, flush=True)
 
 
@@ -188,7 +188,8 @@ def _warm(args) -> int:
 
 def _run(args) -> int:
     from .files.outputs import check_output_path
-    from .ensemble.run import EnsembleSpec, SchedulerUnavailable, ensemble, parts_dir
+    from .ensemble.cluster import SchedulerUnavailable
+    from .ensemble.run import EnsembleSpec, ensemble, parts_dir
     from .analysis.summary import failure_reasons
     specs, verdicts = _requirements(args), []
     targets = _until_targets(args)
@@ -391,7 +392,7 @@ def _report(args) -> int:
     from pathlib import Path
 
     from .studies.report import ReportPlan, write_report
-    from .ensemble.run import SchedulerUnavailable
+    from .ensemble.cluster import SchedulerUnavailable
     out = Path(args.output)
     tracked = [] if args.overwrite_tracked else _tracked([out / "results.md", out / "results"])
     if tracked:
@@ -547,7 +548,8 @@ def _level_spec(args, scene, level: str):
 def _multifidelity(args) -> int:
     from .studies.multifidelity import (check_multifidelity_output, format_multifidelity, level_paths,
                                         multifidelity_dataset, to_json)
-    from .ensemble.run import SchedulerUnavailable, ensemble, parts_dir
+    from .ensemble.cluster import SchedulerUnavailable
+    from .ensemble.run import ensemble, parts_dir
     from .files.store import check_window, write_netcdf
     from .analysis.summary import CLEARANCE_LEVELS
     if args.high == args.low:
@@ -639,7 +641,7 @@ def _multifidelity_parser(sub) -> None:
 
 def _tradeoff(args) -> int:
     from .files.outputs import check_output_folder
-    from .studies.study import tradeoff, write_tradeoff
+    from .studies.tradeoff import tradeoff, write_tradeoff
     scene = find_scene(args.config)
     check_output_folder(args.output, args.parents)
     print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")
@@ -662,7 +664,7 @@ def _tradeoff(args) -> int:
 
 def _stability(args) -> int:
     from .files.outputs import check_output_folder
-    from .studies.study import stability, write_stability
+    from .studies.stability import stability, write_stability
     scene = find_scene(args.config)
     check_output_folder(args.output, args.parents)
     print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
@@ -993,7 +995,7 @@ def _scheduler_options(parser) -> None:
 def _cluster_options(args) -> None:
     """--worker-timeout only with --scheduler (rss6's own local workers are never missing), --workers
     only without it (the scheduler's workers are its own); their defaults filled in."""
-    from .ensemble.run import WORKER_TIMEOUT_S
+    from .ensemble.cluster import WORKER_TIMEOUT_S
     if getattr(args, "scheduler", None) and getattr(args, "workers", None) is not None:
         raise SceneError(f"--workers {args.workers}: sets the local cluster; with --scheduler the "
                          "scheduler's own workers run the tasks")

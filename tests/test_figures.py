@@ -22,7 +22,8 @@ from pipeline.studies.report import LEVELS, error_figure, rigid_figure
 from pipeline.analysis.stats import MIN_N_MEAN, ensemble_stats, estimates, min_n_for_quantile, running_mean_interval
 from pipeline.files.store import open_ensemble, window_masks, write_netcdf
 from pipeline.vocabulary import WINDOWS
-from pipeline.studies.study import recommend, stability_figure, tradeoff_figure
+from pipeline.studies.stability import stability_figure
+from pipeline.studies.tradeoff import recommend, tradeoff_figure
 
 SMOKE = str(Path(__file__).resolve().parent.parent / "configs" / "smoke.toml")
 SLACK = 0.5   # px: boxes that merely touch do not overlap

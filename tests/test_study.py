@@ -7,7 +7,8 @@ import pytest
 import xarray as xr
 
 from pipeline.cli import main
-from pipeline.studies.study import TRADEOFF_STATISTICS, pareto_front, recommend, relative_errors
+from pipeline.studies.setting import TRADEOFF_STATISTICS, relative_errors
+from pipeline.studies.tradeoff import pareto_front, recommend
 from pipeline.files.store import load_netcdf
 from pipeline.vocabulary import DIRECTIONS, QUANTITIES
 from rss6core.contact_dynamics import simulate_contact
