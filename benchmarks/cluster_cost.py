@@ -2,7 +2,7 @@
 
 Run on demand: ``python benchmarks/cluster_cost.py [--pairs P] [--json]``.
 For each of P pairs, alternating which goes first, a cluster of 2 workers is started with rss6's
-settings (``pipeline.ensemble.run.QUIET_CLUSTER``: no worker profiler, slower dashboard monitors) and one
+settings (``pipeline.ensemble.cluster.QUIET_CLUSTER``: no worker profiler, slower dashboard monitors) and one
 with dask's defaults for those keys; each measures
 - idle: the CPU seconds of the main process (scheduler, nannies, client) and of the workers over
   10 s without tasks;
@@ -32,13 +32,14 @@ def _measure(quiet: bool, tmp: str) -> dict:
     """Idle CPU of a 2-worker cluster and a 1000-realisation run on a 1-worker cluster."""
     from dask.distributed import Client
 
+    import pipeline.ensemble.cluster as cluster_module
     import pipeline.ensemble.run as run
     from rss6core import load_scene
     from rss6core.models import default_integrator, default_time_step
-    settings = getattr(run, "QUIET_CLUSTER", {})   # {} in an rss6 before it: both arms are dask's
-    run.QUIET_CLUSTER = settings if quiet else {}
+    settings = cluster_module.QUIET_CLUSTER
+    cluster_module.QUIET_CLUSTER = settings if quiet else {}
     try:
-        with run.local_cluster(2) as cluster, Client(cluster) as client:
+        with cluster_module.local_cluster(2) as cluster, Client(cluster) as client:
             pids = list(client.run(os.getpid).values())
             time.sleep(2.0)                     # start-up settled
             main0, workers0 = _cpu(os.getpid()), [_cpu(p) for p in pids]
@@ -48,7 +49,7 @@ def _measure(quiet: bool, tmp: str) -> dict:
         scene = load_scene(CONFIG)
         spec = run.EnsembleSpec(scene.source_text, str(CONFIG), "paper", default_integrator(scene, "paper"),
                                 default_time_step(scene, "paper"), scene.simulation.elements_per_link, 0)
-        with run.local_cluster(1) as cluster, Client(cluster) as client:
+        with cluster_module.local_cluster(1) as cluster, Client(cluster) as client:
             client.run(lambda: __import__("pipeline.ensemble.run"))
             pid = next(iter(client.run(os.getpid).values()))
             main0, worker0, start = _cpu(os.getpid()), _cpu(pid), time.perf_counter()
@@ -57,7 +58,7 @@ def _measure(quiet: bool, tmp: str) -> dict:
             whole = {"wall_s": time.perf_counter() - start, "main_cpu_s": _cpu(os.getpid()) - main0,
                      "worker_cpu_s": _cpu(pid) - worker0}
     finally:
-        run.QUIET_CLUSTER = settings
+        cluster_module.QUIET_CLUSTER = settings
     return {"idle": idle, "run": whole}
 
 

@@ -108,7 +108,8 @@ def _throughput(scene, config, model, n, workers, tmp):
     seconds its tasks computed (dask's task stream): how busy the pipeline kept the workers."""
     from dask.distributed import Client, get_task_stream
 
-    from pipeline.ensemble.run import EnsembleSpec, local_cluster, run_ensemble
+    from pipeline.ensemble.cluster import local_cluster
+    from pipeline.ensemble.run import EnsembleSpec, run_ensemble
     spec = EnsembleSpec(scene.source_text, str(config), model, default_integrator(scene, model),
                         default_time_step(scene, model), scene.simulation.elements_per_link, 0)
     with local_cluster(workers) as cluster, Client(cluster) as client:

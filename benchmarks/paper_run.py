@@ -105,9 +105,10 @@ def phases(n: int) -> list:
         marks.append((what, round(time.perf_counter() - start, 2)))
 
     import pipeline.cli as cli
+    import pipeline.ensemble.cluster as cluster
     import pipeline.ensemble.run as run
     mark("imports done")
-    client, finished = run._client, run._finished
+    client, finished = cluster._client, run._finished
 
     def timed_client(*args, **kw):
         mark("settings and stored parts done; cluster starts")
@@ -127,7 +128,7 @@ def phases(n: int) -> list:
         write(ds, path)
         mark("final write done")
 
-    run._client, run._finished, run.write_netcdf = timed_client, timed_finished, timed_write
+    cluster._client, run._finished, run.write_netcdf = timed_client, timed_finished, timed_write
     with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
         code = cli.main(["run", str(CONFIG), "-n", str(n), "--model", "paper", "--store", "summary",
                          "--workers", "2", "-o", f"{tmp}/p.nc"])

@@ -42,6 +42,6 @@ def paper_text(configs):
 def cluster_client():
     """One local dask cluster of 2 workers shared by the tests that run ensembles without testing
     the cluster itself (each cluster costs seconds to start, and its workers their imports)."""
-    from pipeline.ensemble.run import dask_client
+    from pipeline.ensemble.cluster import dask_client
     with dask_client(2) as client:
         yield client

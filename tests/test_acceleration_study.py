@@ -8,7 +8,8 @@ import pytest
 
 from pipeline.studies.accelerations import (BURSTS, TIMOSHENKO, converged, default_variants, high_pass, main, markdown,
                                             window_maxima)
-from pipeline.studies.study import Setting, _scene_for, default_settings
+from pipeline.studies.setting import Setting, _scene_for
+from pipeline.studies.tradeoff import default_settings
 from rss6core import BeamTheory, natural_frequencies
 from rss6core.contact_dynamics import build_joint_model
 

@@ -138,6 +138,7 @@ def test_a_level_without_clearances_is_refused(configs, tmp_path, capsys):
                  "-o", str(tmp_path / "b")])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "has no clearances" in err, err
+    assert err.endswith("no clearance budget; use quasi-static, paper or contact"), err   # the level table's
     assert not (tmp_path / "b").exists()
 
 

@@ -192,7 +192,9 @@ def _study_files(folder: Path) -> dict:
     """tradeoff.nc of two quasi-static settings, and stability.nc of two made-up sweep rows (the
     real sweeps take minutes; the file's form is the same)."""
     from pipeline.scenes.catalogue import find_scene
-    from pipeline.studies.study import Setting, _stability_dataset, tradeoff, write_stability, write_tradeoff
+    from pipeline.studies.setting import Setting
+    from pipeline.studies.stability import _stability_dataset, write_stability
+    from pipeline.studies.tradeoff import tradeoff, write_tradeoff
     scene = find_scene("smoke")
     settings = [Setting("quasi-static", "newmark", 2e-3, 4), Setting("quasi-static", "newmark", 1e-3, 4)]
     write_tradeoff(tradeoff(scene, 1, 0, settings, settings[1], log=lambda *a: None), folder, 0.05)

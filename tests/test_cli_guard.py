@@ -351,7 +351,7 @@ def test_report_refuses_to_overwrite_tracked_files(tmp_path, capsys):
 def test_progress_starts_at_once_and_gives_an_eta():
     import io
 
-    from pipeline.ensemble.run import _Progress
+    from pipeline.ensemble.progress import _Progress
     stream = io.StringIO()
     bar = _Progress(10, 2, stream)
     bar.begin(4, "2 workers")

@@ -27,7 +27,8 @@ from pipeline.files.opening import open_ensemble
 from pipeline.files.records import window_masks
 from pipeline.files.writing import write_netcdf
 from pipeline.vocabulary import QUANTITIES, WINDOWS
-from pipeline.studies.study import recommend, stability_figure, tradeoff_figure
+from pipeline.studies.stability import stability_figure
+from pipeline.studies.tradeoff import recommend, tradeoff_figure
 
 SMOKE = str(Path(__file__).resolve().parent.parent / "configs" / "smoke.toml")
 SLACK = 0.5   # px: boxes that merely touch do not overlap

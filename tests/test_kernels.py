@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-import pipeline.ensemble.run as run
+import pipeline.ensemble.progress as progress
 from pipeline.cli import main
 
 
@@ -80,16 +80,16 @@ def test_a_warm_quasi_static_run_prints_no_compile_note(tmp_path, capsys):
 
 def test_the_compile_note_names_the_kernels_once_per_command(monkeypatch):
     """A command's batches (rss6 run --until: up to 14) share one note; none without kernels."""
-    monkeypatch.setattr(run, "_COMPILE_NOTED", [])
+    monkeypatch.setattr(progress, "_COMPILE_NOTED", [])
     stream = io.StringIO()
-    bar = run._Progress(4, 0, stream)
+    bar = progress._Progress(4, 0, stream)
     bar.begin(2, "1 workers")
     bar.compiling([])
     assert "compil" not in stream.getvalue()
     for _ in range(3):
-        run._Progress(4, 0, stream).compiling(["contact_kernel.advance_chunk"])
+        progress._Progress(4, 0, stream).compiling(["contact_kernel.advance_chunk"])
     lines = [ln for ln in stream.getvalue().splitlines() if "compil" in ln]
-    assert lines == [f"rss6 run: {run.compile_note(['contact_kernel.advance_chunk'])}"]
+    assert lines == [f"rss6 run: {progress.compile_note(['contact_kernel.advance_chunk'])}"]
     assert "contact_kernel.advance_chunk" in lines[0] and "rss6 warm" in lines[0]
 
 
@@ -98,7 +98,7 @@ def test_workers_of_a_level_without_kernels_are_not_asked(model):
     class Client:   # stands for a dask client: any question to the workers fails
         def run(self, *args):
             raise AssertionError("asked the workers")
-    assert run._kernels_to_compile(Client(), model) == []
+    assert progress._kernels_to_compile(Client(), model) == []
 
 
 def test_workers_are_asked_about_the_contact_levels_kernels(cluster_client):
@@ -106,4 +106,4 @@ def test_workers_are_asked_about_the_contact_levels_kernels(cluster_client):
     answers = cluster_client.run(__import__("rss6core").kernels_to_compile, "contact")
     assert len(answers) == 2
     expected = sorted({k for names in answers.values() for k in names})
-    assert run._kernels_to_compile(cluster_client, "contact") == expected
+    assert progress._kernels_to_compile(cluster_client, "contact") == expected

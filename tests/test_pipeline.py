@@ -220,7 +220,7 @@ def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(referen
     import dask
     from dask.distributed import Client, Lock
 
-    from pipeline.ensemble.run import QUIET_CLUSTER, local_cluster
+    from pipeline.ensemble.cluster import QUIET_CLUSTER, local_cluster
     ref, _ = reference
     monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
     taken = []
@@ -247,7 +247,7 @@ def test_a_second_local_cluster_starts_without_a_port_warning():
     import socket
     import warnings
 
-    from pipeline.ensemble.run import local_cluster
+    from pipeline.ensemble.cluster import local_cluster
     with socket.socket() as holder, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         with contextlib.suppress(OSError):      # already taken: the same situation

@@ -78,6 +78,8 @@ def test_report_numbers_come_from_its_files(report):
     windows = md.split("### Start-up and steady operation (contact level)")[1]
     assert "steady (t >= 0.1 s): median [95 % CI]" in windows
     assert ", drawn start, " in md                                  # the run line names the start
+    runs = next(line for line in md.splitlines() if line.startswith("Runs: ")).split("; ")
+    assert [r.split(":")[0] for r in runs if " start, " in r] == ["contact"]   # of the level that has one
     assert "would be the same to the last bit" in windows
     row = next(line for line in windows.splitlines() if line.startswith("| max \\|displacement error\\| | z |"))
     cells = [c.strip() for c in row.strip("|").split(" | ")]

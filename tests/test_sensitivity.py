@@ -296,3 +296,17 @@ def test_the_largest_family_is_named_with_its_overlap():
     assert _dominant(cell([0.7, 0.02, 0.5, 0.4], 0.05)) == "revolute_radial"
     assert _dominant(cell([0.5, 0.02, 0.7, 0.65], 0.05)) == "spherical_C (overlaps spherical_B)"
     assert _dominant(cell([np.nan] * 4, 0.05)) == "-"
+
+
+@pytest.mark.parametrize("model", ["rigid", "elastic", "paper"])
+def test_a_level_not_a_function_of_one_draw_is_refused_with_the_reasons_from_the_level_table(model):
+    """Through the API (the command offers only the accepted levels as choices): the accepted levels
+    and the reasons for the others are read from the core's level table, in the words they had."""
+    from pipeline.studies.sensitivity import LEVELS, SensitivityError, sensitivity
+    assert LEVELS == ("quasi-static", "contact")
+    spec = EnsembleSpec("", "smoke", model, "newmark", 1e-3, 4, 0)
+    with pytest.raises(SensitivityError) as caught:
+        sensitivity(spec, 64)
+    assert str(caught.value) == (f"--model {model}: Sobol' indices need a level whose error is a function of "
+                                 "one clearance draw (quasi-static, contact); the paper level redraws the "
+                                 "clearances every step, rigid and elastic have none")

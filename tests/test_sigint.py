@@ -51,7 +51,7 @@ def test_sigint_to_a_run_exits_130_and_keeps_the_finished_chunks(tmp_path):
 def test_ctrl_c_while_waiting_for_dask_is_raised_by_rss6_not_inside_dask(monkeypatch):
     """A Ctrl-C that arrives while the main thread waits in dask's client is held and raised by
     _finished before its next wait: never inside dask's locks (where it could hang the shutdown)."""
-    import pipeline.ensemble.run as run
+    import pipeline.ensemble.cluster as cluster
     from pipeline.files.writing import sigint_deferred
     waits = []
 
@@ -61,8 +61,8 @@ def test_ctrl_c_while_waiting_for_dask_is_raised_by_rss6_not_inside_dask(monkeyp
         os.kill(os.getpid(), signal.SIGINT)
         time.sleep(0.05)   # the handler runs here, in dask's code: it must only take note
         return iter(())
-    monkeypatch.setattr(run, "_gathered", wait_in_dask)
+    monkeypatch.setattr(cluster, "_gathered", wait_in_dask)
     with pytest.raises(KeyboardInterrupt) as caught:
         with sigint_deferred() as interrupted:
-            list(run._finished(None, ["future"], None, 60.0, interrupted))
+            list(cluster._finished(None, ["future"], None, 60.0, interrupted))
     assert len(waits) == 1 and caught.traceback[-1].name == "_finished"

@@ -7,7 +7,8 @@ import pytest
 import xarray as xr
 
 from pipeline.cli import main
-from pipeline.studies.study import TRADEOFF_STATISTICS, pareto_front, recommend, relative_errors
+from pipeline.studies.setting import TRADEOFF_STATISTICS, relative_errors
+from pipeline.studies.tradeoff import pareto_front, recommend
 from pipeline.files.reading import load_netcdf
 from pipeline.vocabulary import DIRECTIONS, QUANTITIES
 from rss6core.contact_dynamics import simulate_contact
@@ -123,3 +124,13 @@ def test_settle_time_leaves_the_start_up_out_of_the_peaks(smoke):
         assert np.all(late_peak[0, q] >= sampled)               # every internal step counts ...
         assert np.all(late_peak[0, q] <= full_peak[0, q])       # ... but none before the settle time
     assert np.any(late_peak[0, 2] < full_peak[0, 2])            # the start-up impacts are left out
+
+
+def test_a_setting_names_integrator_and_mesh_only_for_the_levels_that_integrate_the_links():
+    """The level table's elastic_links decides the label's form (rigid and quasi-static integrate nothing)."""
+    from pipeline.studies.setting import Setting
+    assert Setting("rigid", "hht", 1e-3, 4).label == "rigid 1 ms"
+    assert Setting("quasi-static", "hht", 2e-3, 4).label == "quasi-static 2 ms"
+    assert Setting("elastic", "hht", 1e-3, 4).label == "elastic hht 1 ms 4 el"
+    assert Setting("paper", "newmark", 5e-4, 8).label == "paper newmark 0.5 ms 8 el"
+    assert Setting("contact", "hht", 1e-4, 2, 10.0).label == "contact hht 0.1 ms 2 el, K x10"

@@ -2,6 +2,7 @@
 counts as not met), and end to end on the smoke scene's quasi-static level: the run stops at the
 first checkpoint where every target holds, its data equal a plain run of that n bit for bit, an
 interrupted run resumes to the same file, and a cap reached first exits 1."""
+import io
 import json
 import shutil
 import subprocess
@@ -181,3 +182,26 @@ def test_a_malformed_target_or_qmc_option_exits_2_before_any_work(tmp_path):
         assert proc.returncode == 2 and token in proc.stderr, proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1
         assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow   # a local cluster of one worker and three batches: about 10 s
+def test_every_batch_runs_on_one_client_of_one_cluster(tmp_path, monkeypatch):
+    """The checks of one --until run share one dask client on one local cluster
+    (pipeline.ensemble.cluster.dask_client): a cluster or a client per batch would cost its start-up
+    every check."""
+    import pipeline.ensemble.cluster as cluster
+    from pipeline.analysis.until import run_until
+    from pipeline.ensemble.run import EnsembleSpec
+    from pipeline.scenes.catalogue import find_scene
+    clients, clusters = [], []
+    make_client, make_cluster = cluster._client, cluster.local_cluster
+    monkeypatch.setattr(cluster, "_client", lambda *a: clients.append(a) or make_client(*a))
+    monkeypatch.setattr(cluster, "local_cluster", lambda *a: clusters.append(a) or make_cluster(*a))
+    scene = find_scene("smoke")
+    spec = EnsembleSpec(scene.source_text, "smoke", "quasi-static", "newmark", scene.time_step,
+                        scene.simulation.elements_per_link, 3)
+    targets = [parse_target("displacement:x@q95<=0.0001%")]          # never met: every checkpoint runs
+    out = run_until(spec, targets, 93, tmp_path / "u.nc", workers=1, progress=False, stream=io.StringIO())
+    assert out.n == 93 and not out.met and checkpoints(targets, 93) == [59, 74, 93]
+    assert out.ensemble.computed == 93
+    assert len(clients) == 1 and len(clusters) == 1

@@ -20,6 +20,7 @@ run) is checked at its own n first.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import re
@@ -221,7 +222,8 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
               annotate=None, worker_timeout: float | None = None, stream=None) -> UntilOutcome:
     """Extend ``output`` through :func:`checkpoints` until every target is met or ``cap`` is reached;
     each check's widths are printed to ``stream`` and written into the file (``until_*``)."""
-    from ..ensemble.run import WORKER_TIMEOUT_S, default_chunk, ensemble
+    from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client
+    from ..ensemble.run import default_chunk, ensemble
     from .stats import ensemble_stats
     stream = stream or sys.stderr
     points = checkpoints(targets, cap, spec.qmc_replicates)
@@ -242,13 +244,14 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
                      + format_widths(targets, found["widths"], done) + "\n")
     plan = ([done] if done and all(w.met for w in found["widths"]) else []) \
         + [n for n in points if n > done]
-    address, cluster = _cluster(workers, scheduler, bool(plan))
     outcome, computed = None, 0
-    try:
+    # one cluster (or client of the scheduler) for every batch: a cluster per batch would cost its
+    # start-up every check
+    with dask_client(workers, scheduler) if plan else contextlib.nullcontext() as client:
         for n in plan:
             size = default_chunk(max(n - done, 1), workers, spec.model) if chunk is None else chunk
-            outcome = ensemble(spec, n, output, workers, address, size, progress, judge,
-                               worker_timeout or WORKER_TIMEOUT_S)
+            outcome = ensemble(spec, n, output, workers, scheduler, size, progress, judge,
+                               worker_timeout or WORKER_TIMEOUT_S, client=client)
             computed, done = computed + outcome.computed, n
             met = all(w.met for w in found["widths"])
             stream.write(format_widths(targets, found["widths"], n)
@@ -256,9 +259,6 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
             stream.flush()
             if met:
                 break
-    finally:
-        if cluster is not None:
-            cluster.close()
     if outcome is None:      # the stored file is beyond the cap and was checked as it is
         outcome = ensemble(spec, done, output, workers, scheduler, chunk, progress, judge,
                            worker_timeout or WORKER_TIMEOUT_S)
@@ -267,12 +267,3 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
                       stored_before=0 if stored is None else stored.sizes["realization"])
     return UntilOutcome(outcome, found["n"], all(w.met for w in found["widths"]), found["widths"])
 
-
-def _cluster(workers: int, scheduler: str | None, needed: bool):
-    """The scheduler address every batch runs on: the given one, or one local cluster kept for all
-    batches (a cluster per batch would cost its start-up every check)."""
-    if scheduler or not needed:
-        return scheduler, None
-    from ..ensemble.run import local_cluster
-    cluster = local_cluster(workers)
-    return cluster.scheduler_address, cluster

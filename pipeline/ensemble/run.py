@@ -12,38 +12,35 @@ process writes an output at a time (``OUT.nc.lock``).  When all realisations
 are stored they are merged into OUT.nc and the parts are removed.
 Realisation r draws from the stream (seed, r) only (with ``--sampler qmc`` from a
 fixed point of a fixed scrambling, pipeline/sampler.py), so the file does not
-depend on the chunk size or the number of workers.
+depend on the chunk size or the number of workers.  The cluster and client come from
+pipeline/ensemble/cluster.py, the progress lines from pipeline/ensemble/progress.py.
 """
 from __future__ import annotations
 
 import contextlib
 import functools
-import logging
 import os
 import shutil
-import signal
-import sys
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from rss6core import FAILED, SimulationResult, __version__, parse_scene, prepare_level, stored_draw, time_grid
+from rss6core import (FAILED, MODEL_LEVELS, SimulationResult, __version__, parse_scene, prepare_level, stored_draw,
+                      time_grid)
 
 from ..files.outputs import OutputLock, PartsManifest
 from ..files.opening import open_ensemble
 from ..files.reading import load_netcdf
-from ..files.records import chunk_dataset, finish_ensemble
+from ..files.records import finish_ensemble, chunk_dataset
 from ..files.schema import EnsembleFileError, ensemble_identity, identity
 from ..files.writing import sigint_deferred, write_netcdf
+from .cluster import WORKER_TIMEOUT_S, _finished, dask_client
+from .progress import _kernels_to_compile, _Progress
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
-           "local_cluster", "dask_client", "BLAS_ENV", "SchedulerUnavailable", "parts_dir", "compile_note"]
-
-BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                             "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
+           "parts_dir", "MAX_AUTO_CHUNK", "MAX_AUTO_CHUNK_BY_MODEL"]
 
 
 @dataclass(frozen=True)
@@ -209,256 +206,17 @@ def parts_dir(output: Path) -> Path:
     return output.with_name(output.name + ".parts")
 
 
-_COMPILE_NOTED: list = []   # the kernels a compile note of this process named (said once per command)
-
-
-def compile_note(kernels: list[str]) -> str:
-    """The one line that says kernels are being compiled (rss6 run and rss6 simulate)."""
-    return (f"compiling {', '.join(kernels)} first: numba's cache holds no copy for this machine and "
-            "rss6 version; this takes minutes once (rss6 warm pays it up front)")
-
-
-class _Progress:
-    """A bar on a terminal, plain lines otherwise; a first line at once (starting workers), a line
-    when the workers compile kernels (:meth:`compiling`), then done/total with the elapsed time and
-    an ETA."""
-
-    def __init__(self, total: int, done: int, stream=None):
-        self.total, self.done, self.stream = total, done, stream or sys.stderr
-        self.tty, self.start, self.last = self.stream.isatty(), time.perf_counter(), 0.0
-        self.first = done
-
-    def begin(self, chunks: int, where: str) -> None:
-        self.stream.write(f"rss6 run: {self.total - self.done} realisations to compute in {chunks} "
-                          f"chunks on {where}" + (f" ({self.done} stored)" if self.done else "")
-                          + "; starting workers\n")
-        self.stream.flush()
-
-    def compiling(self, kernels: list[str]) -> None:
-        """Say, once per process (a command's batches share it), that the workers compile
-        ``kernels`` before their first chunk (none: nothing said)."""
-        if not kernels or _COMPILE_NOTED:
-            return
-        _COMPILE_NOTED.append(kernels)
-        self.stream.write(f"rss6 run: {compile_note(kernels)}\n")
-        self.stream.flush()
-
-    def _eta(self, elapsed: float) -> str:
-        computed = self.done - self.first
-        if computed <= 0 or self.done >= self.total:
-            return ""
-        return f", about {elapsed / computed * (self.total - self.done):.0f} s left"
-
-    def advance(self, n: int) -> None:
-        self.done += n
-        elapsed = time.perf_counter() - self.start
-        frac = self.done / max(self.total, 1)
-        if self.tty:
-            bar = "#" * int(30 * frac)
-            self.stream.write(f"\r[{bar:<30s}] {self.done}/{self.total} realisations, "
-                              f"{elapsed:.1f} s{self._eta(elapsed)}   ")
-            if self.done >= self.total:
-                self.stream.write("\n")
-        elif elapsed - self.last >= 2.0 or self.done >= self.total:
-            self.last = elapsed
-            self.stream.write(f"rss6 run: {self.done}/{self.total} realisations "
-                              f"({100 * frac:.0f} %), {elapsed:.1f} s{self._eta(elapsed)}\n")
-        self.stream.flush()
-
-
-def _kernels_to_compile(client, model: str) -> list[str]:
-    """The compiled kernels of ``model`` that any of the client's workers would compile first (each
-    worker asked, from its own cache); none for levels without kernels, without asking, and none
-    when a worker cannot answer (lost meanwhile: the run itself reports that)."""
-    from rss6core import level_kernels, kernels_to_compile
-    if not level_kernels(model):
-        return []
-    try:
-        answers = client.run(kernels_to_compile, model)
-    except (OSError, TimeoutError):
-        return []
-    return sorted({name for names in answers.values() for name in names})
-
-
-def local_cluster(workers: int):
-    """A dask LocalCluster of ``workers`` single-threaded worker processes, one BLAS thread each.
-
-    dask starts its workers with MALLOC_TRIM_THRESHOLD_=65536, which also fixes glibc's mmap
-    threshold at 128 KiB: every larger temporary array is then mapped and faulted in afresh,
-    which costs the paper level 25-30 % more CPU time per realisation. These workers keep glibc's
-    default (a value set in the environment by the user still applies). The cluster's own logs
-    are silenced below CRITICAL: closing it races with the workers' heartbeats, which then log a
-    traceback although nothing failed; rss6 reports every task's failure itself.
-
-    The workers are forked from a server process that imports rss6 and its libraries once
-    (:func:`_preload_worker_imports`), not started afresh: each fresh worker spent seconds importing
-    them, and closing the cluster took seconds more. The cluster has no dashboard, so what only
-    feeds one is off or slowed (QUIET_CLUSTER). Its scheduler still serves dask's health routes
-    over HTTP, on a free local port: by default it takes 8787 and warns "Port 8787 is already in
-    use" whenever another cluster (a second rss6 run) holds it.
-    """
-    import dask
-    from dask.distributed import LocalCluster
-    os.environ.update(BLAS_ENV)  # inherited by the worker processes
-    settings = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
-                "distributed.worker.multiprocessing-method": "forkserver", **QUIET_CLUSTER}
-    with dask.config.set(settings), _workers_ignore_ctrl_c():
-        _preload_worker_imports()
-        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                            dashboard_address=None, host="127.0.0.1", silence_logs=logging.CRITICAL,
-                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
-
-
-# a local cluster without a dashboard: no statistical profiler in the workers (a stack sample of
-# the running task every 10 ms), and the monitors that feed the dashboard (event-loop tick, system
-# and memory) at a tenth of their rates: idle, 2 workers and the main process then take 0.2 s of CPU
-# per 10 s instead of 1.1 s, CPU taken from the realisations once both cores compute
-# (docs/performance.md, section 18)
-QUIET_CLUSTER = {"distributed.worker.profile.enabled": False,
-                 "distributed.admin.tick.interval": "200ms",
-                 "distributed.admin.system-monitor.interval": "2s",
-                 "distributed.worker.memory.monitor-interval": "1s"}
-# what a worker needs: rss6core, numpy, xarray, ... through pipeline.ensemble.run; xarray imports dask.array
-# at its first Dataset, the level's design pipeline.ensemble.sampler (0.2-0.3 s per worker in its first task)
-WORKER_IMPORTS = ["distributed", "pipeline.ensemble.run", "dask.array", "pipeline.ensemble.sampler"]
-
-
-def _preload_worker_imports() -> None:
-    """Make the fork server that starts the workers import WORKER_IMPORTS first (effective until it
-    starts, at the first worker: it then lives as long as this process and forks every worker).
-
-    It starts in the environment of that moment (one BLAS thread, SIGINT ignored: see the caller)."""
-    from distributed.utils import get_mp_context
-    get_mp_context().set_forkserver_preload(WORKER_IMPORTS)   # after dask's own, which it replaces
-
-
-@contextlib.contextmanager
-def _workers_ignore_ctrl_c():
-    """Worker processes started in this block inherit an ignored SIGINT: a terminal's Ctrl-C reaches
-    the whole process group, and only this process should act on it (the cluster is closed from
-    here); otherwise each worker prints its own traceback. The disposition is the process's, so a
-    Ctrl-C while the local cluster starts (1-3 s) is lost; blocking SIGINT instead does not reach
-    the workers (dask starts them from threads that do not block it)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
-CONNECT_TIMEOUT_S = 5.0   # an external scheduler that does not answer in this time is unreachable
-WORKER_TIMEOUT_S = 60.0   # default wait, s, for an external scheduler that has no workers
-POLL_S = 1.0              # how often, s, the workers of an external scheduler are counted
-
-
-class SchedulerUnavailable(RuntimeError):
-    """The external dask scheduler cannot be reached, or has had no workers for too long (an
-    environment problem: the finished chunks stay in OUT.nc.parts)."""
-
-
-@contextlib.contextmanager
-def dask_client(workers: int = 2, scheduler: str | None = None):
-    """A dask client on a new local cluster of ``workers`` (or on ``scheduler``), closed with its
-    cluster at the end of the block: one cluster for many ensembles (``client=`` of :func:`ensemble`)."""
-    client, cluster = _client(workers, scheduler)
-    try:
-        yield client
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-
-def _client(workers: int, scheduler: str | None):
-    from dask.distributed import Client
-    if scheduler:
-        try:
-            return Client(scheduler, timeout=CONNECT_TIMEOUT_S), None
-        except ValueError as exc:  # a malformed address
-            raise SchedulerUnavailable(f"--scheduler {scheduler!r}: {exc}; the address reads e.g. "
-                                       "tcp://HOST:8786") from None
-        except OSError:  # refused or timed out
-            raise SchedulerUnavailable(
-                f"cannot reach the dask scheduler at {scheduler} within {CONNECT_TIMEOUT_S:g} s; "
-                "check the address (e.g. tcp://HOST:8786) and that the scheduler is running"
-            ) from None
-    cluster = local_cluster(workers)
-    return Client(cluster), cluster
-
-
-def _finished(client, futures: list, scheduler: str | None, worker_timeout: float,
-              interrupted: list):
-    """The chunk results as they finish, waiting at most POLL_S at a time: KeyboardInterrupt is
-    raised here, between waits, once ``interrupted`` holds a Ctrl-C (never inside dask's client,
-    where it could leave a lock held and hang the cluster's shutdown). On an external scheduler
-    the workers are counted and SchedulerUnavailable is raised once it has had none for
-    ``worker_timeout`` s."""
-    if scheduler:
-        _quiet_lost_results()
-    pending, idle_since = set(futures), None
-    while pending:
-        if interrupted:
-            raise KeyboardInterrupt
-        got = list(_gathered(client, pending))
-        yield from got
-        if not scheduler or got or client.nthreads():
-            idle_since = None
-            continue
-        idle_since = time.monotonic() if idle_since is None else idle_since
-        if time.monotonic() - idle_since >= worker_timeout:
-            raise SchedulerUnavailable(
-                f"the dask scheduler at {scheduler} has had no workers for "
-                f"{time.monotonic() - idle_since:.0f} s (--worker-timeout {worker_timeout:g})")
-
-
-def _lost_result_record(record) -> bool:
-    """False for dask's log records about a result lost with its worker, which _gathered handles:
-    "Couldn't gather ... rescheduling", and the gather left waiting for it that ends with AllExit
-    when the client closes."""
-    text = record.getMessage()
-    return not ("Couldn't gather" in text or ("never retrieved" in text and "AllExit" in text))
-
-
-def _quiet_lost_results() -> None:
-    import logging
-    for name in ("distributed.client", "asyncio"):
-        logger = logging.getLogger(name)
-        if _lost_result_record not in logger.filters:
-            logger.addFilter(_lost_result_record)
-
-
-def _gathered(client, pending: set):
-    """Results of the futures in ``pending`` that finish within about POLL_S, removed from it.
-
-    A result held by a worker that has died cannot be gathered (dask computes it again, and
-    gathering would wait for that); such a future stays in ``pending``."""
-    from dask.distributed import wait
-    try:
-        done = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED").done
-    except TimeoutError:
-        return
-    held = client.who_has(list(done))
-    for future in done:
-        if future.status == "finished" and not held.get(future.key):
-            continue   # its worker is gone
-        try:
-            result = future.result(timeout=POLL_S)
-        except TimeoutError:   # the worker died just now: ask again who holds the others
-            return
-        pending.discard(future)
-        yield result
-
-
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
 # the contact level computes its fine-grid loads and joint maps once per batch (1.9 s CPU, as much
 # as 8 realisations' steps): twice the batch halves that share (docs/performance.md, section 14);
 # a paper-level chunk of 128 is about 1 s of work, and the main process's work per chunk (writing
 # its part, 15-20 ms CPU, and dask's messages), taken from the workers' cores, is then half as
 # often paid (section 18)
-MAX_AUTO_CHUNK_BY_MODEL = {"contact": 128, "paper": 128}
+MAX_AUTO_CHUNK_INTEGRATED = 128
+# the cap of the levels that integrate the flexible links for every clearance draw, by name, the
+# dearest first (as the --chunk help names them)
+MAX_AUTO_CHUNK_BY_MODEL = {name: MAX_AUTO_CHUNK_INTEGRATED for name, level in reversed(MODEL_LEVELS.items())
+                           if level.elastic_links and level.draws_clearances}
 
 
 def default_chunk(n: int, workers: int, model: str | None = None) -> int:

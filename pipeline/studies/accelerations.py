@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import BeamTheory, SceneError, simulate_batch
+from rss6core import BeamTheory, SceneError, default_time_step, simulate_batch
 
 from ..vocabulary import DIRECTIONS, FINISHED
 
@@ -84,7 +84,7 @@ def measure(scene, variant: Variant, n: int, seed: int = 0) -> dict:
     import dataclasses
     sc = dataclasses.replace(scene, beam=variant.beam)
     start = time.perf_counter()
-    results = simulate_batch(sc, "contact", None, scene.simulation.contact_time_step * variant.step_factor,
+    results = simulate_batch(sc, "contact", None, default_time_step(scene, "contact") * variant.step_factor,
                              variant.elements, seed, range(n))
     wall = (time.perf_counter() - start) / n
     acc = np.stack([r.acceleration for r in results])

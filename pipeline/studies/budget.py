@@ -27,19 +27,19 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from rss6core import model_level, models_with
+
 from ..analysis.gate import Verdict, check_confidence, judge_all
 from ..ensemble.run import EnsembleSpec, ensemble
 from ..scenes.variant import scene_variant
 from ..analysis.spec import Spec
 from ..analysis.estimators import no_interval_at
 from ..vocabulary import CONFIDENCE, UserError, WINDOWS
-from ..analysis.summary import CLEARANCE_LEVELS
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
            "BudgetError"]
 
 FAMILY_KEYS = ("revolute_radial_m", "revolute_axial_m", "spherical_C_m", "spherical_B_m")
-LINEAR_LEVELS = ("quasi-static",)
 DIGITS = 4            # significant digits the factor is rounded down to
 MAX_DOUBLINGS = 12    # the sweep looks for a passing and a failing scale within 2^-12..2^12
 
@@ -112,9 +112,10 @@ def _check_scene(spec: EnsembleSpec) -> None:
 
 def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> None:
     """BudgetError for a request no budget can answer, before any ensemble runs."""
-    if model not in CLEARANCE_LEVELS:
+    if not model_level(model).draws_clearances:
+        *others, last = models_with("draws_clearances")
         raise BudgetError(f"--model {model}: this level has no clearances, so no clearance budget; "
-                          "use quasi-static, paper or contact")
+                          f"use {', '.join(others)} or {last}")
     try:
         check_confidence(confidence)
     except ValueError as exc:
@@ -193,7 +194,7 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
                               "so they set no clearance budget")
         return _trial(spec, specs, scale, n, folder, confidence, workers)
 
-    if spec.model in LINEAR_LEVELS:
+    if model_level(spec.model).linear_in_clearances:
         first = run(1.0)
         ratio, limiting = exact_scale(list(first.verdicts))
         scale = round_down(ratio)

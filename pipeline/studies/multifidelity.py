@@ -47,7 +47,7 @@ import numpy as np
 import xarray as xr
 from scipy import stats as sps
 
-from rss6core import FINISHED
+from rss6core import FINISHED, models_with
 
 from ..analysis.estimators import BOUNDS, MIN_N_MEAN, mean_interval
 from ..analysis.stats import in_window
@@ -163,14 +163,16 @@ def paired_values(high: xr.Dataset, low: xr.Dataset, name: str, window: str = "w
 
 def _check_pairing(high: xr.Dataset, low: xr.Dataset, high_path, low_path) -> None:
     """The pairs must be the same draws: same seed and scene, equal recorded draws (sizes, and
-    eccentricities unless a level is the paper level, which records its first step's)."""
+    eccentricities unless a level redraws them every step, as the paper level does, and records
+    its first step's)."""
     from ..files.schema import EnsembleFileError
     for key in ("seed", "scene_toml"):
         if str(high.attrs.get(key)) != str(low.attrs.get(key)):
             raise EnsembleFileError(f"{low_path}: a different {key} than {high_path}; the "
                                     "realisations are not the same draws")
     common = np.intersect1d(high["realization"].values, low["realization"].values)
-    per_step = "paper" in (high.attrs.get("model"), low.attrs.get("model"))
+    redrawn = models_with("redraws_every_step")
+    per_step = high.attrs.get("model") in redrawn or low.attrs.get("model") in redrawn
     for name in ("clearance_size", "axial_clearance_size") + (() if per_step else ("eccentricity",)):
         if not np.array_equal(high[name].sel(realization=common).values,
                               low[name].sel(realization=common).values, equal_nan=True):

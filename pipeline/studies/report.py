@@ -17,9 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import default_integrator, default_time_step, parse_scene, rigid_motion, simulate, size_band
+from rss6core import (MODELS, default_integrator, default_time_step, model_level, models_with, parse_scene,
+                      rigid_motion, simulate, size_band)
 
-from ..ensemble.run import WORKER_TIMEOUT_S, EnsembleSpec, dask_client, run_ensemble
+from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client
+from ..ensemble.run import EnsembleSpec, run_ensemble
 from ..scenes.catalogue import find_scene
 from ..analysis.envelopes import draw_envelope, envelope_marks, steady_samples
 from ..analysis.plot_common import family_units, legend_entries, plain_ticks, plt, save_figure
@@ -104,8 +106,8 @@ def run_scene(config, data: Path, plan: ReportPlan, client=None) -> dict[str, Pa
     path = data / f"{scene.name}_elastic.nc"
     if not path.exists():
         result = simulate(scene, "elastic")
-        write_netcdf(run_dataset(scene, result, model="elastic", integrator=scene.simulation.integrator,
-                                 dt=scene.time_step, elements=scene.simulation.elements_per_link,
+        write_netcdf(run_dataset(scene, result, model="elastic", integrator=default_integrator(scene, "elastic"),
+                                 dt=default_time_step(scene, "elastic"), elements=scene.simulation.elements_per_link,
                                  wall_time=0.0), path)
     paths["elastic"] = path
     for model, store in (("quasi-static", "summary"), ("paper", "full"), ("contact", "full")):
@@ -282,12 +284,12 @@ _LEVELS = ("quasi-static", "paper", "contact")
 def _setting_line(ds, sds) -> str:
     a = ds.attrs
     dt, sim = float(a["time_step_s"]), parse_scene(a["scene_toml"]).simulation
-    step = f"step {dt * 1e3:g} ms"
-    if a["model"] == "contact" and sim.contact_refinements:
+    step, level = f"step {dt * 1e3:g} ms", model_level(a["model"])
+    if level.contact_joints and sim.contact_refinements:   # the contact kernel's adaptive step
         finest = dt / 2 ** sim.contact_refinements
         step = (f"adaptive step {dt * 1e3:g} ms, halved down to {finest * 1e6:g} us where"
                 f" the local error estimate exceeds {sim.contact_tolerance:g} m")
-    if a["model"] == "contact":
+    if level.contact_start:
         step += f", {sim.contact_start} start"
     return (f"{a['model']}: {a['integrator']}, {step}, "
             f"{a['elements_per_link']} elements per link, {_count(sds)} realisations, seed {a['seed']}")
@@ -409,8 +411,14 @@ def _explanations(scene, st: dict, dt: float, by_window, start: str, t_s: float)
 
 def _open_scene(config, data: Path, plan: ReportPlan, client) -> dict:
     """The scene's files by role, run where missing (on ``client``) and opened into memory."""
-    return {k: (_open_run(p) if k == "elastic" else open_ensemble(p))
+    return {k: (_open_run(p) if _one_run(k) else open_ensemble(p))
             for k, p in run_scene(config, data, plan, client).items()}
+
+
+def _one_run(role: str) -> bool:
+    """Whether the file of ``role`` (a level's name or onlyA/C/B) holds one deterministic run: a
+    level that draws no clearances has no ensemble."""
+    return role in MODELS and role not in models_with("draws_clearances")
 
 
 def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:

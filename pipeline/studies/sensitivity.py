@@ -21,8 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from rss6core import FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, prepare_level, size_band
+from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, MODELS, model_level,
+                      models_with, prepare_level, size_band)
 
+from ..ensemble.cluster import dask_client
 from ..files.records import check_window, window_label, window_summaries
 from ..files.schema import JOINTS, _provenance, _unit_table, command_line
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, UserError, WINDOWS
@@ -33,7 +35,7 @@ __all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs
            "format_sensitivity", "format_joints", "SensitivityError"]
 
 FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
-LEVELS = ("quasi-static", "contact")     # the levels whose error is a function of one draw
+LEVELS = models_with("function_of_one_draw")   # the levels whose error is a function of one draw
 INDICES = ("S1", "ST")
 BOUNDS = ("estimate", "lower", "upper")
 RESAMPLES = 500                          # bootstrap resamples of the rows per index (SALib default 100)
@@ -182,16 +184,8 @@ def _client(workers: int):
     if workers == 1:
         yield None
         return
-    from dask.distributed import Client
-
-    from ..ensemble.run import local_cluster
-    cluster = local_cluster(workers)
-    client = Client(cluster)
-    try:
+    with dask_client(workers) as client:
         yield client
-    finally:
-        client.close()
-        cluster.close()
 
 
 # --- analysis -----------------------------------------------------------------------------
@@ -294,15 +288,24 @@ def _check_window(scene, window: str) -> None:
         raise SensitivityError(str(exc)) from None
 
 
+def _check_level(model: str) -> None:
+    """SensitivityError unless the error of ``model`` is a function of one clearance draw, saying
+    (from the level table) why the other levels have no Sobol' indices."""
+    if model in LEVELS:
+        return
+    redrawn = " and ".join(models_with("redraws_every_step"))
+    without = " and ".join(name for name in MODELS if not model_level(name).draws_clearances)
+    raise SensitivityError(f"--model {model}: Sobol' indices need a level whose error is a "
+                           f"function of one clearance draw ({', '.join(LEVELS)}); the {redrawn} level "
+                           f"redraws the clearances every step, {without} have none")
+
+
 def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFIDENCE, workers: int = 2,
                 announce=None, window: str = "whole") -> xr.Dataset:
     """Sobol' indices of the level ``spec.model`` with N base rows per design (a power of 2), of the
     statistics over the analysis ``window`` (WINDOWS: whole run, startup or steady)."""
     import time
-    if spec.model not in LEVELS:
-        raise SensitivityError(f"--model {spec.model}: Sobol' indices need a level whose error is a "
-                               f"function of one clearance draw ({', '.join(LEVELS)}); the paper level "
-                               "redraws the clearances every step, rigid and elastic have none")
+    _check_level(spec.model)
     if n < MIN_N or n & (n - 1):
         raise SensitivityError(f"-n {n}: the base sample must be a power of 2 of at least {MIN_N} "
                                "(Sobol' points are balanced in powers of 2; interval coverage was "
