@@ -17,8 +17,8 @@ NEEDS = {"stats": ["{file}"], "plot": ["{file}"], "budget": ["--spec", "displace
          "multifidelity": ["-o", "{tmp}/mf.nc"], "report": ["smoke"]}
 # the entry points that compute (budget and sensitivity check their request first, so they stay)
 WORK = ("pipeline.ensemble.run.ensemble", "pipeline.analysis.until.run_until", "rss6core.simulate",
-        "pipeline.studies.report.write_report", "pipeline.studies.study.tradeoff",
-        "pipeline.studies.study.stability", "rss6core.compile_kernels")
+        "pipeline.studies.report.write_report", "pipeline.studies.tradeoff.tradeoff",
+        "pipeline.studies.stability.stability", "rss6core.compile_kernels")
 
 
 def _commands() -> dict[str, argparse.ArgumentParser]:

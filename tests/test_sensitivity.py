@@ -10,7 +10,7 @@ from scipy import stats as sps
 from pipeline.cli import main
 from pipeline.ensemble.run import EnsembleSpec
 from pipeline.scenes.variant import scene_variant
-from pipeline.studies.sensitivity import (FAMILIES, clearance_draws_from_uniforms, clearance_inputs, designs,
+from pipeline.studies.sensitivity import (JOINT_FAMILIES, clearance_draws_from_uniforms, clearance_inputs, designs,
                                           evaluate_statistics, sample_design, sobol_indices)
 from pipeline.files.reading import load_netcdf
 from pipeline.files.records import error_summaries
@@ -205,7 +205,7 @@ def test_sensitivity_file(sobol_file):
     assert da.dims == ("index", "bound", "group", "quantity", "direction")
     assert list(ds["index"].values) == ["S1", "ST"]
     assert list(ds["bound"].values) == ["estimate", "lower", "upper"]
-    assert list(ds["group"].values)[:4] == list(FAMILIES) and ds.sizes["group"] == 22
+    assert list(ds["group"].values)[:4] == list(JOINT_FAMILIES) and ds.sizes["group"] == 22
     assert "bootstrap" in ds.attrs["interval_method"] and ds.attrs["confidence"] == 0.95
     assert ds.attrs["window"] == "whole" and da.attrs["analysis_window"] == "whole run"
     assert ds.attrs["evaluations_families"] == 64 * 6 and ds.attrs["evaluations_joints"] == 64 * 20
@@ -219,7 +219,7 @@ def test_sensitivity_is_reproducible_across_workers(sobol_file, configs, tmp_pat
     path = tmp_path / "s2.nc"
     assert main(["sensitivity", str(configs / "smoke.toml"), "-n", "64", "--workers", "2",
                  "-o", str(path), "--no-plots"]) == 0
-    a, b = load_netcdf(sobol_file).sel(group=list(FAMILIES)), load_netcdf(path)
+    a, b = load_netcdf(sobol_file).sel(group=list(JOINT_FAMILIES)), load_netcdf(path)
     for name in ("max_abs_error_sobol", "mean_abs_error_sobol"):
         np.testing.assert_array_equal(a[name].values, b[name].values)
 
@@ -261,13 +261,13 @@ def test_the_joint_table_lists_the_largest_joints_from_the_file(sobol_file):
     lines = format_joints(ds).splitlines()
     assert len(lines) == 2 + 18 and "of 18; all in the file" in lines[0]
     st = ds["max_abs_error_sobol"].sel(index="ST", quantity="velocity", direction="y",
-                                       group=[g for g in ds["group"].values if g not in FAMILIES])
+                                       group=[g for g in ds["group"].values if g not in JOINT_FAMILIES])
     est = st.sel(bound="estimate")
     first = str(est["group"].values[int(np.argmax(est.values))])
     row = [s for s in lines if s.startswith("velocity     y   ")][0]
     lo, hi = (float(st.sel(group=first, bound=b)) for b in ("lower", "upper"))
     assert row[17:].startswith(f"{first} {float(est.sel(group=first)):.3f} [{lo:.3f},{hi:.3f}]"), row
-    assert format_joints(ds.sel(group=list(FAMILIES))) == ""
+    assert format_joints(ds.sel(group=list(JOINT_FAMILIES))) == ""
 
 
 def test_total_estimates_outside_zero_one_get_a_note_naming_the_worst(sobol_file):
@@ -292,7 +292,7 @@ def test_the_largest_family_is_named_with_its_overlap():
     def cell(est, half):
         est = np.asarray(est)
         return xr.DataArray(np.stack([est, est - half, est + half]), dims=("bound", "group"),
-                            coords={"bound": ["estimate", "lower", "upper"], "group": list(FAMILIES)})
+                            coords={"bound": ["estimate", "lower", "upper"], "group": list(JOINT_FAMILIES)})
     assert _dominant(cell([0.7, 0.02, 0.5, 0.4], 0.05)) == "revolute_radial"
     assert _dominant(cell([0.5, 0.02, 0.7, 0.65], 0.05)) == "spherical_C (overlaps spherical_B)"
     assert _dominant(cell([np.nan] * 4, 0.05)) == "-"

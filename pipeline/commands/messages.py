@@ -38,7 +38,7 @@ def note_compiling(model: str) -> None:
     from rss6core import kernels_to_compile
     cold = kernels_to_compile(model)
     if cold:
-        from ..ensemble.run import compile_note
+        from ..ensemble.progress import compile_note
         print(f"rss6 simulate: {compile_note(cold)}", file=sys.stderr, flush=True)
 
 

@@ -73,7 +73,8 @@ def main(args) -> int:
         raise OptionError(str(exc)) from None
     output = check_multifidelity_output(args.output, args.parents)
     warn_oversubscription(cluster.workers, cluster.scheduler)
-    from ..ensemble.run import SchedulerUnavailable, parts_dir
+    from ..ensemble.cluster import SchedulerUnavailable
+    from ..ensemble.run import parts_dir
     files, data = level_paths(output), []
     for level, n, path in ((args.high, args.n, files[0]), (args.low, args.low_n, files[1])):
         kept = f"finished chunks are kept in {parts_dir(path)}"

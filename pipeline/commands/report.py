@@ -45,7 +45,7 @@ def _tracked(paths: list) -> list[str]:
 
 
 def main(args) -> int:
-    from ..ensemble.run import SchedulerUnavailable
+    from ..ensemble.cluster import SchedulerUnavailable
     from ..studies.report import ReportPlan, write_report
     cluster = resolve_cluster(args.workers, args.scheduler, args.worker_timeout)
     out = Path(args.output)

@@ -66,7 +66,8 @@ def _refuse_clearance_free_default(args, level) -> None:
 
 def main(args) -> int:
     from ..analysis.until import check_cap, parse_targets
-    from ..ensemble.run import SchedulerUnavailable, parts_dir
+    from ..ensemble.cluster import SchedulerUnavailable
+    from ..ensemble.run import parts_dir
     from ..files.outputs import check_output_path
     specs, verdicts = requirements(args), []
     targets = parse_targets(args.until)

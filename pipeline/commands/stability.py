@@ -17,7 +17,7 @@ def add_parser(sub) -> None:
 
 def main(args) -> int:
     from ..files.outputs import check_output_folder
-    from ..studies.study import stability, write_stability
+    from ..studies.stability import stability, write_stability
     scene = find_scene(args.config)
     check_output_folder(args.output, args.parents)
     print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")

@@ -14,7 +14,7 @@ def add_parser(sub) -> None:
 
 def main(args) -> int:
     from ..files.outputs import check_output_folder
-    from ..studies.study import tradeoff, write_tradeoff
+    from ..studies.tradeoff import tradeoff, write_tradeoff
     scene = find_scene(args.config)
     check_output_folder(args.output, args.parents)
     print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")

@@ -11,7 +11,8 @@ from rss6core import (SceneError, default_integrator, default_time_step, model_l
 
 from ..scenes.variant import scene_variant
 from ..vocabulary import OptionError
-from .run import WORKER_TIMEOUT_S, EnsembleSpec
+from .cluster import WORKER_TIMEOUT_S
+from .run import EnsembleSpec
 from .sampler import DEFAULT_REPLICATES, check_qmc
 
 LOCAL_WORKERS = 2   # --workers' default where --scheduler is the alternative

@@ -34,7 +34,7 @@ from ..files.reading import load_netcdf
 from ..files.records import run_dataset, window_label
 from ..files.schema import EnsembleFileError, display_unit
 from ..files.writing import write_netcdf
-from ..vocabulary import DIRECTIONS, FINISHED
+from ..vocabulary import CONFIDENCE, DIRECTIONS, FINISHED, QUANTILES
 
 __all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "PAPER_VALUES", "OFF"]
 
@@ -461,7 +461,7 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
                f"--family-n {plan.family_n}")
     md = ["# Results: the seed paper's section 6 with rss6", "",
           text.INTRO.format(command=command, data=rel(data), confidence=95,
-                            min_n_q95=min_n_for_quantile(0.95, 0.95)), ""]
+                            min_n_q95=min_n_for_quantile(QUANTILES["q95"], CONFIDENCE)), ""]
     for scene in scenes:
         md += _scene_section(scene, ens[scene.name], st[scene.name], figs, rel)
     if len({_clearance_mm(s) for s in scenes if not _banded(s)}) >= 2:

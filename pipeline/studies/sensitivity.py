@@ -29,12 +29,12 @@ from ..files.records import check_window, window_label, window_summaries
 from ..files.schema import JOINTS, _provenance, _unit_table, command_line
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, UserError, WINDOWS
 
-__all__ = ["FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
+__all__ = ["JOINT_FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
            "clearance_draws_from_uniforms", "Design", "designs", "sample_design",
            "evaluate_statistics", "SobolIndices", "sobol_indices", "sensitivity", "sensitivity_dataset",
            "format_sensitivity", "format_joints", "SensitivityError"]
 
-FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
+JOINT_FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
 LEVELS = models_with("function_of_one_draw")   # the levels whose error is a function of one draw
 INDICES = ("S1", "ST")
 BOUNDS = ("estimate", "lower", "upper")
@@ -61,7 +61,7 @@ class ClearanceInputs:
 
 def clearance_inputs(scene) -> ClearanceInputs:
     """The scene's inputs: sizes only where they vary (size tolerance > 0 and a nonzero size)."""
-    sized = {f: size_band(scene, f) is not None for f in FAMILIES}
+    sized = {f: size_band(scene, f) is not None for f in JOINT_FAMILIES}
     rows = []
     for leg in range(1, 7):
         a = f"A{leg}"
@@ -105,7 +105,7 @@ class Design:
 
 def designs(inputs: ClearanceInputs, per_joint: bool) -> list[Design]:
     """The family design, and with ``per_joint`` the joint design (A_i radial and axial together)."""
-    out = [("families", inputs.families, FAMILIES)]
+    out = [("families", inputs.families, JOINT_FAMILIES)]
     if per_joint:
         out.append(("joints", inputs.joints, JOINTS))
     return [Design(name, order, {"num_vars": len(inputs.names), "names": list(inputs.names),
@@ -346,7 +346,7 @@ def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
     """A table of the family indices of ``statistic``: per quantity and direction, each family's
     total index with its interval, and the family of largest total index (with the runner-up when
     their intervals overlap)."""
-    da = ds[f"{statistic}_sobol"].sel(group=[g for g in FAMILIES if g in ds["group"].values])
+    da = ds[f"{statistic}_sobol"].sel(group=[g for g in JOINT_FAMILIES if g in ds["group"].values])
     conf = f"{100 * float(ds.attrs['confidence']):g} %"
     head = "".join(f"{g:>24s}" for g in da["group"].values)
     window = ds[f"{statistic}_sobol"].attrs.get("analysis_window", "whole run")
