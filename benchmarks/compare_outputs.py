@@ -49,6 +49,14 @@ one commit; a change may bump the version):
   ``seconds_per_realization`` (tradeoff.csv): measured costs.
 ``history`` is compared (rss6 writes into it only the options that fix the results, no machine's
 options), and no rss6 file carries a date.
+
+Across the pipeline's restructure into parts (issue 37: dd21ceb against the restructured commit),
+`compare` finds every data variable, printed table and exit code equal, and two intended changes:
+the `--until` run's progress line on stderr names "1 workers" instead of the address of the local
+cluster it had started for its batches (one client of one cluster now serves them all), and the
+multi-fidelity file's `interval_high_only` attribute (and a statistics file's one-sided `bounds`
+note) names the module that now holds the method, pipeline.analysis.estimators, instead of
+pipeline.stats.
 """
 from __future__ import annotations
 

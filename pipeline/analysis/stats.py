@@ -127,7 +127,7 @@ def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False) ->
         attrs |= _rqmc_attrs(design.replicates, confidence)
     if one_sided:
         attrs["bounds"] = ("one-sided: 'lower' and 'upper' are each a bound at the confidence on its "
-                           "own side (pipeline.analysis.stats, one-sided bounds)")
+                           "own side (pipeline.analysis.estimators, one-sided bounds)")
     coords = {"statistic": list(STATISTICS), "bound": list(BOUNDS),
               "quantity": ens["quantity"].values, "direction": ens["direction"].values}
     if "unit" in ds.coords:

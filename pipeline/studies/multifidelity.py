@@ -293,7 +293,7 @@ def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
             "estimator": "two-model multi-fidelity Monte Carlo (control variate, optimal fitted "
                          "coefficient, low mean from all low realisations)",
             "interval_multifidelity": f"Student t, N - 2 degrees of freedom; NaN for N < {MIN_N_MF}",
-            "interval_high_only": f"pipeline.analysis.stats mean interval; NaN for n < {MIN_N_MEAN}",
+            "interval_high_only": f"pipeline.analysis.estimators mean interval; NaN for n < {MIN_N_MEAN}",
             "min_n_multifidelity": MIN_N_MF,
             "statistics_offered": "mean only (quantiles and exceedance probabilities: see "
                                   "pipeline/multifidelity.py)",
