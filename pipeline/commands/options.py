@@ -6,9 +6,8 @@ import argparse
 
 from rss6core import CONTACT_STARTS, INTEGRATORS, MODELS, MODEL_LEVELS
 
+from ..ensemble.settings import LOCAL_WORKERS
 from ..vocabulary import CONFIDENCE, WINDOWS
-
-LOCAL_WORKERS = 2   # --workers' default where --scheduler is the alternative
 
 
 def positive_float(text: str) -> float:
@@ -113,10 +112,9 @@ def add_level_settings(p) -> None:
     p.add_argument("--start", choices=CONTACT_STARTS, help=START_HELP)
 
 
-def add_workers(p, default: int | None = None, what: str = "local dask workers, one thread each") -> None:
-    """--workers; without a default here it is filled in by the cluster settings (LOCAL_WORKERS)."""
-    shown = LOCAL_WORKERS if default is None else default
-    p.add_argument("--workers", type=positive_int, default=default, help=f"{what} (default {shown})")
+def add_workers(p, what: str = "local dask workers, one thread each") -> None:
+    """--workers; left None here, so that resolve_cluster can tell it from --scheduler's workers."""
+    p.add_argument("--workers", type=positive_int, help=f"{what} (default {LOCAL_WORKERS})")
 
 
 def add_scheduler(p, worker_timeout: bool = True) -> None:
