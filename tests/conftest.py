@@ -45,3 +45,32 @@ def cluster_client():
     from pipeline.ensemble.cluster import dask_client
     with dask_client(2) as client:
         yield client
+
+
+def _first_cycle(graph: dict[str, set[str]]) -> list[str]:
+    """One import cycle of ``graph`` as a list of modules, or [] if it has none."""
+    state, path = {}, []
+
+    def visit(m):
+        state[m] = "open"
+        path.append(m)
+        for n in sorted(graph.get(m, ())):
+            if state.get(n) == "open":
+                return path[path.index(n):] + [n]
+            if n not in state and (found := visit(n)):
+                return found
+        state[m] = "done"
+        path.pop()
+        return []
+
+    for m in sorted(graph):
+        if m not in state and (found := visit(m)):
+            return found
+    return []
+
+
+@pytest.fixture(scope="session")
+def find_cycle():
+    """One import cycle of a {module: imported modules} graph as a list, or []: for the layout tests
+    of the core (tests/test_boundaries.py) and of the pipeline (tests/test_pipeline_layout.py)."""
+    return _first_cycle

@@ -39,28 +39,6 @@ def _core_modules_imported(node) -> set[str]:
     return {a.name for a in node.names}                 # from . import x: x is a module
 
 
-def _cycle(graph: dict[str, set[str]]) -> list[str]:
-    """One import cycle of ``graph`` as a list of modules, or [] if it has none."""
-    state, path = {}, []
-
-    def visit(m):
-        state[m] = "open"
-        path.append(m)
-        for n in sorted(graph.get(m, ())):
-            if state.get(n) == "open":
-                return path[path.index(n):] + [n]
-            if n not in state and (found := visit(n)):
-                return found
-        state[m] = "done"
-        path.pop()
-        return []
-
-    for m in sorted(graph):
-        if m not in state and (found := visit(m)):
-            return found
-    return []
-
-
 # the imports inside functions, for import time and not to dodge a cycle: the contact level's
 # compiled kernel (numba, 0.3 s per process) loads only when a contact level runs or its kernels
 # are asked about or compiled (rss6 warm; kernels.compile_kernels runs a level, and numba's compile events)
@@ -75,7 +53,7 @@ def _module_of(node) -> str:
     return node.module if isinstance(node, ast.ImportFrom) else ", ".join(a.name for a in node.names)
 
 
-def test_core_imports_only_at_module_level_and_without_a_cycle():
+def test_core_imports_only_at_module_level_and_without_a_cycle(find_cycle):
     trees = _trees(CORE)
     deferred = {(name, m) for name, tree in trees.items()
                 for n in set(_imports(tree)) - set(_imports(tree, everywhere=False))
@@ -83,7 +61,7 @@ def test_core_imports_only_at_module_level_and_without_a_cycle():
     assert deferred == LAZY, f"imports inside functions or classes: {sorted(deferred - LAZY)}"
     graph = {name: set().union(*map(_core_modules_imported, _imports(tree))) - {name}   # deferred too
              for name, tree in trees.items()}
-    assert _cycle(graph) == []
+    assert find_cycle(graph) == []
     assert graph["levels"] == set()                 # the level table is a leaf, and the scene reads it
     assert "levels" in graph["scene"] and "levels" in graph["models"]
     # reading a scene loads none of the ladder (scene -> models had been a cycle, then a top floor)
@@ -112,8 +90,8 @@ def test_reading_a_scene_and_the_paper_level_do_not_load_the_contact_kernel(pape
     assert out.stdout.strip() == "[]"
 
 
-def test_cycle_finder_finds_a_cycle():
-    assert _cycle({"scene": {"kinematics"}, "kinematics": {"trajectory", "scene"}}) == [
+def test_cycle_finder_finds_a_cycle(find_cycle):
+    assert find_cycle({"scene": {"kinematics"}, "kinematics": {"trajectory", "scene"}}) == [
         "kinematics", "scene", "kinematics"]
 
 

@@ -55,26 +55,6 @@ def _graph() -> dict[str, set[str]]:
     return {name: _pipeline_imports(name, tree, _PACKAGES) - {name} for name, tree in _modules().items()}
 
 
-def _cycle(graph: dict[str, set[str]]) -> list[str]:
-    state, path = {}, []
-
-    def visit(m):
-        state[m] = "open"
-        path.append(m)
-        for n in sorted(graph.get(m, ())):
-            if state.get(n) == "open":
-                return path[path.index(n):] + [n]
-            if n not in state and (found := visit(n)):
-                return found
-        state[m] = "done"
-        path.pop()
-        return []
-    for m in sorted(graph):
-        if m not in state and (found := visit(m)):
-            return found
-    return []
-
-
 def _upward(graph: dict[str, set[str]]) -> list[str]:
     """Imports from a part after the importer's own in PARTS (the package's __init__ is exempt: it
     names the public functions lazily, by string)."""
@@ -88,18 +68,18 @@ def test_every_module_belongs_to_a_part():
     assert len([p for p in PARTS if p in _PACKAGES]) >= 4
 
 
-def test_parts_depend_one_way_and_without_a_cycle():
+def test_parts_depend_one_way_and_without_a_cycle(find_cycle):
     graph = _graph()
     assert "vocabulary" in graph and graph["vocabulary"] == set()
     assert _upward(graph) == []
-    assert _cycle(graph) == []
+    assert find_cycle(graph) == []
 
 
-def test_the_layout_checks_can_fail():
+def test_the_layout_checks_can_fail(find_cycle):
     """The finders find an upward import and a cycle in a made-up graph."""
     graph = {"files.store": {"analysis.stats"}, "analysis.stats": {"files.store"}}
     assert _upward(graph) == ["files.store -> analysis.stats"]
-    assert _cycle(graph) == ["analysis.stats", "files.store", "analysis.stats"]
+    assert find_cycle(graph) == ["analysis.stats", "files.store", "analysis.stats"]
     tree = ast.parse("from ..analysis.stats import x\nfrom . import check\ndef f():\n    from ..vocabulary import Y\n")
     assert _pipeline_imports("files.store", tree, set()) == {"analysis.stats", "files.check", "vocabulary"}
 
