@@ -148,3 +148,17 @@ def test_the_default_grid_spans_the_trajectory_and_the_same_seed_gives_the_same_
     a, b = workspace_map(paper, small, 50, 1), workspace_map(paper, small, 50, 1)
     np.testing.assert_array_equal(a["q95_translation"].values, b["q95_translation"].values)
     assert float(a["platform_z"]) == pytest.approx(-0.387) and float(a["platform_n2"]) == pytest.approx(0, abs=1e-12)
+
+
+def test_the_worst_case_takes_each_band_upper_end(configs, paper):
+    """paper_tolerance's [tolerance] bands end at 0.37 mm (radial) and 0.35 mm (axial, C, B); the paper
+    scene has no band and takes its nominal 0.25 mm; a [sampling] size_tolerance reaches 2 x nominal."""
+    import dataclasses
+
+    from rss6core import RELATIVE_BAND_REACH, load_scene
+    banded = worst_case_sizes(load_scene(configs / "paper_tolerance.toml"))
+    assert (banded.revolute_radial, banded.revolute_axial, banded.spherical_C, banded.spherical_B) == (
+        0.37e-3, 0.35e-3, 0.35e-3, 0.35e-3)
+    assert len(banded.from_band) == 4 and worst_case_sizes(paper).from_band == ()
+    relative = dataclasses.replace(paper, sampling=dataclasses.replace(paper.sampling, size_tolerance=0.1))
+    assert worst_case_sizes(relative).spherical_B == pytest.approx(RELATIVE_BAND_REACH * 0.25e-3)
