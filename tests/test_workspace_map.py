@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import xarray as xr
 
 from pipeline.cli import main
 from pipeline.files.reading import load_netcdf
@@ -100,11 +101,16 @@ def test_the_support_functions_in_closed_form_and_against_the_drawn_eccentriciti
     assert np.all(reach >= 0.65 * h) and (reach / h).max() >= 0.99
 
 
-def _cf_errors():
-    spec = importlib.util.spec_from_file_location("_test_cf", Path(__file__).with_name("test_cf.py"))
+def _sibling(name: str):
+    """A test module beside this one (the tests run in importlib mode: not importable by name)."""
+    spec = importlib.util.spec_from_file_location(f"_{name}", Path(__file__).with_name(f"{name}.py"))
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.cf_errors
+    return module
+
+
+def _cf_errors():
+    return _sibling("test_cf").cf_errors
 
 
 def _unreachable_map(folder) -> Path:
@@ -132,9 +138,41 @@ def test_unreachable_poses_are_masked_not_an_error(tmp_path, capsys):
                                                                for d in ("x", "y", "z", "rx", "ry", "rz"))
 
 
-@pytest.mark.slow   # compliance-checker's cf:1.10 suite: about 5 s
+def test_the_heat_maps_are_legible_and_mask_the_unreachable(smoke):
+    """tests/test_figures.py's legibility check on all six figures of a map with unreachable poses,
+    whose grey cells are masked values of the colour mesh, explained in the legend."""
+    from pipeline.analysis.map_plots import map_figures
+    from pipeline.studies.workspace_map import GridAxis, workspace_map
+    ds = workspace_map(smoke, (GridAxis("y", -0.05, 0.05, 4), GridAxis("z", -0.9, -0.35, 5)), 40, 2)
+    figs = map_figures(ds)
+    mesh = figs["workspace_map_x.png"].axes[0].collections[0]
+    assert np.array_equal(np.ma.getmaskarray(mesh.get_array()).ravel(), ~ds["reachable"].values.astype(bool).ravel())
+    assert "unreachable" in [t.get_text() for t in figs["workspace_map_x.png"].legends[0].get_texts()]
+    assert figs["workspace_map_rz.png"].axes[1].get_xlabel() == "platform position y [mm]"
+    _sibling("test_figures").assert_legible(figs)
+
+
+def test_the_map_file_reads_back_as_written(tmp_path, smoke):
+    from pipeline.files.writing import write_netcdf
+    from pipeline.studies.workspace_map import GridAxis, workspace_map
+    ds = workspace_map(smoke, (GridAxis("y", -0.05, 0.05, 4), GridAxis("z", -0.9, -0.35, 5)), 40, 2)
+    write_netcdf(ds, tmp_path / "m.nc")
+    xr.testing.assert_identical(load_netcdf(tmp_path / "m.nc"), ds)
+
+
+@pytest.mark.slow   # compliance-checker's cf:1.10 suite twice: about 10 s
 def test_the_map_file_is_cf(tmp_path, capsys):
-    assert _cf_errors()(_unreachable_map(tmp_path) / "workspace_map.nc") == []
+    """No cf:1.10 error (tests/test_cf.py's cf_errors), and `compliance-checker --test=cf:1.10` exits 0
+    at its default criteria (a warning fails it too), as tests/test_cf.py asks of every other kind."""
+    import shutil
+    import subprocess
+    import sys
+    path = _unreachable_map(tmp_path) / "workspace_map.nc"
+    assert _cf_errors()(path) == []
+    checker = Path(sys.executable).with_name("compliance-checker")
+    checker = str(checker) if checker.exists() else shutil.which("compliance-checker")
+    proc = subprocess.run([checker, "--test=cf:1.10", str(path)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout[-2000:]
 
 
 def test_the_default_grid_spans_the_trajectory_and_the_same_seed_gives_the_same_map(paper):

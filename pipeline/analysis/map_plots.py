@@ -47,7 +47,7 @@ def direction_map_figure(ds, direction: str):
         fig.colorbar(mesh, ax=ax, label=f"|{direction} error| [{unit}]")
         ax.plot(ds[f"path_{columns}"].values * fa, ds[f"path_{rows}"].values * fb, color="w", lw=1.6)
         ax.plot(ds[f"path_{columns}"].values * fa, ds[f"path_{rows}"].values * fb, color="k", lw=0.8,
-                label="trajectory")
+                label="trajectory (projected on these two axes)")
         ax.set(xlabel=f"{ds[columns].attrs['long_name']} [{ua}]", ylabel=f"{ds[rows].attrs['long_name']} [{ub}]",
                title=what)
         ax.title.set_fontsize(10)
@@ -55,7 +55,8 @@ def direction_map_figure(ds, direction: str):
     if not ds["reachable"].values.all():
         handles.append(Patch(color="0.8", label="unreachable"))
     fig.legend(handles=handles, loc="outside lower center", fontsize=8, ncols=2)
-    fig.suptitle(f"quasi-static |{direction} pose error| over the workspace: scene {ds.attrs.get('scene_name', '?')}, "
+    fig.suptitle(f"{ds.attrs.get('model', '?')} level, |{direction} pose error| over the workspace: "
+                 f"scene {ds.attrs.get('scene_name', '?')}, "
                  f"{ds.attrs.get('n_draws', '?')} draws (seed {ds.attrs.get('seed', '?')}), "
                  f"worst case with {ds.attrs.get('clearance_sizes', '?')}\nother pose axes fixed at the "
                  f"trajectory's mean: {_fixed_pose(ds)}", fontsize=10)

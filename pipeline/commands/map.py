@@ -64,9 +64,11 @@ def main(args) -> int:
     _check(args)
     scene = find_scene(args.config)
     check_output_folder(args.output, args.parents)
+    print(f"rss6 map: scene {scene.name}, {args.model} level, {args.n} drawn realisations (seed {args.seed})",
+          flush=True)
     ds = workspace_map(scene, tuple(args.grid) if args.grid else None, args.n, args.seed, args.model)
-    print(f"rss6 map: scene {scene.name}, {args.model} level; {ds.attrs['history']}")
-    print(f"worst case with {ds.attrs['clearance_sizes']}; q95 over {args.n} drawn realisations")
+    print(f"grid: {ds.attrs['history'].split(' --grid ', 1)[1].split(' -n ')[0].replace(' --grid ', ', ')} "
+          f"(m, deg); worst case with {ds.attrs['clearance_sizes']}")
     print(map_table(ds))
     paths = write_map(ds, args.output)
     print(f"wrote {paths[0]} and {len(paths) - 1} heat maps ({paths[1].name} ...)")
