@@ -38,7 +38,8 @@ def direction_map_figure(ds, direction: str):
     rows, columns = ds["reachable"].dims
     (fa, ua), (fb, ub) = _axis_display(ds, columns), _axis_display(ds, rows)
     x, y = ds[columns].values * fa, ds[rows].values * fb
-    scale, unit = figure_unit("displacement", direction, ds[f"worst_case_{family}"].sel({family: direction}).values)
+    worst = ds[f"worst_case_{family}"].sel({family: direction}).values
+    scale, unit = figure_unit("displacement", direction, worst[np.isfinite(worst)])
     cmap = plt.get_cmap("viridis").with_extremes(bad="0.8")
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), constrained_layout=True)
     for ax, (field, what) in zip(axes, _PANELS):

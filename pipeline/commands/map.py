@@ -67,8 +67,7 @@ def main(args) -> int:
     print(f"rss6 map: scene {scene.name}, {args.model} level, {args.n} drawn realisations (seed {args.seed})",
           flush=True)
     ds = workspace_map(scene, tuple(args.grid) if args.grid else None, args.n, args.seed, args.model)
-    print(f"grid: {ds.attrs['history'].split(' --grid ', 1)[1].split(' -n ')[0].replace(' --grid ', ', ')} "
-          f"(m, deg); worst case with {ds.attrs['clearance_sizes']}")
+    print(f"grid: {ds.attrs['grid']}; worst case with {ds.attrs['clearance_sizes']}")
     print(map_table(ds))
     paths = write_map(ds, args.output)
     print(f"wrote {paths[0]} and {len(paths) - 1} heat maps ({paths[1].name} ...)")

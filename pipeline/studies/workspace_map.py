@@ -115,6 +115,7 @@ def _attributes(scene, axes, sizes, draws: int, seed: int, model: str) -> dict:
     grid = " ".join(f"--grid {ax.option()}" for ax in axes)
     return {
         "model": model, "seed": seed, "n_draws": draws,
+        "grid": ", ".join(ax.option() for ax in axes) + " (AXIS:LO:HI:N; x, y, z in m, n1, n2, n3 in deg)",
         "clearance_sizes": (f"upper end of the size band for {banded}, nominal for the others" if banded
                             else "nominal [clearance] sizes"),
         **{f"worst_case_size_{family}_m": getattr(sizes, family)
