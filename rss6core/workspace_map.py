@@ -17,7 +17,7 @@ crank-rod singularity, an ill-conditioned G by check_workspace's thresholds) giv
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -74,6 +74,10 @@ class StaticClosure:
     inverse: np.ndarray       # (P, 6, 6) g = G^-1: platform error (m, rad) per unit of n_i . e (m)
     transmission: np.ndarray  # (P,) smallest |n_i . dc_i/dalpha_i| / (L_ac L_cb) over the legs
     condition: np.ndarray     # (P,) condition number of G
+
+    def poses(self, part: slice) -> StaticClosure:
+        """The closure at the poses ``part`` of these (a block of a large grid)."""
+        return StaticClosure(*(getattr(self, f.name)[part] for f in fields(self)))
 
 
 def static_closure(geometry, pose) -> StaticClosure:

@@ -81,8 +81,7 @@ def _sampled_statistics(closure, drawn) -> tuple[np.ndarray, np.ndarray]:
     q95, peak = np.full((count, 6), np.nan), np.full((count, 6), np.nan)
     for start in range(0, count, _BLOCK):
         part = slice(start, start + _BLOCK)
-        block = type(closure)(*(getattr(closure, f)[part] for f in closure.__dataclass_fields__))
-        err = sampled_errors(block, drawn)
+        err = sampled_errors(closure.poses(part), drawn)
         q95[part] = quantile_estimates(err, QUANTILES["q95"], axis=1)
         peak[part] = np.max(err, axis=1)
     return q95, peak
