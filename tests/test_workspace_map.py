@@ -129,9 +129,13 @@ def test_unreachable_poses_are_masked_not_an_error(tmp_path, capsys):
     reachable = ds["reachable"].values.astype(bool)
     assert 0 < reachable.sum() < reachable.size
     assert not reachable[ds["platform_z"].values < -0.8].any()
-    for name in ("worst_case_translation", "q95_rotation", "max_sampled_translation"):
+    for name in ("worst_case_translation", "q95_rotation", "q95_upper_rotation", "max_sampled_translation"):
         values = ds[name].values
         assert np.isnan(values[:, ~reachable]).all() and np.isfinite(values[:, reachable]).all(), name
+    for family in ("translation", "rotation"):   # 100 draws: the q95's 95 % interval exists (n >= 59)
+        lower, q95, upper = (ds[f"{k}_{family}"].values[:, reachable] for k in ("q95_lower", "q95", "q95_upper"))
+        assert np.all(lower <= q95) and np.all(q95 <= upper) and np.all(upper <= ds[f"max_sampled_{family}"].values[
+            :, reachable]) and np.all(lower < upper)
     assert ds.attrs["seed"] == 3 and ds.attrs["n_draws"] == 100 and ds["platform_n1"].attrs["units"] == "rad"
     assert "reachable: " in capsys.readouterr().out
     assert sorted(p.name for p in out.glob("*.png")) == sorted(f"workspace_map_{d}.png"
@@ -158,6 +162,7 @@ def test_the_map_file_reads_back_as_written(tmp_path, smoke):
     ds = workspace_map(smoke, (GridAxis("y", -0.05, 0.05, 4), GridAxis("z", -0.9, -0.35, 5)), 40, 2)
     write_netcdf(ds, tmp_path / "m.nc")
     xr.testing.assert_identical(load_netcdf(tmp_path / "m.nc"), ds)
+    assert np.isnan(ds["q95_lower_rotation"].values).all()   # 40 draws: no 95 % interval of the q95 below 59
 
 
 @pytest.mark.slow   # compliance-checker's cf:1.10 suite twice: about 10 s

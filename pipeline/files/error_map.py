@@ -21,6 +21,10 @@ MAP_FIELDS = {
     "worst_case": "largest |platform pose error| any clearance state within the joints' clearance sets "
                   "causes (quasi-static level, closed form)",
     "q95": "0.95-quantile of |platform pose error| over the drawn realisations (quasi-static level)",
+    "q95_lower": "lower end of the q95's two-sided distribution-free confidence interval (global attribute "
+                 "confidence; NaN below its minimum number of draws)",
+    "q95_upper": "upper end of the q95's two-sided distribution-free confidence interval (global attribute "
+                 "confidence; NaN below its minimum number of draws)",
     "max_sampled": "largest |platform pose error| of the drawn realisations (quasi-static level)",
 }
 _FAMILY_UNITS = {"translation": "m", "rotation": "rad"}

@@ -14,9 +14,9 @@ import xarray as xr
 from rss6core import (drawn_eccentricities, models_with, rigid_motion, sampled_errors, static_closure,
                       worst_case_error, worst_case_sizes)
 
-from ..analysis.estimators import quantile_estimates
+from ..analysis.estimators import quantile_estimates, quantile_interval
 from ..files.error_map import POSE_AXES, error_map_dataset
-from ..vocabulary import DIRECTIONS, QUANTILES
+from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTILES
 
 __all__ = ["MAP_MODELS", "GridAxis", "DEFAULT_COUNT", "DEFAULT_DRAWS", "PAD", "MIN_PAD", "USER_UNITS",
            "default_grid", "workspace_map", "map_table", "write_map"]
@@ -75,16 +75,19 @@ def _grid_poses(axes, fixed: np.ndarray) -> np.ndarray:
     return poses
 
 
-def _sampled_statistics(closure, drawn) -> tuple[np.ndarray, np.ndarray]:
-    """q95 and max over the draws of |d| (P, 6) each, block by block of poses; NaN where unreachable."""
+def _sampled_statistics(closure, drawn) -> dict:
+    """Over the draws of |d|, (P, 6) each: the q95, its two-sided CONFIDENCE interval (distribution-free,
+    NaN below its minimum n) and the max; block by block of poses, NaN where unreachable."""
     count = len(closure.reachable)
-    q95, peak = np.full((count, 6), np.nan), np.full((count, 6), np.nan)
+    out = {k: np.full((count, 6), np.nan) for k in ("q95", "q95_lower", "q95_upper", "max_sampled")}
     for start in range(0, count, _BLOCK):
         part = slice(start, start + _BLOCK)
         err = sampled_errors(closure.poses(part), drawn)
-        q95[part] = quantile_estimates(err, QUANTILES["q95"], axis=1)
-        peak[part] = np.max(err, axis=1)
-    return q95, peak
+        out["q95"][part] = quantile_estimates(err, QUANTILES["q95"], axis=1)
+        out["q95_lower"][part], out["q95_upper"][part] = quantile_interval(
+            np.sort(np.moveaxis(err, 1, 0), axis=0), QUANTILES["q95"], CONFIDENCE)
+        out["max_sampled"][part] = np.max(err, axis=1)
+    return out
 
 
 def workspace_map(scene, axes=None, draws: int = DEFAULT_DRAWS, seed: int = 0,
@@ -97,9 +100,8 @@ def workspace_map(scene, axes=None, draws: int = DEFAULT_DRAWS, seed: int = 0,
     closure = static_closure(scene.geometry, _grid_poses(axes, fixed))
     sizes = worst_case_sizes(scene)
     worst = worst_case_error(closure, scene.geometry.w, sizes)
-    q95, peak = _sampled_statistics(closure, drawn_eccentricities(scene, draws, seed))
+    fields = {"worst_case": worst, **_sampled_statistics(closure, drawn_eccentricities(scene, draws, seed))}
     shape = (axes[1].count, axes[0].count)
-    fields = {"worst_case": worst, "q95": q95, "max_sampled": peak}
     fields = {k: v.reshape(*shape, 6) for k, v in fields.items()}
     quality = {k: getattr(closure, k).reshape(shape) for k in ("reachable", "transmission", "condition")}
     names = list(POSE_AXES)
@@ -113,7 +115,7 @@ def _attributes(scene, axes, sizes, draws: int, seed: int, model: str) -> dict:
     banded = ", ".join(sizes.from_band)
     grid = " ".join(f"--grid {ax.option()}" for ax in axes)
     return {
-        "model": model, "seed": seed, "n_draws": draws,
+        "model": model, "seed": seed, "n_draws": draws, "confidence": CONFIDENCE,
         "grid": ", ".join(ax.option() for ax in axes) + " (AXIS:LO:HI:N; x, y, z in m, n1, n2, n3 in deg)",
         "clearance_sizes": (f"upper end of the size band for {banded}, nominal for the others" if banded
                             else "nominal [clearance] sizes"),
