@@ -58,6 +58,14 @@ The elastic level's parts (the stability study's explicit sweep)
 - quasi_static_state: the elastic state on the quasi-static path at one instant.
 - simulate_elastic: the elastic level with a given model, integrator and initial state.
 
+The workspace error map (quasi-static level at static poses; docs/model.md section 3)
+- WorstCaseSizes, worst_case_sizes: the clearance sizes the worst case takes (m): nominal or a band's upper end.
+- revolute_support, ball_support: the support functions of a joint's clearance set (m).
+- StaticClosure, static_closure: the linearised closure G, its inverse and reachability at static poses.
+- worst_case_error: the largest |pose error| any clearance state causes at each pose (m, rad), closed form.
+- DrawnEccentricities, drawn_eccentricities: N realisations' e_A + e_C - e_B of a seeded run (m).
+- sampled_errors: |pose error| of each drawn realisation at each pose (m, rad).
+
 The rigid robot
 - rigid_motion: the ideal rigid motion (platform and cranks) along the trajectory.
 - inverse_dynamics: actuator torques and joint forces of the rigid motion (N m, N).
@@ -82,6 +90,8 @@ from .models import Level, degrees_of_freedom, natural_frequencies, prepare_leve
 from .scene import CLEARANCE_RADII, Scene, SceneError, load_scene, parse_scene
 from .status import FAILED, FINISHED, STATUSES
 from .sections import crank_inertia, rod_inertia
+from .workspace_map import (DrawnEccentricities, StaticClosure, WorstCaseSizes, ball_support, drawn_eccentricities,
+                            revolute_support, sampled_errors, static_closure, worst_case_error, worst_case_sizes)
 
 __version__ = "0.3.0"
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII", "RELATIVE_BAND_REACH",
@@ -95,4 +105,6 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII"
            "SIZE_UNIFORMS", "UNIFORM_BLOCKS", "clearances_from_named_uniforms", "Integrator", "build_elastic_model",
            "BeamTheory", "BEAM_THEORIES",
            "quasi_static_state", "simulate_elastic",
+           "WorstCaseSizes", "worst_case_sizes", "revolute_support", "ball_support", "StaticClosure",
+           "static_closure", "worst_case_error", "DrawnEccentricities", "drawn_eccentricities", "sampled_errors",
            "rigid_motion", "inverse_dynamics", "crank_inertia", "rod_inertia", "__version__"]

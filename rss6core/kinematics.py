@@ -16,7 +16,11 @@ from .trajectory import PlatformMotion, euler_rate_matrix, platform_motion, rota
 __all__ = [
     "inverse_kinematics", "crank_points", "crank_axes", "platform_joints", "leg_jacobian",
     "RigidMotion", "rigid_motion", "forward_kinematics", "check_workspace", "WorkspaceError",
+    "MIN_TRANSMISSION", "MAX_CONDITION",
 ]
+
+MIN_TRANSMISSION = 1e-3   # |n . dc| / (L_ac L_cb) below this: a leg at its crank-rod singularity
+MAX_CONDITION = 1e8       # condition number of the rows [n_i, r_i x n_i] / L_cb above this: singular
 
 
 class WorkspaceError(ValueError):
@@ -141,7 +145,7 @@ def forward_kinematics(geometry, alpha: np.ndarray, pose0: np.ndarray, tol: floa
                           f"(last step {np.max(np.abs(step)):.3e})")
 
 
-def check_workspace(scene, min_transmission: float = 1e-3, max_condition: float = 1e8) -> None:
+def check_workspace(scene, min_transmission: float = MIN_TRANSMISSION, max_condition: float = MAX_CONDITION) -> None:
     """Raise WorkspaceError naming the leg and time where the trajectory leaves the workspace.
 
     Checks on the scene's time grid that every b_i is reachable (|K/rho| <= 1),

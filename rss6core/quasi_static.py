@@ -19,7 +19,7 @@ from .kinematics import RigidMotion
 from .results import SimulationResult
 from .status import check_history
 
-__all__ = ["closure_matrix", "reaction_eccentricities", "quasi_static_error", "quasi_static_result",
+__all__ = ["closure_matrix", "closure_rows", "reaction_eccentricities", "quasi_static_error", "quasi_static_result",
            "time_derivatives", "padded_grid", "CENTRAL_PAD"]
 
 CENTRAL_PAD = 2   # samples beyond each end that give every sample time_derivatives' central differences
@@ -27,9 +27,14 @@ CENTRAL_PAD = 2   # samples beyond each end that give every sample time_derivati
 
 def closure_matrix(motion: RigidMotion) -> tuple[np.ndarray, np.ndarray]:
     """Rows [n_i, r_i x n_i] (T, 6, 6) of the linearised closure, and the unit rod vectors n_i."""
-    n = motion.c - motion.b
+    return closure_rows(motion.c, motion.b, motion.r)
+
+
+def closure_rows(c: np.ndarray, b: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`closure_matrix` from crank tips c_i, platform joints b_i and r_i = b_i - o_p (..., 6, 3), m."""
+    n = c - b
     n = n / np.linalg.norm(n, axis=-1, keepdims=True)
-    return np.concatenate([n, np.cross(motion.r, n)], -1), n
+    return np.concatenate([n, np.cross(r, n)], -1), n
 
 
 def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:

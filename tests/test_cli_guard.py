@@ -125,6 +125,8 @@ def small_ensemble(tmp_path_factory):
     (["budget", "smoke", "--spec", "displacement:x<=1mm@q50", "-o", "{dir}/missing/b"], ["does not exist"]),
     (["plot", "{ens}", "-o", "{dir}/missing/p"], ["folder", "missing does not exist", "--parents"]),
     (["stability", "smoke", "-o", "{dir}/missing/s"], ["does not exist", "--parents"]),
+    (["map", "smoke", "-o", "{ens}"], ["not a folder"]),
+    (["map", "smoke", "-o", "{dir}/missing/m"], ["does not exist", "--parents"]),
 ])
 def test_an_existing_file_or_a_bad_output_folder_is_refused_before_work(argv, words, small_ensemble, tmp_path,
                                                                         capsys):

@@ -18,7 +18,8 @@ NEEDS = {"stats": ["{file}"], "plot": ["{file}"], "budget": ["--spec", "displace
 # the entry points that compute (budget and sensitivity check their request first, so they stay)
 WORK = ("pipeline.ensemble.run.ensemble", "pipeline.analysis.until.run_until", "rss6core.simulate",
         "pipeline.studies.report.write_report", "pipeline.studies.tradeoff.tradeoff",
-        "pipeline.studies.stability.stability", "rss6core.compile_kernels")
+        "pipeline.studies.stability.stability", "rss6core.compile_kernels",
+        "pipeline.studies.workspace_map.workspace_map")
 
 
 def _commands() -> dict[str, argparse.ArgumentParser]:
@@ -100,6 +101,11 @@ COMBINATIONS = [
     ["report", "smoke", "--worker-timeout", "5"],
     ["sensitivity", "smoke", "-n", "100"],
     ["simulate", "smoke", "--model", "elastic", "--start", "equilibrium"],
+    ["map", "smoke", "--model", "elastic"],
+    ["map", "smoke", "--grid", "y:-0.05:0.05:5"],
+    ["map", "smoke", "--grid", "y:-0.05:0.05:5", "--grid", "y:-0.01:0.01:5"],
+    ["map", "smoke", "--grid", "y:0.05:-0.05:5", "--grid", "z:-0.4:-0.3:5"],
+    ["map", "smoke", "--grid", "n1:-10:10:1", "--grid", "z:-0.4:-0.3:5"],
 ]
 
 

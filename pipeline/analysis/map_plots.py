@@ -1,0 +1,69 @@
+"""Heat maps of a workspace error map (``rss6 map``): per direction the worst case and the q95 over the
+grid, unreachable poses masked (grey), the trajectory's path drawn, units on axes and colour bars."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..vocabulary import DIRECTIONS, FAMILIES
+from .plot_common import figure_unit, plt
+
+__all__ = ["map_figures", "direction_map_figure"]
+
+_PANELS = (("worst_case", "worst case over every clearance state"), ("q95", "q95 over the drawn realisations"))
+
+
+def _axis_display(ds, dim: str) -> tuple[float, str]:
+    """Display factor from SI and unit of a grid axis: mm for positions, deg for angles."""
+    return (1e3, "mm") if ds[dim].attrs["units"] == "m" else (180.0 / np.pi, "deg")
+
+
+def _family(direction: str) -> str:
+    return next(f for f, members in FAMILIES.items() if direction in members)
+
+
+def _fixed_pose(ds) -> str:
+    """The pose axes the grid holds fixed, e.g. 'x = 0 mm, n1 = 0 deg'."""
+    out = []
+    for name, coord in ds.coords.items():
+        if str(name).startswith("platform_") and coord.ndim == 0:
+            factor, unit = _axis_display(ds, name)
+            out.append(f"{str(name).removeprefix('platform_')} = {round(float(coord) * factor, 3) + 0.0:g} {unit}")
+    return ", ".join(out)
+
+
+def direction_map_figure(ds, direction: str):
+    """The worst case and the q95 of |error| in ``direction`` over the grid, side by side."""
+    from matplotlib.patches import Patch
+    family = _family(direction)
+    rows, columns = ds["reachable"].dims
+    (fa, ua), (fb, ub) = _axis_display(ds, columns), _axis_display(ds, rows)
+    x, y = ds[columns].values * fa, ds[rows].values * fb
+    worst = ds[f"worst_case_{family}"].sel({family: direction}).values
+    scale, unit = figure_unit("displacement", direction, worst[np.isfinite(worst)])
+    cmap = plt.get_cmap("viridis").with_extremes(bad="0.8")
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), constrained_layout=True)
+    for ax, (field, what) in zip(axes, _PANELS):
+        values = np.ma.masked_invalid(ds[f"{field}_{family}"].sel({family: direction}).values * scale)
+        mesh = ax.pcolormesh(x, y, values, shading="nearest", cmap=cmap)
+        fig.colorbar(mesh, ax=ax, label=f"|{direction} error| [{unit}]")
+        ax.plot(ds[f"path_{columns}"].values * fa, ds[f"path_{rows}"].values * fb, color="w", lw=1.6)
+        ax.plot(ds[f"path_{columns}"].values * fa, ds[f"path_{rows}"].values * fb, color="k", lw=0.8,
+                label="trajectory (projected on these two axes)")
+        ax.set(xlabel=f"{ds[columns].attrs['long_name']} [{ua}]", ylabel=f"{ds[rows].attrs['long_name']} [{ub}]",
+               title=what)
+        ax.title.set_fontsize(10)
+    handles = [axes[0].get_legend_handles_labels()[0][0]]
+    if not ds["reachable"].values.all():
+        handles.append(Patch(color="0.8", label="unreachable"))
+    fig.legend(handles=handles, loc="outside lower center", fontsize=8, ncols=2)
+    fig.suptitle(f"{ds.attrs.get('model', '?')} level, |{direction} pose error| over the workspace: "
+                 f"scene {ds.attrs.get('scene_name', '?')}, "
+                 f"{ds.attrs.get('n_draws', '?')} draws (seed {ds.attrs.get('seed', '?')}), "
+                 f"worst case with {ds.attrs.get('clearance_sizes', '?')}\nother pose axes fixed at the "
+                 f"trajectory's mean: {_fixed_pose(ds)}", fontsize=10)
+    return fig
+
+
+def map_figures(ds) -> dict:
+    """{file name: figure}: workspace_map_<direction>.png for each direction."""
+    return {f"workspace_map_{d}.png": direction_map_figure(ds, d) for d in DIRECTIONS}
