@@ -114,3 +114,27 @@ def test_report_reuses_its_files_and_names_a_corrupt_one(configs, report, tmp_pa
     with pytest.raises(EnsembleFileError, match="smoke_elastic.nc"):
         from pipeline.studies.report import ReportPlan, write_report
         write_report([str(configs / "smoke.toml")], copy, ReportPlan(3, 2))
+
+
+def test_kept_studies_are_the_text_from_the_marker_on(tmp_path):
+    from pipeline.studies.report import KEPT_MARKER, kept_studies
+    path = tmp_path / "results.md"
+    assert kept_studies(path) == ""                           # no file yet
+    path.write_text("# generated\n\ntable\n")
+    assert kept_studies(path) == ""                           # no marker: nothing is kept
+    tail = KEPT_MARKER + "\n\n## Map\n\nnumbers\n"
+    path.write_text("# generated\n\ntable\n\n" + tail)
+    assert kept_studies(path) == tail
+
+
+@pytest.mark.slow   # reuses the report fixture's runs
+def test_report_keeps_the_sections_below_its_marker(configs, report, tmp_path):
+    """Regenerating results.md keeps the studies written by hand from other commands (rss6 map)."""
+    from pipeline.studies.report import KEPT_MARKER
+    copy = tmp_path / "kept"
+    shutil.copytree(report, copy)
+    generated = (copy / "results.md").read_text().replace(str(report), str(copy))
+    tail = KEPT_MARKER + "\n\n## A study from another command\n\nits numbers\n"
+    (copy / "results.md").write_text(generated + tail)
+    assert main(["report", str(configs / "smoke.toml"), "-o", str(copy), "-n", "3", "--family-n", "2"]) == 0
+    assert (copy / "results.md").read_text() == generated + tail

@@ -468,5 +468,18 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
         md += ["## How the errors grow with the clearance", "", text.GROWTH, ""]
         md += _growth_table(scenes, st) + [""]
     path = out / "results.md"
-    path.write_text("\n".join(md) + "\n", encoding="utf-8")
+    path.write_text("\n".join(md) + "\n" + kept_studies(path), encoding="utf-8")
     return path
+
+
+KEPT_MARKER = "<!-- rss6 report keeps what follows: sections written from other commands' output -->"
+
+
+def kept_studies(path: Path) -> str:
+    """The part of an existing results.md from :data:`KEPT_MARKER` on (the studies of other commands,
+    such as ``rss6 map``, which the report does not run), so that regenerating the report keeps it."""
+    if not path.is_file():
+        return ""
+    text = path.read_text(encoding="utf-8")
+    at = text.find(KEPT_MARKER)
+    return "" if at < 0 else text[at:]
