@@ -24,6 +24,7 @@ from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
 from .levels import MODELS
 from .sections import RectangleSection, TubeSection
+from .uncertain import UncertainInputError, UncertainInputs, parse_uncertain
 
 __all__ = [
     "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping",
@@ -58,6 +59,7 @@ class Geometry:
     platform_angles: np.ndarray    # beta_i, rad
     crank_length: float            # L_ac, m
     rod_length: float              # L_cb, m
+    actuator_offsets: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(6)))  # rad, true - commanded
 
     @property
     def a(self) -> np.ndarray:
@@ -198,6 +200,7 @@ class Scene:
     contact: ContactLaw
     beam: BeamTheory = BeamTheory()   # [beam]: the links' beam theory (default Euler-Bernoulli)
     tolerance: Tolerances = Tolerances()
+    uncertain: UncertainInputs = UncertainInputs()   # [uncertain.*], [correlation.*] (rss6core/uncertain.py)
     source_text: str = field(default="", repr=False, compare=False)
     source_path: str = field(default="", repr=False, compare=False)
 
@@ -251,6 +254,7 @@ _SCHEMA: dict = {
         "platform_angles_deg": _Key(float, 6),
         "crank_length_m": _Key(float, check=_POS),
         "rod_length_m": _Key(float, check=_POS),
+        "actuator_offsets_deg": _Key(float, 6, default=(0.0,) * 6),   # the cranks' true - commanded angle
     },
     "crank_section": {"axial_width_m": _Key(float, check=_POS),
                       "height_m": _Key(float, check=_POS)},
@@ -463,6 +467,9 @@ def _build(v: dict, text: str, source: str) -> Scene:
         raise SceneError("[beam] mass: 'lumped' puts the sections' rotary inertia on the nodes' "
                          "rotations; set [beam] rotary_inertia = true")
     _check_clearances(v["clearance"], ct)
+    if any(g["actuator_offsets_deg"]):
+        raise SceneError("[geometry] actuator_offsets_deg: the nominal offsets are 0 (the controller's zero); "
+                         "draw them in an [uncertain.NAME] table")
     if ct["stick_velocity_m_s"] >= ct["slip_velocity_m_s"]:
         raise SceneError("[contact] stick_velocity_m_s: must be smaller than slip_velocity_m_s")
     dt, duration = v["simulation"]["time_step_s"], tr["duration_s"]
@@ -483,7 +490,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
         name=v["name"],
         geometry=Geometry(g["base_radius_m"], _frozen(deg(g["base_angles_deg"])),
                           g["platform_radius_m"], _frozen(deg(g["platform_angles_deg"])),
-                          g["crank_length_m"], g["rod_length_m"]),
+                          g["crank_length_m"], g["rod_length_m"], _frozen(deg(g["actuator_offsets_deg"]))),
         crank_section=RectangleSection(v["crank_section"]["axial_width_m"],
                                        v["crank_section"]["height_m"]),
         rod_section=rod,
@@ -508,7 +515,16 @@ def _build(v: dict, text: str, source: str) -> Scene:
                            ct["stiffness_scale"]),
         beam=BeamTheory(v["beam"]["theory"], v["beam"]["rotary_inertia"], v["beam"]["mass"]),
         tolerance=_tolerances(v.get("tolerance", {}), v["clearance"], v["sampling"]["size_tolerance"], ct),
+        uncertain=_uncertain(v),
         source_text=text, source_path=source)
+
+
+def _uncertain(v: dict) -> UncertainInputs:
+    """The [uncertain.*] and [correlation.*] tables (rss6core/uncertain.py), checked against the nominal keys."""
+    try:
+        return parse_uncertain(v.get("uncertain", {}), v.get("correlation", {}), v)
+    except UncertainInputError as exc:
+        raise SceneError(str(exc)) from None
 
 
 def parse_scene(text: str, source: str = "<string>") -> Scene:
@@ -518,8 +534,8 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: not valid TOML: {exc}") from None
     try:
-        tolerance = raw.pop("tolerance", {})
-        scene = _build(_read_table(raw, _SCHEMA) | {"tolerance": tolerance}, text, source)
+        extra = {k: raw.pop(k, {}) for k in ("tolerance", "uncertain", "correlation")}
+        scene = _build(_read_table(raw, _SCHEMA) | extra, text, source)
         check_workspace(scene)
     except (SceneError, WorkspaceError) as exc:
         raise SceneError(f"{source}: {exc}") from None
