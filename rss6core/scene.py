@@ -43,6 +43,12 @@ def _frozen(values) -> np.ndarray:
     return arr
 
 
+def _per_leg(value) -> np.ndarray:
+    """A scalar or per-leg (6,) value as a column (1 or 6, 1) multiplying (6, 3) leg vectors: a scalar
+    gives the same bits as the scalar product."""
+    return np.asarray(value, float)[..., None]
+
+
 def _rot_z(angle: np.ndarray) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     z, o = np.zeros_like(angle), np.ones_like(angle)
@@ -52,26 +58,29 @@ def _rot_z(angle: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Geometry:
-    """Joint layout (eq. 2-3): base joints a_i, platform joints p_i (platform frame), links."""
-    base_radius: float
+    """Joint layout (eq. 2-3): base joints a_i, platform joints p_i (platform frame), links.
+
+    A scene's lengths and radii are scalars; a realised robot (rss6core/realised.py) may hold them
+    per leg or joint as (6,) arrays (every formula broadcasts over the legs)."""
+    base_radius: float             # R1, m (or per joint)
     base_angles: np.ndarray        # theta_i = u_i, rad
-    platform_radius: float
+    platform_radius: float         # R2, m (or per joint)
     platform_angles: np.ndarray    # beta_i, rad
-    crank_length: float            # L_ac, m
-    rod_length: float              # L_cb, m
+    crank_length: float            # L_ac, m (or per leg)
+    rod_length: float              # L_cb, m (or per leg)
     actuator_offsets: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(6)))  # rad, true - commanded
 
     @property
     def a(self) -> np.ndarray:
         """Base joint centres a_i = R1 [cos theta_i, sin theta_i, 0] (6, 3), m."""
         th = self.base_angles
-        return _frozen(self.base_radius * np.stack([np.cos(th), np.sin(th), 0 * th], -1))
+        return _frozen(_per_leg(self.base_radius) * np.stack([np.cos(th), np.sin(th), 0 * th], -1))
 
     @property
     def p(self) -> np.ndarray:
         """Platform joint centres in the platform frame n_i* (6, 3), m."""
         be = self.platform_angles
-        return _frozen(self.platform_radius * np.stack([np.cos(be), np.sin(be), 0 * be], -1))
+        return _frozen(_per_leg(self.platform_radius) * np.stack([np.cos(be), np.sin(be), 0 * be], -1))
 
     @property
     def k(self) -> np.ndarray:

@@ -75,7 +75,7 @@ def resolve_replicates(sampler: str, replicates: int | None, n: int, level: Leve
     redraws = model_level(level.model).redraws_every_step
     steps = len(time_grid(level.scene.trajectory.duration, level.dt)) if redraws else None
     try:
-        check_qmc(n, replicates, uniform_dimension(steps))
+        check_qmc(n, replicates, uniform_dimension(steps, level.scene))
     except ValueError as exc:
         raise OptionError(str(exc)) from None
     return replicates
