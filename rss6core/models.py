@@ -36,8 +36,8 @@ from .results import SimulationResult, time_grid
 from .status import FAILED, FINISHED, check_history
 from .uncertain import draw_inputs
 
-__all__ = ["simulate", "simulate_batch", "Level", "prepare_level", "stored_draw", "natural_frequencies",
-           "degrees_of_freedom"]
+__all__ = ["simulate", "simulate_batch", "Level", "prepare_level", "stored_draw", "stored_inputs",
+           "natural_frequencies", "degrees_of_freedom"]
 
 
 def stored_draw(scene, model: str, seed: int, realization: int, dt: float, uniforms=None):
@@ -47,6 +47,14 @@ def stored_draw(scene, model: str, seed: int, realization: int, dt: float, unifo
         steps = len(time_grid(scene.trajectory.duration, dt))
         return output_step(paper_draw(scene, seed, realization, steps, uniforms))
     return draw_clearances(scene, seed, realization, uniforms=uniforms)
+
+
+def stored_inputs(scene, seed: int, realization: int, uniforms=None):
+    """The uncertain inputs an ensemble file records for a realisation (:class:`.uncertain.InputDraw`),
+    None for a scene without; the levels that take them draw them after one clearance draw."""
+    if not scene.uncertain:
+        return None
+    return draw_inputs(scene, seed, realization, uniforms, offset=uniform_dimension(None))
 
 
 def simulate(scene, model: str | None = None, integrator: str | None = None,
@@ -132,7 +140,7 @@ class Level:
         """One realised robot (rss6core/realised.py) driven by the nominal commands: its geometric
         error, plus the clearance closure about its motion at a clearance level.  A realised robot
         equal to the nominal one reuses the nominal motion: its geometric error is exactly zero."""
-        inputs = draw_inputs(self.scene, seed, realization, uniforms, offset=uniform_dimension(None))
+        inputs = stored_inputs(self.scene, seed, realization, uniforms)
         geometry = realised_geometry(self.scene.geometry, inputs)
         nominal = is_nominal(self.scene.geometry, geometry)
         try:

@@ -98,6 +98,17 @@ class UncertainInput:
     def units(self) -> str:
         return self.key.units
 
+    def labels(self) -> tuple[str, ...]:
+        """One label per draw: NAME, NAME[leg i], NAME[joint i] (base or platform joint i), NAME[A1] ..
+        NAME[B6] (the clearance joints), NAME[crank i] / NAME[rod i] (the links)."""
+        if self.count == 1:
+            return (self.name,)
+        if self.each == "link":
+            return tuple(f"{self.name}[{link} {i}]" for link in ("crank", "rod") for i in range(1, 7))
+        if self.count == 18:
+            return tuple(f"{self.name}[{j}{i}]" for j in "ACB" for i in range(1, 7))
+        return tuple(f"{self.name}[{self.each} {i}]" for i in range(1, 7))
+
     def law_text(self) -> str:
         """The law as one line, its parameters with the key's unit suffix (file attributes, rss6 check)."""
         names = dict(self.parameters)
@@ -178,6 +189,14 @@ class UncertainInputs:
 
     def __bool__(self) -> bool:
         return bool(self.inputs)
+
+    def labels(self) -> tuple[str, ...]:
+        """Every draw's label, in a realisation's order (:meth:`UncertainInput.labels`)."""
+        return tuple(label for i in self.inputs for label in i.labels())
+
+    def columns(self, attribute) -> tuple:
+        """``attribute(input)`` repeated for each of the input's draws, in a realisation's order."""
+        return tuple(attribute(i) for i in self.inputs for _ in range(i.count))
 
     def offsets(self) -> dict:
         """Each input's first position in a realisation's uniforms (table order)."""
