@@ -118,6 +118,9 @@ class Level:
         """The quasi-static or contact level on given clearance draws, one result each (the
         sensitivity study's designed inputs; an ensemble's draws come from :meth:`simulate`)."""
         kind = model_level(self.model)
+        if self.scene.uncertain:
+            raise ValueError("given clearance draws leave out the scene's [uncertain.*] inputs: run its "
+                             "realisations (Level.simulate)")
         if not kind.function_of_one_draw:
             raise ValueError(f"the {self.model} level takes no given draws "
                              f"({' or '.join(models_with('function_of_one_draw'))} do)")

@@ -125,3 +125,16 @@ def test_check_lists_the_inputs_and_run_refuses_levels_without_them(text, tmp_pa
     assert main(["run", str(scene), "-n", "2", "-o", str(tmp_path / "x.nc")]) == 2   # the scene's elastic
     assert "[simulation] model = 'elastic': the elastic level cannot" in capsys.readouterr().err
     assert not (tmp_path / "x.nc").exists()
+
+
+def test_studies_that_would_leave_the_inputs_out_refuse_them(text, tmp_path, capsys):
+    """Sobol' indices by input and clearance budgets are not computed yet: one line, exit 2, no output."""
+    scene = tmp_path / "u.toml"
+    scene.write_text(text)
+    assert main(["sensitivity", str(scene), "--model", "quasi-static", "-n", "64", "-o", str(tmp_path / "s.nc"),
+                 "--workers", "1"]) == 2
+    assert "Sobol' indices by [uncertain.*] input are not computed yet" in capsys.readouterr().err
+    assert main(["budget", str(scene), "--model", "quasi-static", "--spec", "displacement:z<=1mm@q50",
+                 "-n", "64", "-o", str(tmp_path / "b"), "--workers", "1"]) == 2
+    assert "does not follow; budget the scene without its [uncertain.*] tables" in capsys.readouterr().err
+    assert not (tmp_path / "s.nc").exists() and not (tmp_path / "b").exists()
