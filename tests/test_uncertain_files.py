@@ -138,3 +138,15 @@ def test_studies_that_would_leave_the_inputs_out_refuse_them(text, tmp_path, cap
                  "-n", "64", "-o", str(tmp_path / "b"), "--workers", "1"]) == 2
     assert "does not follow; budget the scene without its [uncertain.*] tables" in capsys.readouterr().err
     assert not (tmp_path / "s.nc").exists() and not (tmp_path / "b").exists()
+
+
+def test_a_single_run_file_records_its_inputs(text, tmp_path, capsys):
+    scene = tmp_path / "u.toml"
+    scene.write_text(text)
+    path = tmp_path / "r.nc"
+    assert main(["simulate", str(scene), "--model", "rigid", "--seed", "3", "--realization", "2", "-o", str(path)]) == 0
+    ds = load_netcdf(path)
+    from rss6core.uncertain import draw_inputs
+    assert np.array_equal(ds["uncertain_input"].values, draw_inputs(parse_scene(text), 3, 2).values)
+    assert ds["input_units"].values[0] == "m" and cf_errors(path) == []
+    assert float(ds["max_abs_error"].sel(window="whole", quantity="displacement", direction="z")) > 1e-7

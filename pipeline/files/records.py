@@ -107,9 +107,12 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
     err = _history(result)
     summary_attrs = {"units": MIXED_UNITS, "cell_methods": "time: maximum"}
     peak, mean = window_summaries(result, scene.simulation.settle_time, scene.simulation.steady_after)
-    extra = {}
+    extra, input_coords = {}, {}
     if result.contact_force_peak is not None:
         extra["max_contact_force"] = (("joint",), result.contact_force_peak, _CONTACT_ATTRS)
+    if result.inputs is not None:   # a scene with [uncertain.*] tables: the run's drawn inputs
+        (_, values, attrs), input_coords = input_variables([result.inputs])
+        extra["uncertain_input"] = (("input",), values[0], attrs)
     return xr.Dataset(
         data_vars={
             "error": (("quantity", "time", "direction"), err,
@@ -125,7 +128,8 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
         coords={
             "time": ("time", result.t, {"units": "s", "long_name": "time", "axis": "T",
                                         "standard_name": "time"}),
-            **({"joint": ("joint", list(JOINTS))} if extra else {}),
+            **({"joint": ("joint", list(JOINTS))} if "max_contact_force" in extra else {}),
+            **input_coords,
             "window": ("window", list(WINDOWS), _WINDOW_ATTRS),
             "direction": ("direction", list(DIRECTIONS),
                           {"long_name": "platform pose direction in the base frame"}),
