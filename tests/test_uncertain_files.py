@@ -150,3 +150,16 @@ def test_a_single_run_file_records_its_inputs(text, tmp_path, capsys):
     assert np.array_equal(ds["uncertain_input"].values, draw_inputs(parse_scene(text), 3, 2).values)
     assert ds["input_units"].values[0] == "m" and cf_errors(path) == []
     assert float(ds["max_abs_error"].sel(window="whole", quantity="displacement", direction="z")) > 1e-7
+
+
+def test_the_shipped_manufacturing_scene_draws_its_tolerances():
+    from pipeline.scenes.catalogue import find_scene
+    from rss6core import simulate
+    scene = find_scene("paper_manufacturing")
+    assert [i.name for i in scene.uncertain.inputs] == [
+        "crank_length", "rod_length", "base_radius", "platform_radius", "base_angle", "platform_angle",
+        "actuator_zero", "youngs_modulus", "friction", "payload_mass", "payload_inertia"]
+    assert scene.uncertain.dimension == 6 * 7 + 1 + 18 + 2
+    assert scene.tolerance.revolute_radial is not None and scene.simulation.model == "quasi-static"
+    rigid = simulate(scene, "rigid", seed=0, realization=0)
+    assert rigid.status == "finished" and 1e-5 < np.abs(rigid.displacement[:, :3]).max() < 2e-3
