@@ -106,7 +106,9 @@ class Level:
         realizations = list(realizations)
         kind = model_level(self.model)
         if self.scene.uncertain:
-            return [self._realised(seed, r, uniforms) for r in realizations]
+            clearances = model_level(self.model).draws_clearances
+            return [self._realised(draw_clearances(self.scene, seed, r, uniforms=uniforms) if clearances else None,
+                                   stored_inputs(self.scene, seed, r, uniforms)) for r in realizations]
         if not kind.draws_clearances:      # every realisation is the same run
             return [self.elastic if kind.elastic_links else self._rigid()] * len(realizations)
         if kind.redraws_every_step:
@@ -114,13 +116,16 @@ class Level:
         return self.simulate_draws([draw_clearances(self.scene, seed, r, uniforms=uniforms)
                                     for r in realizations])
 
-    def simulate_draws(self, draws: list) -> list[SimulationResult]:
+    def simulate_draws(self, draws: list, inputs: list | None = None) -> list[SimulationResult]:
         """The quasi-static or contact level on given clearance draws, one result each (the
-        sensitivity study's designed inputs; an ensemble's draws come from :meth:`simulate`)."""
+        sensitivity study's designed inputs; an ensemble's draws come from :meth:`simulate`); with
+        [uncertain.*] inputs also given input draws (:class:`.uncertain.InputDraw`), one per draw."""
         kind = model_level(self.model)
-        if self.scene.uncertain:
-            raise ValueError("given clearance draws leave out the scene's [uncertain.*] inputs: run its "
-                             "realisations (Level.simulate)")
+        if bool(self.scene.uncertain) != (inputs is not None):
+            raise ValueError("given draws need given uncertain inputs exactly when the scene has [uncertain.*] "
+                             "tables")
+        if inputs is not None:
+            return [self._realised(draw, given) for draw, given in zip(draws, inputs, strict=True)]
         if not kind.function_of_one_draw:
             raise ValueError(f"the {self.model} level takes no given draws "
                              f"({' or '.join(models_with('function_of_one_draw'))} do)")
@@ -139,11 +144,11 @@ class Level:
         zero = np.zeros((len(t), 6))
         return SimulationResult(t, zero, zero, zero, FINISHED, "", len(t) - 1)
 
-    def _realised(self, seed: int, realization: int, uniforms) -> SimulationResult:
-        """One realised robot (rss6core/realised.py) driven by the nominal commands: its geometric
-        error, plus the clearance closure about its motion at a clearance level.  A realised robot
-        equal to the nominal one reuses the nominal motion: its geometric error is exactly zero."""
-        inputs = stored_inputs(self.scene, seed, realization, uniforms)
+    def _realised(self, draw, inputs) -> SimulationResult:
+        """One realised robot (rss6core/realised.py) of the drawn ``inputs`` driven by the nominal
+        commands: its geometric error, plus the clearance closure of ``draw`` about its motion at a
+        clearance level.  A realised robot equal to the nominal one reuses the nominal motion: its
+        geometric error is exactly zero."""
         geometry = realised_geometry(self.scene.geometry, inputs)
         nominal = is_nominal(self.scene.geometry, geometry)
         try:
@@ -156,7 +161,6 @@ class Level:
         if not model_level(self.model).draws_clearances:
             status, message, steps = check_history(geometric[0], real.t, "geometric displacement error")
             return SimulationResult(real.t, *geometric, status, message, steps, inputs=inputs)
-        draw = draw_clearances(self.scene, seed, realization, uniforms=uniforms)
         result = quasi_static_result(self.scene, real, draw, self.scene.simulation.quasi_static_eccentricity)
         if not nominal:
             result = dataclasses.replace(result, displacement=result.displacement + geometric[0],
