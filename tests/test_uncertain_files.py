@@ -127,16 +127,37 @@ def test_check_lists_the_inputs_and_run_refuses_levels_without_them(text, tmp_pa
     assert not (tmp_path / "x.nc").exists()
 
 
-def test_studies_that_would_leave_the_inputs_out_refuse_them(text, tmp_path, capsys):
-    """Sobol' indices by input and clearance budgets are not computed yet: one line, exit 2, no output."""
+def test_sobol_indices_by_input_follow_the_physics(configs):
+    """Zero clearances: the quasi-static error is the geometric error of the crank lengths alone, so
+    their total index is 1 (within 3 half-widths of its 95 % interval, six directions at once), and
+    the platform mass, which the level does not use, and every clearance family get exactly 0."""
+    from pipeline.studies.sensitivity import sensitivity
+    text = (configs / "smoke.toml").read_text()
+    for key in ("revolute_radial_m", "revolute_axial_m", "spherical_C_m", "spherical_B_m"):
+        text = text.replace(f"{key} = 0.25e-3", f"{key} = 0.0")
+    text += (TABLES.split("[uncertain.zero]")[0]
+             + '[uncertain.mass]\nparameter = "platform.mass_kg"\nlaw = "uniform"\nlow_kg = 0.0\nhigh_kg = 0.5\n')
+    ds = sensitivity(_spec(text), 64, workers=1)
+    st = ds["max_abs_error_sobol"].sel(index="ST", quantity="displacement")
+    crank = st.sel(group="crank")
+    est, half = crank.sel(bound="estimate"), (crank.sel(bound="upper") - crank.sel(bound="lower")) / 2
+    assert (abs(est - 1) <= 3 * half).all() and (half < 0.3).all()   # 3 half-widths of 95 %: about 6 sd
+    for group in ("mass", "revolute_radial", "spherical_B"):
+        assert not st.sel(group=group, bound="estimate").any()
+
+
+def test_studies_refuse_what_they_cannot_answer(text, tmp_path, capsys):
+    """A budget scales clearances only, Sobol' indices need independent inputs: one line, exit 2."""
     scene = tmp_path / "u.toml"
     scene.write_text(text)
-    assert main(["sensitivity", str(scene), "--model", "quasi-static", "-n", "64", "-o", str(tmp_path / "s.nc"),
-                 "--workers", "1"]) == 2
-    assert "Sobol' indices by [uncertain.*] input are not computed yet" in capsys.readouterr().err
     assert main(["budget", str(scene), "--model", "quasi-static", "--spec", "displacement:z<=1mm@q50",
                  "-n", "64", "-o", str(tmp_path / "b"), "--workers", "1"]) == 2
     assert "does not follow; budget the scene without its [uncertain.*] tables" in capsys.readouterr().err
+    rod = TABLES.split("[uncertain.zero]")[0].replace("crank]", "rod]").replace("crank_length", "rod_length")
+    scene.write_text(text + rod + '[correlation.c]\ninputs = ["crank", "rod"]\nmatrix = [[1, 0.5], [0.5, 1]]\n')
+    assert main(["sensitivity", str(scene), "--model", "quasi-static", "-n", "64", "-o", str(tmp_path / "s.nc"),
+                 "--workers", "1"]) == 2
+    assert "[correlation.c]: Sobol' indices need independent inputs" in capsys.readouterr().err
     assert not (tmp_path / "s.nc").exists() and not (tmp_path / "b").exists()
 
 
