@@ -258,7 +258,7 @@ def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int
                             {"long_name": "grouping the index belongs to (families or joints)"})
     data["group_inputs"] = (("group",), np.array([t for r in results for t in _group_inputs(inputs, r.design)],
                                                  dtype=object),
-                            {"long_name": "the U(0, 1) inputs of the clearance draw in the group"})
+                            {"long_name": "the U(0, 1) inputs of the draw in the group (clearances, uncertain inputs)"})
     coords = {"index": ("index", list(INDICES), {"long_name": "S1 first-order, ST total Sobol' index"}),
               "bound": ("bound", list(BOUNDS), {"long_name": "estimate and bootstrap interval bounds"}),
               "group": ("group", groups, {"long_name": "input group: joint family or joint"}),
