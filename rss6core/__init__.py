@@ -29,6 +29,9 @@ Running a level
 - ContactBatch: the contact level's results for a batch of realisations (one SimulationResult each).
 - time_grid: the output instants (s) of a duration and step, or ValueError if the step does not divide it.
 - stored_draw: the clearance draw an ensemble file records for one realisation.
+- stored_inputs: the uncertain inputs ([uncertain.*]) an ensemble file records for one realisation, or None.
+- check_uncertain_level: ValueError naming a level that cannot take a scene's uncertain inputs yet.
+- draws_per_realisation: whether a level's realisations on a scene differ (clearances or uncertain inputs).
 - default_time_step: a scene's time step (s) for a level.
 - default_integrator: a scene's integrator for a level.
 - natural_frequencies: undamped angular frequencies (rad/s) of the elastic robot at one instant.
@@ -48,6 +51,7 @@ Clearance draws
 - clearances_from_named_uniforms: the same draw from its uniforms by block name (Sobol' designs).
 - UNIFORM_BLOCKS: the names of those blocks of six uniforms (legs 1-6), in stream order.
 - uniform_dimension: how many uniforms one draw uses at most.
+- inputs_from_uniforms: a realisation's [uncertain.*] inputs (InputDraw) from one uniform per draw.
 - size_band: a joint family's clearance-size band ([tolerance.<family>] or [sampling] size_tolerance), or None.
 - SIZE_UNIFORMS: how many of them (the first) set the clearance sizes.
 
@@ -83,11 +87,13 @@ from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
 from .kernels import compile_kernels, kernel_cache_folder, kernels_to_compile, level_kernels
 from .kinematics import rigid_motion
-from .levels import (MODEL_LEVELS, MODELS, ModelLevel, default_integrator, default_time_step, model_level,
-                     models_with)
+from .levels import (MODEL_LEVELS, MODELS, ModelLevel, check_uncertain_level, default_integrator, default_time_step,
+                     draws_per_realisation, model_level, models_with)
 from .quasi_static import closure_matrix
-from .models import Level, degrees_of_freedom, natural_frequencies, prepare_level, simulate, simulate_batch, stored_draw
+from .models import (Level, degrees_of_freedom, natural_frequencies, prepare_level, simulate, simulate_batch,
+                     stored_draw, stored_inputs)
 from .scene import CLEARANCE_RADII, Scene, SceneError, load_scene, parse_scene
+from .uncertain import inputs_from_uniforms
 from .status import FAILED, FINISHED, STATUSES
 from .sections import crank_inertia, rod_inertia
 from .workspace_map import (DrawnEccentricities, StaticClosure, WorstCaseSizes, ball_support, drawn_eccentricities,
@@ -99,7 +105,8 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII"
            "TOL_DISPLACEMENT", "TOL_VELOCITY", "closure_matrix",
            "simulate", "simulate_batch", "prepare_level", "Level",
            "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
-           "stored_draw", "default_time_step", "default_integrator", "natural_frequencies",
+           "stored_draw", "stored_inputs", "check_uncertain_level", "draws_per_realisation", "inputs_from_uniforms",
+           "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom", "level_kernels", "kernels_to_compile", "compile_kernels", "kernel_cache_folder",
            "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "size_band",
            "SIZE_UNIFORMS", "UNIFORM_BLOCKS", "clearances_from_named_uniforms", "Integrator", "build_elastic_model",

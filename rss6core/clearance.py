@@ -156,10 +156,12 @@ UNIFORM_BLOCKS = SIZE_BLOCKS + ("A_radial_magnitude", "A_radial_angle", "A_axial
                                 "C_azimuth", "B_magnitude", "B_polar", "B_azimuth")
 
 
-def uniform_dimension(steps: int | None = None) -> int:
+def uniform_dimension(steps: int | None = None, scene=None) -> int:
     """Most uniforms one draw uses: 4 x 6 sizes, then per joint and step radial, angle, axial,
-    and magnitude and two direction angles for C and for B (fewer where a law is degenerate)."""
-    return SIZE_UNIFORMS + 9 * 6 * (1 if steps is None else steps)
+    and magnitude and two direction angles for C and for B (fewer where a law is degenerate); with
+    a ``scene`` that has uncertain inputs, theirs after these (rss6core/uncertain.py)."""
+    extra = 0 if scene is None else scene.uncertain.dimension
+    return SIZE_UNIFORMS + 9 * 6 * (1 if steps is None else steps) + extra
 
 
 def draw_clearances(scene, seed: int, realization: int, steps: int | None = None,
@@ -172,7 +174,7 @@ def draw_clearances(scene, seed: int, realization: int, steps: int | None = None
     redraws them every time step (sec. 2).
     """
     if uniforms is not None:
-        return clearances_from_uniforms(scene, uniforms(realization, uniform_dimension(steps)), steps)
+        return clearances_from_uniforms(scene, uniforms(realization, uniform_dimension(steps, scene)), steps)
     return _draw(scene, realization_rng(seed, realization), steps)
 
 

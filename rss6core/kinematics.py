@@ -56,7 +56,7 @@ def inverse_kinematics(geometry, b: np.ndarray) -> np.ndarray:
 def crank_points(geometry, alpha: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """c_i (eq. 2) and its first two derivatives in alpha_i, each (T, 6, 3), m."""
     ca, sa, z = np.cos(alpha), np.sin(alpha), np.zeros_like(alpha)
-    L = geometry.crank_length
+    L = np.asarray(geometry.crank_length, float)[..., None]   # scalar or per leg (6, 1)
     m = L * np.stack([ca, z, sa], -1)
     dm = L * np.stack([-sa, z, ca], -1)
     c = np.einsum("lij,tlj->tli", geometry.k, m)
@@ -172,7 +172,7 @@ def check_workspace(scene, min_transmission: float = MIN_TRANSMISSION, max_condi
         k, leg = bad[0]
         raise WorkspaceError(f"trajectory leaves the workspace: leg {leg + 1} is at its crank-rod "
                          f"singularity at t = {t[k]:.4f} s{where}")
-    rows = np.concatenate([n, np.cross(r, n)], axis=-1) / geo.rod_length
+    rows = np.concatenate([n, np.cross(r, n)], axis=-1) / np.asarray(geo.rod_length, float)[..., None]
     cond = np.linalg.cond(rows)
     if np.any(~(cond < max_condition)):
         k = int(np.argmax(~(cond < max_condition)))

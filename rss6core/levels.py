@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 __all__ = ["ModelLevel", "MODEL_LEVELS", "MODELS", "model_level", "models_with", "default_time_step",
-           "default_integrator"]
+           "default_integrator", "draws_per_realisation", "check_uncertain_level"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -28,15 +28,17 @@ class ModelLevel:
     contact_forces: bool = False        # it reports joint contact forces (max_contact_force)
     contact_joints: bool = False        # joints as contact pairs on their own nodes (the compiled numba kernel)
     contact_start: bool = False         # it takes [simulation] contact_start (--start)
+    realised_robot: bool = False        # it runs the realised robot of a scene's [uncertain.*] inputs
     time_step_field: str = "time_step"  # the Simulation field holding its default time step (s)
     integrator_field: str = "integrator"  # the Simulation field naming its default integrator (files
                                           # record it even for the levels that integrate nothing)
 
 
 MODEL_LEVELS = MappingProxyType({level.name: level for level in (
-    ModelLevel(name="rigid", rung="L0", description="no error, a check"),
+    ModelLevel(name="rigid", rung="L0", description="no error, a check (or a realised robot's geometric error)",
+               realised_robot=True),
     ModelLevel(name="quasi-static", rung="L1", description="clearances, no dynamics", draws_clearances=True,
-               function_of_one_draw=True, linear_in_clearances=True),
+               function_of_one_draw=True, linear_in_clearances=True, realised_robot=True),
     ModelLevel(name="elastic", rung="L2", description="flexible links, no clearances", elastic_links=True),
     ModelLevel(name="paper", rung="L3", description="elastic + the paper's clearance closure", elastic_links=True,
                draws_clearances=True, redraws_every_step=True, contact_forces=True),
@@ -62,6 +64,24 @@ def models_with(prop: str) -> tuple[str, ...]:
     if prop not in _PROPERTIES:
         raise ValueError(f"unknown level property {prop!r}; choose one of {', '.join(_PROPERTIES)}")
     return tuple(name for name, level in MODEL_LEVELS.items() if getattr(level, prop))
+
+
+def draws_per_realisation(scene, model: str) -> bool:
+    """Whether realisations of ``model`` on ``scene`` differ: the level draws clearances, or the scene
+    has uncertain inputs (each realisation a realised robot: every level draws then)."""
+    return model_level(model).draws_clearances or bool(scene.uncertain)
+
+
+def check_uncertain_level(scene, model: str) -> None:
+    """ValueError (one line, naming the level) if ``scene`` has uncertain inputs that ``model`` cannot
+    take yet: never ignore them silently."""
+    if scene.uncertain and not model_level(model).realised_robot:
+        raise ValueError(f"the {model} level cannot take [uncertain.*] inputs yet (the "
+                         f"{' and '.join(models_with('realised_robot'))} levels can)")
+    level = model_level(model)
+    if scene.uncertain and scene.simulation.quasi_static_eccentricity == "reaction" and level.draws_clearances:
+        raise ValueError("the quasi-static level's reaction eccentricities cannot take [uncertain.*] inputs "
+                         "yet; set [simulation] quasi_static_eccentricity = \"drawn\"")
 
 
 def default_time_step(scene, model: str) -> float:

@@ -23,18 +23,21 @@ import numpy as np
 import scipy.linalg
 
 from .assembly import build_elastic_model, dense_matrices, end_maps
-from .clearance import draw_clearances
+from .clearance import draw_clearances, uniform_dimension
 from .elastic import simulate_elastic
 from .integrators import Integrator, make_integrator
 from .kinematics import RigidMotion, rigid_motion
-from .levels import default_integrator, default_time_step, model_level, models_with
+from .levels import (check_uncertain_level, default_integrator, default_time_step, draws_per_realisation,
+                     model_level, models_with)
 from .paper_method import PaperClosure, output_step, paper_contact_forces, paper_draw, paper_result
 from .quasi_static import quasi_static_result
+from .realised import is_nominal, motion_error, realised_geometry, realised_motion
 from .results import SimulationResult, time_grid
-from .status import FINISHED
+from .status import FAILED, FINISHED, check_history
+from .uncertain import draw_inputs
 
-__all__ = ["simulate", "simulate_batch", "Level", "prepare_level", "stored_draw", "natural_frequencies",
-           "degrees_of_freedom"]
+__all__ = ["simulate", "simulate_batch", "Level", "prepare_level", "stored_draw", "stored_inputs",
+           "natural_frequencies", "degrees_of_freedom"]
 
 
 def stored_draw(scene, model: str, seed: int, realization: int, dt: float, uniforms=None):
@@ -44,6 +47,14 @@ def stored_draw(scene, model: str, seed: int, realization: int, dt: float, unifo
         steps = len(time_grid(scene.trajectory.duration, dt))
         return output_step(paper_draw(scene, seed, realization, steps, uniforms))
     return draw_clearances(scene, seed, realization, uniforms=uniforms)
+
+
+def stored_inputs(scene, seed: int, realization: int, uniforms=None):
+    """The uncertain inputs an ensemble file records for a realisation (:class:`.uncertain.InputDraw`),
+    None for a scene without; the levels that take them draw them after one clearance draw."""
+    if not scene.uncertain:
+        return None
+    return draw_inputs(scene, seed, realization, uniforms, offset=uniform_dimension(None))
 
 
 def simulate(scene, model: str | None = None, integrator: str | None = None,
@@ -94,6 +105,10 @@ class Level:
         (``uniforms``: a quasi-Monte Carlo design, as in :func:`simulate_batch`)."""
         realizations = list(realizations)
         kind = model_level(self.model)
+        if self.scene.uncertain:
+            clearances = model_level(self.model).draws_clearances
+            return [self._realised(draw_clearances(self.scene, seed, r, uniforms=uniforms) if clearances else None,
+                                   stored_inputs(self.scene, seed, r, uniforms)) for r in realizations]
         if not kind.draws_clearances:      # every realisation is the same run
             return [self.elastic if kind.elastic_links else self._rigid()] * len(realizations)
         if kind.redraws_every_step:
@@ -101,10 +116,16 @@ class Level:
         return self.simulate_draws([draw_clearances(self.scene, seed, r, uniforms=uniforms)
                                     for r in realizations])
 
-    def simulate_draws(self, draws: list) -> list[SimulationResult]:
+    def simulate_draws(self, draws: list, inputs: list | None = None) -> list[SimulationResult]:
         """The quasi-static or contact level on given clearance draws, one result each (the
-        sensitivity study's designed inputs; an ensemble's draws come from :meth:`simulate`)."""
+        sensitivity study's designed inputs; an ensemble's draws come from :meth:`simulate`); with
+        [uncertain.*] inputs also given input draws (:class:`.uncertain.InputDraw`), one per draw."""
         kind = model_level(self.model)
+        if bool(self.scene.uncertain) != (inputs is not None):
+            raise ValueError("given draws need given uncertain inputs exactly when the scene has [uncertain.*] "
+                             "tables")
+        if inputs is not None:
+            return [self._realised(draw, given) for draw, given in zip(draws, inputs, strict=True)]
         if not kind.function_of_one_draw:
             raise ValueError(f"the {self.model} level takes no given draws "
                              f"({' or '.join(models_with('function_of_one_draw'))} do)")
@@ -122,6 +143,30 @@ class Level:
         t = time_grid(self.scene.trajectory.duration, self.dt)
         zero = np.zeros((len(t), 6))
         return SimulationResult(t, zero, zero, zero, FINISHED, "", len(t) - 1)
+
+    def _realised(self, draw, inputs) -> SimulationResult:
+        """One realised robot (rss6core/realised.py) of the drawn ``inputs`` driven by the nominal
+        commands: its geometric error, plus the clearance closure of ``draw`` about its motion at a
+        clearance level.  A realised robot equal to the nominal one reuses the nominal motion: its
+        geometric error is exactly zero."""
+        geometry = realised_geometry(self.scene.geometry, inputs)
+        nominal = is_nominal(self.scene.geometry, geometry)
+        try:
+            real = self.motion if nominal else realised_motion(geometry, self.motion)
+        except (ArithmeticError, np.linalg.LinAlgError) as exc:   # a realised robot out of its workspace
+            nan = np.full_like(self.motion.platform.pose, np.nan)
+            return SimulationResult(self.motion.t, nan, nan, nan, FAILED,
+                                    f"the realised robot's forward kinematics failed: {exc}", 0, inputs=inputs)
+        geometric = [np.zeros_like(self.motion.platform.pose)] * 3 if nominal else motion_error(real, self.motion)
+        if not model_level(self.model).draws_clearances:
+            status, message, steps = check_history(geometric[0], real.t, "geometric displacement error")
+            return SimulationResult(real.t, *geometric, status, message, steps, inputs=inputs)
+        result = quasi_static_result(self.scene, real, draw, self.scene.simulation.quasi_static_eccentricity)
+        if not nominal:
+            result = dataclasses.replace(result, displacement=result.displacement + geometric[0],
+                                         velocity=result.velocity + geometric[1],
+                                         acceleration=result.acceleration + geometric[2])
+        return dataclasses.replace(result, inputs=inputs)
 
     def _paper(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
         elastic = self.elastic
@@ -149,12 +194,13 @@ def prepare_level(scene, model: str | None = None, integrator: str | None = None
     sim = scene.simulation
     model = model or sim.model
     kind = model_level(model)
+    check_uncertain_level(scene, model)
     dt = default_time_step(scene, model) if dt is None else dt
     elements = elements or sim.elements_per_link
     if not kind.elastic_links:
         t = time_grid(scene.trajectory.duration, dt)
         return Level(scene, model, None, dt, elements,
-                     motion=rigid_motion(scene, t) if kind.draws_clearances else None)
+                     motion=rigid_motion(scene, t) if draws_per_realisation(scene, model) else None)
     method = make_integrator(integrator or default_integrator(scene, model), sim.newmark_beta,
                              sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
     if kind.contact_joints:

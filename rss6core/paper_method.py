@@ -125,7 +125,7 @@ def paper_draw(scene, seed: int, realization: int, steps: int, uniforms=None) ->
         inner = draw_clearances(scene, seed, realization, steps=steps)
         size_uniforms = realization_rng(seed, realization).uniform(size=SIZE_UNIFORMS)
     else:
-        u = uniforms(realization, uniform_dimension(steps))
+        u = uniforms(realization, uniform_dimension(steps, scene))
         inner, size_uniforms = clearances_from_uniforms(scene, u, steps), u[:SIZE_UNIFORMS]
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(realization), END_TAG]))
     fresh = rng.uniform(size=uniform_dimension(2 * CENTRAL_PAD) - SIZE_UNIFORMS)

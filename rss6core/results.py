@@ -26,6 +26,7 @@ class SimulationResult:
     contact_force_peak: np.ndarray | None = None  # (18,) N, joints A1..A6, C1..C6, B1..B6
     iterations: int = 0                           # Newton iterations (contact level)
     draw: object | None = None  # the ClearanceDraw an ensemble file records (clearance levels)
+    inputs: object | None = None  # the uncertain.InputDraw of a scene with [uncertain.*] inputs
 
 
 @dataclass

@@ -24,6 +24,7 @@ from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
 from .levels import MODELS
 from .sections import RectangleSection, TubeSection
+from .uncertain import UncertainInputError, UncertainInputs, parse_uncertain
 
 __all__ = [
     "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping",
@@ -42,6 +43,12 @@ def _frozen(values) -> np.ndarray:
     return arr
 
 
+def _per_leg(value) -> np.ndarray:
+    """A scalar or per-leg (6,) value as a column (1 or 6, 1) multiplying (6, 3) leg vectors: a scalar
+    gives the same bits as the scalar product."""
+    return np.asarray(value, float)[..., None]
+
+
 def _rot_z(angle: np.ndarray) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     z, o = np.zeros_like(angle), np.ones_like(angle)
@@ -51,25 +58,29 @@ def _rot_z(angle: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Geometry:
-    """Joint layout (eq. 2-3): base joints a_i, platform joints p_i (platform frame), links."""
-    base_radius: float
+    """Joint layout (eq. 2-3): base joints a_i, platform joints p_i (platform frame), links.
+
+    A scene's lengths and radii are scalars; a realised robot (rss6core/realised.py) may hold them
+    per leg or joint as (6,) arrays (every formula broadcasts over the legs)."""
+    base_radius: float             # R1, m (or per joint)
     base_angles: np.ndarray        # theta_i = u_i, rad
-    platform_radius: float
+    platform_radius: float         # R2, m (or per joint)
     platform_angles: np.ndarray    # beta_i, rad
-    crank_length: float            # L_ac, m
-    rod_length: float              # L_cb, m
+    crank_length: float            # L_ac, m (or per leg)
+    rod_length: float              # L_cb, m (or per leg)
+    actuator_offsets: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(6)))  # rad, true - commanded
 
     @property
     def a(self) -> np.ndarray:
         """Base joint centres a_i = R1 [cos theta_i, sin theta_i, 0] (6, 3), m."""
         th = self.base_angles
-        return _frozen(self.base_radius * np.stack([np.cos(th), np.sin(th), 0 * th], -1))
+        return _frozen(_per_leg(self.base_radius) * np.stack([np.cos(th), np.sin(th), 0 * th], -1))
 
     @property
     def p(self) -> np.ndarray:
         """Platform joint centres in the platform frame n_i* (6, 3), m."""
         be = self.platform_angles
-        return _frozen(self.platform_radius * np.stack([np.cos(be), np.sin(be), 0 * be], -1))
+        return _frozen(_per_leg(self.platform_radius) * np.stack([np.cos(be), np.sin(be), 0 * be], -1))
 
     @property
     def k(self) -> np.ndarray:
@@ -198,6 +209,7 @@ class Scene:
     contact: ContactLaw
     beam: BeamTheory = BeamTheory()   # [beam]: the links' beam theory (default Euler-Bernoulli)
     tolerance: Tolerances = Tolerances()
+    uncertain: UncertainInputs = UncertainInputs()   # [uncertain.*], [correlation.*] (rss6core/uncertain.py)
     source_text: str = field(default="", repr=False, compare=False)
     source_path: str = field(default="", repr=False, compare=False)
 
@@ -251,6 +263,7 @@ _SCHEMA: dict = {
         "platform_angles_deg": _Key(float, 6),
         "crank_length_m": _Key(float, check=_POS),
         "rod_length_m": _Key(float, check=_POS),
+        "actuator_offsets_deg": _Key(float, 6, default=(0.0,) * 6),   # the cranks' true - commanded angle
     },
     "crank_section": {"axial_width_m": _Key(float, check=_POS),
                       "height_m": _Key(float, check=_POS)},
@@ -463,6 +476,9 @@ def _build(v: dict, text: str, source: str) -> Scene:
         raise SceneError("[beam] mass: 'lumped' puts the sections' rotary inertia on the nodes' "
                          "rotations; set [beam] rotary_inertia = true")
     _check_clearances(v["clearance"], ct)
+    if any(g["actuator_offsets_deg"]):
+        raise SceneError("[geometry] actuator_offsets_deg: the nominal offsets are 0 (the controller's zero); "
+                         "draw them in an [uncertain.NAME] table")
     if ct["stick_velocity_m_s"] >= ct["slip_velocity_m_s"]:
         raise SceneError("[contact] stick_velocity_m_s: must be smaller than slip_velocity_m_s")
     dt, duration = v["simulation"]["time_step_s"], tr["duration_s"]
@@ -483,7 +499,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
         name=v["name"],
         geometry=Geometry(g["base_radius_m"], _frozen(deg(g["base_angles_deg"])),
                           g["platform_radius_m"], _frozen(deg(g["platform_angles_deg"])),
-                          g["crank_length_m"], g["rod_length_m"]),
+                          g["crank_length_m"], g["rod_length_m"], _frozen(deg(g["actuator_offsets_deg"]))),
         crank_section=RectangleSection(v["crank_section"]["axial_width_m"],
                                        v["crank_section"]["height_m"]),
         rod_section=rod,
@@ -508,7 +524,16 @@ def _build(v: dict, text: str, source: str) -> Scene:
                            ct["stiffness_scale"]),
         beam=BeamTheory(v["beam"]["theory"], v["beam"]["rotary_inertia"], v["beam"]["mass"]),
         tolerance=_tolerances(v.get("tolerance", {}), v["clearance"], v["sampling"]["size_tolerance"], ct),
+        uncertain=_uncertain(v),
         source_text=text, source_path=source)
+
+
+def _uncertain(v: dict) -> UncertainInputs:
+    """The [uncertain.*] and [correlation.*] tables (rss6core/uncertain.py), checked against the nominal keys."""
+    try:
+        return parse_uncertain(v.get("uncertain", {}), v.get("correlation", {}), v)
+    except UncertainInputError as exc:
+        raise SceneError(str(exc)) from None
 
 
 def parse_scene(text: str, source: str = "<string>") -> Scene:
@@ -518,8 +543,8 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: not valid TOML: {exc}") from None
     try:
-        tolerance = raw.pop("tolerance", {})
-        scene = _build(_read_table(raw, _SCHEMA) | {"tolerance": tolerance}, text, source)
+        extra = {k: raw.pop(k, {}) for k in ("tolerance", "uncertain", "correlation")}
+        scene = _build(_read_table(raw, _SCHEMA) | extra, text, source)
         check_workspace(scene)
     except (SceneError, WorkspaceError) as exc:
         raise SceneError(f"{source}: {exc}") from None

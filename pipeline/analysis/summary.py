@@ -5,7 +5,8 @@ import re
 
 import numpy as np
 
-from rss6core import crank_inertia, inverse_dynamics, models_with, natural_frequencies, rigid_motion, rod_inertia
+from rss6core import (crank_inertia, draws_per_realisation, inverse_dynamics, models_with, natural_frequencies,
+                      rigid_motion, rod_inertia)
 
 from ..files.schema import display_unit
 from ..vocabulary import DIRECTIONS, FINISHED
@@ -57,19 +58,30 @@ def clearance_summary(scene) -> dict:
                         "time_step_s": scene.simulation.contact_time_step,
                         "integrator": scene.simulation.contact_integrator,
                         "start": scene.simulation.contact_start},
+            "uncertain_inputs": uncertain_summary(scene),
             "run_default_level": run_default_level(scene)}
+
+
+def uncertain_summary(scene) -> dict:
+    """The [uncertain.*] inputs (key, each, draws, law with its parameters in the key's TOML unit)
+    and [correlation.*] matrices: empty for a scene without."""
+    u = scene.uncertain
+    return {"inputs": {i.name: {"parameter": i.parameter, "each": i.each, "draws": i.count, "law": i.law_text(),
+                                "units": i.draw_units} for i in u.inputs},
+            "correlations": {c.name: {"inputs": list(c.inputs), "matrix": [list(r) for r in c.matrix]}
+                             for c in u.correlations}}
 
 
 CLEARANCE_LEVELS = models_with("draws_clearances")   # the levels whose realisations draw clearances
 
 
 def run_default_level(scene) -> str | None:
-    """The scene's level for ``rss6 run``, or None when it has no clearances while the scene has
-    some: an ensemble of it would be N identical runs."""
+    """The scene's level for ``rss6 run``, or None when its realisations do not differ (no clearances,
+    no uncertain inputs) while the scene has clearances: an ensemble of it would be N identical runs."""
     c = scene.clearance
     sizes = (c.revolute_radial, c.revolute_axial, c.spherical_C, c.spherical_B)
     model = scene.simulation.model
-    return None if model not in CLEARANCE_LEVELS and any(sizes) else model
+    return model if draws_per_realisation(scene, model) or not any(sizes) else None
 
 
 def format_summary(s: dict) -> str:
@@ -104,9 +116,18 @@ def _clearance_lines(s: dict) -> list[str]:
             "clearance sizes drawn per joint [mm]: " + (bands or "none (every joint at its nominal size)"),
             "sampling (fractions of the clearance): " + join(s["sampling"]),
             "contact (SI): " + join(s["contact"]),
+            *_uncertain_lines(s["uncertain_inputs"]),
             f"rss6 run default level: {level}" if level else
             f"rss6 run default level: none (the scene's {s['model']!r} has no clearances; "
             "rss6 run asks for --model)"]
+
+
+def _uncertain_lines(u: dict) -> list[str]:
+    """One line per uncertain input and correlation (none for a scene without)."""
+    lines = [f"uncertain input {name}: {i['parameter']}, each {i['each']} ({i['draws']} draws), {i['law']}"
+             for name, i in u["inputs"].items()]
+    return lines + [f"correlation {name}: Gaussian copula over {', '.join(c['inputs'])}, matrix {c['matrix']}"
+                    for name, c in u["correlations"].items()]
 
 
 def error_summary(ds) -> dict:

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from rss6core import (FAILED, MODEL_LEVELS, SimulationResult, __version__, parse_scene, prepare_level, stored_draw,
-                      time_grid)
+                      stored_inputs, time_grid)
 
 from ..files.outputs import OutputLock, PartsManifest
 from ..files.opening import open_ensemble
@@ -97,8 +97,10 @@ def run_chunk(spec: EnsembleSpec, realizations: list[int]):
     draws = [result.draw if result.draw is not None
              else stored_draw(scene, spec.model, spec.seed, r, spec.dt, spec.design())
              for r, result in zip(realizations, results)]
+    inputs = [result.inputs if result.inputs is not None else stored_inputs(scene, spec.seed, r, spec.design())
+              for r, result in zip(realizations, results)] if scene.uncertain else None
     chunk = chunk_dataset(results, draws, realizations, spec.store, scene.simulation.settle_time,
-                          scene.simulation.steady_after)
+                          scene.simulation.steady_after, inputs)
     return _finish([chunk], scene, spec)
 
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from rss6core import (SceneError, default_integrator, default_time_step, model_level, models_with, parse_scene,
-                      time_grid, uniform_dimension)
+from rss6core import (SceneError, check_uncertain_level, default_integrator, default_time_step,
+                      draws_per_realisation, model_level, parse_scene, time_grid, uniform_dimension)
 
 from ..scenes.variant import scene_variant
 from ..vocabulary import OptionError
@@ -47,7 +47,8 @@ def resolve_level(scene, config, *, model: str | None = None, integrator: str | 
                   dt: float | None = None, elements: int | None = None, start: str | None = None) -> LevelSettings:
     """The command line's settings, else the scene's; the step is checked against the duration."""
     sim = scene.simulation
-    model = model or sim.model
+    given, model = model is not None, model or sim.model
+    _check_uncertain(scene, model, from_option=given)
     if start is not None and not model_level(model).contact_start:
         raise OptionError(f"--start {start}: sets the contact level's initial state; this run is the "
                           f"{model} level")
@@ -63,19 +64,30 @@ def resolve_level(scene, config, *, model: str | None = None, integrator: str | 
                          elements or sim.elements_per_link)
 
 
+def _check_uncertain(scene, model: str, from_option: bool) -> None:
+    """Refuse, before any work, a level that cannot take the scene's [uncertain.*] inputs yet: an
+    OptionError naming --model, or a SceneError naming the scene's [simulation] model."""
+    try:
+        check_uncertain_level(scene, model)
+    except ValueError as exc:
+        if from_option:
+            raise OptionError(f"--model {model}: {exc}") from None
+        raise SceneError(f"{scene.source_path}: [simulation] model = {model!r}: {exc}") from None
+
+
 def resolve_replicates(sampler: str, replicates: int | None, n: int, level: LevelSettings) -> int | None:
     """R for --sampler qmc (None for mc), checked against -n and the level's draws."""
     if sampler == "mc":
         if replicates is not None:
             raise OptionError("--replicates applies to --sampler qmc only")
         return None
-    if level.model not in models_with("draws_clearances"):
+    if not draws_per_realisation(level.scene, level.model):
         raise OptionError(f"--sampler qmc: the {level.model} level draws no clearances")
     replicates = DEFAULT_REPLICATES if replicates is None else replicates
     redraws = model_level(level.model).redraws_every_step
     steps = len(time_grid(level.scene.trajectory.duration, level.dt)) if redraws else None
     try:
-        check_qmc(n, replicates, uniform_dimension(steps))
+        check_qmc(n, replicates, uniform_dimension(steps, level.scene))
     except ValueError as exc:
         raise OptionError(str(exc)) from None
     return replicates

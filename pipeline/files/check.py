@@ -15,6 +15,7 @@ import xarray as xr
 from rss6core import INTEGRATORS, MODELS, STATUSES, SceneError, model_level, models_with, parse_scene, time_grid
 
 from ..vocabulary import DIRECTIONS, FINISHED, QUANTITIES, STORES, SUMMARIES, WINDOWS
+from .records import INPUT_COORDS
 from .schema import ENSEMBLE_ATTRS, MIXED_UNITS, PROVENANCE, EnsembleFileError, _unit_table
 
 __all__ = ["check_ensemble", "check_run"]
@@ -283,6 +284,36 @@ def _ensemble_attributes(ds, path, status: np.ndarray) -> None:
             raise EnsembleFileError(f"{path}: attribute {key} is {value}, but the file holds {held} {what}")
 
 
+def _uncertain_inputs(ds, path) -> None:
+    """uncertain_input: present exactly when scene_toml has [uncertain.*] tables, with their labels,
+    keys, units and laws along ``input``, and every draw inside its law's range."""
+    inputs = _scene_of(ds.attrs["scene_toml"]).uncertain
+    if not inputs:
+        if "uncertain_input" in ds:
+            raise EnsembleFileError(f"{path}: the file holds uncertain_input, but scene_toml has no "
+                                    "[uncertain.*] table")
+        return
+    if "uncertain_input" not in ds or ds["uncertain_input"].dims != ("realization", "input"):
+        raise EnsembleFileError(f"{path}: no variable uncertain_input (realization, input), which rss6 writes "
+                                "for a scene with [uncertain.*] tables")
+    want = {"input": inputs.labels(), "input_parameter": inputs.columns(lambda i: i.parameter),
+            "input_units": inputs.columns(lambda i: i.draw_units), "input_law": inputs.columns(lambda i: i.law_text())}
+    for name in ("input",) + INPUT_COORDS:
+        got = tuple(str(v) for v in ds[name].values) if name in ds.coords else None
+        if got != want[name]:
+            raise EnsembleFileError(f"{path}: coordinate {name} is {got}; scene_toml's [uncertain.*] tables give "
+                                    f"{want[name]}")
+    x = ds["uncertain_input"].values
+    low, high = (np.concatenate([i.draws(np.full(i.count, u)) for i in inputs.inputs]) for u in (0.0, 1.0))
+    with np.errstate(invalid="ignore"):
+        bad = ~((x >= low - SLACK * np.abs(low)) & (x <= high + SLACK * np.abs(high)))
+    if bad.any():
+        r, k = np.argwhere(bad)[0]
+        raise EnsembleFileError(f"{path}: uncertain_input {want['input'][k]} of realisation "
+                                f"{ds['realization'].values[r]} is {x[r, k]!r}, outside its law's range "
+                                f"[{low[k]!r}, {high[k]!r}]")
+
+
 def check_ensemble(ds, path) -> None:
     """EnsembleFileError unless ``ds`` is a well-formed rss6 ensemble (docs/model.md section 7)."""
     _dims(ds, path, {"window", "quantity", "realization", "direction"})
@@ -303,6 +334,7 @@ def check_ensemble(ds, path) -> None:
                                 f"{' or '.join(STATUSES)}")
     _attributes(ds, path, status.values == FINISHED)
     _ensemble_attributes(ds, path, status.values)
+    _uncertain_inputs(ds, path)
     _values(ds, path, status.values == FINISHED)
     _invariants(ds, path)
 

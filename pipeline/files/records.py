@@ -12,7 +12,7 @@ from ..vocabulary import DIRECTIONS, FINISHED, QUANTITIES, WINDOWS
 from .schema import JOINTS, MIXED_UNITS, _provenance, _unit_table, command_line
 
 __all__ = ["window_masks", "window_reductions", "error_summaries", "window_summaries", "window_label",
-           "check_window", "run_dataset", "chunk_dataset", "finish_ensemble"]
+           "check_window", "run_dataset", "chunk_dataset", "input_variables", "INPUT_COORDS", "finish_ensemble"]
 
 
 _CONTACT_ATTRS = {"long_name": "maximum over time of the contact force magnitude per joint",
@@ -107,9 +107,12 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
     err = _history(result)
     summary_attrs = {"units": MIXED_UNITS, "cell_methods": "time: maximum"}
     peak, mean = window_summaries(result, scene.simulation.settle_time, scene.simulation.steady_after)
-    extra = {}
+    extra, input_coords = {}, {}
     if result.contact_force_peak is not None:
         extra["max_contact_force"] = (("joint",), result.contact_force_peak, _CONTACT_ATTRS)
+    if result.inputs is not None:   # a scene with [uncertain.*] tables: the run's drawn inputs
+        (_, values, attrs), input_coords = input_variables([result.inputs])
+        extra["uncertain_input"] = (("input",), values[0], attrs)
     return xr.Dataset(
         data_vars={
             "error": (("quantity", "time", "direction"), err,
@@ -125,7 +128,8 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
         coords={
             "time": ("time", result.t, {"units": "s", "long_name": "time", "axis": "T",
                                         "standard_name": "time"}),
-            **({"joint": ("joint", list(JOINTS))} if extra else {}),
+            **({"joint": ("joint", list(JOINTS))} if "max_contact_force" in extra else {}),
+            **input_coords,
             "window": ("window", list(WINDOWS), _WINDOW_ATTRS),
             "direction": ("direction", list(DIRECTIONS),
                           {"long_name": "platform pose direction in the base frame"}),
@@ -147,12 +151,13 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
 
 
 def chunk_dataset(results: list, draws: list, realizations: list[int], store: str,
-                  settle: float = 0.0, steady_after: float = 0.0) -> xr.Dataset:
+                  settle: float = 0.0, steady_after: float = 0.0, inputs: list | None = None) -> xr.Dataset:
     """Realisations ``realizations`` (their results and the draws the file records) as one slice of
     the ensemble file (docs/model.md section 7), built at once rather than concatenated from one
     Dataset per realisation; the summaries leave out t < ``settle`` (s) and are split into WINDOWS
     at ``steady_after`` (s). A realisation without contact forces among others that have them
-    (a failed one) gets NaN there."""
+    (a failed one) gets NaN there. ``inputs``: each realisation's uncertain inputs (InputDraw) of a
+    scene with [uncertain.*] tables, stored as ``uncertain_input`` (:func:`input_variables`)."""
     summaries = [window_summaries(result, settle, steady_after) for result in results]
     peak = np.stack([p for p, _ in summaries], axis=2)          # (window, quantity, realization, dir)
     mean = np.stack([m for _, m in summaries], axis=2)
@@ -188,6 +193,10 @@ def chunk_dataset(results: list, draws: list, realizations: list[int], store: st
              for r in results]), _CONTACT_ATTRS)
     coords = {"realization": ("realization", np.asarray(realizations, dtype=np.int64),
                               {"long_name": "realisation index", "axis": "E"})}
+    if inputs:
+        variable, input_coords = input_variables(inputs)
+        data["uncertain_input"] = variable
+        coords.update(input_coords)
     if store == "full":
         data["error"] = (("realization", "quantity", "time", "direction"),
                          np.stack([_history(r) for r in results]),
@@ -195,6 +204,30 @@ def chunk_dataset(results: list, draws: list, realizations: list[int], store: st
                           "units": MIXED_UNITS})
         coords["time"] = ("time", results[0].t, {"units": "s", "standard_name": "time", "axis": "T"})
     return xr.Dataset(data, coords=coords)
+
+
+INPUT_COORDS = ("input_parameter", "input_units", "input_law")   # per drawn input, beside its label
+
+
+def input_variables(inputs: list) -> tuple[tuple, dict]:
+    """The realisations' drawn uncertain inputs (InputDraw each) as the variable ``uncertain_input``
+    (realization, input): SI deviations from the nominal (lognormal: factors); per input its label,
+    the scene key it draws, its units and its law as coordinates along ``input``."""
+    table = inputs[0].inputs
+    values = np.stack([d.values for d in inputs])
+    variable = (("realization", "input"), values,
+                {"long_name": "drawn uncertain input: deviation from the nominal value in SI units, "
+                              "or the factor on it for a lognormal law",
+                 "comment": "units per input: coordinate input_units; law: input_law ([uncertain.*] tables, "
+                            "docs/model.md section 4b)"})
+    coords = {"input": ("input", list(table.labels()), {"long_name": "uncertain input, per draw"}),
+              "input_parameter": ("input", list(table.columns(lambda i: i.parameter)),
+                                  {"long_name": "the scene key (table.key) the input draws"}),
+              "input_units": ("input", list(table.columns(lambda i: i.draw_units)),
+                              {"long_name": "units of the input's draws"}),
+              "input_law": ("input", list(table.columns(lambda i: i.law_text())),
+                            {"long_name": "law of the input's draws, parameters in the key's TOML unit"})}
+    return variable, coords
 
 
 def finish_ensemble(parts: list[xr.Dataset], scene, *, model: str, integrator: str, dt: float,

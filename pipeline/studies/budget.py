@@ -102,6 +102,10 @@ def _check_scene(spec: EnsembleSpec) -> None:
     """BudgetError for a scene whose sizes a [clearance] scale would not move: a family whose
     [tolerance.<family>] band (absolute limits, m) draws them. A relative [sampling] size_tolerance
     scales with the nominal size, so it does not stop a budget."""
+    if spec.scene().uncertain:
+        raise BudgetError(f"{spec.source}: a clearance budget scales the error with the clearances, which the "
+                          "realised robot's geometric error of its [uncertain.*] inputs does not follow; budget the "
+                          "scene without its [uncertain.*] tables")
     tolerance = spec.scene().tolerance
     banded = [k.removesuffix("_m") for k in FAMILY_KEYS if getattr(tolerance, k.removesuffix("_m")) is not None]
     if banded:

@@ -6,7 +6,9 @@ magnitudes, angles and axial offsets through the laws' inverse CDFs
 (:func:`clearance_draws_from_uniforms`).  The inputs are grouped by joint family
 (the scene's [clearance] keys: revolute_radial, revolute_axial, spherical_C,
 spherical_B) or by joint (A1..A6 with their radial and axial parts, C1..C6,
-B1..B6).  SALib samples them with Saltelli's scheme on scrambled Sobol' points
+B1..B6); a scene's [uncertain.*] inputs add their uniforms (one per draw, the core's
+inputs_from_uniforms), grouped by input in the family design and as one group
+``uncertain_inputs`` in the joint design.  SALib samples them with Saltelli's scheme on scrambled Sobol' points
 (N base rows, N (G + 2) evaluations for G groups), the level is evaluated on
 every row (dask workers, or in this process), and SALib's estimators give the
 first-order (Saltelli 2010) and total (Jansen 1999) indices of each statistic
@@ -21,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, MODELS, model_level,
-                      models_with, prepare_level, size_band)
+from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, inputs_from_uniforms,
+                      MODELS, model_level, models_with, prepare_level, size_band)
 
 from ..ensemble.cluster import dask_client
 from ..files.records import check_window, window_label, window_summaries
@@ -53,10 +55,12 @@ class SensitivityError(UserError):
 
 @dataclass(frozen=True)
 class ClearanceInputs:
-    """The independent U(0, 1) inputs of one clearance draw: name, joint and family of each column."""
+    """The independent U(0, 1) inputs of one clearance draw, then of the scene's [uncertain.*] inputs
+    (the last ``uncertain`` columns): name, joint and family of each column."""
     names: tuple[str, ...]
     joints: tuple[str, ...]
     families: tuple[str, ...]
+    uncertain: int = 0
 
 
 def clearance_inputs(scene) -> ClearanceInputs:
@@ -75,8 +79,14 @@ def clearance_inputs(scene) -> ClearanceInputs:
             j = f"{kind}{leg}"
             rows += [(j, "size", family)] if sized[family] else []
             rows += [(j, "magnitude", family), (j, "polar", family), (j, "azimuth", family)]
-    return ClearanceInputs(tuple(f"{j}_{w}" for j, w, _ in rows), tuple(j for j, _, _ in rows),
-                           tuple(f for _, _, f in rows))
+    drawn = scene.uncertain.inputs   # grouped by input name (families) or together (joints)
+    rows += [(UNCERTAIN_GROUP, label, i.name) for i in drawn for label in i.labels()]
+    return ClearanceInputs(tuple(w if j == UNCERTAIN_GROUP else f"{j}_{w}" for j, w, _ in rows),
+                           tuple(j for j, _, _ in rows), tuple(f for _, _, f in rows),
+                           sum(i.count for i in drawn))
+
+
+UNCERTAIN_GROUP = "uncertain_inputs"   # the joint design's group of every [uncertain.*] input
 
 
 def clearance_draws_from_uniforms(scene, inputs: ClearanceInputs, u: np.ndarray) -> list[ClearanceDraw]:
@@ -105,9 +115,10 @@ class Design:
 
 def designs(inputs: ClearanceInputs, per_joint: bool) -> list[Design]:
     """The family design, and with ``per_joint`` the joint design (A_i radial and axial together)."""
-    out = [("families", inputs.families, JOINT_FAMILIES)]
+    extra = tuple(dict.fromkeys(inputs.families[len(inputs.families) - inputs.uncertain:])) if inputs.uncertain else ()
+    out = [("families", inputs.families, JOINT_FAMILIES + extra)]
     if per_joint:
-        out.append(("joints", inputs.joints, JOINTS))
+        out.append(("joints", inputs.joints, JOINTS + ((UNCERTAIN_GROUP,) if extra else ())))
     return [Design(name, order, {"num_vars": len(inputs.names), "names": list(inputs.names),
                                  "bounds": [[0.0, 1.0]] * len(inputs.names), "groups": list(labels)})
             for name, labels, order in out]
@@ -138,7 +149,10 @@ def _evaluate_chunk(spec, inputs: ClearanceInputs, u: np.ndarray, window: str = 
     scene = spec.scene()
     sim = scene.simulation
     level = prepare_level(scene, spec.model, spec.integrator, spec.dt, spec.elements)
-    results = level.simulate_draws(clearance_draws_from_uniforms(scene, inputs, u))
+    given = None
+    if inputs.uncertain:
+        given = [inputs_from_uniforms(scene.uncertain, row[len(inputs.names) - inputs.uncertain:]) for row in u]
+    results = level.simulate_draws(clearance_draws_from_uniforms(scene, inputs, u), given)
     k = WINDOWS.index(window)
     stats = np.stack([np.stack([w[k] for w in window_summaries(r, sim.settle_time, sim.steady_after)])
                       for r in results])
@@ -244,7 +258,7 @@ def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int
                             {"long_name": "grouping the index belongs to (families or joints)"})
     data["group_inputs"] = (("group",), np.array([t for r in results for t in _group_inputs(inputs, r.design)],
                                                  dtype=object),
-                            {"long_name": "the U(0, 1) inputs of the clearance draw in the group"})
+                            {"long_name": "the U(0, 1) inputs of the draw in the group (clearances, uncertain inputs)"})
     coords = {"index": ("index", list(INDICES), {"long_name": "S1 first-order, ST total Sobol' index"}),
               "bound": ("bound", list(BOUNDS), {"long_name": "estimate and bootstrap interval bounds"}),
               "group": ("group", groups, {"long_name": "input group: joint family or joint"}),
@@ -312,9 +326,12 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFI
                                f"measured from {MIN_N})")
     start = time.perf_counter()
     scene = spec.scene()
+    if scene.uncertain.correlations:
+        raise SensitivityError(f"{spec.source}: [correlation.{scene.uncertain.correlations[0].name}]: Sobol' "
+                               "indices need independent inputs; run the scene without its [correlation.*] tables")
     _check_window(scene, window)
     c = scene.clearance
-    if not any((c.revolute_radial, c.revolute_axial, c.spherical_C, c.spherical_B)):
+    if not any((c.revolute_radial, c.revolute_axial, c.spherical_C, c.spherical_B)) and not scene.uncertain:
         raise SensitivityError(f"{spec.source}: every [clearance] size is 0, so no input varies and no "
                                "Sobol' index is defined")
     inputs = clearance_inputs(scene)
@@ -346,11 +363,12 @@ def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
     """A table of the family indices of ``statistic``: per quantity and direction, each family's
     total index with its interval, and the family of largest total index (with the runner-up when
     their intervals overlap)."""
-    da = ds[f"{statistic}_sobol"].sel(group=[g for g in JOINT_FAMILIES if g in ds["group"].values])
+    da = ds[f"{statistic}_sobol"].sel(group=[g for g, d in zip(ds["group"].values, ds["group_design"].values)
+                                             if d == "families"])
     conf = f"{100 * float(ds.attrs['confidence']):g} %"
     head = "".join(f"{g:>24s}" for g in da["group"].values)
     window = ds[f"{statistic}_sobol"].attrs.get("analysis_window", "whole run")
-    lines = [f"total Sobol' indices ST of the per-realisation {statistic} by joint family, "
+    lines = [f"total Sobol' indices ST of the per-realisation {statistic} by joint family (and uncertain input), "
              f"{ds.attrs['model']} level, {window}, N = {ds.attrs['n_base_samples']}, "
              f"[{conf} bootstrap interval]",
              f"{'quantity':<13s}{'dir':<4s}{head}  largest"]

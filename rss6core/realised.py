@@ -1,0 +1,105 @@
+"""The realised robot: one realisation's drawn geometry driven by the nominal controller (issue 38).
+
+The controller knows only the drawing: it commands the nominal inverse kinematics alpha_cmd(t)
+(:func:`.kinematics.rigid_motion` of the scene).  The realised robot's cranks turn to alpha_cmd +
+its actuator offsets, and its platform takes the pose the realised closure gives (Newton's forward
+kinematics, :func:`.kinematics.forward_kinematics`), with twist and its rate from the differentiated
+closure (docs/model.md section 3b):
+    G [v, omega] = (n . c_alpha) alpha',
+    G [a, omega'] = (n . c_alpha) alpha'' + (n . c_alpha_alpha) alpha'^2 + |n'|^2 - n . (omega x (omega x r)),
+G the rows [n_i, r_i x n_i], n_i = c_i - b_i.  Its error against the ideal pose is the geometric
+(kinematic) error of the rigid level; the quasi-static level adds the clearance closure about it.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .kinematics import RigidMotion, crank_points, forward_kinematics, leg_jacobian, platform_joints
+from .trajectory import PlatformMotion, _euler_rate_matrix_dot, euler_rate_matrix, rotation
+
+__all__ = ["GEOMETRY_KEYS", "realised_geometry", "realised_motion", "motion_error", "linear_length_error"]
+
+# each drawable [geometry] key and the Geometry field it sets
+GEOMETRY_KEYS = {"geometry.crank_length_m": "crank_length", "geometry.rod_length_m": "rod_length",
+                 "geometry.base_radius_m": "base_radius", "geometry.platform_radius_m": "platform_radius",
+                 "geometry.base_angles_deg": "base_angles", "geometry.platform_angles_deg": "platform_angles",
+                 "geometry.actuator_offsets_deg": "actuator_offsets"}
+
+
+def _frozen(values) -> np.ndarray:
+    out = np.array(values, dtype=float)
+    out.flags.writeable = False
+    return out
+
+
+def realised_geometry(geometry, inputs):
+    """The scene's ``geometry`` with the drawn values of ``inputs`` (an :class:`.uncertain.InputDraw`):
+    per leg or joint (6,) where drawn so, (1,) for one shared draw; the nominal elsewhere."""
+    changes = {field: _frozen(inputs.realised(key)) for key, field in GEOMETRY_KEYS.items()
+               if inputs.realised(key) is not None}
+    return dataclasses.replace(geometry, **changes)
+
+
+def is_nominal(geometry, realised) -> bool:
+    """True when the realised geometry holds the nominal values exactly (zero-width draws)."""
+    return all(np.array_equal(*np.broadcast_arrays(getattr(realised, f), getattr(geometry, f)))
+               for f in GEOMETRY_KEYS.values())
+
+
+def _dot(x, y):
+    return np.einsum("tli,tli->tl", x, y)
+
+
+def realised_motion(geometry, nominal: RigidMotion) -> RigidMotion:
+    """The realised robot's rigid motion under the nominal commands of ``nominal`` (same times)."""
+    alpha = nominal.alpha + geometry.actuator_offsets
+    alpha_dot, alpha_ddot = nominal.alpha_dot, nominal.alpha_ddot
+    pose, _ = forward_kinematics(geometry, alpha, nominal.platform.pose)
+    R = rotation(pose[:, 3:])
+    b, r = platform_joints(geometry, pose[:, :3], R)
+    c, dc, d2c = crank_points(geometry, alpha)
+    n = c - b
+    G = np.concatenate([n, np.cross(r, n)], -1)
+    twist = np.linalg.solve(G, (_dot(n, dc) * alpha_dot)[..., None])[..., 0]
+    v, omega = twist[:, :3], twist[:, 3:]
+    w = omega[:, None, :]
+    b_dot = v[:, None, :] + np.cross(w, r)
+    c_dot = dc * alpha_dot[..., None]
+    n_dot = c_dot - b_dot
+    centripetal = np.cross(w, np.cross(w, r))
+    rhs = (_dot(n, dc) * alpha_ddot + _dot(n, d2c) * alpha_dot ** 2 + _dot(n_dot, n_dot)
+           - _dot(n, centripetal))
+    rate = np.linalg.solve(G, rhs[..., None])[..., 0]
+    a, omega_dot = rate[:, :3], rate[:, 3:]
+    b_ddot = a[:, None, :] + np.cross(omega_dot[:, None, :], r) + centripetal
+    c_ddot = dc * alpha_ddot[..., None] + d2c * (alpha_dot ** 2)[..., None]
+    E = euler_rate_matrix(pose[:, 3:])
+    euler_rate = np.linalg.solve(E, omega[..., None])[..., 0]
+    euler_acc = np.linalg.solve(E, (omega_dot - np.einsum("tij,tj->ti", _euler_rate_matrix_dot(
+        pose[:, 3:], euler_rate), euler_rate))[..., None])[..., 0]
+    platform = PlatformMotion(nominal.t, pose, np.concatenate([v, euler_rate], -1),
+                              np.concatenate([a, euler_acc], -1), R, omega, omega_dot)
+    return RigidMotion(platform, alpha, alpha_dot, alpha_ddot, c, c_dot, c_ddot, b, b_dot, b_ddot, r,
+                       leg_jacobian(geometry, b, r, alpha))
+
+
+def motion_error(real: RigidMotion, ideal: RigidMotion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Realised minus ideal platform motion (T, 6) each: displacement [o - o*, rotation vector of
+    R R*^T], velocity [v - v*, omega - omega*], acceleration [a - a*, omega' - omega'*] (SI)."""
+    p, q = real.platform, ideal.platform
+    turn = Rotation.from_matrix(np.einsum("tij,tkj->tik", p.R, q.R)).as_rotvec()
+    return (np.concatenate([p.o - q.o, turn], -1), np.concatenate([p.v - q.v, p.omega - q.omega], -1),
+            np.concatenate([p.a - q.a, p.omega_dot - q.omega_dot], -1))
+
+
+def linear_length_error(geometry, ideal: RigidMotion, d_crank, d_rod) -> np.ndarray:
+    """First-order pose error (T, 6) of crank and rod length deviations (6,) m: J_x dx = J_g dg with
+    J_x = [n_i, r_i x n_i] and J_g = [n_i . (c_i - a_i) / L_ac, -L_cb] per leg (closure |c - b|^2 = L_cb^2)."""
+    n = ideal.c - ideal.b
+    G = np.concatenate([n, np.cross(ideal.r, n)], -1)
+    rhs = (_dot(n, ideal.c - geometry.a) / geometry.crank_length * np.asarray(d_crank)
+           - geometry.rod_length * np.asarray(d_rod))
+    return np.linalg.solve(G, rhs[..., None])[..., 0]

@@ -1,0 +1,102 @@
+"""The realised robot driven by the nominal controller: its geometric error against closed forms."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from rss6core import parse_scene, rigid_motion, simulate
+from rss6core.kinematics import leg_jacobian
+from rss6core.realised import linear_length_error, motion_error, realised_motion
+
+
+def _table(name, key, law_lines, each="leg"):
+    return f'\n[uncertain.{name}]\nparameter = "{key}"\neach = "{each}"\n{law_lines}\n'
+
+
+def _lengths(text, h):
+    """Crank and rod lengths per leg, uniform deviations in [-h, h] m."""
+    law = f'law = "uniform"\nlow_m = {-h!r}\nhigh_m = {h!r}'
+    return parse_scene(text + _table("crank", "geometry.crank_length_m", law)
+                       + _table("rod", "geometry.rod_length_m", law), "s.toml")
+
+
+@pytest.fixture(scope="module")
+def smoke_text(configs):
+    return (configs / "smoke.toml").read_text()
+
+
+def test_rigid_error_of_length_deviations_is_the_linear_error_model_to_second_order(smoke_text):
+    """J_x dx = J_g dg (realised.linear_length_error) against the realised forward kinematics: the
+    residual is second order, so it shrinks 4x when the deviations halve (same uniforms, half width)."""
+    residual, size = [], []
+    for h in (2e-4, 1e-4):
+        scene = _lengths(smoke_text, h)
+        result = simulate(scene, "rigid", seed=4, realization=1)
+        linear = linear_length_error(scene.geometry, rigid_motion(scene), result.inputs.of("crank"),
+                                     result.inputs.of("rod"))
+        residual.append(np.abs(result.displacement - linear).max())
+        size.append(np.abs(result.displacement).max())
+    assert size[0] > 1e-4 and residual[0] < 1e-2 * size[0]
+    assert residual[0] / residual[1] == pytest.approx(4.0, rel=0.05)
+
+
+def test_actuator_offsets_give_the_inverse_jacobian_error(smoke_text):
+    """Only offsets drawn: dx = J^-1 d alpha to first order (J the leg Jacobian, alpha' = J twist)."""
+    residual = []
+    for h in (0.02, 0.01):
+        scene = parse_scene(smoke_text + _table("zero", "geometry.actuator_offsets_deg",
+                                                f'law = "uniform"\nlow_deg = {-h}\nhigh_deg = {h}'))
+        result = simulate(scene, "rigid", seed=2, realization=0)
+        m = rigid_motion(scene)
+        linear = np.linalg.solve(m.jacobian, np.broadcast_to(result.inputs.of("zero"), m.alpha.shape)[..., None])
+        residual.append(np.abs(result.displacement - linear[..., 0]).max())
+        assert residual[-1] < 1e-2 * np.abs(result.displacement).max()
+    assert residual[0] / residual[1] == pytest.approx(4.0, rel=0.1)
+
+
+def test_realised_rates_are_the_derivatives_of_the_realised_pose(smoke_text):
+    scene = _lengths(smoke_text, 1e-3)
+    m = rigid_motion(scene)
+    rng = np.random.default_rng(0)
+    geo = dataclasses.replace(scene.geometry, crank_length=scene.geometry.crank_length + rng.uniform(-1e-3, 1e-3, 6),
+                              base_angles=scene.geometry.base_angles + rng.uniform(-1e-2, 1e-2, 6),
+                              actuator_offsets=rng.uniform(-1e-2, 1e-2, 6))
+    p = realised_motion(geo, m).platform
+    h = m.t[1] - m.t[0]
+    for x, rate in ((p.pose, p.pose_rate), (p.pose_rate, p.pose_acc)):
+        central = (x[2:] - x[:-2]) / (2 * h)      # error h^2 x''' / 6
+        third = np.abs(np.diff(x, 3, axis=0)).max() / h ** 3
+        assert np.abs(central - rate[1:-1]).max() < 2 * h ** 2 * third / 6 + 1e-9
+
+
+def test_the_nominal_robot_has_zero_error(smoke_text):
+    """A zero-width law: exactly zero rigid error and the nominal scene's quasi-static bits; the
+    realised kinematics of the nominal geometry itself (no shortcut) stays at rounding level."""
+    zero = parse_scene(smoke_text + _table("crank", "geometry.crank_length_m", 'law = "normal"\nstd_m = 0.0'))
+    rigid = simulate(zero, "rigid", seed=1, realization=3)
+    assert not np.any(rigid.displacement) and not np.any(rigid.acceleration)
+    a, b = simulate(zero, "quasi-static", seed=1, realization=3), simulate(parse_scene(smoke_text), "quasi-static",
+                                                                             seed=1, realization=3)
+    for f in ("displacement", "velocity", "acceleration"):
+        assert np.array_equal(getattr(a, f), getattr(b, f))
+    m = rigid_motion(zero)
+    d, v, acc = motion_error(realised_motion(zero.geometry, m), m)
+    assert np.abs(d).max() < 1e-14 and np.abs(v).max() < 1e-13 and np.abs(acc).max() < 1e-12
+
+
+def test_per_leg_geometry_of_nominal_values_keeps_every_bit(smoke_text):
+    scene = parse_scene(smoke_text)
+    g = scene.geometry
+    legs = dataclasses.replace(g, **{f: np.full(6, getattr(g, f)) for f in
+                                     ("crank_length", "rod_length", "base_radius", "platform_radius")})
+    a, b = rigid_motion(scene), rigid_motion(dataclasses.replace(scene, geometry=legs))
+    for f in ("alpha", "alpha_dot", "alpha_ddot", "c", "c_ddot", "b", "jacobian"):
+        assert np.array_equal(getattr(a, f), getattr(b, f)), f
+    assert np.array_equal(leg_jacobian(g, a.b, a.r, a.alpha), leg_jacobian(legs, a.b, a.r, a.alpha))
+
+
+def test_levels_that_cannot_take_uncertain_inputs_refuse_them(smoke_text):
+    scene = _lengths(smoke_text, 1e-4)
+    for model in ("elastic", "paper", "contact"):
+        with pytest.raises(ValueError, match=rf"^the {model} level cannot take \[uncertain.\*\] inputs yet"):
+            simulate(scene, model)

@@ -1,0 +1,186 @@
+"""Uncertain inputs through the pipeline: the ensemble file records every draw, reproducibly, and the
+commands list them or refuse a level that cannot take them."""
+import numpy as np
+import pytest
+import xarray as xr
+
+from pipeline.cli import main
+from pipeline.ensemble.run import EnsembleSpec, ensemble, run_chunk
+from pipeline.ensemble.sampler import QMCDesign
+from pipeline.files.check import check_ensemble
+from pipeline.files.reading import load_netcdf
+from pipeline.files.schema import EnsembleFileError
+from pipeline.files.writing import write_netcdf
+from rss6core import parse_scene, uniform_dimension
+from rss6core.uncertain import inputs_from_uniforms
+
+from .test_cf import cf_errors
+
+TABLES = """
+[uncertain.crank]
+parameter = "geometry.crank_length_m"
+each = "leg"
+law = "uniform"
+low_m = -0.1e-3
+high_m = 0.1e-3
+
+[uncertain.zero]
+parameter = "geometry.actuator_offsets_deg"
+each = "leg"
+law = "triangular"
+low_deg = -0.02
+mode_deg = 0.0
+high_deg = 0.01
+
+[uncertain.mass]
+parameter = "platform.mass_kg"
+law = "lognormal"
+sigma = 0.1
+"""
+
+
+@pytest.fixture(scope="module")
+def text(configs):
+    return (configs / "smoke.toml").read_text() + TABLES
+
+
+def _spec(text, model="quasi-static", seed=0, replicates=None):
+    return EnsembleSpec(text, "u.toml", model, "newmark", 1e-3, 4, seed, "summary", qmc_replicates=replicates)
+
+
+def test_the_file_records_every_draw_with_names_units_and_laws_and_is_cf(text, tmp_path):
+    ds = run_chunk(_spec(text), [0, 1, 2])
+    var = ds["uncertain_input"]
+    assert var.dims == ("realization", "input") and var.shape == (3, 13)
+    assert list(ds["input"].values[:2]) == ["crank[leg 1]", "crank[leg 2]"] and ds["input"].values[-1] == "mass"
+    assert list(ds["input_units"].values[[0, 6, 12]]) == ["m", "rad", "1"]
+    assert ds["input_law"].values[12] == "lognormal factor (sigma=0.1, median=1.0)"
+    assert ds["input_parameter"].values[6] == "geometry.actuator_offsets_deg"
+    lo, hi = np.radians([-0.02, 0.01])
+    assert (np.abs(var.values[:, :6]) <= 1e-4).all()
+    assert (var.values[:, 6:12] >= lo).all() and (var.values[:, 6:12] <= hi).all()
+    path = tmp_path / "u.nc"
+    write_netcdf(ds, path)
+    assert cf_errors(path) == []
+    xr.testing.assert_identical(load_netcdf(path), ds)
+
+
+def test_qmc_draws_take_the_points_last_coordinates(text):
+    scene = parse_scene(text)
+    ds = run_chunk(_spec(text, replicates=4), [5])
+    u = QMCDesign(0, 4)(5, uniform_dimension(None, scene))
+    assert u.size == uniform_dimension() + 13
+    want = inputs_from_uniforms(scene.uncertain, u[uniform_dimension():]).values
+    assert np.array_equal(ds["uncertain_input"].values[0], want)
+
+
+def test_same_seed_same_file_for_one_and_two_workers(text, tmp_path):
+    files = []
+    for workers, chunk in ((1, 5), (2, 3)):
+        out = tmp_path / f"w{workers}.nc"
+        ensemble(_spec(text, "rigid", seed=9), 10, out, workers=workers, chunk=chunk, progress=False)
+        files.append(load_netcdf(out))
+    xr.testing.assert_identical(files[0], files[1])
+    assert np.unique(files[0]["uncertain_input"].values[:, 0]).size == 10
+    assert (files[0]["max_abs_error"].sel(window="whole", quantity="displacement") > 1e-6).all()
+
+
+def test_a_zero_width_law_gives_the_nominal_scenes_file_data(configs):
+    nominal = (configs / "smoke.toml").read_text()
+    zero = nominal + '[uncertain.c]\nparameter = "geometry.rod_length_m"\nlaw = "normal"\nstd_m = 0.0\n'
+    a, b = run_chunk(_spec(nominal), [0, 1, 2, 3]), run_chunk(_spec(zero), [0, 1, 2, 3])
+    for name in ("max_abs_error", "mean_abs_error", "clearance_size", "eccentricity", "status"):
+        assert np.array_equal(a[name].values, b[name].values), name
+    assert not b["uncertain_input"].values.any()
+
+
+def test_the_file_check_refuses_draws_that_do_not_fit_the_scene(text, configs):
+    ds = run_chunk(_spec(text), [0, 1])
+    check_ensemble(ds, "f.nc")
+    bad = ds.copy(deep=True)
+    bad["uncertain_input"][1, 3] = 2e-4          # outside the uniform's [-0.1, 0.1] mm
+    with pytest.raises(EnsembleFileError, match=r"f.nc: uncertain_input crank\[leg 4\] of realisation 1 is"):
+        check_ensemble(bad, "f.nc")
+    foreign = ds.assign_attrs(scene_toml=(configs / "smoke.toml").read_text())
+    with pytest.raises(EnsembleFileError, match="holds uncertain_input, but scene_toml has no"):
+        check_ensemble(foreign, "f.nc")
+    with pytest.raises(EnsembleFileError, match="no variable uncertain_input"):
+        check_ensemble(ds.drop_vars(["uncertain_input", "input", "input_units", "input_law", "input_parameter"]),
+                       "f.nc")
+
+
+def test_check_lists_the_inputs_and_run_refuses_levels_without_them(text, tmp_path, capsys):
+    scene = tmp_path / "u.toml"
+    scene.write_text(text)
+    assert main(["check", str(scene)]) == 0
+    out = capsys.readouterr().out
+    assert ("uncertain input crank: geometry.crank_length_m, each leg (6 draws), uniform deviation "
+            "(low_m=-0.0001, high_m=0.0001)") in out
+    assert "uncertain input mass: platform.mass_kg, each one (1 draws), lognormal factor" in out
+    for model in ("elastic", "paper", "contact"):
+        assert main(["run", str(scene), "--model", model, "-n", "2", "-o", str(tmp_path / "x.nc")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (f"rss6: error: --model {model}: the {model} level cannot take [uncertain.*] inputs yet "
+                       "(the rigid and quasi-static levels can)")
+    assert main(["run", str(scene), "-n", "2", "-o", str(tmp_path / "x.nc")]) == 2   # the scene's elastic
+    assert "[simulation] model = 'elastic': the elastic level cannot" in capsys.readouterr().err
+    assert not (tmp_path / "x.nc").exists()
+
+
+def test_sobol_indices_by_input_follow_the_physics(configs):
+    """Zero clearances: the quasi-static error is the geometric error of the crank lengths alone, so
+    their total index is 1 (within 3 half-widths of its 95 % interval, six directions at once), and
+    the platform mass, which the level does not use, and every clearance family get exactly 0."""
+    from pipeline.studies.sensitivity import sensitivity
+    text = (configs / "smoke.toml").read_text()
+    for key in ("revolute_radial_m", "revolute_axial_m", "spherical_C_m", "spherical_B_m"):
+        text = text.replace(f"{key} = 0.25e-3", f"{key} = 0.0")
+    text += (TABLES.split("[uncertain.zero]")[0]
+             + '[uncertain.mass]\nparameter = "platform.mass_kg"\nlaw = "uniform"\nlow_kg = 0.0\nhigh_kg = 0.5\n')
+    ds = sensitivity(_spec(text), 64, workers=1)
+    st = ds["max_abs_error_sobol"].sel(index="ST", quantity="displacement")
+    crank = st.sel(group="crank")
+    est, half = crank.sel(bound="estimate"), (crank.sel(bound="upper") - crank.sel(bound="lower")) / 2
+    assert (abs(est - 1) <= 3 * half).all() and (half < 0.3).all()   # 3 half-widths of 95 %: about 6 sd
+    for group in ("mass", "revolute_radial", "spherical_B"):
+        assert not st.sel(group=group, bound="estimate").any()
+
+
+def test_studies_refuse_what_they_cannot_answer(text, tmp_path, capsys):
+    """A budget scales clearances only, Sobol' indices need independent inputs: one line, exit 2."""
+    scene = tmp_path / "u.toml"
+    scene.write_text(text)
+    assert main(["budget", str(scene), "--model", "quasi-static", "--spec", "displacement:z<=1mm@q50",
+                 "-n", "64", "-o", str(tmp_path / "b"), "--workers", "1"]) == 2
+    assert "does not follow; budget the scene without its [uncertain.*] tables" in capsys.readouterr().err
+    rod = TABLES.split("[uncertain.zero]")[0].replace("crank]", "rod]").replace("crank_length", "rod_length")
+    scene.write_text(text + rod + '[correlation.c]\ninputs = ["crank", "rod"]\nmatrix = [[1, 0.5], [0.5, 1]]\n')
+    assert main(["sensitivity", str(scene), "--model", "quasi-static", "-n", "64", "-o", str(tmp_path / "s.nc"),
+                 "--workers", "1"]) == 2
+    assert "[correlation.c]: Sobol' indices need independent inputs" in capsys.readouterr().err
+    assert not (tmp_path / "s.nc").exists() and not (tmp_path / "b").exists()
+
+
+def test_a_single_run_file_records_its_inputs(text, tmp_path, capsys):
+    scene = tmp_path / "u.toml"
+    scene.write_text(text)
+    path = tmp_path / "r.nc"
+    assert main(["simulate", str(scene), "--model", "rigid", "--seed", "3", "--realization", "2", "-o", str(path)]) == 0
+    ds = load_netcdf(path)
+    from rss6core.uncertain import draw_inputs
+    assert np.array_equal(ds["uncertain_input"].values, draw_inputs(parse_scene(text), 3, 2).values)
+    assert ds["input_units"].values[0] == "m" and cf_errors(path) == []
+    assert float(ds["max_abs_error"].sel(window="whole", quantity="displacement", direction="z")) > 1e-7
+
+
+def test_the_shipped_manufacturing_scene_draws_its_tolerances():
+    from pipeline.scenes.catalogue import find_scene
+    from rss6core import simulate
+    scene = find_scene("paper_manufacturing")
+    assert [i.name for i in scene.uncertain.inputs] == [
+        "crank_length", "rod_length", "base_radius", "platform_radius", "base_angle", "platform_angle",
+        "actuator_zero", "youngs_modulus", "friction", "payload_mass", "payload_inertia"]
+    assert scene.uncertain.dimension == 6 * 7 + 1 + 18 + 2
+    assert scene.tolerance.revolute_radial is not None and scene.simulation.model == "quasi-static"
+    rigid = simulate(scene, "rigid", seed=0, realization=0)
+    assert rigid.status == "finished" and 1e-5 < np.abs(rigid.displacement[:, :3]).max() < 2e-3
