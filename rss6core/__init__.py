@@ -60,6 +60,8 @@ The elastic level's parts (the stability study's explicit sweep)
 
 The rigid robot
 - rigid_motion: the ideal rigid motion (platform and cranks) along the trajectory.
+- workspace_quality: reach, transmission index and Jacobian condition number of every pose of the trajectory.
+- TRAJECTORY_KINDS: the [trajectory] kinds by name (sinusoid, points, file).
 - inverse_dynamics: actuator torques and joint forces of the rigid motion (N m, N).
 - crank_inertia, rod_inertia: the rigid links' masses (kg) and inertias (kg m^2).
 """
@@ -74,13 +76,14 @@ from .contact_options import CONTACT_STARTS, TOL_DISPLACEMENT, TOL_VELOCITY
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
 from .kernels import compile_kernels, kernel_cache_folder, kernels_to_compile, level_kernels
-from .kinematics import rigid_motion
+from .kinematics import rigid_motion, workspace_quality
 from .levels import (MODEL_LEVELS, MODELS, ModelLevel, default_integrator, default_time_step, model_level,
                      models_with)
 from .quasi_static import closure_matrix
 from .models import Level, degrees_of_freedom, natural_frequencies, prepare_level, simulate, simulate_batch, stored_draw
 from .scene import CLEARANCE_RADII, Scene, SceneError, load_scene, parse_scene
 from .status import FAILED, FINISHED, STATUSES
+from .trajectory_kinds import TRAJECTORY_KINDS
 from .sections import crank_inertia, rod_inertia
 
 __version__ = "0.3.0"
@@ -95,4 +98,5 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII"
            "SIZE_UNIFORMS", "UNIFORM_BLOCKS", "clearances_from_named_uniforms", "Integrator", "build_elastic_model",
            "BeamTheory", "BEAM_THEORIES",
            "quasi_static_state", "simulate_elastic",
-           "rigid_motion", "inverse_dynamics", "crank_inertia", "rod_inertia", "__version__"]
+           "rigid_motion", "workspace_quality", "TRAJECTORY_KINDS", "inverse_dynamics", "crank_inertia", "rod_inertia",
+           "__version__"]
