@@ -27,11 +27,13 @@ __all__ = ["COLUMNS", "read_pose_csv", "with_pose_samples", "file_trajectory"]
 
 COLUMNS = ("t_s", "x_m", "y_m", "z_m", "n1_deg", "n2_deg", "n3_deg")
 _KEYS = {"kind": "required", "path": "required", "samples": "optional"}
+# units a header may name in place of the expected one (a wrong unit, not a misspelt column)
+_UNITS = {"m", "mm", "cm", "um", "km", "in", "ft", "deg", "rad", "mrad", "s", "ms", "us", "min", "h"}
 
 
 def _column_order(header: list[str], name: str) -> list[int]:
-    """Index in ``header`` of each of COLUMNS; TrajectoryError naming a misspelt, wrongly-unitted,
-    repeated or missing column and the file."""
+    """Index in ``header`` of each of COLUMNS; TrajectoryError naming a misspelt column, a column in
+    another unit (one of _UNITS), a repeated or a missing column, and the file."""
     quantities = {c.split("_")[0]: c for c in COLUMNS}
     for cell in header:
         if cell in COLUMNS:
@@ -39,7 +41,7 @@ def _column_order(header: list[str], name: str) -> list[int]:
                 raise TrajectoryError(f"{name}: column {cell} appears {header.count(cell)} times in the header")
             continue
         quantity, _, unit = cell.partition("_")
-        if quantity in quantities:
+        if quantity in quantities and unit in _UNITS:
             expected = quantities[quantity]
             raise TrajectoryError(f"{name}: column {cell!r}: unit {unit!r} is not the expected one, the header "
                                   f"names {expected!r} ({expected.partition('_')[2]})")
