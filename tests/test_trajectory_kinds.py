@@ -200,3 +200,27 @@ def test_the_default_kind_is_eq35(paper, paper_text):
     for name in ("frequency", "offset", "amplitude", "duration"):
         np.testing.assert_array_equal(getattr(explicit.trajectory, name), getattr(paper.trajectory, name))
     assert paper.source_text == paper_text
+
+
+def test_an_ensemble_file_records_the_csv_content_not_its_path(configs, tmp_path, monkeypatch, capsys):
+    """rss6 run on a kind = "file" scene from another folder: the workers re-parse the scene text (the
+    CSV rides in it), the file's scene_toml holds the samples and the CSV's sha256, and the file is
+    read back (rss6 stats re-parses scene_toml) after the CSV is gone."""
+    import xarray as xr
+    folder = tmp_path / "scene"
+    folder.mkdir()
+    _eq35_csv(folder / "eq35.csv", duration=0.2)
+    scene = folder / "smoke_file.toml"
+    scene.write_text(_with_trajectory((configs / "smoke.toml").read_text(),
+                                      '[trajectory]\nkind = "file"\npath = "eq35.csv"'))
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "file_qs.nc"
+    assert main(["run", str(scene), "--model", "quasi-static", "-n", "2", "--workers", "1", "-o", str(out)]) == 0
+    (folder / "eq35.csv").unlink()
+    with xr.open_dataset(out) as ds:
+        text = ds.attrs["scene_toml"]
+    assert "[trajectory.samples]" in text and len(text) > 200 * 7 * 5   # 201 rows of 7 numbers
+    assert parse_scene(text, "scene_toml").trajectory.sha256 in text
+    capsys.readouterr()
+    assert main(["stats", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["n_finished"] == 2
