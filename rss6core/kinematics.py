@@ -173,7 +173,7 @@ def workspace_quality(scene, t: np.ndarray | None = None) -> WorkspaceQuality:
     c, dc, _ = crank_points(geo, alpha)
     n = c - b
     trans = np.abs(np.einsum("tli,tli->tl", n, dc)) / (geo.crank_length * geo.rod_length)
-    rows = np.concatenate([n, np.cross(r, n)], axis=-1) / geo.rod_length
+    rows = np.concatenate([n, np.cross(r, n)], axis=-1) / np.asarray(geo.rod_length, float)[..., None]
     return WorkspaceQuality(t, np.abs(ratio), trans, np.linalg.cond(rows), alpha)
 
 
