@@ -72,6 +72,8 @@ The workspace error map (quasi-static level at static poses; docs/model.md secti
 
 The rigid robot
 - rigid_motion: the ideal rigid motion (platform and cranks) along the trajectory.
+- workspace_quality: reach, transmission index and Jacobian condition number of every pose of the trajectory.
+- TRAJECTORY_KINDS: the [trajectory] kinds by name (sinusoid, points, file).
 - inverse_dynamics: actuator torques and joint forces of the rigid motion (N m, N).
 - crank_inertia, rod_inertia: the rigid links' masses (kg) and inertias (kg m^2).
 """
@@ -86,7 +88,7 @@ from .contact_options import CONTACT_STARTS, TOL_DISPLACEMENT, TOL_VELOCITY
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
 from .kernels import compile_kernels, kernel_cache_folder, kernels_to_compile, level_kernels
-from .kinematics import rigid_motion
+from .kinematics import rigid_motion, workspace_quality
 from .levels import (MODEL_LEVELS, MODELS, ModelLevel, check_uncertain_level, default_integrator, default_time_step,
                      draws_per_realisation, model_level, models_with)
 from .quasi_static import closure_matrix
@@ -95,6 +97,7 @@ from .models import (Level, degrees_of_freedom, natural_frequencies, prepare_lev
 from .scene import CLEARANCE_RADII, Scene, SceneError, load_scene, parse_scene
 from .uncertain import inputs_from_uniforms
 from .status import FAILED, FINISHED, STATUSES
+from .trajectory_kinds import TRAJECTORY_KINDS
 from .sections import crank_inertia, rod_inertia
 from .workspace_map import (DrawnEccentricities, StaticClosure, WorstCaseSizes, ball_support, drawn_eccentricities,
                             revolute_support, sampled_errors, static_closure, worst_case_error, worst_case_sizes)
@@ -114,4 +117,5 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII"
            "quasi_static_state", "simulate_elastic",
            "WorstCaseSizes", "worst_case_sizes", "revolute_support", "ball_support", "StaticClosure",
            "static_closure", "worst_case_error", "DrawnEccentricities", "drawn_eccentricities", "sampled_errors",
-           "rigid_motion", "inverse_dynamics", "crank_inertia", "rod_inertia", "__version__"]
+           "rigid_motion", "workspace_quality", "TRAJECTORY_KINDS", "inverse_dynamics", "crank_inertia", "rod_inertia",
+           "__version__"]

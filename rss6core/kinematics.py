@@ -16,7 +16,7 @@ from .trajectory import PlatformMotion, euler_rate_matrix, platform_motion, rota
 __all__ = [
     "inverse_kinematics", "crank_points", "crank_axes", "platform_joints", "leg_jacobian",
     "RigidMotion", "rigid_motion", "forward_kinematics", "check_workspace", "WorkspaceError",
-    "MIN_TRANSMISSION", "MAX_CONDITION",
+    "MIN_TRANSMISSION", "MAX_CONDITION", "WorkspaceQuality", "workspace_quality",
 ]
 
 MIN_TRANSMISSION = 1e-3   # |n . dc| / (L_ac L_cb) below this: a leg at its crank-rod singularity
@@ -145,6 +145,41 @@ def forward_kinematics(geometry, alpha: np.ndarray, pose0: np.ndarray, tol: floa
                           f"(last step {np.max(np.abs(step)):.3e})")
 
 
+@dataclass(frozen=True)
+class WorkspaceQuality:
+    """How well the robot reaches and drives each pose of a trajectory (leading axis T)."""
+    t: np.ndarray             # (T,) s
+    reach: np.ndarray         # (T, 6) |K/rho| of each leg: its joint b_i is reachable when <= 1
+    transmission: np.ndarray  # (T, 6) |n_i . dc_i/dalpha_i| / (L_ac L_cb): 0 at the crank-rod singularity
+    condition: np.ndarray     # (T,) condition number of the platform Jacobian rows [n_i, r_i x n_i] / L_cb
+    alpha: np.ndarray         # (T, 6) crank angles, rad
+
+
+_WHERE = "; check [trajectory] against [geometry]"
+
+
+def workspace_quality(scene, t: np.ndarray | None = None) -> WorkspaceQuality:
+    """Reach, transmission and conditioning at times t (s; default the scene's grid); WorkspaceError
+    naming the leg and the first time where a platform joint is out of reach."""
+    geo = scene.geometry
+    t = scene.times if t is None else np.atleast_1d(np.asarray(t, dtype=float))
+    pm = platform_motion(scene.trajectory, t)
+    b, r = platform_joints(geo, pm.o, pm.R)
+    _, _, ratio = _reach(geo, b)
+    bad = np.argwhere(~(np.abs(ratio) <= 1.0))
+    if bad.size:
+        k, leg = bad[0]
+        raise WorkspaceError(f"trajectory leaves the workspace: leg {leg + 1} cannot reach its "
+                             f"platform joint at t = {t[k]:.4f} s (|K/rho| = {abs(ratio[k, leg]):.4f} "
+                             f"> 1){_WHERE}")
+    alpha = inverse_kinematics(geo, b)
+    c, dc, _ = crank_points(geo, alpha)
+    n = c - b
+    trans = np.abs(np.einsum("tli,tli->tl", n, dc)) / (geo.crank_length * geo.rod_length)
+    rows = np.concatenate([n, np.cross(r, n)], axis=-1) / np.asarray(geo.rod_length, float)[..., None]
+    return WorkspaceQuality(t, np.abs(ratio), trans, np.linalg.cond(rows), alpha)
+
+
 def check_workspace(scene, min_transmission: float = MIN_TRANSMISSION, max_condition: float = MAX_CONDITION) -> None:
     """Raise WorkspaceError naming the leg and time where the trajectory leaves the workspace.
 
@@ -152,29 +187,15 @@ def check_workspace(scene, min_transmission: float = MIN_TRANSMISSION, max_condi
     that no leg is near its crank-rod singularity (|n . dc| / (L_ac L_cb) >=
     ``min_transmission``) and that the platform Jacobian is well conditioned.
     """
-    geo, t = scene.geometry, scene.times
-    pm = platform_motion(scene.trajectory, t)
-    b, r = platform_joints(geo, pm.o, pm.R)
-    _, _, ratio = _reach(geo, b)
-    where = "; check [trajectory] against [geometry]"
-    bad = np.argwhere(~(np.abs(ratio) <= 1.0))
-    if bad.size:
-        k, leg = bad[0]
-        raise WorkspaceError(f"trajectory leaves the workspace: leg {leg + 1} cannot reach its "
-                         f"platform joint at t = {t[k]:.4f} s (|K/rho| = {abs(ratio[k, leg]):.4f} "
-                         f"> 1){where}")
-    alpha = inverse_kinematics(geo, b)
-    c, dc, _ = crank_points(geo, alpha)
-    n = c - b
-    trans = np.abs(np.einsum("tli,tli->tl", n, dc)) / (geo.crank_length * geo.rod_length)
-    bad = np.argwhere(trans < min_transmission)
+    q = workspace_quality(scene)
+    t = q.t
+    bad = np.argwhere(q.transmission < min_transmission)
     if bad.size:
         k, leg = bad[0]
         raise WorkspaceError(f"trajectory leaves the workspace: leg {leg + 1} is at its crank-rod "
-                         f"singularity at t = {t[k]:.4f} s{where}")
-    rows = np.concatenate([n, np.cross(r, n)], axis=-1) / np.asarray(geo.rod_length, float)[..., None]
-    cond = np.linalg.cond(rows)
+                             f"singularity at t = {t[k]:.4f} s{_WHERE}")
+    cond = q.condition
     if np.any(~(cond < max_condition)):
         k = int(np.argmax(~(cond < max_condition)))
         raise WorkspaceError(f"trajectory leaves the workspace: the platform is singular "
-                         f"(condition number {cond[k]:.3g}) at t = {t[k]:.4f} s{where}")
+                             f"(condition number {cond[k]:.3g}) at t = {t[k]:.4f} s{_WHERE}")

@@ -1,7 +1,8 @@
 """Immutable scene description of a 6-RSS robot, read from a TOML file.
 
 A scene holds everything a run needs to know and nothing it computes: geometry,
-link sections, material, platform, gravity, trajectory (eq. 35), time step,
+link sections, material, platform, gravity, trajectory (eq. 35 or another kind of
+:mod:`.trajectory_kinds`), time step,
 damping, clearances and contact laws.  All values are SI inside; the TOML keys
 carry their units in their names.  Loading checks every key strictly (unknown,
 missing, wrong type, non-physical value) and raises :class:`SceneError` naming
@@ -23,8 +24,10 @@ from .contact_options import CONTACT_STARTS, MAX_CONTACT_REFINEMENTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
 from .levels import MODELS
+from .pose_csv import file_trajectory, with_pose_samples
 from .sections import RectangleSection, TubeSection
 from .uncertain import UncertainInputError, UncertainInputs, parse_uncertain
+from .trajectory_kinds import TRAJECTORY_KINDS, SampledPoses, Sinusoid, TrajectoryError, ViaPoints, via_points
 
 __all__ = [
     "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping",
@@ -111,13 +114,7 @@ class Platform:
     inertia: np.ndarray     # principal moments about o_p in platform axes, kg m^2
 
 
-@dataclass(frozen=True)
-class Trajectory:
-    """Eq. 35: pose_k(t) = offset_k + amplitude_k sin(2 pi f t), pose = (x, y, z, n1, n2, n3)."""
-    frequency: float        # Hz
-    offset: np.ndarray      # (6,) m and rad
-    amplitude: np.ndarray   # (6,) m and rad
-    duration: float         # s
+Trajectory = Sinusoid   # the default kind, eq. 35 (its former name)
 
 
 @dataclass(frozen=True)
@@ -201,7 +198,7 @@ class Scene:
     material: Material
     platform: Platform
     gravity: float                # m/s^2 along -Z
-    trajectory: Trajectory
+    trajectory: Sinusoid | ViaPoints | SampledPoses   # [trajectory] kind
     simulation: Simulation
     damping: Damping
     clearance: Clearances
@@ -245,13 +242,13 @@ _UNSET = float("nan")   # a key whose default depends on other keys
 STEADY_AFTER = 0.75     # s: default window boundary, measured on paper's contact level (docs/model.md)
 
 
-def _steady_after(value: float, duration: float) -> float:
+def _steady_after(value: float, duration: float, duration_key: str) -> float:
     """The window boundary t_s (s): the key's value, checked to lie in [0, duration), or by default
     STEADY_AFTER, at most half the duration (a short scene keeps a start-up and a steady window)."""
     if np.isnan(value):
         return min(STEADY_AFTER, duration / 2)
     if value >= duration:
-        raise SceneError(f"[simulation] steady_after_s: must be shorter than [trajectory] duration_s "
+        raise SceneError(f"[simulation] steady_after_s: must be shorter than {duration_key} "
                          f"= {duration!r}, got {value!r}")
     return value
 _SCHEMA: dict = {
@@ -275,14 +272,6 @@ _SCHEMA: dict = {
     "platform": {"mass_kg": _Key(float, check=_POS),
                  "inertia_kg_m2": _Key(float, 3, check=_POS)},
     "environment": {"gravity_m_s2": _Key(float, check=_NONNEG)},
-    "trajectory": {
-        "frequency_Hz": _Key(float, check=_NONNEG),
-        "position_offset_m": _Key(float, 3),
-        "position_amplitude_m": _Key(float, 3),
-        "angle_offset_deg": _Key(float, 3),
-        "angle_amplitude_deg": _Key(float, 3),
-        "duration_s": _Key(float, check=_POS),
-    },
     "simulation": {
         "time_step_s": _Key(float, check=_POS),
         "model": _Key(str, default="elastic", choices=MODELS),
@@ -328,6 +317,34 @@ _SCHEMA: dict = {
                 "impact_speed_floor_m_s": _Key(float, default=1e-3, check=_POS),
                 "stiffness_scale": _Key(float, default=1.0, check=_POS)},
 }
+
+
+_SINUSOID = {   # [trajectory] of kind "sinusoid" (eq. 35); the other kinds read their own tables
+    "kind": _Key(str, default="sinusoid", choices=TRAJECTORY_KINDS),
+    "frequency_Hz": _Key(float, check=_NONNEG),
+    "position_offset_m": _Key(float, 3),
+    "position_amplitude_m": _Key(float, 3),
+    "angle_offset_deg": _Key(float, 3),
+    "angle_amplitude_deg": _Key(float, 3),
+    "duration_s": _Key(float, check=_POS),
+}
+
+
+def _trajectory(table) -> Sinusoid | ViaPoints | SampledPoses:
+    """The [trajectory] table as its kind (default "sinusoid", eq. 35)."""
+    if table is None:
+        raise SceneError("missing key trajectory")
+    if not isinstance(table, dict):
+        raise SceneError("[trajectory] must be a table")
+    kind = _scalar(table.get("kind", "sinusoid"), _SINUSOID["kind"], ("trajectory", "kind"))
+    if kind == "points":
+        return via_points(table)
+    if kind == "file":
+        return file_trajectory(table)
+    tr = _read_table(table, _SINUSOID, ("trajectory",))
+    deg = np.radians
+    return Sinusoid(tr["frequency_Hz"], _frozen(tr["position_offset_m"] + list(deg(tr["angle_offset_deg"]))),
+                    _frozen(tr["position_amplitude_m"] + list(deg(tr["angle_amplitude_deg"]))), tr["duration_s"])
 
 
 _BAND = {"law": _Key(str, choices=("normal", "uniform")), "low_m": _Key(float, check=_NONNEG),
@@ -462,6 +479,7 @@ def _check_clearances(clearance: dict, contact: dict) -> None:
 
 def _build(v: dict, text: str, source: str) -> Scene:
     g, tr, ct = v["geometry"], v["trajectory"], v["contact"]
+    where = tr.duration_key
     rod = TubeSection(v["rod_section"]["outer_diameter_m"], v["rod_section"]["inner_diameter_m"])
     if rod.inner_diameter >= rod.outer_diameter:
         raise SceneError("[rod_section] inner_diameter_m: must be smaller than outer_diameter_m, "
@@ -481,15 +499,15 @@ def _build(v: dict, text: str, source: str) -> Scene:
                          "draw them in an [uncertain.NAME] table")
     if ct["stick_velocity_m_s"] >= ct["slip_velocity_m_s"]:
         raise SceneError("[contact] stick_velocity_m_s: must be smaller than slip_velocity_m_s")
-    dt, duration = v["simulation"]["time_step_s"], tr["duration_s"]
+    dt, duration = v["simulation"]["time_step_s"], tr.duration
     steps = duration / dt
     if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
         raise SceneError(f"[simulation] time_step_s: {dt!r} does not divide "
-                         f"[trajectory] duration_s = {duration!r} into whole steps")
+                         f"{where} = {duration!r} into whole steps")
     if v["simulation"]["settle_time_s"] >= duration:
-        raise SceneError(f"[simulation] settle_time_s: must be shorter than [trajectory] duration_s "
+        raise SceneError(f"[simulation] settle_time_s: must be shorter than {where} "
                          f"= {duration!r}, got {v['simulation']['settle_time_s']!r}")
-    v["simulation"]["steady_after_s"] = _steady_after(v["simulation"]["steady_after_s"], duration)
+    v["simulation"]["steady_after_s"] = _steady_after(v["simulation"]["steady_after_s"], duration, where)
     ratio = dt / v["simulation"]["contact_time_step_s"]
     if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
         raise SceneError(f"[simulation] contact_time_step_s: must divide time_step_s = {dt!r} "
@@ -506,11 +524,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
         material=mat,
         platform=Platform(v["platform"]["mass_kg"], _frozen(v["platform"]["inertia_kg_m2"])),
         gravity=v["environment"]["gravity_m_s2"],
-        trajectory=Trajectory(
-            tr["frequency_Hz"],
-            _frozen(tr["position_offset_m"] + list(deg(tr["angle_offset_deg"]))),
-            _frozen(tr["position_amplitude_m"] + list(deg(tr["angle_amplitude_deg"]))),
-            duration),
+        trajectory=tr,
         simulation=Simulation(**{k.removesuffix("_s").removesuffix("_m"): val
                                  for k, val in v["simulation"].items()}),
         damping=Damping(v["damping"]["mass_coefficient_per_s"],
@@ -544,15 +558,17 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
         raise SceneError(f"{source}: not valid TOML: {exc}") from None
     try:
         extra = {k: raw.pop(k, {}) for k in ("tolerance", "uncertain", "correlation")}
+        extra["trajectory"] = _trajectory(raw.pop("trajectory", None))
         scene = _build(_read_table(raw, _SCHEMA) | extra, text, source)
         check_workspace(scene)
-    except (SceneError, WorkspaceError) as exc:
+    except (SceneError, WorkspaceError, TrajectoryError) as exc:
         raise SceneError(f"{source}: {exc}") from None
     return scene
 
 
 def load_scene(path: str | Path) -> Scene:
     """Load and check a scene from a TOML file; SceneError naming the file if it cannot be read.
+    A ``kind = "file"`` trajectory's samples are read here and carried in the scene text (:mod:`.pose_csv`).
 
     Shipped scenes are found by name in ``pipeline.scenes.catalogue``, not here: the core reads files only.
     """
@@ -562,4 +578,8 @@ def load_scene(path: str | Path) -> Scene:
         raise SceneError(f"{path}: no such scene file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SceneError(f"{path}: cannot read the scene file: {exc}") from None
+    try:   # a kind = "file" trajectory's CSV, relative to the scene file, into the scene text
+        text = with_pose_samples(text, Path(path).parent)
+    except TrajectoryError as exc:
+        raise SceneError(f"{path}: {exc}") from None
     return parse_scene(text, str(path))

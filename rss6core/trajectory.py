@@ -1,4 +1,5 @@
-"""Platform trajectory (eq. 35) with exact velocity and acceleration, and Euler-angle maps.
+"""Platform motion along a scene's trajectory (any kind of :mod:`.trajectory_kinds`, eq. 35 by
+default) with exact velocity and acceleration, and Euler-angle maps.
 
 Orientation is R = Rz(n3) Ry(n2) Rx(n1) (eq. 1, with the paper's typo in the
 (1,2) entry corrected).  Angular velocity and acceleration are in the base
@@ -69,13 +70,10 @@ class PlatformMotion:
 
 
 def platform_motion(trajectory, t: np.ndarray) -> PlatformMotion:
-    """Evaluate eq. 35 and its exact derivatives at times t, s."""
+    """The platform motion at times t (s) along ``trajectory`` (a kind of :mod:`.trajectory_kinds`: its
+    own exact pose, pose rate and pose acceleration), with the twist that follows from them."""
     t = np.atleast_1d(np.asarray(t, dtype=float))
-    w = 2.0 * np.pi * trajectory.frequency
-    s, c = np.sin(w * t)[:, None], np.cos(w * t)[:, None]
-    amp = trajectory.amplitude[None, :]
-    pose = trajectory.offset[None, :] + amp * s
-    rate, acc = amp * w * c, -amp * w * w * s
+    pose, rate, acc = trajectory.derivatives(t)
     n, nd, ndd = pose[:, 3:], rate[:, 3:], acc[:, 3:]
     E = euler_rate_matrix(n)
     omega = np.einsum("tij,tj->ti", E, nd)

@@ -10,13 +10,15 @@ from rss6core import (crank_inertia, draws_per_realisation, inverse_dynamics, mo
 
 from ..files.schema import display_unit
 from ..vocabulary import DIRECTIONS, FINISHED
+from .workspace import format_workspace, workspace_summary
 
 __all__ = ["CLEARANCE_LEVELS", "scene_summary", "format_summary", "error_summary", "format_errors",
            "failure_reasons"]
 
 
 def scene_summary(scene) -> dict:
-    """JSON-ready summary: crank angles, torques and link masses along the scene's trajectory."""
+    """JSON-ready summary: crank angles, torques and link masses along the scene's trajectory, and its
+    workspace report (:func:`.workspace.workspace_summary`)."""
     motion = rigid_motion(scene)
     loads = inverse_dynamics(scene, motion)
     alpha = np.degrees(motion.alpha)
@@ -41,6 +43,7 @@ def scene_summary(scene) -> dict:
         # undamped explicit limit; Rayleigh stiffness damping lowers it further
         "critical_time_step_s": float(2.0 / omega[-1]),
         **clearance_summary(scene),
+        **workspace_summary(scene),
     }
 
 
@@ -102,7 +105,7 @@ def format_summary(s: dict) -> str:
         f"elastic model: {s['elements_per_link']} elements per link, {s['dof']} DOFs; lowest "
         f"natural frequencies [Hz]: " + ", ".join(f"{f:.1f}" for f in s["natural_frequencies_Hz"][:6]),
         f"explicit critical time step 2/omega_max: {s['critical_time_step_s']:.3e} s"]
-    return "\n".join(lines + _clearance_lines(s))
+    return "\n".join(lines + format_workspace(s) + _clearance_lines(s))
 
 
 def _clearance_lines(s: dict) -> list[str]:

@@ -165,7 +165,7 @@ def rigid_figure(scene, t):
     """The ideal rigid platform motion (pose, rate, acceleration per direction) of a scene."""
     pm = rigid_motion(scene, t).platform
     fig, axes = plt.subplots(3, 6, figsize=(18, 8), constrained_layout=True, sharex=True)
-    fig.suptitle(f"scene {scene.name}: ideal rigid platform motion (eq. 35), the reference of "
+    fig.suptitle(f"scene {scene.name}: ideal rigid platform motion ({scene.trajectory.label}), the reference of "
                  f"every error; {len(t)} instants over {t[-1] - t[0]:.3g} s")
     labels = ("x", "y", "z", "n1", "n2", "n3")
     for row, (q, values) in enumerate((("displacement", pm.pose), ("velocity", pm.pose_rate),
