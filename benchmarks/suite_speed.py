@@ -47,8 +47,10 @@ def main() -> int:
     p.add_argument("before")
     p.add_argument("after")
     p.add_argument("--work", type=Path, default=Path("suite-speed"), help="a folder that does not exist yet")
-    p.add_argument("pytest_args", nargs="*", help="after --: passed to both suites (e.g. -k kinematics)")
-    args = p.parse_args()
+    argv = sys.argv[1:]
+    cut = argv.index("--") if "--" in argv else len(argv)
+    args = p.parse_args(argv[:cut])
+    args.pytest_args = argv[cut + 1:]   # after --: passed to both suites (e.g. -k kinematics)
     args.work.mkdir(parents=True)
     work = args.work.resolve()
     envs = {name: _setup(work, name, rev) for name, rev in (("before", args.before), ("after", args.after))}
