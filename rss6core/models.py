@@ -31,8 +31,8 @@ from .levels import (check_uncertain_level, default_integrator, default_time_ste
                      model_level, models_with)
 from .paper_method import PaperClosure, output_step, paper_contact_forces, paper_draw, paper_result
 from .quasi_static import quasi_static_result
-from .realised import (is_nominal, motion_error, realised_geometry, realised_motion, realised_scene,
-                       scene_is_nominal)
+from .realised import (is_nominal, motion_error, realised_clearances, realised_geometry, realised_motion,
+                       realised_scene, scene_is_nominal)
 from .results import SimulationResult, time_grid
 from .status import FAILED, FINISHED, check_history
 from .uncertain import draw_inputs
@@ -47,7 +47,15 @@ def stored_draw(scene, model: str, seed: int, realization: int, dt: float, unifo
     if model_level(model).redraws_every_step:
         steps = len(time_grid(scene.trajectory.duration, dt))
         return output_step(paper_draw(scene, seed, realization, steps, uniforms))
-    return draw_clearances(scene, seed, realization, uniforms=uniforms)
+    return realised_draw(scene, seed, realization, uniforms)
+
+
+def realised_draw(scene, seed: int, realization: int, uniforms=None):
+    """A realisation's clearance draw with the sizes its [uncertain.*] inputs draw (the scene's
+    otherwise): :func:`.realised.realised_clearances`."""
+    inputs = stored_inputs(scene, seed, realization, uniforms)
+    drawn = scene if inputs is None else realised_clearances(scene, inputs)
+    return draw_clearances(drawn, seed, realization, uniforms=uniforms)
 
 
 def stored_inputs(scene, seed: int, realization: int, uniforms=None):
@@ -109,7 +117,7 @@ class Level:
         kind = model_level(self.model)
         if self.scene.uncertain:
             clearances = model_level(self.model).draws_clearances
-            return [self._realised(draw_clearances(self.scene, seed, r, uniforms=uniforms) if clearances else None,
+            return [self._realised(realised_draw(self.scene, seed, r, uniforms) if clearances else None,
                                    stored_inputs(self.scene, seed, r, uniforms)) for r in realizations]
         if not kind.draws_clearances:      # every realisation is the same run
             return [self.elastic if kind.elastic_links else self._rigid()] * len(realizations)

@@ -17,11 +17,12 @@ import dataclasses
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .clearance import CLEARANCE_RADII
 from .kinematics import RigidMotion, crank_points, forward_kinematics, leg_jacobian, platform_joints
 from .trajectory import PlatformMotion, _euler_rate_matrix_dot, euler_rate_matrix, rotation
 
-__all__ = ["GEOMETRY_KEYS", "realised_geometry", "realised_scene", "realised_motion", "motion_error",
-           "linear_length_error"]
+__all__ = ["GEOMETRY_KEYS", "realised_geometry", "realised_clearances", "realised_scene", "realised_motion",
+           "motion_error", "linear_length_error"]
 
 # each drawable [geometry] key and the Geometry field it sets
 GEOMETRY_KEYS = {"geometry.crank_length_m": "crank_length", "geometry.rod_length_m": "rod_length",
@@ -42,6 +43,16 @@ def realised_geometry(geometry, inputs):
     changes = {field: _frozen(inputs.realised(key)) for key, field in GEOMETRY_KEYS.items()
                if inputs.realised(key) is not None}
     return dataclasses.replace(geometry, **changes)
+
+
+def realised_clearances(scene, inputs):
+    """The scene with its drawn clearance sizes (each family's (6,) or shared (1,) values, m) as its
+    [clearance] values: the clearance draw then takes them as the nominal sizes (no band: the
+    parser refuses a band on a drawn family), so its eccentricities scale with them.  The scene
+    itself when no size is drawn."""
+    changes = {family.removesuffix("_m"): _frozen(inputs.realised(f"clearance.{family}"))
+               for family in CLEARANCE_RADII if inputs.realised(f"clearance.{family}") is not None}
+    return dataclasses.replace(scene, clearance=dataclasses.replace(scene.clearance, **changes)) if changes else scene
 
 
 def realised_scene(scene, inputs):

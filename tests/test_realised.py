@@ -141,6 +141,28 @@ def test_a_realised_elastic_robot_of_nominal_values_keeps_the_bits_and_per_leg_m
     assert np.abs(per_leg.displacement - plain.displacement).max() < 1e-9 * np.abs(plain.displacement).max()
 
 
+CLEARANCE_KEYS = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
+
+
+def test_drawn_clearance_sizes_scale_the_quasi_static_error_and_are_the_draws_sizes(smoke_text):
+    """The quasi-static error is linear in the clearances (eccentricities scale with the sizes): every
+    size x1.5 (a point lognormal factor) gives 1.5 x the nominal error to rounding; sizes drawn per
+    joint are the draw's sizes, and a zero-width law keeps the nominal bits."""
+    nominal = simulate(parse_scene(smoke_text), "quasi-static", seed=2, realization=5)
+    factor = "".join(_table(f, f"clearance.{f}_m", 'law = "lognormal"\nsigma = 0.0\nmedian = 1.5', "one")
+                     for f in CLEARANCE_KEYS)
+    scaled = simulate(parse_scene(smoke_text + factor), "quasi-static", seed=2, realization=5)
+    assert np.abs(scaled.displacement - 1.5 * nominal.displacement).max() < 1e-12 * np.abs(nominal.displacement).max()
+    assert np.array_equal(scaled.draw.size_C, np.full(6, 1.5 * 0.25e-3))
+    joint = simulate(parse_scene(smoke_text + _table("c", "clearance.spherical_C_m", 'law = "uniform"\nlow_m = -1e-5\n'
+                                                     'high_m = 1e-5', "joint")), "quasi-static", seed=2, realization=5)
+    assert np.array_equal(joint.draw.size_C, 0.25e-3 + joint.inputs.of("c"))
+    assert len(set(joint.draw.size_C)) == 6 and np.array_equal(joint.draw.size_B, nominal.draw.size_B)
+    zero = simulate(parse_scene(smoke_text + _table("r", "clearance.revolute_radial_m", 'law = "normal"\nstd_m = 0.0',
+                                                    "joint")), "quasi-static", seed=2, realization=5)
+    assert np.array_equal(zero.displacement, nominal.displacement)
+
+
 def test_levels_that_cannot_take_uncertain_inputs_refuse_them(smoke_text):
     scene = _lengths(smoke_text, 1e-4)
     for model in ("paper", "contact"):
