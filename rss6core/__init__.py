@@ -52,6 +52,7 @@ Clearance draws
 - UNIFORM_BLOCKS: the names of those blocks of six uniforms (legs 1-6), in stream order.
 - uniform_dimension: how many uniforms one draw uses at most.
 - inputs_from_uniforms: a realisation's [uncertain.*] inputs (InputDraw) from one uniform per draw.
+- realised_clearances: the scene with the clearance sizes a realisation's [uncertain.*] inputs draw.
 - size_band: a joint family's clearance-size band ([tolerance.<family>] or [sampling] size_tolerance), or None.
 - SIZE_UNIFORMS: how many of them (the first) set the clearance sizes.
 
@@ -96,6 +97,7 @@ from .models import (Level, degrees_of_freedom, natural_frequencies, prepare_lev
                      stored_draw, stored_inputs)
 from .scene import CLEARANCE_RADII, Scene, SceneError, load_scene, parse_scene
 from .uncertain import inputs_from_uniforms
+from .realised import realised_clearances
 from .status import FAILED, FINISHED, STATUSES
 from .trajectory_kinds import TRAJECTORY_KINDS
 from .sections import crank_inertia, rod_inertia
@@ -109,6 +111,7 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII"
            "simulate", "simulate_batch", "prepare_level", "Level",
            "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
            "stored_draw", "stored_inputs", "check_uncertain_level", "draws_per_realisation", "inputs_from_uniforms",
+           "realised_clearances",
            "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom", "level_kernels", "kernels_to_compile", "compile_kernels", "kernel_cache_folder",
            "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "size_band",

@@ -71,7 +71,7 @@ class ElasticModel(LegLayout):
     (5 n - 1, rod frame).  Rod matrices are ordered [own DOFs, C end (3), B end (3)].
     """
     elements: int
-    crank_K: np.ndarray       # (6n, 6n) crank nodes 1..n
+    crank_K: np.ndarray       # (6n, 6n) crank nodes 1..n; each link matrix (6, ...) per leg if they differ
     crank_M: np.ndarray
     crank_M_full: np.ndarray  # (6(n+1), 6(n+1)) with the clamped node, for loads
     rod_K: np.ndarray         # (5n+5, 5n+5) [own, C end, B end]
@@ -85,12 +85,12 @@ class ElasticModel(LegLayout):
 
     @property
     def crank_dofs(self) -> int:
-        return self.crank_K.shape[0]
+        return self.crank_K.shape[-1]
 
     @property
     def rod_dofs(self) -> int:
         """The rod's own DOFs (ends excluded)."""
-        return self.rod_K.shape[0] - 6
+        return self.rod_K.shape[-1] - 6
 
     @property
     def tip(self) -> slice:
@@ -98,16 +98,39 @@ class ElasticModel(LegLayout):
         return slice(self.crank_dofs - 6, self.crank_dofs - 3)
 
 
+def _rows(x: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """Row vectors times a link matrix: x (..., 6, m) @ M, with M shared by the legs (m, m') or one per
+    leg (6, m, m') (a realised robot's, :func:`scene_link_matrices`)."""
+    return x @ M if M.ndim == 2 else (x[..., None, :] @ M)[..., 0, :]
+
+
+def _per_link(value, link: str) -> np.ndarray:
+    """A material value as the ``link``'s: a scene's scalar, or the crank or rod part of a realised
+    robot's per-link (12,) values (cranks 1-6, rods 1-6)."""
+    value = np.asarray(value, float)
+    return value if value.size != 12 else value[:6] if link == "crank" else value[6:]
+
+
 def scene_link_matrices(scene, link: str, elements: int) -> tuple[np.ndarray, np.ndarray]:
     """Stiffness and mass (6 (n+1) square, link frame) of the scene's ``link`` ('crank' or 'rod')
-    in ``elements`` elements, with the scene's beam theory ([beam] table)."""
+    in ``elements`` elements, with the scene's beam theory ([beam] table).  A realised robot whose
+    length or material differs per leg or link gets one pair per leg (6, 6 (n+1), 6 (n+1))."""
     section, length = {"crank": (scene.crank_section, scene.geometry.crank_length),
                        "rod": (scene.rod_section, scene.geometry.rod_length)}[link]
     mat, beam = scene.material, scene.beam
-    k = (shear_correction_factor(section, mat.poisson_ratio) if beam.theory == "timoshenko"
-         else None)
-    return link_matrices(section_properties(section), mat.youngs_modulus, mat.shear_modulus,
-                         mat.density, length, elements, k, beam.rotary_inertia, beam.mass)
+    values = [np.asarray(v, float) for v in (mat.youngs_modulus, mat.shear_modulus, mat.density, length)]
+    if all(v.ndim == 0 for v in values):
+        k = (shear_correction_factor(section, mat.poisson_ratio) if beam.theory == "timoshenko"
+             else None)
+        return link_matrices(section_properties(section), mat.youngs_modulus, mat.shear_modulus,
+                             mat.density, length, elements, k, beam.rotary_inertia, beam.mass)
+    E, G, rho = (np.broadcast_to(_per_link(v, link), (6,)) for v in values[:3])
+    lengths = np.broadcast_to(values[3], (6,))
+    pairs = [link_matrices(section_properties(section), E[i], G[i], rho[i], lengths[i], elements,
+                           shear_correction_factor(section, E[i] / (2.0 * G[i]) - 1.0)
+                           if beam.theory == "timoshenko" else None, beam.rotary_inertia, beam.mass)
+             for i in range(6)]
+    return np.stack([K for K, _ in pairs]), np.stack([M for _, M in pairs])
 
 
 def build_elastic_model(scene, elements: int) -> ElasticModel:
@@ -118,8 +141,8 @@ def build_elastic_model(scene, elements: int) -> ElasticModel:
     ends = np.r_[0:3, n6:n6 + 3]
     torsion = np.arange(3, n6 + 6, 6)
     order = np.r_[np.setdiff1d(np.arange(n6 + 6), np.r_[ends, torsion]), ends]
-    return ElasticModel(elements, Kc[6:, 6:], Mc[6:, 6:], Mc, Kr[np.ix_(order, order)],
-                        Mr[np.ix_(order, order)], Mr, order, scene.platform.mass,
+    return ElasticModel(elements, Kc[..., 6:, 6:], Mc[..., 6:, 6:], Mc, Kr[..., order[:, None], order],
+                        Mr[..., order[:, None], order], Mr, order, scene.platform.mass,
                         np.array(scene.platform.inertia), scene.damping.mass_coefficient,
                         scene.damping.stiffness_coefficient)
 
@@ -143,9 +166,9 @@ class EndMaps:
 def link_frames(motion: RigidMotion, geometry) -> tuple[np.ndarray, np.ndarray]:
     """Crank and rod frames (T, 6, 3, 3), columns = local x, y, z in base coordinates."""
     w = np.broadcast_to(geometry.w, motion.c.shape)
-    xc = (motion.c - geometry.a) / geometry.crank_length
+    xc = (motion.c - geometry.a) / np.asarray(geometry.crank_length, float)[..., None]
     crank = np.stack([xc, w, np.cross(xc, w)], -1)
-    xr = (motion.b - motion.c) / geometry.rod_length
+    xr = (motion.b - motion.c) / np.asarray(geometry.rod_length, float)[..., None]
     yr = w - np.einsum("tli,tli->tl", w, xr)[..., None] * xr
     yr /= np.linalg.norm(yr, axis=-1, keepdims=True)
     return crank, np.stack([xr, yr, np.cross(xr, yr)], -1)
@@ -192,8 +215,8 @@ def apply_pair(model: ElasticModel, maps: EndMaps, x_mass: np.ndarray,
     """M x_mass + K x_stiff at one instant (``maps`` for that instant); x (..., N)."""
     cm, rm, pm = _local(model, maps, x_mass)
     ck, rk, _ = _local(model, maps, x_stiff)
-    yc = cm @ model.crank_M + ck @ model.crank_K
-    yr = rm @ model.rod_M + rk @ model.rod_K
+    yc = _rows(cm, model.crank_M) + _rows(ck, model.crank_K)
+    yr = _rows(rm, model.rod_M) + _rows(rk, model.rod_K)
     nf = model.rod_dofs
     yc[..., model.tip] += (yr[..., None, nf:nf + 3] @ maps.Q)[..., 0, :]
     yp = np.einsum("...lj,ljk->...k", yr[..., nf + 3:], maps.H)
@@ -228,18 +251,20 @@ class StepSolver:
         t = np.arange(model.crank_dofs)[model.tip]
         i = np.setdiff1d(np.arange(model.crank_dofs), t)
         self._ci, self._ct = i, t
-        self._Ec_ii_inv = np.linalg.inv(Ec[np.ix_(i, i)])
-        self._Ec_it = Ec[np.ix_(i, t)]
-        Sc = Ec[np.ix_(t, t)] - self._Ec_it.T @ self._Ec_ii_inv @ self._Ec_it
+        self._Ec_ii_inv = np.linalg.inv(Ec[..., i[:, None], i])
+        self._Ec_it = Ec[..., i[:, None], t]
+        self._Ec_ti = np.swapaxes(self._Ec_it, -1, -2)
+        Sc = Ec[..., t[:, None], t] - self._Ec_ti @ self._Ec_ii_inv @ self._Ec_it
         nf = model.rod_dofs
-        self._Er_ff_inv = np.linalg.inv(Er[:nf, :nf])
-        self._Er_fe = Er[:nf, nf:]
-        Sr = Er[nf:, nf:] - self._Er_fe.T @ self._Er_ff_inv @ self._Er_fe
+        self._Er_ff_inv = np.linalg.inv(Er[..., :nf, :nf])
+        self._Er_fe = Er[..., :nf, nf:]
+        self._Er_ef = np.swapaxes(self._Er_fe, -1, -2)
+        Sr = Er[..., nf:, nf:] - self._Er_ef @ self._Er_ff_inv @ self._Er_fe
         Q, H = maps.Q, maps.H
         QT = np.swapaxes(Q, -1, -2)
-        legs = Sc + QT @ Sr[:3, :3] @ Q                       # (T, 6, 3, 3)
-        self._border = QT @ Sr[:3, 3:] @ H                     # (T, 6, 3, 6)
-        plat = np.einsum("tlji,jk,tlkm->tim", H, Sr[3:, 3:], H)
+        legs = Sc + QT @ Sr[..., :3, :3] @ Q                  # (T, 6, 3, 3)
+        self._border = QT @ Sr[..., :3, 3:] @ H                # (T, 6, 3, 6)
+        plat = np.einsum("tlji,jk,tlkm->tim" if Sr.ndim == 2 else "tlji,ljk,tlkm->tim", H, Sr[..., 3:, 3:], H)
         plat[..., :3, :3] += mass * model.platform_mass * np.eye(3)
         plat[..., 3:, 3:] += mass * maps.platform_inertia
         self._legs_inv = np.linalg.inv(legs)
@@ -250,19 +275,19 @@ class StepSolver:
         """x at instant k of the batch; r (..., N)."""
         m = self.model
         rc, rf, rp = split(m, r)
-        y_ci = rc[..., self._ci] @ self._Ec_ii_inv       # symmetric inverses: row form
-        y_f = rf @ self._Er_ff_inv
-        g = y_f @ self._Er_fe                            # (..., 6, 6) rod-end loads of the own DOFs
+        y_ci = _rows(rc[..., self._ci], self._Ec_ii_inv)     # symmetric inverses: row form
+        y_f = _rows(rf, self._Er_ff_inv)
+        g = _rows(y_f, self._Er_fe)                          # (..., 6, 6) rod-end loads of the own DOFs
         Q, H = self.maps.Q[k], self.maps.H[k]
-        r_tip = rc[..., self._ct] - y_ci @ self._Ec_it - (g[..., None, :3] @ Q)[..., 0, :]
+        r_tip = rc[..., self._ct] - _rows(y_ci, self._Ec_it) - (g[..., None, :3] @ Q)[..., 0, :]
         r_p = rp - np.einsum("...lj,ljk->...k", g[..., 3:], H)
         u = (self._legs_inv[k] @ r_tip[..., None])[..., 0]
         r_p = r_p - np.einsum("lji,...lj->...i", self._border[k], u)
         x_p = (self._schur_inv[k] @ r_p[..., None])[..., 0]
         x_tip = u - (self._W[k] @ x_p[..., None, :, None])[..., 0]
-        x_ci = y_ci - x_tip @ self._Ec_it.T @ self._Ec_ii_inv
+        x_ci = y_ci - _rows(_rows(x_tip, self._Ec_ti), self._Ec_ii_inv)
         e = np.concatenate([(Q @ x_tip[..., None])[..., 0], (H @ x_p[..., None, :, None])[..., 0]], -1)
-        x_f = y_f - e @ self._Er_fe.T @ self._Er_ff_inv
+        x_f = y_f - _rows(_rows(e, self._Er_ef), self._Er_ff_inv)
         xc = np.empty(rc.shape)
         xc[..., self._ci], xc[..., self._ct] = x_ci, x_tip
         return join(xc, x_f, x_p)
@@ -288,7 +313,7 @@ def _affine_nodal_loads(frames, lin0, lin1, ang, M_full: np.ndarray) -> np.ndarr
     together, and a contact run's chunks, of 2^refinements more instants with a finer step, must
     give the fixed run's bits (tests/test_contact.py, adaptive step limits).
     """
-    nodes = M_full.shape[0] // 6
+    nodes = M_full.shape[-1] // 6
     B = np.zeros((9, 6 * nodes))                  # [lin0, lin1, ang] -> nodal field
     for k, s_k in enumerate(np.linspace(0.0, 1.0, nodes)):
         B[0:3, 6 * k:6 * k + 3] = np.eye(3)
@@ -296,7 +321,7 @@ def _affine_nodal_loads(frames, lin0, lin1, ang, M_full: np.ndarray) -> np.ndarr
         B[6:9, 6 * k + 3:6 * k + 6] = np.eye(3)
     local = np.stack([lin0, lin1, ang], -2) @ frames          # rows v^T R = (R^T v)^T: (T, 6, 3, 3)
     T = local.shape[0]
-    return (local.reshape(T, 6, 9) @ (B @ M_full)).reshape(T, 6, 6 * nodes)
+    return _rows(local.reshape(T, 6, 9), B @ M_full).reshape(T, 6, 6 * nodes)
 
 
 def system_at(model: ElasticModel, motion: RigidMotion, scene) -> tuple[EndMaps, np.ndarray]:

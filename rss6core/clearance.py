@@ -28,10 +28,13 @@ import numpy as np
 from scipy.special import ndtr, ndtri
 
 RELATIVE_BAND_REACH = 2.0   # a [sampling] size_tolerance draws sizes up to this multiple of the nominal
+# each [clearance] size and the [contact] radius of the joint it belongs to
+CLEARANCE_RADII = {"revolute_radial_m": "journal_radius_m", "revolute_axial_m": "journal_radius_m",
+                   "spherical_C_m": "sphere_radius_m", "spherical_B_m": "sphere_radius_m"}
 
-__all__ = ["SIZE_UNIFORMS", "FAMILIES", "UNIFORM_BLOCKS", "size_band", "SizeBand", "ClearanceDraw", "UniformVector",
-           "NamedUniforms", "realization_rng", "truncated_normal", "sphere_directions", "draw_clearances",
-           "clearances_from_uniforms", "clearances_from_named_uniforms", "uniform_dimension"]
+__all__ = ["CLEARANCE_RADII", "SIZE_UNIFORMS", "FAMILIES", "UNIFORM_BLOCKS", "size_band", "SizeBand", "ClearanceDraw",
+           "UniformVector", "NamedUniforms", "realization_rng", "truncated_normal", "sphere_directions",
+           "draw_clearances", "clearances_from_uniforms", "clearances_from_named_uniforms", "uniform_dimension"]
 
 
 def realization_rng(seed: int, realization: int) -> np.random.Generator:

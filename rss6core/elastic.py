@@ -20,18 +20,19 @@ from .status import DIVERGENCE_LIMIT, FAILED, FINISHED, diverged, failure_messag
 __all__ = ["simulate_elastic", "quasi_static_state", "elastic_energy"]
 
 
-def _system(scene, model: ElasticModel, t: np.ndarray):
-    return system_at(model, rigid_motion(scene, t), scene)
+def _system(scene, model: ElasticModel, t: np.ndarray, motion=None):
+    return system_at(model, rigid_motion(scene, t) if motion is None else motion(t), scene)
 
 
-def quasi_static_state(scene, model: ElasticModel, t0: float = 0.0, h: float = 1e-4):
+def quasi_static_state(scene, model: ElasticModel, t0: float = 0.0, h: float = 1e-4, motion=None):
     """Initial state on the quasi-static path d_qs(t) = K(t)^-1 F(t), consistent with eq. 32.
 
     v and a are the first and second central differences of d_qs (step h, s);
     d = K^-1 (F - C v - M a) then satisfies eq. 32 exactly at t0, so the run
     starts without the stiff-mode transient that d = K^-1 F, v = a = 0 would ring.
+    ``motion``: as in :func:`simulate_elastic`.
     """
-    maps, F = _system(scene, model, np.array([t0 - h, t0, t0 + h]))
+    maps, F = _system(scene, model, np.array([t0 - h, t0, t0 + h]), motion)
     stiff = StepSolver(model, maps, 0.0, 1.0)
     d = np.stack([stiff.solve(k, F[k]) for k in range(3)])
     v = (d[2] - d[0]) / (2.0 * h)
@@ -43,17 +44,19 @@ def quasi_static_state(scene, model: ElasticModel, t0: float = 0.0, h: float = 1
 def simulate_elastic(scene, elements: int = 4, integrator: Integrator | None = None,
                      dt: float | None = None, model: ElasticModel | None = None,
                      initial=None, chunk: int = 200, keep_states: bool = False,
-                     divergence_limit: float = DIVERGENCE_LIMIT) -> SimulationResult:
+                     divergence_limit: float = DIVERGENCE_LIMIT, motion=None) -> SimulationResult:
     """Integrate eq. 32 along the scene's trajectory; the platform error is its elastic motion.
 
     ``initial`` is (d, v, a) or None for the quasi-static state at t = 0;
-    ``divergence_limit`` (m or rad) marks a run as failed.
+    ``divergence_limit`` (m or rad) marks a run as failed; ``motion(t)`` gives the rigid motion
+    (:class:`.kinematics.RigidMotion`) the elastic motion is superposed on at times t (default the
+    scene's inverse kinematics; a realised robot's under the nominal commands, rss6core/realised.py).
     """
     integrator = integrator or Integrator.newmark()
     model = model or build_elastic_model(scene, elements)
     h = scene.time_step if dt is None else dt
     t = time_grid(scene.trajectory.duration, h)
-    d, v, a = quasi_static_state(scene, model) if initial is None else map(np.asarray, initial)
+    d, v, a = quasi_static_state(scene, model, motion=motion) if initial is None else map(np.asarray, initial)
     cM, cC, cK = integrator.step_coefficients(h)
     lam1, lam2 = model.mass_damping, model.stiffness_damping
     am, af, w = integrator.alpha_m, integrator.alpha_f, integrator.weights(h)
@@ -62,12 +65,12 @@ def simulate_elastic(scene, elements: int = 4, integrator: Integrator | None = N
     hist = np.full((3, len(t), d[..., keep].shape[-1]), np.nan)
     hist[:, 0] = d[keep], v[keep], a[keep]
     status, message, steps = FINISHED, "", 0
-    maps, F = _system(scene, model, t[:1])
+    maps, F = _system(scene, model, t[:1], motion)
     Ma, rest = apply(model, maps[0], a, 1.0, 0.0), internal_force(model, maps[0], d, v)
     Fn = F[0]
     for start in range(1, len(t), chunk):
         stop = min(start + chunk, len(t))
-        maps, F = _system(scene, model, t[start:stop])
+        maps, F = _system(scene, model, t[start:stop], motion)
         solver = StepSolver(model, maps, cM + cC * lam1, cC * lam2 + cK)
         for j in range(stop - start):
             dp, vp = predict(d, v, a, h, w.d_pred, w.v_pred)

@@ -39,7 +39,8 @@ MODEL_LEVELS = MappingProxyType({level.name: level for level in (
                realised_robot=True),
     ModelLevel(name="quasi-static", rung="L1", description="clearances, no dynamics", draws_clearances=True,
                function_of_one_draw=True, linear_in_clearances=True, realised_robot=True),
-    ModelLevel(name="elastic", rung="L2", description="flexible links, no clearances", elastic_links=True),
+    ModelLevel(name="elastic", rung="L2", description="flexible links, no clearances", elastic_links=True,
+               realised_robot=True),
     ModelLevel(name="paper", rung="L3", description="elastic + the paper's clearance closure", elastic_links=True,
                draws_clearances=True, redraws_every_step=True, contact_forces=True),
     ModelLevel(name="contact", rung="L4", description="clearance contact dynamics, by far the dearest",
@@ -76,8 +77,9 @@ def check_uncertain_level(scene, model: str) -> None:
     """ValueError (one line, naming the level) if ``scene`` has uncertain inputs that ``model`` cannot
     take yet: never ignore them silently."""
     if scene.uncertain and not model_level(model).realised_robot:
+        *some, last = models_with("realised_robot")
         raise ValueError(f"the {model} level cannot take [uncertain.*] inputs yet (the "
-                         f"{' and '.join(models_with('realised_robot'))} levels can)")
+                         f"{', '.join(some)} and {last} levels can)")
     level = model_level(model)
     if scene.uncertain and scene.simulation.quasi_static_eccentricity == "reaction" and level.draws_clearances:
         raise ValueError("the quasi-static level's reaction eccentricities cannot take [uncertain.*] inputs "

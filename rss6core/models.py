@@ -31,7 +31,8 @@ from .levels import (check_uncertain_level, default_integrator, default_time_ste
                      model_level, models_with)
 from .paper_method import PaperClosure, output_step, paper_contact_forces, paper_draw, paper_result
 from .quasi_static import quasi_static_result
-from .realised import is_nominal, motion_error, realised_geometry, realised_motion
+from .realised import (is_nominal, motion_error, realised_clearances, realised_geometry, realised_motion,
+                       realised_scene, scene_is_nominal)
 from .results import SimulationResult, time_grid
 from .status import FAILED, FINISHED, check_history
 from .uncertain import draw_inputs
@@ -46,7 +47,15 @@ def stored_draw(scene, model: str, seed: int, realization: int, dt: float, unifo
     if model_level(model).redraws_every_step:
         steps = len(time_grid(scene.trajectory.duration, dt))
         return output_step(paper_draw(scene, seed, realization, steps, uniforms))
-    return draw_clearances(scene, seed, realization, uniforms=uniforms)
+    return realised_draw(scene, seed, realization, uniforms)
+
+
+def realised_draw(scene, seed: int, realization: int, uniforms=None):
+    """A realisation's clearance draw with the sizes its [uncertain.*] inputs draw (the scene's
+    otherwise): :func:`.realised.realised_clearances`."""
+    inputs = stored_inputs(scene, seed, realization, uniforms)
+    drawn = scene if inputs is None else realised_clearances(scene, inputs)
+    return draw_clearances(drawn, seed, realization, uniforms=uniforms)
 
 
 def stored_inputs(scene, seed: int, realization: int, uniforms=None):
@@ -87,8 +96,9 @@ def simulate_batch(scene, model: str | None = None, integrator: str | None = Non
 @dataclass(frozen=True)
 class Level:
     """One level's settings on one scene, with what all its realisations share computed once: the
-    rigid motion (quasi-static), the ideal-joint elastic run (elastic, paper) and the leg closure
-    (paper).  Made by :func:`prepare_level`; an ensemble worker keeps it for all its chunks."""
+    rigid motion (quasi-static; elastic with [uncertain.*] inputs), the ideal-joint elastic run (elastic,
+    paper) and the leg closure (paper).  Made by :func:`prepare_level`; an ensemble worker keeps it
+    for all its chunks."""
     scene: object
     model: str
     integrator: Integrator | None   # None for the rigid and quasi-static levels
@@ -107,7 +117,7 @@ class Level:
         kind = model_level(self.model)
         if self.scene.uncertain:
             clearances = model_level(self.model).draws_clearances
-            return [self._realised(draw_clearances(self.scene, seed, r, uniforms=uniforms) if clearances else None,
+            return [self._realised(realised_draw(self.scene, seed, r, uniforms) if clearances else None,
                                    stored_inputs(self.scene, seed, r, uniforms)) for r in realizations]
         if not kind.draws_clearances:      # every realisation is the same run
             return [self.elastic if kind.elastic_links else self._rigid()] * len(realizations)
@@ -149,24 +159,43 @@ class Level:
         commands: its geometric error, plus the clearance closure of ``draw`` about its motion at a
         clearance level.  A realised robot equal to the nominal one reuses the nominal motion: its
         geometric error is exactly zero."""
+        if model_level(self.model).elastic_links:
+            return self._realised_elastic(inputs)
         geometry = realised_geometry(self.scene.geometry, inputs)
         nominal = is_nominal(self.scene.geometry, geometry)
         try:
             real = self.motion if nominal else realised_motion(geometry, self.motion)
         except (ArithmeticError, np.linalg.LinAlgError) as exc:   # a realised robot out of its workspace
-            nan = np.full_like(self.motion.platform.pose, np.nan)
-            return SimulationResult(self.motion.t, nan, nan, nan, FAILED,
-                                    f"the realised robot's forward kinematics failed: {exc}", 0, inputs=inputs)
+            return self._failed_kinematics(exc, inputs)
         geometric = [np.zeros_like(self.motion.platform.pose)] * 3 if nominal else motion_error(real, self.motion)
         if not model_level(self.model).draws_clearances:
             status, message, steps = check_history(geometric[0], real.t, "geometric displacement error")
             return SimulationResult(real.t, *geometric, status, message, steps, inputs=inputs)
         result = quasi_static_result(self.scene, real, draw, self.scene.simulation.quasi_static_eccentricity)
-        if not nominal:
-            result = dataclasses.replace(result, displacement=result.displacement + geometric[0],
-                                         velocity=result.velocity + geometric[1],
-                                         acceleration=result.acceleration + geometric[2])
-        return dataclasses.replace(result, inputs=inputs)
+        return dataclasses.replace(result if nominal else _plus(result, geometric), inputs=inputs)
+
+    def _realised_elastic(self, inputs) -> SimulationResult:
+        """The elastic level on one realised robot: its finite-element model from the realised scene
+        (lengths, joint positions, modulus, density, platform), the elastic motion superposed on the
+        realised rigid motion under the nominal commands, plus that motion's geometric error.  A
+        realised scene equal to the nominal one reuses the nominal elastic run (the same bits)."""
+        scene = realised_scene(self.scene, inputs)
+        if scene_is_nominal(self.scene, scene):
+            return dataclasses.replace(self.elastic, inputs=inputs)
+        nominal_scene = self.scene
+        try:
+            real = realised_motion(scene.geometry, self.motion)
+            result = simulate_elastic(scene, self.elements, self.integrator, self.dt, motion=lambda t: realised_motion(
+                scene.geometry, rigid_motion(nominal_scene, t)))
+        except (ArithmeticError, np.linalg.LinAlgError) as exc:
+            return self._failed_kinematics(exc, inputs)
+        return dataclasses.replace(_plus(result, motion_error(real, self.motion)), inputs=inputs)
+
+    def _failed_kinematics(self, exc, inputs) -> SimulationResult:
+        """A realised robot out of its workspace: NaN errors and the reason, not an exception."""
+        nan = np.full_like(self.motion.platform.pose, np.nan)
+        return SimulationResult(self.motion.t, nan, nan, nan, FAILED,
+                                f"the realised robot's forward kinematics failed: {exc}", 0, inputs=inputs)
 
     def _paper(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:
         elastic = self.elastic
@@ -176,6 +205,13 @@ class Level:
             out.append(paper_result(elastic, self.closure, draw,
                                     paper_contact_forces(self.scene, draw, self.dt), output_step(draw)))
         return out
+
+
+def _plus(result: SimulationResult, geometric) -> SimulationResult:
+    """``result`` with the geometric error (displacement, velocity, acceleration) added."""
+    return dataclasses.replace(result, displacement=result.displacement + geometric[0],
+                               velocity=result.velocity + geometric[1],
+                               acceleration=result.acceleration + geometric[2])
 
 
 def _contact_solver():
@@ -207,7 +243,8 @@ def prepare_level(scene, model: str | None = None, integrator: str | None = None
         return Level(scene, model, method, dt, elements, tolerance, refinements)
     elastic = simulate_elastic(scene, elements, method, dt)
     closure = PaperClosure(scene, elastic.t) if kind.redraws_every_step else None
-    return Level(scene, model, method, dt, elements, elastic=elastic, closure=closure)
+    motion = rigid_motion(scene, elastic.t) if scene.uncertain else None
+    return Level(scene, model, method, dt, elements, motion=motion, elastic=elastic, closure=closure)
 
 
 def natural_frequencies(scene, elements: int | None = None, t: float = 0.0) -> np.ndarray:

@@ -17,10 +17,12 @@ import dataclasses
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .clearance import CLEARANCE_RADII
 from .kinematics import RigidMotion, crank_points, forward_kinematics, leg_jacobian, platform_joints
 from .trajectory import PlatformMotion, _euler_rate_matrix_dot, euler_rate_matrix, rotation
 
-__all__ = ["GEOMETRY_KEYS", "realised_geometry", "realised_motion", "motion_error", "linear_length_error"]
+__all__ = ["GEOMETRY_KEYS", "realised_geometry", "realised_clearances", "realised_scene", "realised_motion",
+           "motion_error", "linear_length_error"]
 
 # each drawable [geometry] key and the Geometry field it sets
 GEOMETRY_KEYS = {"geometry.crank_length_m": "crank_length", "geometry.rod_length_m": "rod_length",
@@ -41,6 +43,48 @@ def realised_geometry(geometry, inputs):
     changes = {field: _frozen(inputs.realised(key)) for key, field in GEOMETRY_KEYS.items()
                if inputs.realised(key) is not None}
     return dataclasses.replace(geometry, **changes)
+
+
+def realised_clearances(scene, inputs):
+    """The scene with its drawn clearance sizes (each family's (6,) or shared (1,) values, m) as its
+    [clearance] values: the clearance draw then takes them as the nominal sizes (no band: the
+    parser refuses a band on a drawn family), so its eccentricities scale with them.  The scene
+    itself when no size is drawn."""
+    changes = {family.removesuffix("_m"): _frozen(inputs.realised(f"clearance.{family}"))
+               for family in CLEARANCE_RADII if inputs.realised(f"clearance.{family}") is not None}
+    return dataclasses.replace(scene, clearance=dataclasses.replace(scene.clearance, **changes)) if changes else scene
+
+
+def realised_scene(scene, inputs):
+    """The scene of one realised robot: :func:`realised_geometry`, the links' Young's modulus and
+    density (scalar, or per link (12,): cranks 1-6, rods 1-6), the platform's mass and principal
+    moments.  The shear modulus follows the modulus (G E_real / E_nominal: Poisson's ratio kept)."""
+    mat, plat = scene.material, scene.platform
+    E, rho = inputs.realised("material.youngs_modulus_Pa"), inputs.realised("material.density_kg_m3")
+    mass, inertia = inputs.realised("platform.mass_kg"), inputs.realised("platform.inertia_kg_m2")
+    material = dataclasses.replace(
+        mat, youngs_modulus=mat.youngs_modulus if E is None else _scalar_or_links(E),
+        shear_modulus=mat.shear_modulus if E is None else _scalar_or_links(
+            E * (mat.shear_modulus / mat.youngs_modulus)),
+        density=mat.density if rho is None else _scalar_or_links(rho))
+    platform = dataclasses.replace(plat, mass=plat.mass if mass is None else float(mass[0]),
+                                   inertia=plat.inertia if inertia is None else _frozen(inertia))
+    return dataclasses.replace(scene, geometry=realised_geometry(scene.geometry, inputs), material=material,
+                               platform=platform)
+
+
+def _scalar_or_links(values):
+    """One shared draw as a scalar (a scene's type), twelve per-link draws as a frozen (12,) array."""
+    values = np.asarray(values, float)
+    return float(values[0]) if values.size == 1 else _frozen(values)
+
+
+def scene_is_nominal(scene, realised) -> bool:
+    """True when the realised scene's geometry, material and platform hold the nominal values exactly."""
+    same = [np.array_equal(*np.broadcast_arrays(getattr(getattr(realised, part), f), getattr(getattr(scene, part), f)))
+            for part, fields in (("material", ("youngs_modulus", "shear_modulus", "density")),
+                                 ("platform", ("mass", "inertia"))) for f in fields]
+    return all(same) and is_nominal(scene.geometry, realised.geometry)
 
 
 def is_nominal(geometry, realised) -> bool:

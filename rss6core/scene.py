@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .beam import BEAM_THEORIES, MASS_MODELS, BeamTheory
-from .clearance import RELATIVE_BAND_REACH, SizeBand
+from .clearance import CLEARANCE_RADII, RELATIVE_BAND_REACH, SizeBand
 from .contact_options import CONTACT_STARTS, MAX_CONTACT_REFINEMENTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
@@ -445,11 +445,6 @@ def _read_table(table: dict, schema: dict, path: tuple[str, ...] = ()) -> dict:
         else:
             out[key] = _read_key(value, spec, path + (key,))
     return out
-
-
-# each [clearance] size and the [contact] radius of the joint it belongs to
-CLEARANCE_RADII = {"revolute_radial_m": "journal_radius_m", "revolute_axial_m": "journal_radius_m",
-                   "spherical_C_m": "sphere_radius_m", "spherical_B_m": "sphere_radius_m"}
 
 
 def _below_radius(where: str, size: float, radius: str, contact: dict) -> None:

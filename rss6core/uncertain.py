@@ -24,6 +24,8 @@ import numpy as np
 from scipy import stats
 from scipy.special import ndtr, ndtri
 
+from .clearance import CLEARANCE_RADII
+
 __all__ = ["UncertainInputError", "UncertainKey", "UNCERTAIN_KEYS", "LAWS", "TAIL", "INPUT_STREAM",
            "UncertainInput", "Correlation", "UncertainInputs", "InputDraw", "parse_uncertain", "input_rng",
            "inputs_from_uniforms", "draw_inputs"]
@@ -64,6 +66,7 @@ UNCERTAIN_KEYS = {
     "platform.inertia_kg_m2": UncertainKey("kg_m2", "kg m2", 1.0, (("one", 1),), "positive"),
     "contact.friction_coefficient": UncertainKey("", "1", 1.0, _CONTACT, "nonnegative"),
     "contact.restitution": UncertainKey("", "1", 1.0, _CONTACT, "unit"),
+    **{f"clearance.{family}": UncertainKey("m", "m", 1.0, _JOINT, "clearance") for family in CLEARANCE_RADII},
 }
 
 # per law: required parameters, optional ones with defaults (in the key's unit; lognormal's are
@@ -266,6 +269,7 @@ def _check_law(where: str, law: str, p: dict, suffix: str) -> None:
 _RULES = {"positive": (lambda lo, hi: lo > 0, "positive"),
           "nonnegative": (lambda lo, hi: lo >= 0, "non-negative"),
           "unit": (lambda lo, hi: lo > 0 and hi <= 1, "in (0, 1]"),
+          "clearance": (lambda lo, hi: lo >= 0, "non-negative"),   # and below the joint's radius: _check_clearance
           "any": (lambda lo, hi: True, "")}
 
 
@@ -277,6 +281,21 @@ def _check_possible(where: str, item: UncertainInput) -> None:
         ends = "its 1e-9 and 1-1e-9 quantiles" if item.law in ("normal", "lognormal") else "its bounds"
         raise UncertainInputError(f"{where} {item.parameter}: law {item.law!r} can draw values in "
                                   f"[{lo:.6g}, {hi:.6g}] {item.units} ({ends}), which must be {rule}")
+
+
+def _check_clearance(where: str, item: UncertainInput, values: dict) -> None:
+    """A drawn clearance size: below its joint's [contact] radius at every value the law can draw, and
+    its family's size drawn by this table alone (no [tolerance.<family>] band, no [sampling]
+    size_tolerance: those are the older form of the same draw)."""
+    key = item.parameter.split(".", 1)[1]
+    family, radius = key.removesuffix("_m"), CLEARANCE_RADII[key]
+    if family in values.get("tolerance", {}) or values["sampling"]["size_tolerance"] > 0:
+        other = f"[tolerance.{family}]" if family in values.get("tolerance", {}) else "[sampling] size_tolerance"
+        raise UncertainInputError(f"{where} parameter: {item.parameter} is drawn by {other} already; give one of them")
+    lo, hi = item.extremes()
+    if hi >= values["contact"][radius]:
+        raise UncertainInputError(f"{where} {item.parameter}: law {item.law!r} can draw sizes up to {hi:.6g} m, "
+                                  f"not below [contact] {radius} = {values['contact'][radius]!r} m")
 
 
 def _input(name: str, raw, values: dict, taken: dict) -> UncertainInput:
@@ -307,6 +326,8 @@ def _input(name: str, raw, values: dict, taken: dict) -> UncertainInput:
     count = dict(key.each)[each]
     item = UncertainInput(name, parameter, each, count, law, params, _nominal(values, parameter, key))
     _check_possible(where, item)
+    if key.possible == "clearance":
+        _check_clearance(where, item, values)
     return item
 
 

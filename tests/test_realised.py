@@ -5,6 +5,8 @@ import numpy as np
 import pytest
 
 from rss6core import parse_scene, rigid_motion, simulate
+from rss6core.assembly import build_elastic_model
+from rss6core.elastic import simulate_elastic
 from rss6core.kinematics import leg_jacobian
 from rss6core.realised import linear_length_error, motion_error, realised_motion
 
@@ -95,8 +97,74 @@ def test_per_leg_geometry_of_nominal_values_keeps_every_bit(smoke_text):
     assert np.array_equal(leg_jacobian(g, a.b, a.r, a.alpha), leg_jacobian(legs, a.b, a.r, a.alpha))
 
 
+def _modulus(factor, each="link"):
+    """Young's modulus times ``factor`` on every link (a point lognormal law: a factor, no spread)."""
+    return _table("E", "material.youngs_modulus_Pa", f'law = "lognormal"\nsigma = 0.0\nmedian = {factor!r}', each)
+
+
+def test_elastic_sag_scales_as_one_over_the_modulus(smoke_text):
+    """Only the modulus drawn (per link, so each leg its own matrices): halving E doubles the elastic
+    error and doubling it halves it, to the dynamic amplification's change (slow motion: < 1 %)."""
+    nominal = simulate(parse_scene(smoke_text), "elastic").displacement
+    for factor in (0.5, 2.0):
+        scene = parse_scene(smoke_text + _modulus(factor))
+        d = simulate(scene, "elastic").displacement
+        assert np.abs(d * factor - nominal).max() < 1e-2 * np.abs(nominal).max()
+
+
+def test_elastic_error_of_a_stiff_realised_robot_is_its_rigid_error(smoke_text):
+    """Lengths drawn, modulus x 1e4: the elastic level's error is the rigid level's geometric error plus
+    an elastic part 1e4 times below the nominal robot's."""
+    scene = parse_scene(smoke_text + _table(
+        "crank", "geometry.crank_length_m", 'law = "uniform"\nlow_m = -2e-4\nhigh_m = 2e-4')
+        + _table("rod", "geometry.rod_length_m", 'law = "uniform"\nlow_m = -2e-4\nhigh_m = 2e-4') + _modulus(1e4))
+    rigid, elastic = simulate(scene, "rigid", seed=3, realization=1), simulate(scene, "elastic", seed=3, realization=1)
+    nominal = np.abs(simulate(parse_scene(smoke_text), "elastic").displacement).max()
+    assert np.abs(rigid.displacement).max() > 10 * nominal
+    assert np.abs(elastic.displacement - rigid.displacement).max() < 2e-4 * nominal
+
+
+def test_a_realised_elastic_robot_of_nominal_values_keeps_the_bits_and_per_leg_matrices_agree(smoke_text):
+    """Zero-width laws: the nominal elastic run's bits.  Per-leg link matrices of the nominal values (the
+    realised model's other path) agree with the shared ones to rounding."""
+    plain = simulate(parse_scene(smoke_text), "elastic")
+    zero = parse_scene(smoke_text + _table("crank", "geometry.crank_length_m", 'law = "normal"\nstd_m = 0.0')
+                       + _modulus(1.0, "one"))
+    same = simulate(zero, "elastic", seed=5, realization=2)
+    for f in ("displacement", "velocity", "acceleration"):
+        assert np.array_equal(getattr(plain, f), getattr(same, f)), f
+    scene = parse_scene(smoke_text)
+    legs = dataclasses.replace(scene, material=dataclasses.replace(
+        scene.material, youngs_modulus=np.full(12, scene.material.youngs_modulus)))
+    assert build_elastic_model(legs, 4).crank_K.shape == (6, 24, 24)
+    per_leg = simulate_elastic(legs, 4, dt=scene.simulation.time_step)
+    assert np.abs(per_leg.displacement - plain.displacement).max() < 1e-9 * np.abs(plain.displacement).max()
+
+
+CLEARANCE_KEYS = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
+
+
+def test_drawn_clearance_sizes_scale_the_quasi_static_error_and_are_the_draws_sizes(smoke_text):
+    """The quasi-static error is linear in the clearances (eccentricities scale with the sizes): every
+    size x1.5 (a point lognormal factor) gives 1.5 x the nominal error to rounding; sizes drawn per
+    joint are the draw's sizes, and a zero-width law keeps the nominal bits."""
+    nominal = simulate(parse_scene(smoke_text), "quasi-static", seed=2, realization=5)
+    factor = "".join(_table(f, f"clearance.{f}_m", 'law = "lognormal"\nsigma = 0.0\nmedian = 1.5', "one")
+                     for f in CLEARANCE_KEYS)
+    scaled = simulate(parse_scene(smoke_text + factor), "quasi-static", seed=2, realization=5)
+    assert np.abs(scaled.displacement - 1.5 * nominal.displacement).max() < 1e-12 * np.abs(nominal.displacement).max()
+    assert np.array_equal(scaled.draw.size_C, np.full(6, 1.5 * 0.25e-3))
+    joint = simulate(parse_scene(smoke_text + _table("c", "clearance.spherical_C_m", 'law = "uniform"\nlow_m = -1e-5\n'
+                                                     'high_m = 1e-5', "joint")), "quasi-static", seed=2, realization=5)
+    assert np.array_equal(joint.draw.size_C, 0.25e-3 + joint.inputs.of("c"))
+    assert len(set(joint.draw.size_C)) == 6 and np.array_equal(joint.draw.size_B, nominal.draw.size_B)
+    zero = simulate(parse_scene(smoke_text + _table("r", "clearance.revolute_radial_m", 'law = "normal"\nstd_m = 0.0',
+                                                    "joint")), "quasi-static", seed=2, realization=5)
+    assert np.array_equal(zero.displacement, nominal.displacement)
+
+
 def test_levels_that_cannot_take_uncertain_inputs_refuse_them(smoke_text):
     scene = _lengths(smoke_text, 1e-4)
-    for model in ("elastic", "paper", "contact"):
+    for model in ("paper", "contact"):
         with pytest.raises(ValueError, match=rf"^the {model} level cannot take \[uncertain.\*\] inputs yet"):
             simulate(scene, model)

@@ -71,11 +71,30 @@ def test_a_table_is_read_with_its_law_and_draw_count(paper_text):
      r"\[uncertain.x\] law: 'lognormal' is a factor on a positive value"),
     ('parameter = "geometry.crank_length_m"\nlaw = "truncated-normal"\nstd_m = 0\nlow_m = -1e-4\nhigh_m = 1e-4',
      r"\[uncertain.x\] std_m: must be positive"),
+    ('parameter = "clearance.revolute_radial_m"\neach = "joint"\nlaw = "uniform"\nlow_m = -0.3e-3\nhigh_m = 0',
+     r"\[uncertain.x\] clearance.revolute_radial_m: law 'uniform' can draw .*-5e-05.* must be non-negative"),
+    ('parameter = "clearance.spherical_C_m"\nlaw = "uniform"\nlow_m = 0\nhigh_m = 0.00975',   # 0.25 + 9.75 mm
+     r"\[uncertain.x\] clearance.spherical_C_m: law 'uniform' can draw sizes up to 0.01 m, not below \[contact\] "
+     r"sphere_radius_m = 0.01 m"),
+    ('parameter = "clearance.spherical_B_m"\neach = "leg"\nlaw = "uniform"\nlow_m = 0\nhigh_m = 1e-5',
+     r"\[uncertain.x\] each: 'leg' is not one of one, joint for clearance.spherical_B_m"),
 ])
 def test_a_bad_table_is_refused_in_one_line_naming_table_and_key(paper_text, table, message):
     with pytest.raises(SceneError, match=message) as info:
         _with(paper_text, "[uncertain.x]\n" + table)
     assert str(info.value).startswith("s.toml: ") and "\n" not in str(info.value)
+
+
+def test_a_clearance_size_drawn_by_a_band_too_is_refused(paper_text, configs):
+    """[tolerance.<family>] bands and [sampling] size_tolerance are the older form of the same draw: a
+    family takes one of them or an [uncertain] table, in one line naming both."""
+    table = ('[uncertain.x]\nparameter = "clearance.revolute_radial_m"\neach = "joint"\nlaw = "uniform"\n'
+             'low_m = -1e-5\nhigh_m = 1e-5')
+    with pytest.raises(SceneError, match=r"^s.toml: \[uncertain.x\] parameter: clearance.revolute_radial_m is "
+                                         r"drawn by \[tolerance.revolute_radial\] already; give one of them$"):
+        _with((configs / "paper_tolerance.toml").read_text(), table)
+    with pytest.raises(SceneError, match=r"is drawn by \[sampling\] size_tolerance already"):
+        _with(paper_text.replace("size_tolerance = 0.0 ", "size_tolerance = 0.1 ", 1), table)
 
 
 def test_a_key_drawn_twice_and_bad_correlations_are_refused(paper_text):

@@ -117,14 +117,47 @@ def test_check_lists_the_inputs_and_run_refuses_levels_without_them(text, tmp_pa
     assert ("uncertain input crank: geometry.crank_length_m, each leg (6 draws), uniform deviation "
             "(low_m=-0.0001, high_m=0.0001)") in out
     assert "uncertain input mass: platform.mass_kg, each one (1 draws), lognormal factor" in out
-    for model in ("elastic", "paper", "contact"):
+    for model in ("paper", "contact"):
         assert main(["run", str(scene), "--model", model, "-n", "2", "-o", str(tmp_path / "x.nc")]) == 2
         err = capsys.readouterr().err.strip()
         assert err == (f"rss6: error: --model {model}: the {model} level cannot take [uncertain.*] inputs yet "
-                       "(the rigid and quasi-static levels can)")
-    assert main(["run", str(scene), "-n", "2", "-o", str(tmp_path / "x.nc")]) == 2   # the scene's elastic
-    assert "[simulation] model = 'elastic': the elastic level cannot" in capsys.readouterr().err
+                       "(the rigid, quasi-static and elastic levels can)")
     assert not (tmp_path / "x.nc").exists()
+    (paper := tmp_path / "p.toml").write_text(text.replace('model = "elastic"', 'model = "paper"', 1))
+    assert main(["run", str(paper), "-n", "2", "-o", str(tmp_path / "x.nc")]) == 2   # the scene's own level
+    assert "[simulation] model = 'paper': the paper level cannot" in capsys.readouterr().err
+    assert not (tmp_path / "x.nc").exists()
+
+
+def test_drawn_clearance_sizes_are_the_files_sizes_in_an_ensemble_and_a_sensitivity_design(text):
+    """An [uncertain] clearance size: the file's clearance_size is the drawn size (nominal + input), and the
+    sensitivity design's draws take the sizes of its rows' inputs."""
+    from pipeline.studies.sensitivity import clearance_draws_from_uniforms, clearance_inputs
+    sized = text + ('\n[uncertain.radial]\nparameter = "clearance.revolute_radial_m"\neach = "joint"\n'
+                    'law = "uniform"\nlow_m = -2e-5\nhigh_m = 2e-5\n')
+    ds = run_chunk(_spec(sized), [0, 1])
+    drawn = ds["uncertain_input"].sel(input=[f"radial[joint {i}]" for i in range(1, 7)]).values
+    sizes = ds["clearance_size"].sel(joint=[f"A{i}" for i in range(1, 7)]).transpose("realization", ...).values
+    assert np.array_equal(sizes, 0.25e-3 + drawn)
+    scene = parse_scene(sized)
+    inputs = clearance_inputs(scene)
+    u = np.random.default_rng(0).random((3, len(inputs.names)))
+    given = [inputs_from_uniforms(scene.uncertain, row[len(inputs.names) - inputs.uncertain:]) for row in u]
+    for draw, g in zip(clearance_draws_from_uniforms(scene, inputs, u, given), given, strict=True):
+        assert np.array_equal(draw.radial_size, 0.25e-3 + g.of("radial"))
+
+
+def test_an_elastic_ensemble_of_realised_robots_records_the_inputs_and_differs_per_realisation(text, tmp_path):
+    """The elastic level on realised robots: the file holds every drawn input, and the realisations'
+    errors differ (their geometric errors differ), reproducibly."""
+    ds = run_chunk(_spec(text, "elastic"), [0, 1, 2])
+    assert ds["uncertain_input"].shape == (3, 13)
+    again = run_chunk(_spec(text, "elastic"), [1, 2])
+    assert ds.attrs["model"] == "elastic"
+    assert np.array_equal(ds["uncertain_input"].values[1:], again["uncertain_input"].values)
+    error = ds["max_abs_error"].transpose("realization", ...).values
+    assert np.array_equal(error[1:], again["max_abs_error"].transpose("realization", ...).values)
+    assert np.abs(error[0] - error[1]).max() > 1e-6     # m: 10-100 um geometric errors differ
 
 
 def test_sobol_indices_by_input_follow_the_physics(configs):

@@ -205,3 +205,14 @@ def test_the_worst_case_takes_each_band_upper_end(configs, paper):
     assert len(banded.from_band) == 4 and worst_case_sizes(paper).from_band == ()
     relative = dataclasses.replace(paper, sampling=dataclasses.replace(paper.sampling, size_tolerance=0.1))
     assert worst_case_sizes(relative).spherical_B == pytest.approx(RELATIVE_BAND_REACH * 0.25e-3)
+
+
+def test_a_scene_with_uncertain_inputs_is_refused_in_one_line_before_any_work(tmp_path, capsys):
+    """The map is the nominal geometry's clearance error: a manufacturing scene ends in one line, exit 2,
+    and writes no folder."""
+    out = tmp_path / "map"
+    assert main(["map", "paper_manufacturing", "-n", "10", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "[uncertain.crank_length]" in err and "paper_manufacturing" in err
+    assert not out.exists()

@@ -58,11 +58,21 @@ def _check(args) -> None:
         raise OptionError(f"--grid: give two different axes, got {' '.join(g.option() for g in args.grid)}")
 
 
+def _check_scene(scene, source: str) -> None:
+    """OptionError for a scene with [uncertain.*] inputs: the map's worst case is a closed form over the
+    clearance sets of one geometry (the nominal), which a realised robot's drawn geometry would leave."""
+    if scene.uncertain:
+        raise OptionError(f"{source}: [uncertain.{scene.uncertain.inputs[0].name}]: the workspace map is the "
+                          "nominal geometry's clearance error and cannot take [uncertain.*] inputs; map the scene "
+                          "without its [uncertain.*] tables")
+
+
 def main(args) -> int:
     from ..files.outputs import check_output_folder
     from ..studies.workspace_map import map_table, workspace_map, write_map
     _check(args)
     scene = find_scene(args.config)
+    _check_scene(scene, args.config)
     check_output_folder(args.output, args.parents)
     print(f"rss6 map: scene {scene.name}, {args.model} level, {args.n} drawn realisations (seed {args.seed})",
           flush=True)

@@ -24,7 +24,7 @@ import numpy as np
 import xarray as xr
 
 from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, inputs_from_uniforms,
-                      MODELS, model_level, models_with, prepare_level, size_band)
+                      MODELS, model_level, models_with, prepare_level, realised_clearances, size_band)
 
 from ..ensemble.cluster import dask_client
 from ..files.records import check_window, window_label, window_summaries
@@ -89,10 +89,11 @@ def clearance_inputs(scene) -> ClearanceInputs:
 UNCERTAIN_GROUP = "uncertain_inputs"   # the joint design's group of every [uncertain.*] input
 
 
-def clearance_draws_from_uniforms(scene, inputs: ClearanceInputs, u: np.ndarray) -> list[ClearanceDraw]:
+def clearance_draws_from_uniforms(scene, inputs: ClearanceInputs, u: np.ndarray, given=None) -> list[ClearanceDraw]:
     """The clearance draws (one per row) of uniforms u (R, D) laid out as ``inputs``: the core's
     draw (rss6core.clearances_from_named_uniforms) with each block's six uniforms taken from the
-    columns of its joints (block ``C_magnitude``: columns C1_magnitude .. C6_magnitude)."""
+    columns of its joints (block ``C_magnitude``: columns C1_magnitude .. C6_magnitude); with the
+    rows' [uncertain.*] inputs ``given``, the clearance sizes they draw (rss6core.realised_clearances)."""
     u = np.atleast_2d(np.asarray(u, float))
     columns = {}
     for block in UNIFORM_BLOCKS:
@@ -100,7 +101,8 @@ def clearance_draws_from_uniforms(scene, inputs: ClearanceInputs, u: np.ndarray)
         names = [f"{kind}{leg}_{what}" for leg in range(1, 7)]
         if all(n in inputs.names for n in names):
             columns[block] = [inputs.names.index(n) for n in names]
-    return [clearances_from_named_uniforms(scene, {b: row[c] for b, c in columns.items()}) for row in u]
+    scenes = [scene] * len(u) if given is None else [realised_clearances(scene, g) for g in given]
+    return [clearances_from_named_uniforms(s, {b: row[c] for b, c in columns.items()}) for s, row in zip(scenes, u)]
 
 
 # --- the sampling design ---------------------------------------------------------------------
@@ -152,7 +154,7 @@ def _evaluate_chunk(spec, inputs: ClearanceInputs, u: np.ndarray, window: str = 
     given = None
     if inputs.uncertain:
         given = [inputs_from_uniforms(scene.uncertain, row[len(inputs.names) - inputs.uncertain:]) for row in u]
-    results = level.simulate_draws(clearance_draws_from_uniforms(scene, inputs, u), given)
+    results = level.simulate_draws(clearance_draws_from_uniforms(scene, inputs, u, given), given)
     k = WINDOWS.index(window)
     stats = np.stack([np.stack([w[k] for w in window_summaries(r, sim.settle_time, sim.steady_after)])
                       for r in results])
