@@ -2,4 +2,5 @@
 checks a file must pass before it is used, and the output paths, locks and parts manifests.
 
 Each module imports only those before it: schema < records < checksums < writing < reading < check
-< opening (read, then checked); outputs (paths, locks, manifests) uses schema and writing."""
+< opening (read, then checked); outputs (paths, locks, manifests) uses schema and writing; error_map
+(the workspace error map's file, ``rss6 map``) uses none of them."""
