@@ -29,14 +29,13 @@ from ..ensemble.run import EnsembleSpec, ensemble
 from ..files.records import window_masks
 from ..scenes.variant import dump_scene_toml
 from ..vocabulary import DIRECTIONS, QUANTITIES, STATISTICS, WINDOWS, UserError
-from .fits import COST_LAW, FitError, fit_limits, parse_fit
+from .fits import COST_LAW, DEFAULT_FITS, FitError, fit_limits, parse_fit
 
 __all__ = ["ALLOCATED", "DEFAULT_FITS", "ClassOption", "Allocation", "AllocationError", "class_options",
            "Responses", "responses", "spec_uppers", "search", "allocate", "allocated_scene"]
 
 ALLOCATED = ("revolute_radial", "spherical_C", "spherical_B")   # families given fit classes
 RADII = {"revolute_radial": "journal_radius", "spherical_C": "sphere_radius", "spherical_B": "sphere_radius"}
-DEFAULT_FITS = ("H7/g6", "H7/f7", "H8/e8", "H9/d9", "H11/c11")
 PROBE_LOW, PROBE_HIGH = 1.0e-4, 2.0e-4   # m: the band the responses are drawn with (any band gives them)
 
 

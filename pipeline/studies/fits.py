@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 from ..vocabulary import UserError
 
-__all__ = ["SIZE_BANDS_MM", "IT_UM", "SHAFT_ES_UM", "Fit", "FitError", "CostLaw", "COST_LAW", "parse_fit",
+__all__ = ["DEFAULT_FITS", "SIZE_BANDS_MM", "IT_UM", "SHAFT_ES_UM", "Fit", "FitError", "CostLaw", "COST_LAW",
+           "parse_fit",
            "fit_limits", "FitLimits"]
 
 SIZE_BANDS_MM = (3, 6, 10, 18, 30, 50, 80, 120)       # upper ends; a size sits in (previous, upper]
@@ -47,6 +48,9 @@ SHAFT_ES_UM = {
     "g": tuple(zip(SIZE_BANDS_MM, (-2, -4, -5, -6, -7, -9, -10, -12))),
     "h": tuple(zip(SIZE_BANDS_MM, (0,) * 8)),
 }
+# the clearance fits rss6 allocate offers by default, tightest to loosest at 18-30 mm; the ISO 286-1 Annex
+# preferred running fits among them (H7/g6, H8/f7, H9/d9, H11/c11) and the grades between
+DEFAULT_FITS = ("H7/g6", "H7/f7", "H8/f7", "H8/e8", "H9/e9", "H9/d9", "H10/d10", "H11/d11", "H11/c11")
 _FIT = re.compile(r"^H(\d+)/([a-z])(\d+)$")
 
 

@@ -1,0 +1,116 @@
+"""rss6 allocate: the least-cost fit classes per family against an exhaustive search of real runs,
+the saving against the cheapest uniform class, the verification, and the one-line refusals."""
+from __future__ import annotations
+
+import itertools
+import json
+from dataclasses import replace
+
+import pytest
+
+from pipeline.analysis.gate import judge_all
+from pipeline.analysis.spec import parse_spec
+from pipeline.cli import main
+from pipeline.ensemble.run import EnsembleSpec, run_chunk
+from pipeline.scenes.variant import scene_variant
+from pipeline.studies.allocation import ALLOCATED, allocated_scene, class_options, responses, search, spec_uppers
+
+SPEC = "displacement:x,y,z<=0.1mm@q95"
+N = 60                                   # q95's one-sided 95 % bound exists from n = 59
+SMALL = ("H8/f7", "H9/d9", "H10/d10")    # 27 combinations on the three families
+
+
+@pytest.fixture(scope="module")
+def paper(configs):
+    text = (configs / "paper.toml").read_text()
+    return EnsembleSpec(text, "paper", "quasi-static", "newmark", 1e-3, 4, 0)
+
+
+def _cost(combo):
+    return 6 * sum(c.cost for c in combo)
+
+
+def _passes_by_run(spec: EnsembleSpec, combo, specs) -> bool:
+    """The combination judged by the gate on a plain run of its scene (the core's own draws)."""
+    text = allocated_scene(spec.scene_text, spec.source, combo)
+    ds = run_chunk(replace(spec, scene_text=text), list(range(N)))
+    return all(v.outcome == "pass" for v in judge_all([parse_spec(SPEC)], ds, 0.95))
+
+
+@pytest.fixture(scope="module")
+def exhaustive(paper):
+    """(least cost, its combos) over every combination of SMALL, each judged on a run."""
+    options = class_options(paper.scene(), SMALL)
+    combos = list(itertools.product(*(options[f] for f in ALLOCATED)))
+    passing = [c for c in combos if _passes_by_run(paper, c, [parse_spec(SPEC)])]
+    best = min(_cost(c) for c in passing)
+    return options, best, [c for c in passing if _cost(c) == best], passing
+
+
+def test_allocation_is_the_exhaustive_optimum(paper, exhaustive):
+    options, best, optima, _ = exhaustive
+    specs = [parse_spec(SPEC)]
+    combo, judged, _ = search(responses(paper, specs, N), options, specs, paper.scene(), 0.95)
+    assert _cost(combo) == pytest.approx(best)
+    assert combo in optima and 1 <= judged <= 27
+
+
+def test_allocation_costs_less_than_the_cheapest_passing_uniform_class(exhaustive):
+    _, best, _, passing = exhaustive
+    uniform = [c for c in passing if len({x.name for x in c}) == 1]
+    assert uniform and best < min(_cost(c) for c in uniform)
+
+
+def test_superposition_reproduces_a_run_at_every_size(paper):
+    """The responses' prediction equals a plain run's upper bound at a mixed combination (same draws)."""
+    specs = [parse_spec(SPEC)]
+    options = class_options(paper.scene(), SMALL)
+    combo = (options["revolute_radial"][0], options["spherical_C"][2], options["spherical_B"][1])
+    predicted = spec_uppers(responses(paper, specs, N), combo, specs, paper.scene(), 0.95)[0]
+    ds = run_chunk(replace(paper, scene_text=allocated_scene(paper.scene_text, "paper", combo)), list(range(N)))
+    measured = [v.upper for v in judge_all(specs, ds, 0.95)]
+    assert predicted == pytest.approx(measured, rel=1e-9)
+
+
+def test_command_verifies_and_writes(configs, tmp_path, capsys):
+    code = main(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "-n", str(N), "--classes", ",".join(SMALL),
+                 "--workers", "1", "-o", str(tmp_path / "a"), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["verification"] == "pass"
+    assert out["total_cost"] < out["uniform_cost"]
+    import xarray as xr
+    with xr.open_dataset(tmp_path / "a" / "allocation.nc") as ds:
+        assert list(ds["fit_class"].values) == [c["class"] for c in out["classes"]]
+        assert set(ds["verdict_outcome"].values) == {"pass"}
+
+
+def _refused(args, capsys, *words):
+    code = main(args)
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    for w in words:
+        assert w in err, err
+
+
+def test_refusals_in_one_line(configs, tmp_path, capsys):
+    paper = str(configs / "paper.toml")
+    base = ["allocate", paper, "--spec", SPEC, "-n", str(N), "-o", str(tmp_path / "x")]
+    _refused(base + ["--classes", "H7/x6"], capsys, "H7/x6")
+    _refused(base + ["--model", "elastic"], capsys, "--model elastic")
+    _refused(base + ["--per-joint"], capsys, "--per-joint")
+    _refused(["allocate", paper, "--spec", "displacement:x<=0.01mm@q95", "-n", str(N), "-o", str(tmp_path / "y")],
+             capsys, "displacement:x<=0.01mm@q95", "best attainable")
+    costs = tmp_path / "costs.toml"
+    costs.write_text('[revolute_radial]\n"H9/d9" = 3.0\n"H11/c11" = 2.0\n')
+    _refused(base + ["--classes", "H9/d9,H11/c11", "--costs", str(costs)], capsys, "spherical_C", "H9/d9")
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_a_band_reaching_the_radius_is_refused(configs, tmp_path, capsys):
+    patch = {"clearance": {"revolute_radial_m": 0.05e-3, "revolute_axial_m": 0.05e-3},
+             "contact": {"journal_radius_m": 0.08e-3}}     # D = 0.16 mm: H11/c11 reaches 0.09 mm radially
+    text = scene_variant((configs / "paper.toml").read_text(), patch)
+    scene = tmp_path / "small.toml"
+    scene.write_text(text)
+    _refused(["allocate", str(scene), "--spec", SPEC, "--classes", "H11/c11", "-o", str(tmp_path / "z")],
+             capsys, "H11/c11", "journal_radius_m")
