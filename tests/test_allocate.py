@@ -114,3 +114,33 @@ def test_a_band_reaching_the_radius_is_refused(configs, tmp_path, capsys):
     scene.write_text(text)
     _refused(["allocate", str(scene), "--spec", SPEC, "--classes", "H11/c11", "-o", str(tmp_path / "z")],
              capsys, "H11/c11", "journal_radius_m")
+
+
+def _costs_file(tmp_path, extra: str):
+    lines = [f'[{f}]\n' + "".join(f'"{fit}" = {3.0 - i * 0.3}\n' for i, fit in enumerate(SMALL)) for f in ALLOCATED]
+    path = tmp_path / "costs.toml"
+    path.write_text("".join(lines) + extra)
+    return path
+
+
+def test_a_named_class_from_the_costs_file_is_offered_and_chosen(paper, tmp_path):
+    """A cheap, tight ball-joint grade for B (costs file) wins B; the others keep fits; no uniform name
+    covers B's grade, so the uniform choice is among the fits."""
+    specs = [parse_spec(SPEC)]
+    path = _costs_file(tmp_path, "[classes.spherical_B.grade1]\nlow_m = 0.005e-3\nhigh_m = 0.02e-3\ncost = 0.5\n")
+    options = class_options(paper.scene(), SMALL, path)
+    assert [c.name for c in options["spherical_B"]] == [*SMALL, "grade1"]
+    assert [c.cost for c in options["revolute_radial"]] == pytest.approx([3.0, 2.7, 2.4])
+    combo, _, _ = search(responses(paper, specs, N), options, specs, paper.scene(), 0.95)
+    assert combo[2].name == "grade1" and (combo[2].low, combo[2].high) == (0.005e-3, 0.02e-3)
+
+
+@pytest.mark.parametrize("extra, words", [
+    ("[classes.spherical_B.wide]\nlow_m = 0.0\nhigh_m = 0.02\ncost = 1.0\n", ["[classes.spherical_B.wide]", "radius"]),
+    ("[classes.spherical_B.odd]\nlow_m = 0.0\nhigh_m = 1e-5\n", ["[classes.spherical_B.odd]", "cost"]),
+    ("[classes.spherical_A.x]\nlow_m = 0.0\nhigh_m = 1e-5\ncost = 1.0\n", ["spherical_A"]),
+])
+def test_bad_named_classes_are_refused_in_one_line(configs, tmp_path, capsys, extra, words):
+    path = _costs_file(tmp_path, extra)
+    _refused(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "--classes", ",".join(SMALL), "--costs",
+              str(path), "-o", str(tmp_path / "o")], capsys, *words)

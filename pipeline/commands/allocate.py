@@ -28,7 +28,8 @@ def add_parser(sub) -> None:
                    help="comma list of ISO 286 hole-basis clearance fits offered to the revolute radial and "
                         f"spherical C, B families at their joint diameters (default {','.join(DEFAULT_FITS)})")
     p.add_argument("--costs", metavar="TOML", help="costs per joint: [<family>] \"<fit>\" = cost for each "
-                                                   "family and class (default: the reciprocal-power cost law)")
+                                                   "family and fit (default: the reciprocal-power cost law), and "
+                                                   "named classes [classes.<family>.<name>] low_m, high_m, cost")
     p.add_argument("-n", type=positive_int, default=200,
                    help="realisations of the search and of the verification ensemble (default 200)")
     p.add_argument("-o", "--output", help="folder of the allocation file, scene and verification ensemble "

@@ -73,34 +73,61 @@ def _read_costs(path) -> dict:
         data = tomllib.loads(Path(path).read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise AllocationError(f"--costs {path}: {exc}") from None
+    unknown = sorted(set(data) - set(ALLOCATED) - {"classes"}) + sorted(set(data.get("classes", {})) - set(ALLOCATED))
+    if unknown:
+        raise AllocationError(f"--costs {path}: unknown table {unknown[0]!r}; give [<family>] costs and "
+                              f"[classes.<family>.<name>] classes for the families {', '.join(ALLOCATED)}")
     return data
+
+
+def _named_class(family: str, name: str, table, radius: float, where: str) -> ClassOption:
+    """A class the costs file names ([classes.<family>.<name>] low_m, high_m, cost), checked."""
+    keys = {"low_m", "high_m", "cost"}
+    if not isinstance(table, dict) or set(table) != keys:
+        raise AllocationError(f"{where}: give exactly low_m, high_m (radial play, m) and cost (per joint)")
+    low, high, cost = table["low_m"], table["high_m"], table["cost"]
+    if not all(isinstance(x, (int, float)) for x in (low, high, cost)) or not 0 <= low < high or cost < 0:
+        raise AllocationError(f"{where}: need 0 <= low_m < high_m and cost >= 0, got {low!r}, {high!r}, {cost!r}")
+    if high >= radius:
+        raise AllocationError(f"{where}: high_m = {high:g} m reaches the {family} joint's "
+                              f"{RADII[family]}_m = {radius:g} m")
+    return ClassOption(family, name, float(low), float(high), float(cost))
+
+
+def _fit_class(family: str, name: str, radius: float, costs, costs_file) -> ClassOption:
+    """An ISO 286 fit as a class of ``family`` (radial band: half the diametral clearance)."""
+    try:
+        lim = fit_limits(parse_fit(name), 2 * radius)
+    except FitError as exc:
+        raise AllocationError(f"--classes: {exc}") from None
+    if lim.radial_high >= radius:
+        raise AllocationError(f"--classes {name}: its radial band reaches {lim.radial_high * 1e3:g} mm, "
+                              f"not below the {family} joint's {RADII[family]}_m = {radius * 1e3:g} mm")
+    cost = COST_LAW.fit(lim)
+    if costs is not None:
+        cost = costs.get(family, {}).get(name)
+        if not isinstance(cost, (int, float)) or cost < 0:
+            raise AllocationError(f"--costs {costs_file}: [{family}] {name!r}: missing or not a "
+                                  f"cost >= 0 (got {cost!r})")
+    return ClassOption(family, name, lim.radial_low, lim.radial_high, float(cost))
 
 
 def class_options(scene, fits=DEFAULT_FITS, costs_file=None) -> dict[str, tuple[ClassOption, ...]]:
     """Each allocated family's classes: ISO 286 fits at the joint's diameter (2 x its [contact] radius),
-    the radial band half the diametral clearance; costs from ``costs_file`` ([<family>] "<fit>" =
-    cost per joint) or else the reciprocal-power law (pipeline.studies.fits).  AllocationError for an
-    unknown fit, a band reaching the joint's radius, or a cost the file lacks."""
+    the radial band half the diametral clearance, costs from ``costs_file`` ([<family>] "<fit>" =
+    cost per joint) or else the reciprocal-power law (pipeline.studies.fits); then the file's named
+    classes ([classes.<family>.<name>] low_m, high_m, cost; e.g. ball-joint catalogue grades).
+    AllocationError for an unknown fit, a band reaching the joint's radius, or a cost the file lacks."""
     costs = _read_costs(costs_file) if costs_file else None
     out = {}
     for family in ALLOCATED:
         radius = getattr(scene.contact, RADII[family])
-        options = []
-        for name in fits:
-            try:
-                lim = fit_limits(parse_fit(name), 2 * radius)
-            except FitError as exc:
-                raise AllocationError(f"--classes: {exc}") from None
-            if lim.radial_high >= radius:
-                raise AllocationError(f"--classes {name}: its radial band reaches {lim.radial_high * 1e3:g} mm, "
-                                      f"not below the {family} joint's {RADII[family]}_m = {radius * 1e3:g} mm")
-            cost = COST_LAW.fit(lim)
-            if costs is not None:
-                cost = costs.get(family, {}).get(name)
-                if not isinstance(cost, (int, float)) or cost < 0:
-                    raise AllocationError(f"--costs {costs_file}: [{family}] {name!r}: missing or not a "
-                                          f"cost >= 0 (got {cost!r})")
-            options.append(ClassOption(family, name, lim.radial_low, lim.radial_high, float(cost)))
+        options = [_fit_class(family, name, radius, costs, costs_file) for name in fits]
+        for name, table in ((costs or {}).get("classes", {}).get(family, {})).items():
+            if name in fits:
+                raise AllocationError(f"--costs {costs_file}: [classes.{family}.{name}] repeats a fit of --classes")
+            options.append(_named_class(family, name, table, radius, f"--costs {costs_file}: "
+                                                                     f"[classes.{family}.{name}]"))
         out[family] = tuple(options)
     return out
 
@@ -228,7 +255,8 @@ def search(res: Responses, options: dict, specs: list[Spec], scene, confidence: 
 
 def _uniform(res: Responses, options: dict, specs: list[Spec], scene, confidence: float):
     """The cheapest combo naming one class for every family that meets every spec, or None."""
-    names = [c.name for c in options[ALLOCATED[0]]]
+    names = [c.name for c in options[ALLOCATED[0]]
+             if all(any(o.name == c.name for o in options[f]) for f in ALLOCATED)]
     combos = [tuple(next(c for c in options[f] if c.name == name) for f in ALLOCATED) for name in names]
     for combo in sorted(combos, key=_cost):
         if all(bool(np.all(s.holds(u))) for s, u in zip(specs, spec_uppers(res, combo, specs, scene, confidence))):
