@@ -96,7 +96,7 @@ def test_refusals_in_one_line(configs, tmp_path, capsys):
     paper = str(configs / "paper.toml")
     base = ["allocate", paper, "--spec", SPEC, "-n", str(N), "-o", str(tmp_path / "x")]
     _refused(base + ["--classes", "H7/x6"], capsys, "H7/x6")
-    _refused(base + ["--model", "elastic"], capsys, "--model elastic")
+    _refused(base + ["--model", "elastic"], capsys, "--model elastic", "no clearances")
     _refused(base + ["--per-joint"], capsys, "--per-joint")
     _refused(["allocate", paper, "--spec", "displacement:x<=0.01mm@q95", "-n", str(N), "-o", str(tmp_path / "y")],
              capsys, "displacement:x<=0.01mm@q95", "best attainable")
@@ -144,3 +144,30 @@ def test_bad_named_classes_are_refused_in_one_line(configs, tmp_path, capsys, ex
     path = _costs_file(tmp_path, extra)
     _refused(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "--classes", ",".join(SMALL), "--costs",
               str(path), "-o", str(tmp_path / "o")], capsys, *words)
+
+
+def test_greedy_search_at_the_paper_level_is_locally_least_cost_and_bounded(configs, tmp_path):
+    """paper level (not linear in the clearances): the answer passes, every one-step loosening of it
+    that was run failed, the ensembles run stay within the budget and are the files written."""
+    from pipeline.studies.allocation_greedy import _loosenings, greedy_allocate
+    spec = EnsembleSpec((configs / "smoke.toml").read_text(), "smoke", "paper", "newmark", 1e-3, 4, 0)
+    specs = [parse_spec(SPEC)]
+    options = class_options(spec.scene(), SMALL)
+    a = greedy_allocate(spec, specs, N, tmp_path, 0.95, options, workers=1, max_ensembles=6)
+    assert all(v.outcome == "pass" for v in a.verdicts)
+    assert 1 <= a.combinations <= 6 and len(list(tmp_path.glob("smoke_paper_*.nc"))) == a.combinations
+    ranked = {f: sorted(options[f], key=lambda c: -c.cost) for f in ALLOCATED}
+    for looser in _loosenings(a.classes, ranked):
+        path = tmp_path / ("smoke_paper_" + "_".join(c.name.replace("/", "") for c in looser) + ".nc")
+        if path.exists():
+            ds = run_chunk(replace(spec, scene_text=allocated_scene(spec.scene_text, "smoke", looser)), list(range(N)))
+            assert any(v.outcome != "pass" for v in judge_all(specs, ds, 0.95))
+
+
+def test_greedy_never_beats_the_exact_optimum(paper, exhaustive, tmp_path):
+    """At the quasi-static level the greedy search (run there for the check) costs at least the
+    exhaustive optimum and its answer passes."""
+    from pipeline.studies.allocation_greedy import greedy_allocate
+    options, best, _, passing = exhaustive
+    a = greedy_allocate(paper, [parse_spec(SPEC)], N, tmp_path, 0.95, options, workers=1, max_ensembles=27)
+    assert a.cost >= best - 1e-9 and a.classes in passing

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import json
 
-from rss6core import MODELS
+from rss6core import MODELS, model_level
 
 from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
@@ -22,8 +22,11 @@ def add_parser(sub) -> None:
                         "'displacement:x,y,z<=0.1mm@q95' (repeatable; required)")
     p.add_argument("--per-joint", action="store_true",
                    help="a class per joint rather than per family (not implemented: refused)")
-    add_model(p, "model level (only quasi-static: the search uses its exact linear scaling)", choices=MODELS,
+    add_model(p, "model level (default quasi-static: exhaustive search by its exact linear scaling; paper, "
+                 "contact: a greedy search of ensembles, at most --max-ensembles)", choices=MODELS,
               default="quasi-static")
+    p.add_argument("--max-ensembles", type=positive_int, default=12,
+                   help="paper and contact levels: most ensembles the greedy search runs (default 12)")
     p.add_argument("--classes", default=",".join(DEFAULT_FITS), metavar="FITS",
                    help="comma list of ISO 286 hole-basis clearance fits offered to the revolute radial and "
                         f"spherical C, B families at their joint diameters (default {','.join(DEFAULT_FITS)})")
@@ -54,7 +57,8 @@ def main(args) -> int:
     from ..analysis.gate import EXIT_CODES, overall
     from ..files.outputs import check_output_folder
     from ..files.writing import write_netcdf
-    from ..studies.allocation import allocate, class_options
+    from ..studies.allocation import allocate, check_request, class_options
+    from ..studies.allocation_greedy import greedy_allocate
     from ..studies.allocation_output import COST_NOTE, allocation_dataset, allocation_json, format_allocation
     specs = _specs(args.spec)
     if args.per_joint:
@@ -63,11 +67,16 @@ def main(args) -> int:
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
     options = class_options(level.scene, [f.strip() for f in args.classes.split(",") if f.strip()], args.costs)
+    check_request(level.ensemble_spec(args.seed), specs, args.n, args.confidence)
     folder = check_output_folder(args.output or f"allocate_{level.scene.name}_{level.model}", args.parents)
     warn_oversubscription(cluster.workers, None)
     try:
-        a = allocate(level.ensemble_spec(args.seed), specs, args.n, folder, args.confidence, options,
-                     cluster.workers)
+        spec = level.ensemble_spec(args.seed)
+        if model_level(level.model).linear_in_clearances:
+            a = allocate(spec, specs, args.n, folder, args.confidence, options, cluster.workers)
+        else:
+            a = greedy_allocate(spec, specs, args.n, folder, args.confidence, options, cluster.workers,
+                                args.max_ensembles)
     except KeyboardInterrupt:
         return interrupted(f"finished chunks of the verification ensemble are kept in {folder}")
     note = f"per joint from {args.costs}" if args.costs else COST_NOTE

@@ -32,7 +32,8 @@ from ..vocabulary import DIRECTIONS, QUANTITIES, STATISTICS, WINDOWS, UserError
 from .fits import COST_LAW, DEFAULT_FITS, FitError, fit_limits, parse_fit
 
 __all__ = ["ALLOCATED", "DEFAULT_FITS", "ClassOption", "Allocation", "AllocationError", "class_options",
-           "Responses", "responses", "spec_uppers", "search", "allocate", "allocated_scene"]
+           "Responses", "responses", "spec_uppers", "search", "allocate", "allocated_scene", "check_request",
+           "cost_of"]
 
 ALLOCATED = ("revolute_radial", "spherical_C", "spherical_B")   # families given fit classes
 RADII = {"revolute_radial": "journal_radius", "spherical_C": "sphere_radius", "spherical_B": "sphere_radius"}
@@ -66,6 +67,7 @@ class Allocation:
     predicted: dict         # spec text -> largest predicted upper bound over its directions (SI)
     ensemble_path: Path
     scene_path: Path
+    method: str = "exact linear scaling"
 
 
 def _read_costs(path) -> dict:
@@ -236,8 +238,12 @@ def spec_uppers(res: Responses, combo, specs: list[Spec], scene, confidence: flo
     return out
 
 
-def _cost(combo) -> float:
+def cost_of(combo) -> float:
+    """Total cost of a class per family, six joints a family."""
     return 6.0 * sum(c.cost for c in combo)
+
+
+_cost = cost_of
 
 
 def search(res: Responses, options: dict, specs: list[Spec], scene, confidence: float):
@@ -264,17 +270,17 @@ def _uniform(res: Responses, options: dict, specs: list[Spec], scene, confidence
     return None
 
 
-def _check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: float) -> None:
-    """AllocationError for a request this allocation cannot answer, before any work."""
-    if not model_level(spec.model).linear_in_clearances:
-        raise AllocationError(f"--model {spec.model}: rss6 allocate searches with the exact linear scaling of "
-                              f"the {' or '.join(models_with('linear_in_clearances'))} level only (other levels: "
-                              "not implemented)")
+def check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: float) -> None:
+    """AllocationError for a request no allocation can answer, before any work."""
+    if not model_level(spec.model).draws_clearances:
+        raise AllocationError(f"--model {spec.model}: this level has no clearances, so no fit allocation; use "
+                              f"{', '.join(models_with('draws_clearances'))}")
     scene = spec.scene()
     if scene.uncertain or scene.sampling.size_tolerance > 0:
         raise AllocationError(f"{spec.source}: allocate draws sizes from fit classes; give a scene without "
                               "[uncertain.*] tables and with [sampling] size_tolerance = 0")
-    if scene.simulation.quasi_static_eccentricity != "drawn":
+    linear = model_level(spec.model).linear_in_clearances
+    if linear and scene.simulation.quasi_static_eccentricity != "drawn":
         raise AllocationError(f"{spec.source}: allocate needs [simulation] quasi_static_eccentricity = "
                               "\"drawn\" (the reaction mode's direction does not split by family)")
     for s in specs:
@@ -290,7 +296,9 @@ def _check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: fl
 def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float, options: dict,
              workers: int = 2) -> Allocation:
     """The least-cost class per family meeting every spec, checked by an ensemble (module doc)."""
-    _check_request(spec, specs, n, confidence)
+    check_request(spec, specs, n, confidence)
+    if not model_level(spec.model).linear_in_clearances:
+        raise ValueError(f"the {spec.model} level is not linear in the clearances: use greedy_allocate")
     scene = spec.scene()
     res = responses(spec, specs, n)
     combo, judged, best = search(res, options, specs, scene, confidence)

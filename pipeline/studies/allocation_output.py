@@ -19,7 +19,8 @@ COST_NOTE = (f"relative units per joint: ISO 286 fit cost C(T_hole) + C(T_shaft)
 
 def _saving(a: Allocation) -> str:
     if a.uniform_cost is None:
-        return "no single class for every family meets the specs"
+        return ("no single class for every family meets the specs" if a.method.startswith("exact") else
+                "no single class for every family met the specs within the ensemble budget")
     name = a.uniform[0].name
     return (f"cheapest uniform class {name}: cost {a.uniform_cost:.4g}; allocation saves "
             f"{a.uniform_cost - a.cost:.4g} ({100 * (1 - a.cost / a.uniform_cost):.1f} %)")
@@ -28,7 +29,7 @@ def _saving(a: Allocation) -> str:
 def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_note: str) -> str:
     """The answer as lines: the class table, total against uniform, the verification's verdicts."""
     lines = [f"fit allocation: scene {scene_name}, {model} level, n = {n} realisations, "
-             f"{a.combinations} class combinations judged in rising cost (exact linear scaling)",
+             f"{a.combinations} class combinations judged ({a.method})",
              f"costs: {cost_note}",
              f"{'family':18}{'class':10}{'radial band (um)':>20}{'cost/joint':>12}{'joints':>8}"]
     for c in a.classes:
@@ -69,7 +70,7 @@ def allocation_dataset(a: Allocation, scene, model: str, integrator: str, dt: fl
                                                      elements=elements, options=options)))
     ds.attrs.update(total_cost=a.cost, uniform_class=a.uniform[0].name if a.uniform else "none",
                     uniform_cost=np.nan if a.uniform_cost is None else a.uniform_cost,
-                    combinations_judged=a.combinations, verification=overall(v),
+                    combinations_judged=a.combinations, search_method=a.method, verification=overall(v),
                     verification_file=a.ensemble_path.name)
     return ds
 
@@ -79,7 +80,7 @@ def allocation_json(a: Allocation) -> dict:
     return {"classes": [{"family": c.family, "class": c.name, "band_low_m": c.low, "band_high_m": c.high,
                          "cost_per_joint": c.cost, "joints": 6} for c in a.classes],
             "total_cost": a.cost, "uniform_class": a.uniform[0].name if a.uniform else None,
-            "uniform_cost": a.uniform_cost, "combinations_judged": a.combinations,
+            "uniform_cost": a.uniform_cost, "combinations_judged": a.combinations, "method": a.method,
             "predicted_upper": a.predicted, "verification": overall(list(a.verdicts)),
             "verification_file": str(a.ensemble_path), "scene": str(a.scene_path),
             "verdicts": verdicts_json(list(a.verdicts))}
