@@ -1,6 +1,7 @@
 """``rss6 allocate``: the least-cost fit class per joint family such that every spec holds.
 
-Quasi-static level only (the others are refused): its error is linear in the eccentricities, which
+At the quasi-static level (the paper and contact levels: pipeline.studies.allocation_greedy), whose
+error is linear in the eccentricities, which
 scale with the joint's clearance size on the draw's own uniforms (docs/model.md section 4), so one
 realisation's error is d(t) = sum_j s_j U_j(t) with U_j the error per unit size of joint j.  A class
 draws each joint's size uniformly in its band [lo, hi] from the draw's size uniform u_j, s_j = lo +
