@@ -244,13 +244,11 @@ def cost_of(combo) -> float:
     return 6.0 * sum(c.cost for c in combo)
 
 
-_cost = cost_of
-
 
 def search(res: Responses, options: dict, specs: list[Spec], scene, confidence: float):
     """(least-cost combo, combinations judged, best attainable upper per spec) by exhaustive search in
     rising cost; the combo is None if none meets every spec."""
-    combos = sorted(itertools.product(*(options[f] for f in ALLOCATED)), key=_cost)
+    combos = sorted(itertools.product(*(options[f] for f in ALLOCATED)), key=cost_of)
     best = [np.inf] * len(specs)
     for k, combo in enumerate(combos, 1):
         uppers = spec_uppers(res, combo, specs, scene, confidence)
@@ -265,7 +263,7 @@ def _uniform(res: Responses, options: dict, specs: list[Spec], scene, confidence
     names = [c.name for c in options[ALLOCATED[0]]
              if all(any(o.name == c.name for o in options[f]) for f in ALLOCATED)]
     combos = [tuple(next(c for c in options[f] if c.name == name) for f in ALLOCATED) for name in names]
-    for combo in sorted(combos, key=_cost):
+    for combo in sorted(combos, key=cost_of):
         if all(bool(np.all(s.holds(u))) for s, u in zip(specs, spec_uppers(res, combo, specs, scene, confidence))):
             return combo
     return None
@@ -318,5 +316,5 @@ def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: 
     path = folder / f"{scene.name}_{spec.model}_allocated.nc"
     outcome = ensemble(replace(spec, scene_text=text), n, path, workers=workers, progress=False)
     verdicts = tuple(judge_all(specs, outcome.dataset, confidence))
-    return Allocation(combo, _cost(combo), uniform, None if uniform is None else _cost(uniform), judged,
+    return Allocation(combo, cost_of(combo), uniform, None if uniform is None else cost_of(uniform), judged,
                       verdicts, predicted, path, scene_path)
