@@ -35,7 +35,8 @@ def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_n
     for c in a.classes:
         lines.append(f"{c.family:18}{c.name:10}{f'{c.low * 1e6:.4g}-{c.high * 1e6:.4g}':>20}{c.cost:12.4g}{6:8d}")
     lines.append(f"total cost {a.cost:.4g}; {_saving(a)}")
-    lines.append("predicted upper bounds at the answer: " + "; ".join(f"{k}: {v * 1e3:.4g} mm"
+    how = "predicted by the linear scaling" if a.method.startswith("exact") else "measured"
+    lines.append(f"upper bounds at the answer ({how}): " + "; ".join(f"{k}: {v * 1e3:.4g} mm"
                                                                       for k, v in a.predicted.items()))
     lines.append(f"scene at the answer: {a.scene_path}")
     lines.append(f"verification ensemble {a.ensemble_path}: {overall(list(a.verdicts))}")
