@@ -10,16 +10,18 @@ from pipeline.cli import build_parser, main
 # a value each free-text option must refuse (options not listed take any text, e.g. paths)
 BAD_TEXT = {"require": "displacement:x<=1parsec@q95", "until": "displacement:x@q95<=5 furlongs",
             "spec": "displacement:x<=1mm@q101", "quantity": "torque", "direction": "w", "window": "midnight",
-            "output": "{missing}/out", "plots": None, "data": None, "configs": None, "file": None, "config": None}
+            "output": "{missing}/out", "classes": "H7/x6", "costs": "{missing}/costs.toml",
+            "plots": None, "data": None, "configs": None, "file": None, "config": None}
 # per command, what else must be given for the option to be judged (a file to read, a required option)
 ANY_TEXT = {("report", "output")}   # report creates its output folder, parents included
 NEEDS = {"stats": ["{file}"], "plot": ["{file}"], "budget": ["--spec", "displacement:x<=1mm@q95"],
+         "allocate": ["--spec", "displacement:x<=1mm@q95"],
          "multifidelity": ["-o", "{tmp}/mf.nc"], "report": ["smoke"]}
 # the entry points that compute (budget and sensitivity check their request first, so they stay)
 WORK = ("pipeline.ensemble.run.ensemble", "pipeline.analysis.until.run_until", "rss6core.simulate",
         "pipeline.studies.report.write_report", "pipeline.studies.tradeoff.tradeoff",
         "pipeline.studies.stability.stability", "rss6core.compile_kernels",
-        "pipeline.studies.workspace_map.workspace_map")
+        "pipeline.studies.workspace_map.workspace_map", "pipeline.studies.allocation.responses")
 
 
 def _commands() -> dict[str, argparse.ArgumentParser]:

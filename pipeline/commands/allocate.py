@@ -1,0 +1,92 @@
+"""rss6 allocate: the least-cost ISO 286 fit class per joint family such that every spec holds."""
+from __future__ import annotations
+
+import json
+
+from rss6core import MODELS, model_level
+
+from ..ensemble.settings import resolve_cluster, resolve_level
+from ..scenes.catalogue import find_scene
+from ..studies.fits import DEFAULT_FITS
+from ..vocabulary import OptionError
+from .messages import interrupted, warn_oversubscription
+from .options import add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, positive_int
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("allocate", help="the least-cost fit class per joint family for which requirement specs "
+                                        "pass, checked by an ensemble")
+    add_scene(p)
+    p.add_argument("--spec", action="append", required=True, metavar="SPEC",
+                   help="an upper limit QUANTITY:DIRECTIONS <= VALUE UNIT@STATISTIC, as for rss6 budget, e.g. "
+                        "'displacement:x,y,z<=0.1mm@q95' (repeatable; required)")
+    p.add_argument("--per-joint", action="store_true",
+                   help="a class per joint rather than per family (not implemented: refused)")
+    add_model(p, "model level (default quasi-static: exhaustive search by its exact linear scaling; paper, "
+                 "contact: a greedy search of ensembles, at most --max-ensembles)", choices=MODELS,
+              default="quasi-static")
+    p.add_argument("--max-ensembles", type=positive_int, default=12,
+                   help="paper and contact levels: most ensembles the greedy search runs (default 12)")
+    p.add_argument("--classes", default=",".join(DEFAULT_FITS), metavar="FITS",
+                   help="comma list of ISO 286 hole-basis clearance fits offered to the revolute radial and "
+                        f"spherical C, B families at their joint diameters (default {','.join(DEFAULT_FITS)})")
+    p.add_argument("--costs", metavar="TOML", help="costs per joint: [<family>] \"<fit>\" = cost for each "
+                                                   "family and fit (default: the reciprocal-power cost law), and "
+                                                   "named classes [classes.<family>.<name>] low_m, high_m, cost")
+    p.add_argument("-n", type=positive_int, default=200,
+                   help="realisations of the search and of the verification ensemble (default 200)")
+    p.add_argument("-o", "--output", help="folder of the allocation file, scene and verification ensemble "
+                                          "(default: allocate_SCENE_MODEL); rerunning resumes the ensemble")
+    add_parents(p)
+    add_seed(p)
+    add_confidence(p, "confidence of the one-sided bounds the specs are judged on, above 0.5")
+    add_json(p)
+    add_workers(p, what="local dask workers of the verification ensemble")
+    p.set_defaults(main=main)
+
+
+def _specs(texts):
+    from ..analysis.spec import SpecError, parse_spec
+    try:
+        return [parse_spec(t) for t in texts]
+    except SpecError as exc:
+        raise SpecError(str(exc).replace("--require", "--spec", 1)) from None
+
+
+def main(args) -> int:
+    from ..analysis.gate import EXIT_CODES, overall
+    from ..files.outputs import check_output_folder
+    from ..files.writing import write_netcdf
+    from ..studies.allocation import allocate, check_request, class_options
+    from ..studies.allocation_greedy import greedy_allocate
+    from ..studies.allocation_output import COST_NOTE, allocation_dataset, allocation_json, format_allocation
+    specs = _specs(args.spec)
+    if args.per_joint:
+        raise OptionError("--per-joint: a class per joint needs per-joint size bands, which a scene's "
+                          "[tolerance.<family>] tables cannot give yet; allocate per family")
+    cluster = resolve_cluster(args.workers)
+    level = resolve_level(find_scene(args.config), args.config, model=args.model)
+    options = class_options(level.scene, [f.strip() for f in args.classes.split(",") if f.strip()], args.costs)
+    check_request(level.ensemble_spec(args.seed), specs, args.n, args.confidence)
+    folder = check_output_folder(args.output or f"allocate_{level.scene.name}_{level.model}", args.parents)
+    warn_oversubscription(cluster.workers, None)
+    try:
+        spec = level.ensemble_spec(args.seed)
+        if model_level(level.model).linear_in_clearances:
+            a = allocate(spec, specs, args.n, folder, args.confidence, options, cluster.workers)
+        else:
+            a = greedy_allocate(spec, specs, args.n, folder, args.confidence, options, cluster.workers,
+                                args.max_ensembles)
+    except KeyboardInterrupt:
+        return interrupted(f"finished chunks of the verification ensemble are kept in {folder}")
+    note = f"per joint from {args.costs}" if args.costs else COST_NOTE
+    opts = f"-n {args.n} --seed {args.seed} --confidence {args.confidence} --classes {args.classes} " + " ".join(
+        f"--spec '{s}'" for s in args.spec)
+    ds = allocation_dataset(a, level.scene, level.model, level.integrator, level.dt, level.elements, opts, note)
+    write_netcdf(ds, folder / "allocation.nc")
+    if args.json:
+        print(json.dumps(allocation_json(a) | {"file": str(folder / "allocation.nc")}, indent=2, allow_nan=False))
+    else:
+        print(format_allocation(a, level.scene.name, level.model, args.n, note))
+        print(f"allocation file: {folder / 'allocation.nc'}")
+    return EXIT_CODES[overall(list(a.verdicts))]

@@ -1,0 +1,320 @@
+"""``rss6 allocate``: the least-cost fit class per joint family such that every spec holds.
+
+At the quasi-static level (the paper and contact levels: pipeline.studies.allocation_greedy), whose
+error is linear in the eccentricities, which
+scale with the joint's clearance size on the draw's own uniforms (docs/model.md section 4), so one
+realisation's error is d(t) = sum_j s_j U_j(t) with U_j the error per unit size of joint j.  A class
+draws each joint's size uniformly in its band [lo, hi] from the draw's size uniform u_j, s_j = lo +
+(hi - lo) u_j, so per family f the error is lo_f A_f(t) + (hi_f - lo_f) B_f(t), with A_f = sum_j U_j
+and B_f = sum_j u_j U_j computed once from the seed's realisations (two given-draw runs per family).
+Every class combination is then judged without an ensemble, on the same one-sided bounds as the
+gate (pipeline.analysis.estimators.one_sided_bounds), in order of rising cost: the first that meets
+every spec is the least-cost allocation (exhaustive, so exact for these draws).  A verification
+ensemble at the answer (same seed and n, so the same draws) is judged by the gate.
+"""
+from __future__ import annotations
+
+import itertools
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from rss6core import ClearanceDraw, model_level, models_with, parse_scene, prepare_level, stored_draw
+
+from ..analysis.estimators import no_interval_at, one_sided_bounds
+from ..analysis.gate import Verdict, judge_all
+from ..analysis.spec import Spec
+from ..ensemble.run import EnsembleSpec, ensemble
+from ..files.records import window_masks
+from ..scenes.variant import dump_scene_toml
+from ..vocabulary import DIRECTIONS, QUANTITIES, STATISTICS, WINDOWS, UserError
+from .fits import COST_LAW, DEFAULT_FITS, FitError, fit_limits, parse_fit
+
+__all__ = ["ALLOCATED", "DEFAULT_FITS", "ClassOption", "Allocation", "AllocationError", "class_options",
+           "Responses", "responses", "spec_uppers", "search", "allocate", "allocated_scene", "check_request",
+           "cost_of"]
+
+ALLOCATED = ("revolute_radial", "spherical_C", "spherical_B")   # families given fit classes
+RADII = {"revolute_radial": "journal_radius", "spherical_C": "sphere_radius", "spherical_B": "sphere_radius"}
+PROBE_LOW, PROBE_HIGH = 1.0e-4, 2.0e-4   # m: the band the responses are drawn with (any band gives them)
+
+
+class AllocationError(UserError):
+    """A request no allocation can answer (unknown class, band too wide, spec out of reach, costs)."""
+
+
+@dataclass(frozen=True)
+class ClassOption:
+    """One class offered to one family: its radial band (m, drawn uniformly) and cost per joint."""
+    family: str
+    name: str
+    low: float    # m
+    high: float   # m
+    cost: float   # relative units per joint
+
+
+@dataclass(frozen=True)
+class Allocation:
+    """The answer: a class per family, its total cost (6 joints a family), the cheapest uniform
+    choice (one class name for every family) and the verification's verdicts."""
+    classes: tuple[ClassOption, ...]
+    cost: float
+    uniform: tuple[ClassOption, ...] | None
+    uniform_cost: float | None
+    combinations: int       # class combinations judged
+    verdicts: tuple[Verdict, ...]
+    predicted: dict         # spec text -> largest predicted upper bound over its directions (SI)
+    ensemble_path: Path
+    scene_path: Path
+    method: str = "exact linear scaling"
+
+
+def _read_costs(path) -> dict:
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise AllocationError(f"--costs {path}: {exc}") from None
+    unknown = sorted(set(data) - set(ALLOCATED) - {"classes"}) + sorted(set(data.get("classes", {})) - set(ALLOCATED))
+    if unknown:
+        raise AllocationError(f"--costs {path}: unknown table {unknown[0]!r}; give [<family>] costs and "
+                              f"[classes.<family>.<name>] classes for the families {', '.join(ALLOCATED)}")
+    return data
+
+
+def _named_class(family: str, name: str, table, radius: float, where: str) -> ClassOption:
+    """A class the costs file names ([classes.<family>.<name>] low_m, high_m, cost), checked."""
+    keys = {"low_m", "high_m", "cost"}
+    if not isinstance(table, dict) or set(table) != keys:
+        raise AllocationError(f"{where}: give exactly low_m, high_m (radial play, m) and cost (per joint)")
+    low, high, cost = table["low_m"], table["high_m"], table["cost"]
+    if not all(isinstance(x, (int, float)) for x in (low, high, cost)) or not 0 <= low < high or cost < 0:
+        raise AllocationError(f"{where}: need 0 <= low_m < high_m and cost >= 0, got {low!r}, {high!r}, {cost!r}")
+    if high >= radius:
+        raise AllocationError(f"{where}: high_m = {high:g} m reaches the {family} joint's "
+                              f"{RADII[family]}_m = {radius:g} m")
+    return ClassOption(family, name, float(low), float(high), float(cost))
+
+
+def _fit_class(family: str, name: str, radius: float, costs, costs_file) -> ClassOption:
+    """An ISO 286 fit as a class of ``family`` (radial band: half the diametral clearance)."""
+    try:
+        lim = fit_limits(parse_fit(name), 2 * radius)
+    except FitError as exc:
+        raise AllocationError(f"--classes: {exc}") from None
+    if lim.radial_high >= radius:
+        raise AllocationError(f"--classes {name}: its radial band reaches {lim.radial_high * 1e3:g} mm, "
+                              f"not below the {family} joint's {RADII[family]}_m = {radius * 1e3:g} mm")
+    cost = COST_LAW.fit(lim)
+    if costs is not None:
+        cost = costs.get(family, {}).get(name)
+        if not isinstance(cost, (int, float)) or cost < 0:
+            raise AllocationError(f"--costs {costs_file}: [{family}] {name!r}: missing or not a "
+                                  f"cost >= 0 (got {cost!r})")
+    return ClassOption(family, name, lim.radial_low, lim.radial_high, float(cost))
+
+
+def class_options(scene, fits=DEFAULT_FITS, costs_file=None) -> dict[str, tuple[ClassOption, ...]]:
+    """Each allocated family's classes: ISO 286 fits at the joint's diameter (2 x its [contact] radius),
+    the radial band half the diametral clearance, costs from ``costs_file`` ([<family>] "<fit>" =
+    cost per joint) or else the reciprocal-power law (pipeline.studies.fits); then the file's named
+    classes ([classes.<family>.<name>] low_m, high_m, cost; e.g. ball-joint catalogue grades).
+    AllocationError for an unknown fit, a band reaching the joint's radius, or a cost the file lacks."""
+    costs = _read_costs(costs_file) if costs_file else None
+    out = {}
+    for family in ALLOCATED:
+        radius = getattr(scene.contact, RADII[family])
+        options = [_fit_class(family, name, radius, costs, costs_file) for name in fits]
+        for name, table in ((costs or {}).get("classes", {}).get(family, {})).items():
+            if name in fits:
+                raise AllocationError(f"--costs {costs_file}: [classes.{family}.{name}] repeats a fit of --classes")
+            options.append(_named_class(family, name, table, radius, f"--costs {costs_file}: "
+                                                                     f"[classes.{family}.{name}]"))
+        out[family] = tuple(options)
+    return out
+
+
+def allocated_scene(text: str, source: str, classes) -> str:
+    """The scene text with each class's family drawn uniformly in its band ([tolerance.<family>]),
+    its nominal [clearance] size the band's middle; checked by parsing."""
+    data = tomllib.loads(text)
+    tolerance = data.setdefault("tolerance", {})
+    for c in classes:
+        tolerance[c.family] = {"law": "uniform", "low_m": c.low, "high_m": c.high}
+        data["clearance"][f"{c.family}_m"] = 0.5 * (c.low + c.high)
+    note = ", ".join(f"{c.family} {c.name}" for c in classes)
+    out = dump_scene_toml(data, f"rss6 allocate variant of {source}: {note}")
+    parse_scene(out, source)
+    return out
+
+
+@dataclass(frozen=True)
+class Responses:
+    """Per allocated family f the error parts A_f, B_f (module doc) of the spec cells: (family, n, T,
+    cell) in SI per metre of size; the error of the families left at the scene's sizes (the revolute
+    axial play): (n, T, cell) in SI; the cells' (quantity, direction) and the times (s)."""
+    offset: np.ndarray
+    spread: np.ndarray
+    fixed: np.ndarray
+    cells: tuple[tuple[str, str], ...]
+    t: np.ndarray
+
+
+def _unit_draws(scene, draw: ClearanceDraw, family: str):
+    """Two draws of ``family`` alone (others zero) at sizes 1 and u_j (module doc), scaled by PROBE_LOW
+    so that no divergence check sees metre-sized clearances."""
+    w = scene.geometry.w
+    zero6, zero63 = np.zeros(6), np.zeros((6, 3))
+    if family == "revolute_radial":
+        size = draw.radial_size
+        radial = draw.e_A - np.einsum("li,li->l", draw.e_A, w)[:, None] * w
+        unit = radial / size[:, None]
+    else:
+        size = draw.size_C if family == "spherical_C" else draw.size_B
+        unit = (draw.e_C if family == "spherical_C" else draw.e_B) / size[:, None]
+    u = (size - PROBE_LOW) / (PROBE_HIGH - PROBE_LOW)
+    out = []
+    for c in (np.ones(6), u):
+        s, e = PROBE_LOW * c, PROBE_LOW * c[:, None] * unit
+        fields = dict(radial_size=zero6, axial_size=zero6, size_C=zero6, size_B=zero6, e_A=zero63, e_C=zero63,
+                      e_B=zero63)
+        key = {"revolute_radial": ("radial_size", "e_A"), "spherical_C": ("size_C", "e_C"),
+               "spherical_B": ("size_B", "e_B")}[family]
+        fields.update({key[0]: s, key[1]: e})
+        out.append(ClearanceDraw(**fields))
+    return out
+
+
+def _fixed_draw(scene, draw: ClearanceDraw) -> ClearanceDraw:
+    """The draw with the allocated families' eccentricities zeroed: the revolute axial part alone."""
+    w = scene.geometry.w
+    axial = np.einsum("li,li->l", draw.e_A, w)[:, None] * w
+    zero6, zero63 = np.zeros(6), np.zeros((6, 3))
+    return ClearanceDraw(radial_size=zero6, axial_size=draw.axial_size, size_C=zero6, size_B=zero6, e_A=axial,
+                         e_C=zero63, e_B=zero63)
+
+
+def _cells_history(result, cells) -> np.ndarray:
+    """(T, cell) of a result's error histories, SI."""
+    q = [QUANTITIES.index(c[0]) for c in cells]
+    d = [DIRECTIONS.index(c[1]) for c in cells]
+    return np.stack([result.displacement, result.velocity, result.acceleration])[q, :, d].T
+
+
+def responses(spec: EnsembleSpec, specs: list[Spec], n: int) -> Responses:
+    """A_f and B_f of realisations 0..n-1 of the seed, for the cells the specs read."""
+    cells = tuple(dict.fromkeys((s.quantity, d) for s in specs for d in s.directions))
+    probe = [ClassOption(f, "probe", PROBE_LOW, PROBE_HIGH, 0.0) for f in ALLOCATED]
+    scene = parse_scene(allocated_scene(spec.scene_text, spec.source, probe), spec.source)
+    level = prepare_level(scene, spec.model, dt=spec.dt)
+    t = scene.times
+    offset = np.empty((len(ALLOCATED), n, len(t), len(cells)))
+    spread, fixed = np.empty_like(offset), np.empty((n, len(t), len(cells)))
+    for r in range(n):
+        draw = stored_draw(scene, spec.model, spec.seed, r, spec.dt)
+        fixed[r] = _cells_history(level.simulate_draws([_fixed_draw(scene, draw)])[0], cells)
+        for k, family in enumerate(ALLOCATED):
+            one, u = level.simulate_draws(_unit_draws(scene, draw, family))
+            offset[k, r] = _cells_history(one, cells) / PROBE_LOW
+            spread[k, r] = _cells_history(u, cells) / PROBE_LOW
+    return Responses(offset, spread, fixed, cells, t)
+
+
+def spec_uppers(res: Responses, combo, specs: list[Spec], scene, confidence: float) -> list[np.ndarray]:
+    """Per spec, the one-sided upper bound (SI) of its statistic per direction at class ``combo``
+    (one ClassOption per ALLOCATED family), from the responses."""
+    lows = np.array([c.low for c in combo])
+    widths = np.array([c.high - c.low for c in combo])
+    err = np.abs(np.tensordot(lows, res.offset, 1) + np.tensordot(widths, res.spread, 1) + res.fixed)  # (n, T, cell)
+    sim = scene.simulation
+    masks = window_masks(res.t, sim.settle_time, sim.steady_after)
+    out = []
+    for s in specs:
+        mask = masks[WINDOWS.index(s.window or "whole")]
+        cols = [res.cells.index((s.quantity, d)) for d in s.directions]
+        e = err[:, mask][:, :, cols]
+        x = e.max(axis=1) if s.measure == "max" else e.mean(axis=1)
+        out.append(one_sided_bounds(x, confidence)[STATISTICS.index(s.statistic), 1])
+    return out
+
+
+def cost_of(combo) -> float:
+    """Total cost of a class per family, six joints a family."""
+    return 6.0 * sum(c.cost for c in combo)
+
+
+
+def search(res: Responses, options: dict, specs: list[Spec], scene, confidence: float):
+    """(least-cost combo, combinations judged, best attainable upper per spec) by exhaustive search in
+    rising cost; the combo is None if none meets every spec."""
+    combos = sorted(itertools.product(*(options[f] for f in ALLOCATED)), key=cost_of)
+    best = [np.inf] * len(specs)
+    for k, combo in enumerate(combos, 1):
+        uppers = spec_uppers(res, combo, specs, scene, confidence)
+        best = [min(b, float(np.max(u))) for b, u in zip(best, uppers)]
+        if all(bool(np.all(s.holds(u))) for s, u in zip(specs, uppers)):
+            return combo, k, best
+    return None, len(combos), best
+
+
+def _uniform(res: Responses, options: dict, specs: list[Spec], scene, confidence: float):
+    """The cheapest combo naming one class for every family that meets every spec, or None."""
+    names = [c.name for c in options[ALLOCATED[0]]
+             if all(any(o.name == c.name for o in options[f]) for f in ALLOCATED)]
+    combos = [tuple(next(c for c in options[f] if c.name == name) for f in ALLOCATED) for name in names]
+    for combo in sorted(combos, key=cost_of):
+        if all(bool(np.all(s.holds(u))) for s, u in zip(specs, spec_uppers(res, combo, specs, scene, confidence))):
+            return combo
+    return None
+
+
+def check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: float) -> None:
+    """AllocationError for a request no allocation can answer, before any work."""
+    if not model_level(spec.model).draws_clearances:
+        raise AllocationError(f"--model {spec.model}: this level has no clearances, so no fit allocation; use "
+                              f"{', '.join(models_with('draws_clearances'))}")
+    scene = spec.scene()
+    if scene.uncertain or scene.sampling.size_tolerance > 0:
+        raise AllocationError(f"{spec.source}: allocate draws sizes from fit classes; give a scene without "
+                              "[uncertain.*] tables and with [sampling] size_tolerance = 0")
+    linear = model_level(spec.model).linear_in_clearances
+    if linear and scene.simulation.quasi_static_eccentricity != "drawn":
+        raise AllocationError(f"{spec.source}: allocate needs [simulation] quasi_static_eccentricity = "
+                              "\"drawn\" (the reaction mode's direction does not split by family)")
+    for s in specs:
+        if why := no_interval_at(s.statistic, confidence, n):
+            raise AllocationError(f"--spec {s.text!r}: {why}")
+        if s.op not in ("<=", "<"):
+            raise AllocationError(f"--spec {s.text!r}: an allocation bounds the error from above; use <= or <")
+        if s.window is not None and s.window not in WINDOWS:
+            raise AllocationError(f"--spec {s.text!r}: unknown window {s.window!r}; choose one of "
+                                  f"{', '.join(WINDOWS)}")
+
+
+def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float, options: dict,
+             workers: int = 2) -> Allocation:
+    """The least-cost class per family meeting every spec, checked by an ensemble (module doc)."""
+    check_request(spec, specs, n, confidence)
+    if not model_level(spec.model).linear_in_clearances:
+        raise ValueError(f"the {spec.model} level is not linear in the clearances: use greedy_allocate")
+    scene = spec.scene()
+    res = responses(spec, specs, n)
+    combo, judged, best = search(res, options, specs, scene, confidence)
+    if combo is None:
+        worst = max(range(len(specs)), key=lambda i: best[i] / specs[i].limit)
+        s = specs[worst]
+        raise AllocationError(f"--spec {s.text!r}: no class combination meets it; the best attainable "
+                              f"{s.statistic} upper bound is {best[worst] / s.factor:.4g} {s.unit}")
+    uniform = _uniform(res, options, specs, scene, confidence)
+    predicted = {s.text: float(np.max(u)) for s, u in zip(specs, spec_uppers(res, combo, specs, scene, confidence))}
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    text = allocated_scene(spec.scene_text, spec.source, combo)
+    scene_path = folder / f"{scene.name}_allocated.toml"
+    scene_path.write_text(text)
+    path = folder / f"{scene.name}_{spec.model}_allocated.nc"
+    outcome = ensemble(replace(spec, scene_text=text), n, path, workers=workers, progress=False)
+    verdicts = tuple(judge_all(specs, outcome.dataset, confidence))
+    return Allocation(combo, cost_of(combo), uniform, None if uniform is None else cost_of(uniform), judged,
+                      verdicts, predicted, path, scene_path)

@@ -1,0 +1,126 @@
+"""``rss6 allocate`` at a level whose error is not linear in the clearances (paper, contact): a greedy
+search of measured ensembles with a bound on their number.
+
+Start with every family at its most expensive class (taken as its tightest); then repeatedly try
+the one-step loosenings (a family moved to its next cheaper class) in order of the cost they save,
+running an ensemble for each until one passes every spec at the gate, and keep it; stop when no
+loosening passes or the ensemble budget is spent.  It assumes a cheaper class errs at least as much
+(the verdict changes once along each family's class order, as ``rss6 budget``'s sweep assumes);
+it is greedy, so it may stop above the least cost, and says so.  The passing ensemble of the answer
+is its verification; the cheapest uniform class is sought with the ensembles left.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from ..analysis.gate import Verdict, judge_all
+from ..analysis.spec import Spec
+from ..ensemble.run import EnsembleSpec, ensemble
+from .allocation import ALLOCATED, Allocation, AllocationError, allocated_scene, check_request, cost_of
+
+__all__ = ["Trial", "greedy_allocate"]
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One ensemble of the search: its classes, file and the specs' verdicts there."""
+    combo: tuple
+    path: Path
+    verdicts: tuple[Verdict, ...]
+
+    @property
+    def passed(self) -> bool:
+        return all(v.outcome == "pass" for v in self.verdicts)
+
+
+class _Runner:
+    """Runs (or resumes) the ensemble of a class combination, counting them against the budget."""
+
+    def __init__(self, spec: EnsembleSpec, specs, n: int, folder: Path, confidence: float, workers: int,
+                 budget: int):
+        self.spec, self.specs, self.n, self.folder = spec, specs, n, folder
+        self.confidence, self.workers, self.budget = confidence, workers, budget
+        self.trials: dict[tuple, Trial] = {}
+
+    @property
+    def left(self) -> int:
+        return self.budget - len(self.trials)
+
+    def __call__(self, combo) -> Trial:
+        key = tuple(c.name for c in combo)
+        if key not in self.trials:
+            text = allocated_scene(self.spec.scene_text, self.spec.source, combo)
+            name = "_".join(k.replace("/", "") for k in key)
+            path = self.folder / f"{self.spec.scene().name}_{self.spec.model}_{name}.nc"
+            out = ensemble(replace(self.spec, scene_text=text), self.n, path, workers=self.workers, progress=False)
+            self.trials[key] = Trial(combo, path, tuple(judge_all(self.specs, out.dataset, self.confidence)))
+        return self.trials[key]
+
+
+def _loosenings(combo, ranked: dict) -> list[tuple]:
+    """The one-step cheaper combinations, most cost saved first."""
+    out = []
+    for k, family in enumerate(ALLOCATED):
+        order = ranked[family]
+        i = order.index(combo[k])
+        if i + 1 < len(order):
+            out.append(combo[:k] + (order[i + 1],) + combo[k + 1:])
+    return sorted(out, key=cost_of)
+
+
+def _descend(run: _Runner, start: Trial, ranked: dict) -> Trial:
+    """Greedy loosening from ``start`` while the budget lasts."""
+    best = start
+    while run.left > 0:
+        for candidate in _loosenings(best.combo, ranked):
+            if run.left <= 0:
+                break
+            trial = run(candidate)
+            if trial.passed:
+                best = trial
+                break
+        else:
+            break
+    return best
+
+
+def _uniform(run: _Runner, options: dict):
+    """The cheapest uniform combination that passes, with the ensembles left (None if none or no budget)."""
+    names = [c.name for c in options[ALLOCATED[0]]
+             if all(any(o.name == c.name for o in options[f]) for f in ALLOCATED)]
+    combos = sorted((tuple(next(c for c in options[f] if c.name == n) for f in ALLOCATED) for n in names),
+                    key=cost_of)
+    for combo in combos:
+        if run.left <= 0 and tuple(c.name for c in combo) not in run.trials:
+            return None
+        if run(combo).passed:
+            return combo
+    return None
+
+
+def greedy_allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float, options: dict,
+                    workers: int = 2, max_ensembles: int = 12) -> Allocation:
+    """The greedy allocation (module doc) with at most ``max_ensembles`` ensembles."""
+    check_request(spec, specs, n, confidence)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    ranked = {f: sorted(options[f], key=lambda c: -c.cost) for f in ALLOCATED}
+    run = _Runner(spec, specs, n, folder, confidence, workers, max_ensembles)
+    start = run(tuple(ranked[f][0] for f in ALLOCATED))
+    if not start.passed:
+        worst = max(start.verdicts, key=lambda v: (v.outcome != "pass", (v.upper or float("inf")) / v.limit))
+        raise AllocationError(f"--spec {worst.spec!r}: the most expensive classes do not meet it at the {spec.model} "
+                              f"level (the {worst.direction} {worst.statistic} bound is "
+                              f"{'none' if worst.upper is None else f'{worst.upper / worst.factor:.4g}'} {worst.unit}, "
+                              f"{worst.outcome}; {start.path})")
+    best = _descend(run, start, ranked)
+    uniform = _uniform(run, options)
+    scene_path = folder / f"{spec.scene().name}_allocated.toml"
+    scene_path.write_text(allocated_scene(spec.scene_text, spec.source, best.combo))
+    predicted = {s.text: max((v.upper for v in best.verdicts if v.spec == s.text and v.upper is not None),
+                             default=float("nan")) for s in specs}
+    return Allocation(best.combo, cost_of(best.combo), uniform, None if uniform is None else cost_of(uniform),
+                      len(run.trials), best.verdicts, predicted, best.path, scene_path,
+                      method=f"greedy loosening, {len(run.trials)} of at most {max_ensembles} ensembles "
+                             "(not proven least-cost)")

@@ -1,0 +1,87 @@
+"""What ``rss6 allocate`` writes: the class table, costs and verification verdicts as text, a CF
+netCDF Dataset and plain JSON."""
+from __future__ import annotations
+
+import numpy as np
+import xarray as xr
+
+from ..analysis.gate import format_verdicts, overall, verdicts_json
+from ..files.schema import _provenance, command_line
+from .allocation import Allocation
+from .fits import COST_LAW
+
+__all__ = ["format_allocation", "allocation_dataset", "allocation_json", "COST_NOTE"]
+
+COST_NOTE = (f"relative units per joint: ISO 286 fit cost C(T_hole) + C(T_shaft), C(T) = {COST_LAW.a:g} + "
+             f"{COST_LAW.b:g} ({COST_LAW.reference * 1e6:g} um / T)^{COST_LAW.k:g} (reciprocal-power law, "
+             "Chase et al. 1990), unless --costs gives them")
+
+
+def _saving(a: Allocation) -> str:
+    if a.uniform_cost is None:
+        return ("no single class for every family meets the specs" if a.method.startswith("exact") else
+                "no single class for every family met the specs within the ensemble budget")
+    name = a.uniform[0].name
+    return (f"cheapest uniform class {name}: cost {a.uniform_cost:.4g}; allocation saves "
+            f"{a.uniform_cost - a.cost:.4g} ({100 * (1 - a.cost / a.uniform_cost):.1f} %)")
+
+
+def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_note: str) -> str:
+    """The answer as lines: the class table, total against uniform, the verification's verdicts."""
+    lines = [f"fit allocation: scene {scene_name}, {model} level, n = {n} realisations, "
+             f"{a.combinations} class combinations judged ({a.method})",
+             f"costs: {cost_note}",
+             f"{'family':18}{'class':10}{'radial band (um)':>20}{'cost/joint':>12}{'joints':>8}"]
+    for c in a.classes:
+        lines.append(f"{c.family:18}{c.name:10}{f'{c.low * 1e6:.4g}-{c.high * 1e6:.4g}':>20}{c.cost:12.4g}{6:8d}")
+    lines.append(f"total cost {a.cost:.4g}; {_saving(a)}")
+    how = "predicted by the linear scaling" if a.method.startswith("exact") else "measured"
+    lines.append(f"upper bounds at the answer ({how}): " + "; ".join(f"{k}: {v * 1e3:.4g} mm"
+                                                                      for k, v in a.predicted.items()))
+    lines.append(f"scene at the answer: {a.scene_path}")
+    lines.append(f"verification ensemble {a.ensemble_path}: {overall(list(a.verdicts))}")
+    lines.append(format_verdicts(list(a.verdicts)))
+    return "\n".join(lines)
+
+
+def allocation_dataset(a: Allocation, scene, model: str, integrator: str, dt: float, elements: int,
+                       options: str, cost_note: str) -> xr.Dataset:
+    """The allocation as a CF Dataset: per family its class, band (m) and cost; per verdict the
+    verification's outcome and bounds; totals in the global attributes."""
+    v = list(a.verdicts)
+    upper = [np.nan if x.upper is None else x.upper for x in v]
+    ds = xr.Dataset(
+        {"fit_class": ("family", [c.name for c in a.classes], {"long_name": "ISO 286 fit class chosen"}),
+         "band_low": ("family", [c.low for c in a.classes], {"long_name": "smallest radial clearance of the class",
+                                                             "units": "m"}),
+         "band_high": ("family", [c.high for c in a.classes], {"long_name": "largest radial clearance of the class",
+                                                               "units": "m"}),
+         "cost_per_joint": ("family", [c.cost for c in a.classes], {"long_name": f"cost per joint ({cost_note})",
+                                                                    "units": "1"}),
+         "verdict_spec": ("verdict", [x.spec for x in v], {"long_name": "requirement spec"}),
+         "verdict_direction": ("verdict", [x.direction for x in v], {"long_name": "direction judged"}),
+         "verdict_outcome": ("verdict", [x.outcome for x in v], {"long_name": "verification verdict"}),
+         "verdict_upper": ("verdict", upper, {"long_name": "one-sided upper bound of the statistic (SI: m, rad "
+                                                           "and their rates)", "units": "1"}),
+         "verdict_limit": ("verdict", [x.limit for x in v], {"long_name": "limit of the spec (SI)", "units": "1"})},
+        coords={"family": [c.family for c in a.classes]})
+    title = "least-cost fit class per joint family meeting the requirement specs"
+    ds.attrs.update(_provenance(scene, title, model=model, integrator=integrator, dt=dt, elements=elements,
+                                history=command_line("allocate", scene, model=model, integrator=integrator, dt=dt,
+                                                     elements=elements, options=options)))
+    ds.attrs.update(total_cost=a.cost, uniform_class=a.uniform[0].name if a.uniform else "none",
+                    uniform_cost=np.nan if a.uniform_cost is None else a.uniform_cost,
+                    combinations_judged=a.combinations, search_method=a.method, verification=overall(v),
+                    verification_file=a.ensemble_path.name)
+    return ds
+
+
+def allocation_json(a: Allocation) -> dict:
+    """The allocation as plain data (SI)."""
+    return {"classes": [{"family": c.family, "class": c.name, "band_low_m": c.low, "band_high_m": c.high,
+                         "cost_per_joint": c.cost, "joints": 6} for c in a.classes],
+            "total_cost": a.cost, "uniform_class": a.uniform[0].name if a.uniform else None,
+            "uniform_cost": a.uniform_cost, "combinations_judged": a.combinations, "method": a.method,
+            "predicted_upper": a.predicted, "verification": overall(list(a.verdicts)),
+            "verification_file": str(a.ensemble_path), "scene": str(a.scene_path),
+            "verdicts": verdicts_json(list(a.verdicts))}

@@ -1,0 +1,173 @@
+"""rss6 allocate: the least-cost fit classes per family against an exhaustive search of real runs,
+the saving against the cheapest uniform class, the verification, and the one-line refusals."""
+from __future__ import annotations
+
+import itertools
+import json
+from dataclasses import replace
+
+import pytest
+
+from pipeline.analysis.gate import judge_all
+from pipeline.analysis.spec import parse_spec
+from pipeline.cli import main
+from pipeline.ensemble.run import EnsembleSpec, run_chunk
+from pipeline.scenes.variant import scene_variant
+from pipeline.studies.allocation import ALLOCATED, allocated_scene, class_options, responses, search, spec_uppers
+
+SPEC = "displacement:x,y,z<=0.1mm@q95"
+N = 60                                   # q95's one-sided 95 % bound exists from n = 59
+SMALL = ("H8/f7", "H9/d9", "H10/d10")    # 27 combinations on the three families
+
+
+@pytest.fixture(scope="module")
+def paper(configs):
+    text = (configs / "paper.toml").read_text()
+    return EnsembleSpec(text, "paper", "quasi-static", "newmark", 1e-3, 4, 0)
+
+
+def _cost(combo):
+    return 6 * sum(c.cost for c in combo)
+
+
+def _passes_by_run(spec: EnsembleSpec, combo, specs) -> bool:
+    """The combination judged by the gate on a plain run of its scene (the core's own draws)."""
+    text = allocated_scene(spec.scene_text, spec.source, combo)
+    ds = run_chunk(replace(spec, scene_text=text), list(range(N)))
+    return all(v.outcome == "pass" for v in judge_all([parse_spec(SPEC)], ds, 0.95))
+
+
+@pytest.fixture(scope="module")
+def exhaustive(paper):
+    """(least cost, its combos) over every combination of SMALL, each judged on a run."""
+    options = class_options(paper.scene(), SMALL)
+    combos = list(itertools.product(*(options[f] for f in ALLOCATED)))
+    passing = [c for c in combos if _passes_by_run(paper, c, [parse_spec(SPEC)])]
+    best = min(_cost(c) for c in passing)
+    return options, best, [c for c in passing if _cost(c) == best], passing
+
+
+def test_allocation_is_the_exhaustive_optimum(paper, exhaustive):
+    options, best, optima, _ = exhaustive
+    specs = [parse_spec(SPEC)]
+    combo, judged, _ = search(responses(paper, specs, N), options, specs, paper.scene(), 0.95)
+    assert _cost(combo) == pytest.approx(best)
+    assert combo in optima and 1 <= judged <= 27
+
+
+def test_allocation_costs_less_than_the_cheapest_passing_uniform_class(exhaustive):
+    _, best, _, passing = exhaustive
+    uniform = [c for c in passing if len({x.name for x in c}) == 1]
+    assert uniform and best < min(_cost(c) for c in uniform)
+
+
+def test_superposition_reproduces_a_run_at_every_size(paper):
+    """The responses' prediction equals a plain run's upper bound at a mixed combination (same draws)."""
+    specs = [parse_spec(SPEC)]
+    options = class_options(paper.scene(), SMALL)
+    combo = (options["revolute_radial"][0], options["spherical_C"][2], options["spherical_B"][1])
+    predicted = spec_uppers(responses(paper, specs, N), combo, specs, paper.scene(), 0.95)[0]
+    ds = run_chunk(replace(paper, scene_text=allocated_scene(paper.scene_text, "paper", combo)), list(range(N)))
+    measured = [v.upper for v in judge_all(specs, ds, 0.95)]
+    assert predicted == pytest.approx(measured, rel=1e-9)
+
+
+def test_command_verifies_and_writes(configs, tmp_path, capsys):
+    code = main(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "-n", str(N), "--classes", ",".join(SMALL),
+                 "--workers", "1", "-o", str(tmp_path / "a"), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["verification"] == "pass"
+    assert out["total_cost"] < out["uniform_cost"]
+    import xarray as xr
+    with xr.open_dataset(tmp_path / "a" / "allocation.nc") as ds:
+        assert list(ds["fit_class"].values) == [c["class"] for c in out["classes"]]
+        assert set(ds["verdict_outcome"].values) == {"pass"}
+
+
+def _refused(args, capsys, *words):
+    code = main(args)
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    for w in words:
+        assert w in err, err
+
+
+def test_refusals_in_one_line(configs, tmp_path, capsys):
+    paper = str(configs / "paper.toml")
+    base = ["allocate", paper, "--spec", SPEC, "-n", str(N), "-o", str(tmp_path / "x")]
+    _refused(base + ["--classes", "H7/x6"], capsys, "H7/x6")
+    _refused(base + ["--model", "elastic"], capsys, "--model elastic", "no clearances")
+    _refused(base + ["--per-joint"], capsys, "--per-joint")
+    _refused(["allocate", paper, "--spec", "displacement:x<=0.01mm@q95", "-n", str(N), "-o", str(tmp_path / "y")],
+             capsys, "displacement:x<=0.01mm@q95", "best attainable")
+    costs = tmp_path / "costs.toml"
+    costs.write_text('[revolute_radial]\n"H9/d9" = 3.0\n"H11/c11" = 2.0\n')
+    _refused(base + ["--classes", "H9/d9,H11/c11", "--costs", str(costs)], capsys, "spherical_C", "H9/d9")
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_a_band_reaching_the_radius_is_refused(configs, tmp_path, capsys):
+    patch = {"clearance": {"revolute_radial_m": 0.05e-3, "revolute_axial_m": 0.05e-3},
+             "contact": {"journal_radius_m": 0.08e-3}}     # D = 0.16 mm: H11/c11 reaches 0.09 mm radially
+    text = scene_variant((configs / "paper.toml").read_text(), patch)
+    scene = tmp_path / "small.toml"
+    scene.write_text(text)
+    _refused(["allocate", str(scene), "--spec", SPEC, "--classes", "H11/c11", "-o", str(tmp_path / "z")],
+             capsys, "H11/c11", "journal_radius_m")
+
+
+def _costs_file(tmp_path, extra: str):
+    lines = [f'[{f}]\n' + "".join(f'"{fit}" = {3.0 - i * 0.3}\n' for i, fit in enumerate(SMALL)) for f in ALLOCATED]
+    path = tmp_path / "costs.toml"
+    path.write_text("".join(lines) + extra)
+    return path
+
+
+def test_a_named_class_from_the_costs_file_is_offered_and_chosen(paper, tmp_path):
+    """A cheap, tight ball-joint grade for B (costs file) wins B; the others keep fits; no uniform name
+    covers B's grade, so the uniform choice is among the fits."""
+    specs = [parse_spec(SPEC)]
+    path = _costs_file(tmp_path, "[classes.spherical_B.grade1]\nlow_m = 0.005e-3\nhigh_m = 0.02e-3\ncost = 0.5\n")
+    options = class_options(paper.scene(), SMALL, path)
+    assert [c.name for c in options["spherical_B"]] == [*SMALL, "grade1"]
+    assert [c.cost for c in options["revolute_radial"]] == pytest.approx([3.0, 2.7, 2.4])
+    combo, _, _ = search(responses(paper, specs, N), options, specs, paper.scene(), 0.95)
+    assert combo[2].name == "grade1" and (combo[2].low, combo[2].high) == (0.005e-3, 0.02e-3)
+
+
+@pytest.mark.parametrize("extra, words", [
+    ("[classes.spherical_B.wide]\nlow_m = 0.0\nhigh_m = 0.02\ncost = 1.0\n", ["[classes.spherical_B.wide]", "radius"]),
+    ("[classes.spherical_B.odd]\nlow_m = 0.0\nhigh_m = 1e-5\n", ["[classes.spherical_B.odd]", "cost"]),
+    ("[classes.spherical_A.x]\nlow_m = 0.0\nhigh_m = 1e-5\ncost = 1.0\n", ["spherical_A"]),
+])
+def test_bad_named_classes_are_refused_in_one_line(configs, tmp_path, capsys, extra, words):
+    path = _costs_file(tmp_path, extra)
+    _refused(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "--classes", ",".join(SMALL), "--costs",
+              str(path), "-o", str(tmp_path / "o")], capsys, *words)
+
+
+def test_greedy_search_at_the_paper_level_is_locally_least_cost_and_bounded(configs, tmp_path):
+    """paper level (not linear in the clearances): the answer passes, every one-step loosening of it
+    that was run failed, the ensembles run stay within the budget and are the files written."""
+    from pipeline.studies.allocation_greedy import _loosenings, greedy_allocate
+    spec = EnsembleSpec((configs / "smoke.toml").read_text(), "smoke", "paper", "newmark", 1e-3, 4, 0)
+    specs = [parse_spec(SPEC)]
+    options = class_options(spec.scene(), SMALL)
+    a = greedy_allocate(spec, specs, N, tmp_path, 0.95, options, workers=1, max_ensembles=6)
+    assert all(v.outcome == "pass" for v in a.verdicts)
+    assert 1 <= a.combinations <= 6 and len(list(tmp_path.glob("smoke_paper_*.nc"))) == a.combinations
+    ranked = {f: sorted(options[f], key=lambda c: -c.cost) for f in ALLOCATED}
+    for looser in _loosenings(a.classes, ranked):
+        path = tmp_path / ("smoke_paper_" + "_".join(c.name.replace("/", "") for c in looser) + ".nc")
+        if path.exists():
+            ds = run_chunk(replace(spec, scene_text=allocated_scene(spec.scene_text, "smoke", looser)), list(range(N)))
+            assert any(v.outcome != "pass" for v in judge_all(specs, ds, 0.95))
+
+
+def test_greedy_never_beats_the_exact_optimum(paper, exhaustive, tmp_path):
+    """At the quasi-static level the greedy search (run there for the check) costs at least the
+    exhaustive optimum and its answer passes."""
+    from pipeline.studies.allocation_greedy import greedy_allocate
+    options, best, _, passing = exhaustive
+    a = greedy_allocate(paper, [parse_spec(SPEC)], N, tmp_path, 0.95, options, workers=1, max_ensembles=27)
+    assert a.cost >= best - 1e-9 and a.classes in passing
