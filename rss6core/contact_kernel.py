@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
-from collections import ChainMap, namedtuple
+from collections import namedtuple
 
 import llvmlite.binding as llvm
 import numpy as np
@@ -91,7 +91,7 @@ class _BlockCopier:
     every block copies the callee's whole variable scope again: blocks times variables, which was two
     thirds of the contact kernel's compile (150 of 228 s).  Here the blocks of one IR share one copy of
     their scope (the scope and everything reachable from it are copied once, then seed each block's
-    memo), which is what a single deepcopy of the blocks would give: the same statements and names.
+    memo): the same statements and names, as a single deepcopy of all the blocks would give.
     The inliner renames every callee variable into the caller's scope right after the copy, so the
     copies' scopes were equal and are dropped either way; the inlined IR is the same
     (benchmarks/cold_start.py --check-ir compares the kernels' LLVM IR)."""
@@ -106,7 +106,7 @@ class _BlockCopier:
         if scope is not self._scope or len(scope.localvars._con) != self._count:   # another IR, or grown
             self._scope, self._count, self._memo = scope, len(scope.localvars._con), {}
             copy.deepcopy(scope, self._memo)
-        return copy.deepcopy(x, ChainMap({}, self._memo))
+        return copy.deepcopy(x, dict(self._memo))   # a dict's copy costs less than a ChainMap's lookups
 
     def __getattr__(self, name):
         return getattr(copy, name)
