@@ -94,7 +94,8 @@ class _BlockCopier:
     memo): the same statements and names, as a single deepcopy of all the blocks would give.
     The inliner renames every callee variable into the caller's scope right after the copy, so the
     copies' scopes were equal and are dropped either way; the inlined IR is the same
-    (benchmarks/cold_start.py --check-ir compares the kernels' LLVM IR)."""
+    (``python benchmarks/kernel_compile.py [--plain]`` prints hashes of the kernels' LLVM IR and
+    assembly; tests/test_fast_inlining.py compares a small kernel's)."""
 
     def __init__(self):
         self._scope, self._count, self._memo = None, -1, {}
