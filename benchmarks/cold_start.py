@@ -55,12 +55,13 @@ def _run(checkout: Path, cache: Path, args: list[str], out: Path) -> dict:
 def measure(checkout: Path, args: list[str], folder: Path) -> dict:
     """Cold run (empty cache), then warm run (the cache it filled) of ``checkout``; the compile share."""
     imported = subprocess.run([sys.executable, "-c", "import rss6core, pipeline; print(rss6core.__file__)"],
-                              env=dict(os.environ, PYTHONPATH=str(checkout)), capture_output=True, text=True)
+                              env=dict(os.environ, PYTHONPATH=str(checkout)), cwd=folder, capture_output=True,
+                              text=True)   # in the run's folder, as the runs: the current folder comes first
     cache = folder / "numba_cache"
     cache.mkdir()
     cold = _run(checkout, cache, args, folder / "cold.nc")
     warm = _run(checkout, cache, args, folder / "warm.nc")
-    return {"checkout": str(checkout), "commit": _commit(checkout), "rss6core": imported.stdout.strip(),
+    return {"checkout": str(checkout), "commit": _commit(checkout), "imports": imported.stdout.strip(),
             "cold": cold, "warm": warm, "compile_share": (cold["wall_s"] - warm["wall_s"]) / cold["wall_s"],
             "file": str(folder / "cold.nc")}
 
@@ -73,7 +74,9 @@ def same_data(a: str, b: str) -> list[str]:
 
 
 def _line(name: str, m: dict) -> str:
-    return (f"{name:9s} {m['commit']:18s} cold {m['cold']['wall_s']:6.1f} s (load {m['cold']['load_before']:.1f}), "
+    code = Path(m["imports"]).parent.parent   # the checkout the runs imported rss6core from
+    return (f"{name:9s} {m['commit']} ({code}): "
+            f"cold {m['cold']['wall_s']:6.1f} s (load {m['cold']['load_before']:.1f}), "
             f"warm {m['warm']['wall_s']:5.1f} s (load {m['warm']['load_before']:.1f}), compile share "
             f"{100 * m['compile_share']:.0f} %")
 
@@ -84,6 +87,7 @@ def main(argv=None) -> int:
     parser.add_argument("-n", type=int, default=16, help="realisations (default 16)")
     parser.add_argument("--workers", type=int, default=2, help="local workers (default 2)")
     parser.add_argument("--config", default="paper", help="scene (default paper)")
+    parser.add_argument("--baseline-first", action="store_true", help="measure the baseline first")
     parser.add_argument("--json", action="store_true", help="print the measurements as JSON too")
     opts = parser.parse_args(argv)
     args = [opts.config, "-n", str(opts.n), "--model", "contact", "--workers", str(opts.workers)]
@@ -93,7 +97,8 @@ def main(argv=None) -> int:
     result = {}
     with tempfile.TemporaryDirectory(prefix="cold_start_") as tmp:
         checkouts = {"this": CHECKOUT} | ({"baseline": opts.baseline.resolve()} if opts.baseline else {})
-        for name, checkout in checkouts.items():
+        for name in sorted(checkouts, key=lambda k: (k != "baseline") == opts.baseline_first):
+            checkout = checkouts[name]
             folder = Path(tmp) / name
             folder.mkdir()
             result[name] = measure(checkout, args, folder)
