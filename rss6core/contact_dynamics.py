@@ -42,7 +42,7 @@ import numpy as np
 from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
                        platform_point_map, scene_link_matrices, split)
 from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Records, Settings, State, System,
-                             Out, advance_chunk, make_scratch, make_work, newton_step)
+                             Out, advance_chunk, fast_inlining, make_scratch, make_work, newton_step)
 from .contact_options import MAX_CONTACT_REFINEMENTS, TOL_DISPLACEMENT, TOL_VELOCITY
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import platform_inertia_world, rod_angular_motion
@@ -715,8 +715,9 @@ class CompiledStepper(ContactStepper):
         out = Out(f=np.empty((R, 6, 3, 3)), gl=np.empty((R, 6, 12)), gp=np.empty((R, 6)),
                   delta=np.empty((R, 6, 4)), rate=np.empty((R, 6, 4)))
         done, count = np.zeros(R, np.bool_), np.zeros(R, np.int64)
-        newton_step(Frame(Rc=ch.Rc[j], J=ch.J[j], Rr=ch.Rr[j], omega=ch.omega[j]), self._joints_of(idx), sy, ab, ap,
-                    float(bh2), float(gh), float(wf), self.settings, out, done, count, self.scratch)
+        with fast_inlining():
+            newton_step(Frame(Rc=ch.Rc[j], J=ch.J[j], Rr=ch.Rr[j], omega=ch.omega[j]), self._joints_of(idx), sy, ab,
+                        ap, float(bh2), float(gh), float(wf), self.settings, out, done, count, self.scratch)
         return JointSolution(ab=ab, ap=ap, f=out.f, gl=out.gl, gp=out.gp, converged=done, iterations=count,
                              delta=out.delta, rate=out.rate)
 
@@ -732,9 +733,10 @@ class CompiledStepper(ContactStepper):
         records = Records(peak=ws.peak, cpeak=ws.cpeak, hist=ws.hist, alive=ws.alive, fail=ws.fail,
                           fail_t=ws.fail_t, fail_h=ws.fail_h, fail_size=ws.fail_size, steps=ws.steps,
                           iters=ws.iters, refined=ws.refined)
-        advance_chunk(np.flatnonzero(ws.alive), first, n_base, self.setup.every, lv, self.layout,
-                      self.settings, ch.arrays(), self._joints_of(slice(None)), state, records,
-                      self.work, self.scratch)
+        with fast_inlining():
+            advance_chunk(np.flatnonzero(ws.alive), first, n_base, self.setup.every, lv, self.layout,
+                          self.settings, ch.arrays(), self._joints_of(slice(None)), state, records,
+                          self.work, self.scratch)
         for r in np.flatnonzero(before & ~ws.alive):
             ws.failed(r, ws.fail[r], ws.fail_t[r], ws.fail_h[r], ws.fail_size[r], self.setup.limit)
         return self._progress(ch)

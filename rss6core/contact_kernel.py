@@ -47,18 +47,21 @@ left (views, named structures) was still a fifth of the steps' time.
 """
 from __future__ import annotations
 
+import contextlib
+import copy
 from collections import namedtuple
 
 import llvmlite.binding as llvm
 import numpy as np
 from numba import njit, types
+from numba.core import inline_closurecall, ir
 from numba.extending import get_cython_function_address
 
 from .status import DIVERGED, NEWTON_FAILED   # the failure codes written to ``fail``
 
-__all__ = ["newton_step", "advance_chunk", "ball", "predict_one", "correct_one", "coarsest_next", "balance_next",
-           "Levels", "Layout", "Settings", "ChunkArrays", "Frame", "Law", "Joints", "State", "Records", "Out", "System",
-           "make_work", "make_scratch"]
+__all__ = ["newton_step", "advance_chunk", "fast_inlining", "ball", "predict_one", "correct_one", "coarsest_next",
+           "balance_next", "Levels", "Layout", "Settings", "ChunkArrays", "Frame", "Law", "Joints", "State", "Records",
+           "Out", "System", "make_work", "make_scratch"]
 
 # reassociation and fused multiply-add, but no finite-math assumption: a diverging
 # realisation's inf and nan must survive to be reported.  Every fastmath function is inlined
@@ -77,6 +80,50 @@ _PATTERN = np.array([[0, 0], [1, 1], [1, 2], [2, 3]], np.int64)
 llvm.add_symbol("rss6_dgemm", get_cython_function_address("scipy.linalg.cython_blas", "dgemm"))
 _dgemm = types.ExternalFunction("rss6_dgemm", types.void(*[types.uintp] * 13))
 
+
+
+# --- compiling: numba's inliner without its quadratic copies ---
+
+class _BlockCopier:
+    """``copy`` as numba's inliner (``inline_closurecall``) sees it while :func:`fast_inlining` holds.
+
+    The inliner copies a callee's IR block by block, each with ``copy.deepcopy`` and its own memo, so
+    every block copies the callee's whole variable scope again: blocks times variables, which was two
+    thirds of the contact kernel's compile (150 of 228 s).  Here the blocks of one IR share one copy of
+    their scope (the scope and everything reachable from it are copied once, then seed each block's
+    memo): the same statements and names, as a single deepcopy of all the blocks would give.
+    The inliner renames every callee variable into the caller's scope right after the copy, so the
+    copies' scopes were equal and are dropped either way; the inlined IR is the same
+    (``python benchmarks/kernel_compile.py [--plain]`` prints hashes of the kernels' LLVM IR and
+    assembly; tests/test_fast_inlining.py compares a small kernel's)."""
+
+    def __init__(self):
+        self._scope, self._count, self._memo = None, -1, {}
+
+    def deepcopy(self, x, memo=None):
+        if memo is not None or not isinstance(x, ir.Block):
+            return copy.deepcopy(x, memo)
+        scope = x.scope
+        if scope is not self._scope or len(scope.localvars._con) != self._count:   # another IR, or grown
+            self._scope, self._count, self._memo = scope, len(scope.localvars._con), {}
+            copy.deepcopy(scope, self._memo)
+        return copy.deepcopy(x, dict(self._memo))   # a dict's copy costs less than a ChainMap's lookups
+
+    def __getattr__(self, name):
+        return getattr(copy, name)
+
+
+@contextlib.contextmanager
+def fast_inlining():
+    """Compile (a kernel's first call in a process) with :class:`_BlockCopier` as the inliner's
+    ``copy``; costs nothing once compiled or loaded.  numba compiles under one lock, so no other
+    compile sees the swap."""
+    saved = inline_closurecall.copy
+    inline_closurecall.copy = _BlockCopier()
+    try:
+        yield
+    finally:
+        inline_closurecall.copy = saved
 
 # --- named structures: every array and constant the kernel reads, by name ---
 
