@@ -101,7 +101,7 @@ class _BlockCopier:
         self._scope, self._count, self._memo = None, -1, {}
 
     def deepcopy(self, x, memo=None):
-        if memo is not None or not isinstance(x, ir.Block):
+        if memo is not None or not isinstance(x, ir.Block) or not _SCOPE_COUNTABLE:
             return copy.deepcopy(x, memo)
         scope = x.scope
         if scope is not self._scope or len(scope.localvars._con) != self._count:   # another IR, or grown
@@ -113,11 +113,19 @@ class _BlockCopier:
         return getattr(copy, name)
 
 
+# the numba internals the copier relies on (numba 0.60-0.68): without them numba's own inliner runs
+_SCOPE_COUNTABLE = hasattr(ir, "Scope") and hasattr(ir, "VarMap") and hasattr(ir.VarMap(), "_con")
+_SWAPPABLE = getattr(inline_closurecall, "copy", None) is copy and _SCOPE_COUNTABLE
+
+
 @contextlib.contextmanager
 def fast_inlining():
     """Compile (a kernel's first call in a process) with :class:`_BlockCopier` as the inliner's
     ``copy``; costs nothing once compiled or loaded.  numba compiles under one lock, so no other
-    compile sees the swap."""
+    compile sees the swap.  A numba whose inliner no longer works this way keeps its own."""
+    if not _SWAPPABLE:
+        yield
+        return
     saved = inline_closurecall.copy
     inline_closurecall.copy = _BlockCopier()
     try:
