@@ -8,7 +8,8 @@ import pytest
 from pipeline.cli import build_parser, main
 
 # a value each free-text option must refuse (options not listed take any text, e.g. paths)
-BAD_TEXT = {"require": "displacement:x<=1parsec@q95", "event": "displacement:z>1parsec", "until": "displacement:x@q95<=5 furlongs",
+BAD_TEXT = {"require": "displacement:x<=1parsec@q95", "event": "displacement:z>1parsec",
+            "until": "displacement:x@q95<=5 furlongs",
             "spec": "displacement:x<=1mm@q101", "quantity": "torque", "direction": "w", "window": "midnight",
             "output": "{missing}/out", "plots": None, "data": None, "configs": None, "file": None, "config": None}
 # per command, what else must be given for the option to be judged (a file to read, a required option)
