@@ -15,12 +15,13 @@ BAD_TEXT = {"require": "displacement:x<=1parsec@q95", "event": "displacement:z>1
 # per command, what else must be given for the option to be judged (a file to read, a required option)
 ANY_TEXT = {("report", "output")}   # report creates its output folder, parents included
 NEEDS = {"stats": ["{file}"], "plot": ["{file}"], "budget": ["--spec", "displacement:x<=1mm@q95"],
-         "multifidelity": ["-o", "{tmp}/mf.nc"], "report": ["smoke"]}
+         "multifidelity": ["-o", "{tmp}/mf.nc"], "report": ["smoke"],
+         "reliability": ["smoke", "--event", "displacement:z>0.1mm"]}
 # the entry points that compute (budget and sensitivity check their request first, so they stay)
 WORK = ("pipeline.ensemble.run.ensemble", "pipeline.analysis.until.run_until", "rss6core.simulate",
         "pipeline.studies.report.write_report", "pipeline.studies.tradeoff.tradeoff",
         "pipeline.studies.stability.stability", "rss6core.compile_kernels",
-        "pipeline.studies.workspace_map.workspace_map")
+        "pipeline.studies.workspace_map.workspace_map", "pipeline.studies.reliability.reliability")
 
 
 def _commands() -> dict[str, argparse.ArgumentParser]:
