@@ -24,7 +24,7 @@ from ..analysis.exceedance import Event, clopper_pearson
 from ..analysis.subset import SubsetSettings, subset_simulation
 from ..ensemble.cluster import dask_client
 from ..files.records import window_summaries
-from ..vocabulary import DIRECTIONS, QUANTITIES, WINDOWS, UserError
+from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
 
 __all__ = ["ReliabilityError", "Estimate", "input_dimension", "evaluate", "reliability", "reliability_dataset",
            "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
@@ -103,7 +103,8 @@ def evaluate(spec, window: str, z: np.ndarray, client=None) -> np.ndarray:
     workers = max(1, len(client.nthreads()))
     chunk = max(IN_PROCESS_ROWS // 4, -(-len(z) // (4 * workers)))
     parts = [slice(i, min(i + chunk, len(z))) for i in range(0, len(z), chunk)]
-    futures = [client.submit(_evaluate_rows, spec, window, z[p], pure=False) for p in parts]
+    scattered = client.scatter([z[p] for p in parts])   # the rows as data, not in the task graph
+    futures = [client.submit(_evaluate_rows, spec, window, rows, pure=False) for rows in scattered]
     return np.concatenate(client.gather(futures))
 
 
@@ -152,7 +153,7 @@ def _client(workers: int):
 
 
 def reliability(spec, event: Event, method: str = "subset", n: int | None = None, p0: float = 0.1,
-                confidence: float = 0.95, workers: int = 1) -> Estimate:
+                confidence: float = CONFIDENCE, workers: int = 1) -> Estimate:
     """P(event) at the level of ``spec`` (pipeline.ensemble.run.EnsembleSpec) by ``method``: subset
     simulation with N = ``n`` (default 1000) per level, or plain Monte Carlo of ``n`` (default 20000)."""
     dimension = input_dimension(spec.scene(), spec.model, spec.source)
