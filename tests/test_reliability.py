@@ -73,3 +73,16 @@ def test_bad_input_is_one_line_exit_2_before_any_work(tmp_path, capsys, extra, t
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and token in err, err
     assert not (tmp_path / "x.nc").exists()
+
+
+@pytest.mark.slow
+def test_the_same_seed_gives_the_same_file_on_two_workers_as_in_this_process(tmp_path, capsys):
+    """Batches of 300 rows are cut into chunks on 2 dask workers, or evaluated here: same bits."""
+    runs = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"w{workers}.nc"
+        assert main(["reliability", "smoke", "--event", EVENT, "--method", "mc", "-n", "300", "--workers", workers,
+                     "-o", str(out)]) == 0
+        runs.append(load_netcdf(out))
+    assert np.array_equal(runs[0]["max_abs_error"].values, runs[1]["max_abs_error"].values, equal_nan=True)
+    assert np.array_equal(runs[0]["z"].values, runs[1]["z"].values)
