@@ -30,14 +30,16 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--reps", type=int, default=200)
     reps = p.parse_args().reps
-    print(f"{'case':<22s}{'bias':>8s}{'CoV obs':>9s}{'CoV rep':>9s}{'cover':>7s}{'evals':>7s}  cover (uncorrelated CoV)")
+    print(f"{'case':<22s}{'bias':>8s}{'CoV obs':>9s}{'CoV rep':>9s}{'cover':>7s}{'evals':>7s}"
+          "  cover (uncorrelated CoV)")
     for name, (response, d, truth) in cases().items():
         runs = [subset_simulation(response, d, 0.0, SubsetSettings(seed=s)) for s in range(reps)]
         pf = np.array([r.pf for r in runs])
         cover = np.mean([r.lower <= truth <= r.upper for r in runs])
         bare = np.mean([lo <= truth <= up for lo, up in (lognormal_interval(r.pf, r.cov, 0.95) for r in runs)])
         print(f"{name:<22s}{pf.mean() / truth - 1:>+8.3f}{pf.std(ddof=1) / truth:>9.3f}"
-              f"{np.mean([r.cov for r in runs]):>9.3f}{cover:>7.3f}{np.mean([r.n_evaluations for r in runs]):>7.0f}  {bare:.3f}")
+              f"{np.mean([r.cov for r in runs]):>9.3f}{cover:>7.3f}"
+              f"{np.mean([r.n_evaluations for r in runs]):>7.0f}  {bare:.3f}")
 
 
 if __name__ == "__main__":
