@@ -172,7 +172,7 @@ def reliability_dataset(est: Estimate, event: Event, spec, elapsed: float, optio
     scene = spec.scene()
     history = command_line("reliability", scene, model=spec.model, integrator=spec.integrator, dt=spec.dt,
                            elements=spec.elements, options=options)
-    attrs = {"Conventions": "CF-1.8", "title": f"rss6 reliability of {event.text} at the {spec.model} level, "
+    attrs = {"Conventions": "CF-1.10", "title": f"rss6 reliability of {event.text} at the {spec.model} level, "
              f"scene {scene.name!r}", "history": history, "event": event.text, "event_limit": event.limit,
              "event_window": event.window, "seed": spec.seed, "elapsed_s": elapsed,
              "estimate": json.dumps(est.summary(), allow_nan=False)
