@@ -9,12 +9,12 @@ import sys
 
 from rss6core import SceneError, __version__
 
-from .commands import (allocate, budget, check, map, multifidelity, plot, report, run, sensitivity, simulate, stability,
-                       stats, tradeoff, warm)
+from .commands import (allocate, budget, check, map, multifidelity, plot, reliability, report, run, sensitivity,
+                       simulate, stability, stats, tradeoff, warm)
 from .scenes.catalogue import scene_names
 from .vocabulary import UserError
 
-COMMANDS = (check, simulate, warm, run, report, stats, multifidelity, sensitivity, budget, allocate, plot,
+COMMANDS = (check, simulate, warm, run, report, stats, multifidelity, sensitivity, reliability, budget, allocate, plot,
             tradeoff, stability, map)   # in the order ``rss6 -h`` lists them
 
 

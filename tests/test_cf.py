@@ -97,6 +97,14 @@ def test_sensitivity_file_is_cf(tmp_path):
     assert cf_errors(out) == []
 
 
+def test_reliability_file_is_cf(tmp_path):
+    """`rss6 reliability -o R.nc`: every evaluation's inputs, level and maxima."""
+    out = tmp_path / "rel.nc"
+    assert main(["reliability", str(SMOKE), "--event", "displacement:z>0.2mm", "-n", "100", "--workers", "1",
+                 "-o", str(out)]) == 0
+    assert cf_errors(out) == []
+
+
 # --- what a plain netCDF or xarray user sees -------------------------------------------------------
 
 def test_label_selection_with_plain_xarray_and_one_line(tmp_path):

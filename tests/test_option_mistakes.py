@@ -8,7 +8,8 @@ import pytest
 from pipeline.cli import build_parser, main
 
 # a value each free-text option must refuse (options not listed take any text, e.g. paths)
-BAD_TEXT = {"require": "displacement:x<=1parsec@q95", "until": "displacement:x@q95<=5 furlongs",
+BAD_TEXT = {"require": "displacement:x<=1parsec@q95", "event": "displacement:z>1parsec",
+            "until": "displacement:x@q95<=5 furlongs",
             "spec": "displacement:x<=1mm@q101", "quantity": "torque", "direction": "w", "window": "midnight",
             "output": "{missing}/out", "classes": "H7/x6", "costs": "{missing}/costs.toml",
             "plots": None, "data": None, "configs": None, "file": None, "config": None}
@@ -16,12 +17,14 @@ BAD_TEXT = {"require": "displacement:x<=1parsec@q95", "until": "displacement:x@q
 ANY_TEXT = {("report", "output")}   # report creates its output folder, parents included
 NEEDS = {"stats": ["{file}"], "plot": ["{file}"], "budget": ["--spec", "displacement:x<=1mm@q95"],
          "allocate": ["--spec", "displacement:x<=1mm@q95"],
-         "multifidelity": ["-o", "{tmp}/mf.nc"], "report": ["smoke"]}
+         "multifidelity": ["-o", "{tmp}/mf.nc"], "report": ["smoke"],
+         "reliability": ["smoke", "--event", "displacement:z>0.1mm"]}
 # the entry points that compute (budget and sensitivity check their request first, so they stay)
 WORK = ("pipeline.ensemble.run.ensemble", "pipeline.analysis.until.run_until", "rss6core.simulate",
         "pipeline.studies.report.write_report", "pipeline.studies.tradeoff.tradeoff",
         "pipeline.studies.stability.stability", "rss6core.compile_kernels",
-        "pipeline.studies.workspace_map.workspace_map", "pipeline.studies.allocation.responses")
+        "pipeline.studies.workspace_map.workspace_map", "pipeline.studies.allocation.responses",
+        "pipeline.studies.reliability.reliability")
 
 
 def _commands() -> dict[str, argparse.ArgumentParser]:

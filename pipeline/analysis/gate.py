@@ -28,7 +28,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .spec import Spec
+from .exceedance import Event, event_values, one_sided_cp
+from .spec import PF, Spec
 from ..vocabulary import CONFIDENCE, QUANTILES
 from .estimators import QUANTILE_DECISION_CAP, interval_floor, quantile_decision_n
 from .stats import ensemble_stats, finished_values
@@ -42,7 +43,8 @@ UPPER_LIMITS = ("<=", "<")
 BOUND_METHODS = {"quantile": "exact binomial order statistics, distribution-free",
                  "mean": "union of Student t and Hall's skewness-corrected t",
                  "std": "those of the two-sided Bonett interval",
-                 "qmc": "Student t over the randomised-QMC replicates"}
+                 "qmc": "Student t over the randomised-QMC replicates",
+                 PF: "exact Clopper-Pearson binomial bounds"}
 
 
 @dataclass(frozen=True)
@@ -97,8 +99,8 @@ def _sides(spec: Spec) -> tuple[str, str]:
 
 def _rule(spec: Spec, confidence: float, replicates: int | None) -> str:
     """The decision rule of ``spec`` in words, with its confidence."""
-    kind = "qmc" if replicates is not None else ("quantile" if spec.statistic in QUANTILES
-                                                  else spec.statistic)
+    kind = "qmc" if replicates is not None and spec.statistic != PF else (
+        "quantile" if spec.statistic in QUANTILES else spec.statistic)
     check, other = _sides(spec)
     return (f"one-sided {100 * confidence:g} % bounds of {spec.statistic} ({BOUND_METHODS[kind]}): "
             f"fail when the {check} bound violates the limit, pass when the {other} bound meets it")
@@ -206,14 +208,51 @@ def _judge(spec: Spec, ds, bounds) -> list[Verdict]:
     return out
 
 
+def _pf_decision(spec: Spec, k: int, n: int, failed: int, lower: float, upper: float, confidence: float):
+    """(outcome, n needed, reason) of a pf requirement from k of n exceeding and its one-sided bounds."""
+    holds = (lambda p: p <= spec.pf_limit) if spec.pf_op == "<=" else (lambda p: p < spec.pf_limit)
+    share = f"{k} of {n} realisations exceed the limit"
+    if not holds(lower):
+        return "fail", None, f"{share}: the lower bound of P violates pf {spec.pf_op} {spec.pf_limit:g}"
+    if holds(upper) and failed:
+        return "undecided", None, (f"the upper bound meets the limit, but {failed} of {n + failed} "
+                                   "realisations failed and are not in it")
+    if holds(upper):
+        return "pass", None, f"{share}: the upper bound of P meets pf {spec.pf_op} {spec.pf_limit:g}"
+    need = quantile_decision_n(max(n, 1), k, spec.pf_limit, confidence)
+    if need is None:
+        return "undecided", None, (f"{share}, a share too close to the {spec.pf_limit:g} allowed for any n "
+                                   f"up to {QUANTILE_DECISION_CAP:,} to decide")
+    return "undecided", need, f"{share}; at that share n = {need} decides"
+
+
+def _judge_pf(spec: Spec, ds, confidence: float) -> list[Verdict]:
+    """Verdicts of a pf requirement, one per direction: P(max |error| violates the limit) on
+    one-sided Clopper-Pearson bounds at ``confidence``."""
+    out = []
+    for d in spec.directions:
+        event = Event(spec.text, spec.quantity, d, spec.limit, spec.unit, spec.factor, spec.window or "whole")
+        values = event_values(ds, event)
+        n, k = len(values), int(np.count_nonzero(~spec.holds(values)))
+        failed = int(ds["status"].size - n) if "status" in ds else 0
+        lower, upper = (float(b) for b in one_sided_cp(k, n, confidence))
+        outcome, need, reason = _pf_decision(spec, k, n, failed, lower, upper, confidence)
+        out.append(Verdict(spec.text, spec.quantity, d, PF, "max", spec.window, spec.pf_op, spec.pf_limit,
+                           "", 1.0, k / n if n else float("nan"), lower, upper, confidence, n, failed,
+                           outcome, need, reason, _rule(spec, confidence, None)))
+    return out
+
+
 def judge_all(specs: list[Spec], ds, confidence: float = CONFIDENCE) -> list[Verdict]:
     """Every spec's verdicts, in the order given, on an ensemble (or single-run) Dataset at
-    ``confidence``; ValueError names a window the file lacks or a confidence not above 0.5."""
+    ``confidence``; ValueError names a window the file lacks, a confidence not above 0.5, or a pf
+    requirement on a QMC file."""
     if not specs:
         return []
     check_confidence(confidence)
     bounds = ensemble_stats(ds, confidence, window=None, one_sided=True)
-    return [v for s in specs for v in _judge(s, ds, bounds)]
+    return [v for s in specs
+            for v in (_judge_pf(s, ds, confidence) if s.statistic == PF else _judge(s, ds, bounds))]
 
 
 def judge(spec: Spec, ds, confidence: float = CONFIDENCE) -> list[Verdict]:

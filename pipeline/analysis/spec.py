@@ -11,7 +11,10 @@ One grammar serves every command that states a limit (``rss6 run --require``,
 - VALUE UNIT: a number and a unit of the quantity: lengths m, cm, mm, um;
   angles rad, mrad, urad, deg; per second ``/s`` (or UDUNITS ``m s-1``),
   per second squared ``/s^2`` (``/s2``, ``m s-2``), and ``g`` (9.80665 m/s^2);
-- STATISTIC: one of the statistics Dataset's labels that carry an interval
+- STATISTIC: ``pf<=P`` (or ``pf<P``), P in (0, 1): the probability that a realisation's maximum
+  |error| violates the limit is at most P (an upper limit OP only; per direction; decided on
+  one-sided Clopper-Pearson bounds, pipeline.analysis.exceedance), for example
+  ``displacement:z<=0.1mm@pf<=1e-3``; or one of the statistics Dataset's labels that carry an interval
   (mean, std, q05, q50, q95, q99; not max, which has none), of the per-realisation maximum |error| by default or of the
   per-realisation mean |error| with ``:mean`` (``@q50:mean``), and optionally
   an analysis window of the file (``@q95/steady``).
@@ -27,11 +30,12 @@ from dataclasses import dataclass
 
 from ..vocabulary import FAMILIES, QUANTITIES, REQUIRABLE, SUMMARIES, UserError
 
-__all__ = ["OPERATORS", "Spec", "SpecError", "parse_spec", "parse_specs"]
+__all__ = ["OPERATORS", "PF", "Spec", "SpecError", "parse_spec", "parse_specs"]
 
 TRANSLATIONS, ROTATIONS = FAMILIES["translation"], FAMILIES["rotation"]
 MEASURES = dict(zip(("max", "mean"), SUMMARIES))   # the summary a spec's ":max" or ":mean" names
 OPERATORS = ("<=", "<", ">=", ">")
+PF = "pf"   # the statistic of a probability-of-exceedance requirement
 STANDARD_GRAVITY = 9.80665  # m/s^2
 
 _LENGTHS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6}
@@ -61,6 +65,8 @@ class Spec:
     statistic: str
     measure: str = "max"
     window: str | None = None
+    pf_op: str | None = None       # pf requirements: "<=" or "<" on the exceedance probability
+    pf_limit: float | None = None  # pf requirements: the largest allowed exceedance probability
 
     @property
     def variable(self) -> str:
@@ -140,6 +146,26 @@ def _statistic(text: str, token: str) -> tuple[str, str, str | None]:
     return stat, measure, window
 
 
+def _pf(text: str, op: str, token: str) -> tuple[str, float, str | None]:
+    """``'pf<=1e-3/steady'`` -> (op, probability, window); SpecError names what is wrong."""
+    body, _, window = token.strip().partition("/")
+    m = re.fullmatch(r"pf\s*(<=|<|=<)\s*(.*)", body.strip())
+    if m is None:
+        raise _fail(text, "a pf requirement reads pf<=P or pf<P (e.g. @pf<=1e-3)")
+    if op not in ("<=", "<"):
+        raise _fail(text, "a pf requirement bounds the probability that the error exceeds an upper "
+                          f"limit: use <= or < before the limit, not {op!r}")
+    try:
+        value = float(m.group(2))
+    except ValueError:
+        raise _fail(text, f"pf value {m.group(2)!r} is not a number") from None
+    if not 0 < value < 1:
+        raise _fail(text, f"pf value {m.group(2)} must lie strictly between 0 and 1")
+    if "/" in token and not window.strip():
+        raise _fail(text, "missing window name after '/' (e.g. @pf<=1e-3/steady)")
+    return {"=<": "<="}.get(m.group(1), m.group(1)), value, window.strip() or None
+
+
 def _subject(text: str, subject: str) -> tuple[str, tuple[str, ...]]:
     """``'displacement:x,y'`` -> (quantity, directions)."""
     quantity, colon, dirs = subject.partition(":")
@@ -176,6 +202,10 @@ def parse_spec(text: str) -> Spec:
     if not math.isfinite(value):
         raise _fail(text, f"value {m.group(1)!r} is not a finite number")
     factor = _unit_factor(text, unit, quantity, directions)
+    if right.strip().startswith(PF):
+        pf_op, pf_limit, window = _pf(text, op, right)
+        return Spec(text, quantity, directions, op, value * factor, unit, factor, PF, "max", window,
+                    pf_op, pf_limit)
     stat, measure, window = _statistic(text, right)
     return Spec(text, quantity, directions, op, value * factor, unit, factor, stat, measure, window)
 

@@ -25,17 +25,23 @@ def add_parser(sub) -> None:
                                     "without '/WINDOW' (default: every window shown, --require "
                                     "judged on the whole run)")
     add_require(p)
+    p.add_argument("--event", action="append", metavar="EVENT",
+                   help="also print the probability that a realisation's maximum |error| exceeds a limit, "
+                        "QUANTITY:DIRECTION>VALUE UNIT[/WINDOW], e.g. 'displacement:z>0.1mm' (repeatable): "
+                        "k/n and its exact Clopper-Pearson interval at --confidence (Monte Carlo files only)")
     p.set_defaults(main=main)
 
 
 def main(args) -> int:
     from ..analysis.gate import check_confidence, exit_code, format_verdicts, verdicts_json
+    from ..analysis.exceedance import exceedance_json, format_exceedance
     from ..analysis.stats import ensemble_stats, format_stats, to_json
     from ..files.opening import open_results
     from ..files.outputs import check_new_output
     from ..files.writing import write_netcdf
     specs = requirements(args)
     known_windows(specs)
+    events = _events(args)
     if specs:
         try:
             check_confidence(args.confidence)
@@ -48,17 +54,36 @@ def main(args) -> int:
     if args.window is not None:
         full, specs = _window_of(full, args.window), [replace(s, window=s.window or args.window) for s in specs]
     verdicts = judge(ds, specs, args.confidence)
+    probabilities = _probabilities(ds, events, args.confidence)
     sds = _selection(full, args)
     if args.output:
         write_netcdf(sds.assign_attrs(verdict_attrs(verdicts)) if specs else sds, args.output)
     if args.json:
         out = to_json(sds) | ({"requirements": verdicts_json(verdicts)} if specs else {})
+        out |= {"exceedance": exceedance_json(probabilities)} if events else {}
         print(json.dumps(out, indent=2, allow_nan=False))
     else:
         print(format_stats(sds))
+        if events:
+            print(format_exceedance(probabilities))
         if specs:
             print(format_verdicts(verdicts))
     return exit_code(verdicts, args.undecided) if specs else 0
+
+
+def _events(args) -> list:
+    """The parsed --event options (EventError, one line, on a malformed one)."""
+    from ..analysis.exceedance import parse_event
+    return [parse_event(text) for text in args.event or []]
+
+
+def _probabilities(ds, events: list, confidence: float) -> list:
+    """Each event's exceedance probability; a QMC file or an absent window is an OptionError."""
+    from ..analysis.exceedance import exceedance
+    try:
+        return [exceedance(ds, e, confidence) for e in events]
+    except ValueError as exc:
+        raise OptionError(f"--event {exc}") from None
 
 
 def _window_of(sds, window: str):

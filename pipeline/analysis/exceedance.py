@@ -1,0 +1,160 @@
+"""Exceedance probabilities: P(a realisation's maximum |error| over a window exceeds a limit).
+
+An event ``QUANTITY:DIRECTION > LIMIT UNIT[/WINDOW]`` (for example ``displacement:z>0.1mm`` or
+``velocity:x>2mm/s/steady``) holds for a realisation when its ``max_abs_error`` of that quantity
+and direction over the window (default whole) exceeds the limit.  From n independent realisations
+of which k exceed, the estimate is k / n and the interval is the exact Clopper-Pearson one (beta
+quantiles; at least the stated confidence for every true probability, two-sided, or one-sided for
+each bound of a requirement: coverage measured in tests/test_exceedance.py).  A randomised QMC
+file is refused: its points are not independent, so the binomial interval does not hold.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats as sps
+
+from ..vocabulary import CONFIDENCE, WINDOWS
+from .spec import SpecError, _NUMBER, _subject, _unit_factor
+
+__all__ = ["Event", "Exceedance", "EventError", "parse_event", "clopper_pearson", "one_sided_cp",
+           "exceedance", "format_exceedance", "exceedance_json"]
+
+_PER_SECOND = {"s", "s^2", "s2", "s**2"}   # unit tails after '/' that are no window
+
+
+class EventError(SpecError):
+    """An event that cannot be parsed; one line naming the bad token."""
+
+
+@dataclass(frozen=True)
+class Event:
+    """``max |error|`` of ``quantity`` in ``direction`` over ``window`` exceeds ``limit`` (SI; the
+    user's ``unit`` is ``factor`` SI units)."""
+
+    text: str
+    quantity: str
+    direction: str
+    limit: float
+    unit: str
+    factor: float
+    window: str = "whole"
+
+    def exceeds(self, values: np.ndarray) -> np.ndarray:
+        """Whether each maximum |error| (SI) is in the event."""
+        return np.asarray(values) > self.limit
+
+
+def _fail(text: str, what: str, flag: str) -> EventError:
+    return EventError(f"{flag} {text!r}: {what}")
+
+
+def _window(text: str, flag: str) -> tuple[str, str]:
+    """(the event without its window, the window); a trailing '/NAME' that is no unit tail names one."""
+    head, slash, tail = text.rpartition("/")
+    if not slash or tail.strip() in _PER_SECOND or not re.fullmatch(r"\s*[A-Za-z_]\w*\s*", tail):
+        return text, "whole"
+    if tail.strip() not in WINDOWS:
+        raise _fail(text, f"unknown window {tail.strip()!r} (choose from {', '.join(WINDOWS)})", flag)
+    return head, tail.strip()
+
+
+def parse_event(text: str, flag: str = "--event") -> Event:
+    """Parse ``QUANTITY:DIRECTION > VALUE UNIT[/WINDOW]``; EventError (one line, naming ``flag``) on
+    an unknown quantity, direction or window, a missing operator, value or unit."""
+    body, window = _window(text, flag)
+    subject, op, rest = body.partition(">")
+    if not op or rest.startswith("="):
+        raise _fail(text, "an event reads QUANTITY:DIRECTION>LIMIT (e.g. displacement:z>0.1mm)", flag)
+    try:
+        quantity, directions = _subject(text, subject)
+        m = _NUMBER.match(rest)
+        if m is None or not np.isfinite(float(m.group(1))):
+            raise _fail(text, "missing value after '>' (e.g. 0.1mm)", flag)
+        factor = _unit_factor(text, m.group(2).strip(), quantity, directions)
+    except EventError:
+        raise
+    except SpecError as exc:       # the spec grammar's message, under this flag
+        raise EventError(str(exc).replace("--require", flag, 1)) from None
+    if len(directions) != 1:
+        raise _fail(text, "an event names one direction (write one event per direction)", flag)
+    return Event(text, quantity, directions[0], float(m.group(1)) * factor, m.group(2).strip(), factor,
+                 window)
+
+
+def clopper_pearson(k, n, confidence: float = CONFIDENCE) -> tuple:
+    """Two-sided exact (Clopper-Pearson) interval of a binomial proportion from k of n: each bound a
+    one-sided bound at (1 + confidence) / 2; 0 and 1 at k = 0 and k = n."""
+    return one_sided_cp(k, n, (1 + confidence) / 2)
+
+
+def one_sided_cp(k, n, confidence: float = CONFIDENCE) -> tuple:
+    """One-sided exact bounds (lower, upper) of a binomial proportion, each at ``confidence``:
+    lower = Beta(1 - c; k, n - k + 1), upper = Beta(c; k + 1, n - k) (Clopper and Pearson 1934)."""
+    k, n = np.asarray(k, float), np.asarray(n, float)
+    with np.errstate(invalid="ignore"):
+        lower = np.where(k > 0, sps.beta.ppf(1 - confidence, k, n - k + 1), 0.0)
+        upper = np.where(k < n, sps.beta.ppf(confidence, k + 1, n - k), 1.0)
+    return lower, upper
+
+
+@dataclass(frozen=True)
+class Exceedance:
+    """The estimate k / n of an event's probability and its two-sided Clopper-Pearson interval at
+    ``confidence`` over the n finished realisations (``n_failed`` others left out)."""
+
+    event: str
+    exceeding: int
+    n: int
+    n_failed: int
+    estimate: float
+    lower: float
+    upper: float
+    confidence: float
+    method: str = "Clopper-Pearson exact binomial interval (coverage >= confidence for every p)"
+
+
+def event_values(ds, event: Event) -> np.ndarray:
+    """The event's maxima |error| (SI) over the finished realisations of an ensemble Dataset;
+    ValueError for a QMC file or a window the file lacks."""
+    from .stats import finished_values
+    if ds.attrs.get("sampler") == "qmc":
+        raise ValueError(f"{event.text!r}: an exceedance probability needs independent realisations; "
+                         "a scrambled Sobol' (QMC) file's points are not, so its Clopper-Pearson "
+                         "interval would not hold (use a Monte Carlo ensemble, --sampler mc)")
+    if event.window != "whole" and "window" not in ds.dims:
+        raise ValueError(f"{event.text!r}: the file has no analysis windows; drop '/{event.window}'")
+    values = finished_values(ds, "max_abs_error", event.window)
+    return values.sel(quantity=event.quantity, direction=event.direction).values
+
+
+def exceedance(ds, event: Event, confidence: float = CONFIDENCE) -> Exceedance:
+    """The event's probability estimate and two-sided interval from an ensemble Dataset."""
+    values = event_values(ds, event)
+    n, k = len(values), int(np.count_nonzero(event.exceeds(values)))
+    failed = int(ds["status"].size - n) if "status" in ds else 0
+    if n == 0:
+        return Exceedance(event.text, 0, 0, failed, float("nan"), float("nan"), float("nan"), confidence)
+    lower, upper = clopper_pearson(k, n, confidence)
+    return Exceedance(event.text, k, n, failed, k / n, float(lower), float(upper), confidence)
+
+
+def format_exceedance(results: list[Exceedance]) -> str:
+    """One line per event: P = k/n and its interval with the confidence it reaches."""
+    lines = []
+    for r in results:
+        failed = f"; {r.n_failed} failed realisations left out" if r.n_failed else ""
+        lines.append(f"P({r.event}) = {r.exceeding}/{r.n} = {r.estimate:.4g}, "
+                     f"{100 * r.confidence:g} % interval [{r.lower:.4g}, {r.upper:.4g}] "
+                     f"(Clopper-Pearson, exact: covers with at least {100 * r.confidence:g} % "
+                     f"for every true P{failed})")
+    return "\n".join(lines)
+
+
+def exceedance_json(results: list[Exceedance]) -> list[dict]:
+    """Plain dicts for ``--json`` (NaN as None)."""
+    from dataclasses import asdict
+    return [{k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(r).items()}
+            for r in results]

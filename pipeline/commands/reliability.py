@@ -1,0 +1,93 @@
+"""rss6 reliability: the probability that a level's maximum |error| exceeds a limit, by subset
+simulation or plain Monte Carlo, with every evaluation in a netCDF file."""
+from __future__ import annotations
+
+import json
+import time
+
+from ..ensemble.settings import resolve_cluster, resolve_level
+from ..scenes.catalogue import find_scene
+from ..vocabulary import OptionError
+from .messages import interrupted
+from .options import add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, positive_int
+
+
+def add_parser(sub) -> None:
+    from ..studies.reliability import METHODS
+    p = sub.add_parser("reliability", help="probability that the maximum |error| exceeds a limit (subset "
+                                           "simulation or Monte Carlo), with its interval")
+    add_scene(p)
+    add_model(p, "model level (default quasi-static; contact costs about 0.4 s per evaluation on the paper "
+                 "scene)", default="quasi-static")
+    p.add_argument("--event", required=True, metavar="EVENT",
+                   help="QUANTITY:DIRECTION>VALUE UNIT[/WINDOW], e.g. 'displacement:z>0.1mm' or "
+                        "'displacement:z>0.1mm/steady': a realisation's maximum |error| over the window "
+                        "(default whole) exceeds the limit")
+    p.add_argument("--method", choices=METHODS, default="subset",
+                   help="subset: subset simulation (Au & Beck 2001, adaptive conditional sampling); mc: plain "
+                        "Monte Carlo with an exact Clopper-Pearson interval (default subset)")
+    p.add_argument("-n", type=positive_int, help="subset: evaluations per level N, a multiple of 1 / p0 "
+                                                 "(default 1000); mc: realisations (default 20000)")
+    p.add_argument("-p0", "--p0", type=float, default=0.1,
+                   help="subset: conditional probability of each level, in (0, 0.5] (default 0.1)")
+    add_seed(p)
+    add_confidence(p, "confidence of the interval")
+    p.add_argument("-o", "--output", help="netCDF file of every evaluation (default: SCENE_MODEL_reliability.nc)")
+    add_parents(p)
+    add_json(p, "print one JSON object: pf, lower, upper, confidence, cov, evaluations, method, ...")
+    add_workers(p, what="local dask workers for large batches (1: in this process)")
+    p.set_defaults(main=main)
+
+
+def _settings(args):
+    """Every option checked before any work: the event, p0 and N, the level's random inputs."""
+    from ..analysis.exceedance import parse_event
+    from ..analysis.subset import SubsetSettings
+    from ..studies.reliability import input_dimension
+    event = parse_event(args.event)
+    if args.method == "subset":
+        try:
+            SubsetSettings(args.n or 1000, args.p0, args.seed, args.confidence)
+        except ValueError as exc:
+            raise OptionError(f"-n/--p0: {exc}") from None
+    elif args.p0 != 0.1:
+        raise OptionError("--p0: applies with --method subset only")
+    level = resolve_level(find_scene(args.config), args.config, model=args.model)
+    input_dimension(level.scene, level.model, args.config)   # ReliabilityError: no random inputs
+    return event, level
+
+
+def main(args) -> int:
+    from ..files.outputs import OutputLock, check_new_output
+    from ..files.writing import write_netcdf
+    from ..studies.reliability import reliability, reliability_dataset
+    event, level = _settings(args)
+    cluster = resolve_cluster(args.workers)
+    output = check_new_output(args.output or f"{level.scene.name}_{level.model}_reliability.nc",
+                              "rss6 reliability", args.parents)
+    spec = level.ensemble_spec(args.seed)
+    start = time.perf_counter()
+    with OutputLock(output):
+        try:
+            est = reliability(spec, event, args.method, args.n, args.p0, args.confidence, cluster.workers)
+        except KeyboardInterrupt:
+            return interrupted(None)
+        options = f"--event '{event.text}' --method {args.method}" + (f" -n {args.n}" if args.n else "") + \
+            (f" --p0 {args.p0:g}" if args.method == "subset" else "") + f" --seed {args.seed}"
+        write_netcdf(reliability_dataset(est, event, spec, time.perf_counter() - start, options), output)
+    print(json.dumps(_strict(est.summary()), indent=2) if args.json else _text(est, event, output))
+    return 0
+
+
+def _strict(summary: dict) -> dict:
+    """NaN and infinities as null (strict JSON)."""
+    from ..analysis.stats import json_number
+    return {k: json_number(v) if isinstance(v, float) else v for k, v in summary.items()}
+
+
+def _text(est, event, output) -> str:
+    """The estimate in a few lines."""
+    levels = ", ".join(f"{e}" for e in est.evaluations_per_level)
+    return (f"wrote {output}\nP({event.text}) = {est.pf:.4g} by {est.method}, CoV {est.cov:.3g}; "
+            f"{100 * est.confidence:g} % interval [{est.lower:.4g}, {est.upper:.4g}] ({est.interval})\n"
+            f"{est.level.size} evaluations (per level: {levels}); {est.message}")

@@ -1,0 +1,189 @@
+"""``rss6 reliability``: the probability that a level's maximum |error| exceeds a limit, by subset
+simulation (pipeline.analysis.subset) or plain Monte Carlo, in the standard normal space of the
+realisation's random inputs.
+
+A realisation of a level is a function of a vector of uniforms u (the clearance draw's
+``uniform_dimension`` eccentricity and size uniforms, then the [uncertain.*] inputs' ones); the
+space of the estimators is z = Phi^-1(u) of that whole vector, so u = Phi(z) (clipped below 1).
+A realisation that fails numerically counts as exceeding the limit (its response is +inf), the
+conservative reading.  Batches of rows are evaluated in this process, or in chunks on the dask
+workers of pipeline.ensemble.cluster when a batch is large.
+"""
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+from scipy import stats as sps
+
+from rss6core import FINISHED, model_level, prepare_level, uniform_dimension
+
+from ..analysis.exceedance import Event, clopper_pearson
+from ..analysis.subset import SubsetSettings, subset_simulation
+from ..ensemble.cluster import dask_client
+from ..files.records import window_summaries
+from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
+
+__all__ = ["ReliabilityError", "Estimate", "input_dimension", "evaluate", "reliability", "reliability_dataset",
+           "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
+
+METHODS = ("subset", "mc")
+MC_BLOCK = 1000          # plain Monte Carlo draws block b of z from SeedSequence([seed, MC_TAG, b])
+MC_TAG = 40404040
+IN_PROCESS_ROWS = 64     # batches up to this many rows are evaluated here, larger ones on the workers
+_ONE_BELOW = np.nextafter(1.0, 0.0)
+
+
+class ReliabilityError(UserError):
+    """A reliability request that cannot be answered (no random inputs at that level)."""
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """P of the event, its CoV estimate, interval at ``confidence`` and how it was obtained; every
+    evaluation's z (E, d), level (E,) and maxima |error| (E, quantity, direction) in the event's window."""
+
+    method: str
+    pf: float
+    lower: float
+    upper: float
+    confidence: float
+    cov: float
+    interval: str
+    evaluations_per_level: tuple[int, ...]
+    thresholds: tuple[float, ...]
+    status: str
+    message: str
+    z: np.ndarray
+    level: np.ndarray
+    maxima: np.ndarray
+
+    def summary(self) -> dict:
+        """The JSON fields (SI thresholds)."""
+        return {"method": self.method, "pf": self.pf, "lower": self.lower, "upper": self.upper,
+                "confidence": self.confidence, "cov": self.cov, "evaluations": int(self.level.size),
+                "evaluations_per_level": list(self.evaluations_per_level), "thresholds": list(self.thresholds),
+                "interval": self.interval, "status": self.status, "message": self.message}
+
+
+def input_dimension(scene, model: str, source: str = "") -> int:
+    """How many standard normal inputs a realisation of ``model`` on ``scene`` takes; ReliabilityError
+    for a level that draws none (or redraws its clearances every step, an unbounded dimension)."""
+    kind = model_level(model)
+    if kind.redraws_every_step:
+        raise ReliabilityError(f"--model {model}: the level redraws its clearances every step, so its "
+                               "random inputs grow with the steps; use quasi-static or contact")
+    clearances = uniform_dimension(None, scene) if kind.draws_clearances else 0
+    uncertain = scene.uncertain.dimension if scene.uncertain else 0
+    if clearances + uncertain == 0:
+        raise ReliabilityError(f"{source or scene.name}: a scene with no uncertain input at the {model} level "
+                               "(it draws no clearances and has no [uncertain.*] table): nothing to be probable")
+    return clearances + uncertain
+
+
+def _evaluate_rows(spec, window: str, z: np.ndarray) -> np.ndarray:
+    """Maxima |error| (rows, quantity, direction), SI, over ``window`` of the level at rows z; NaN
+    for a realisation that failed."""
+    scene = spec.scene()
+    sim = scene.simulation
+    level = prepare_level(scene, spec.model, spec.integrator, spec.dt, spec.elements)
+    u = np.minimum(sps.norm.cdf(z), _ONE_BELOW)
+    results = level.simulate(0, range(len(u)), lambda r, dim: u[r][:dim])
+    k = WINDOWS.index(window)
+    return np.stack([window_summaries(r, sim.settle_time, sim.steady_after)[0][k] if r.status == FINISHED
+                     else np.full((len(QUANTITIES), len(DIRECTIONS)), np.nan) for r in results])
+
+
+def evaluate(spec, window: str, z: np.ndarray, client=None) -> np.ndarray:
+    """:func:`_evaluate_rows` of a batch, in chunks on ``client``'s workers when it is large."""
+    if client is None or len(z) <= IN_PROCESS_ROWS:
+        return _evaluate_rows(spec, window, z)
+    workers = max(1, len(client.nthreads()))
+    chunk = max(IN_PROCESS_ROWS // 4, -(-len(z) // (4 * workers)))
+    parts = [slice(i, min(i + chunk, len(z))) for i in range(0, len(z), chunk)]
+    scattered = client.scatter([z[p] for p in parts])   # the rows as data, not in the task graph
+    futures = [client.submit(_evaluate_rows, spec, window, rows, pure=False) for rows in scattered]
+    return np.concatenate(client.gather(futures))
+
+
+def _response(event: Event, maxima: np.ndarray) -> np.ndarray:
+    """The event's maximum |error| per row (SI); +inf where the realisation failed."""
+    r = maxima[:, QUANTITIES.index(event.quantity), DIRECTIONS.index(event.direction)]
+    return np.where(np.isnan(r), np.inf, r)
+
+
+def _subset(spec, event: Event, dimension: int, settings: SubsetSettings, client) -> Estimate:
+    collected = []
+
+    def response(z):
+        collected.append(evaluate(spec, event.window, z, client))
+        return _response(event, collected[-1])
+
+    res = subset_simulation(response, dimension, event.limit, settings)
+    e = res.evaluations
+    return Estimate("subset", res.pf, res.lower, res.upper, res.confidence, res.cov, res.interval,
+                    tuple(rec.evaluations for rec in res.levels), tuple(rec.threshold for rec in res.levels),
+                    res.status, res.message, e.z, e.level, np.concatenate(collected))
+
+
+def _monte_carlo(spec, event: Event, dimension: int, n: int, seed: int, confidence: float, client) -> Estimate:
+    blocks = [np.random.default_rng(np.random.SeedSequence([seed, MC_TAG, b])).standard_normal((MC_BLOCK, dimension))
+              for b in range(-(-n // MC_BLOCK))]
+    z = np.concatenate(blocks)[:n]
+    maxima = evaluate(spec, event.window, z, client)
+    k = int(np.count_nonzero(_response(event, maxima) > event.limit))
+    lower, upper = (float(b) for b in clopper_pearson(k, n, confidence))
+    pf = k / n
+    cov = float(np.sqrt((1 - pf) / (n * pf))) if k else float("inf")
+    return Estimate("mc", pf, lower, upper, confidence, cov, "Clopper-Pearson exact binomial interval", (n,),
+                    (event.limit,), "converged", f"{k} of {n} realisations exceed the limit",
+                    z, np.zeros(n, int), maxima)
+
+
+@contextlib.contextmanager
+def _client(workers: int):
+    """A dask client on ``workers`` local processes; None (this process) for one."""
+    if workers <= 1:
+        yield None
+        return
+    with dask_client(workers) as client:
+        yield client
+
+
+def reliability(spec, event: Event, method: str = "subset", n: int | None = None, p0: float = 0.1,
+                confidence: float = CONFIDENCE, workers: int = 1) -> Estimate:
+    """P(event) at the level of ``spec`` (pipeline.ensemble.run.EnsembleSpec) by ``method``: subset
+    simulation with N = ``n`` (default 1000) per level, or plain Monte Carlo of ``n`` (default 20000)."""
+    dimension = input_dimension(spec.scene(), spec.model, spec.source)
+    with _client(workers) as client:
+        if method == "mc":
+            return _monte_carlo(spec, event, dimension, n or 20000, spec.seed, confidence, client)
+        settings = SubsetSettings(n or 1000, p0, spec.seed, confidence)
+        return _subset(spec, event, dimension, settings, client)
+
+
+def reliability_dataset(est: Estimate, event: Event, spec, elapsed: float, options: str = "") -> xr.Dataset:
+    """The CF netCDF content: every evaluation's inputs, level and maxima, and the estimate in attributes."""
+    import json
+
+    from ..files.schema import MIXED_UNITS, _unit_table, command_line
+    scene = spec.scene()
+    history = command_line("reliability", scene, model=spec.model, integrator=spec.integrator, dt=spec.dt,
+                           elements=spec.elements, options=options)
+    attrs = {"Conventions": "CF-1.10", "title": f"rss6 reliability of {event.text} at the {spec.model} level, "
+             f"scene {scene.name!r}", "history": history, "event": event.text, "event_limit": event.limit,
+             "event_window": event.window, "seed": spec.seed, "elapsed_s": elapsed,
+             "estimate": json.dumps(est.summary(), allow_nan=False)
+             if np.isfinite([est.pf, est.cov]).all() else json.dumps({"status": est.status})}
+    data = {"z": (("evaluation", "input"), est.z, {"long_name": "standard normal input, Phi^-1 of the "
+                                                   "realisation's uniform", "units": "1"}),
+            "level": ("evaluation", est.level.astype(np.int32), {"long_name": "subset level of the evaluation "
+                                                                 "(0: independent draws)", "units": "1"}),
+            "max_abs_error": (("evaluation", "quantity", "direction"), est.maxima,
+                              {"long_name": f"maximum over the {event.window} window of |error|",
+                               "units": MIXED_UNITS, "cell_methods": "time: maximum"})}
+    coords = {"quantity": list(QUANTITIES), "direction": list(DIRECTIONS),
+              "unit": (("quantity", "direction"), _unit_table(), {"long_name": "SI unit of each element"})}
+    return xr.Dataset(data, coords=coords, attrs=attrs)

@@ -1,0 +1,88 @@
+"""rss6 reliability end to end on the smoke scene's quasi-static level: the JSON fields, the file of
+every evaluation (its z, level and maxima reproduce the estimate), plain Monte Carlo's exact interval,
+and one-line refusals (exit 2) of a bad event, p0 or N, and of a level without random inputs."""
+import json
+
+import numpy as np
+import pytest
+from scipy import stats as sps
+
+from pipeline.cli import main
+from pipeline.files.reading import load_netcdf
+
+EVENT = "displacement:z>0.15mm"   # P about 0.1 at the smoke scene's quasi-static level
+RARE = "displacement:z>0.2mm"
+
+
+@pytest.fixture(scope="module")
+def subset_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rel") / "s.nc"
+    return out, ["reliability", "smoke", "--event", RARE, "-n", "200", "--workers", "1", "-o", str(out), "--json"]
+
+
+def test_subset_json_has_the_fields_and_the_file_every_evaluation(subset_run, capsys):
+    out, argv = subset_run
+    capsys.readouterr()
+    assert main(argv) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert {"pf", "lower", "upper", "confidence", "cov", "evaluations", "method"} <= set(res)
+    assert res["method"] == "subset" and res["lower"] <= res["pf"] <= res["upper"]
+    ds = load_netcdf(out)
+    assert ds.sizes["evaluation"] == res["evaluations"] == sum(res["evaluations_per_level"])
+    level = ds["level"].values
+    m = len(res["evaluations_per_level"])
+    assert m >= 2, "pick an event rarer than p0 so that the test sees a subset level"
+    assert np.bincount(level).tolist() == res["evaluations_per_level"] == [200] + [180] * (m - 1)
+    assert res["thresholds"][-1] == pytest.approx(2e-4) and np.all(np.diff(res["thresholds"]) > 0)
+    # P = p0^(m-1) x (k of the last level's 200 states above the limit)
+    k = res["pf"] / 0.1 ** (m - 1) * 200
+    assert k == pytest.approx(round(k)) and 1 <= round(k) <= 200
+    # level 0's draws: the first threshold is the mean of their 20th and 21st largest responses
+    z0 = np.sort(ds["max_abs_error"].sel(quantity="displacement", direction="z").values[level == 0])[::-1]
+    assert res["thresholds"][0] == pytest.approx((z0[19] + z0[20]) / 2)
+
+
+def test_mc_gives_the_exact_interval_of_its_count(tmp_path, capsys):
+    out = tmp_path / "m.nc"
+    capsys.readouterr()
+    assert main(["reliability", "smoke", "--event", EVENT, "--method", "mc", "-n", "300", "--workers", "1",
+                 "-o", str(out), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    z = load_netcdf(out)["max_abs_error"].sel(quantity="displacement", direction="z").values
+    k = int(np.count_nonzero(z > 1.5e-4))
+    assert res["pf"] == k / 300 and res["evaluations"] == 300
+    assert res["upper"] == pytest.approx(sps.beta.ppf(0.975, k + 1, 300 - k))
+
+
+@pytest.mark.parametrize("extra, token", [
+    (["--event", "displacement:w>1mm"], "unknown direction 'w'"),
+    (["--event", "displacement:z>1mm/later"], "unknown window 'later'"),
+    (["--event", "displacement:z>1"], "missing unit"),
+    (["--event", "force:z>1mm"], "unknown quantity 'force'"),
+    (["--event", EVENT, "--p0", "0.7"], "p0 0.7"),
+    (["--event", EVENT, "-n", "1005"], "N p0 must be an integer"),
+    (["--event", EVENT, "--method", "mc", "--p0", "0.2"], "--p0: applies with --method subset only"),
+    (["--event", EVENT, "--model", "rigid"], "no uncertain input"),
+    (["--event", EVENT, "--model", "paper"], "redraws its clearances every step"),
+])
+def test_bad_input_is_one_line_exit_2_before_any_work(tmp_path, capsys, extra, token, monkeypatch):
+    import pipeline.studies.reliability as study
+    monkeypatch.setattr(study, "reliability", lambda *a, **k: pytest.fail("work started"))
+    capsys.readouterr()
+    assert main(["reliability", "smoke", *extra, "-o", str(tmp_path / "x.nc")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and token in err, err
+    assert not (tmp_path / "x.nc").exists()
+
+
+@pytest.mark.slow
+def test_the_same_seed_gives_the_same_file_on_two_workers_as_in_this_process(tmp_path, capsys):
+    """Batches of 300 rows are cut into chunks on 2 dask workers, or evaluated here: same bits."""
+    runs = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"w{workers}.nc"
+        assert main(["reliability", "smoke", "--event", EVENT, "--method", "mc", "-n", "300", "--workers", workers,
+                     "-o", str(out)]) == 0
+        runs.append(load_netcdf(out))
+    assert np.array_equal(runs[0]["max_abs_error"].values, runs[1]["max_abs_error"].values, equal_nan=True)
+    assert np.array_equal(runs[0]["z"].values, runs[1]["z"].values)
