@@ -63,8 +63,15 @@ def small_file(tmp_path_factory):
 
 @pytest.fixture
 def no_work(monkeypatch):
-    """Every entry point that computes raises: a mistake must be refused before it."""
+    """Every entry point that computes raises: a mistake must be refused before it.  Every pipeline
+    module is imported first, so none first imported during a test binds a stub for good (a module
+    level ``from ..ensemble.run import ensemble`` would keep it after the patch is undone)."""
     import importlib
+    import pkgutil
+
+    import pipeline
+    for info in pkgutil.walk_packages(pipeline.__path__, "pipeline."):
+        importlib.import_module(info.name)
     for target in WORK:
         module, _, name = target.rpartition(".")
         monkeypatch.setattr(importlib.import_module(module), name,
