@@ -30,8 +30,8 @@ import numpy as np
 
 from .exceedance import Event, event_values, one_sided_cp
 from .spec import PF, Spec
-from ..vocabulary import CONFIDENCE, QUANTILES
-from .estimators import QUANTILE_DECISION_CAP, interval_floor, quantile_decision_n
+from ..vocabulary import CONFIDENCE, QUANTILES, WINDOWS
+from .estimators import QUANTILE_DECISION_CAP, interval_floor, no_interval_at, quantile_decision_n
 from .stats import ensemble_stats, finished_values
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
@@ -90,6 +90,18 @@ def check_confidence(confidence: float) -> None:
     if not 0.5 < confidence < 1.0:
         raise ValueError(f"confidence {confidence:g}: a requirement is decided on one-sided bounds, "
                          "which need a confidence above 0.5 and below 1")
+
+
+def upper_limit_problem(spec: Spec, confidence: float, n: int, study: str) -> str | None:
+    """Why ``spec`` cannot serve a study (``study``: "a budget", "an allocation") that bounds the error
+    from above with n realisations at ``confidence``, as a one-line message; None if it can."""
+    if why := no_interval_at(spec.statistic, confidence, n):
+        return f"--spec {spec.text!r}: {why}"
+    if spec.op not in ("<=", "<"):
+        return f"--spec {spec.text!r}: {study} bounds the error from above; use <= or <"
+    if spec.window is not None and spec.window not in WINDOWS:
+        return f"--spec {spec.text!r}: unknown window {spec.window!r}; choose one of {', '.join(WINDOWS)}"
+    return None
 
 
 def _sides(spec: Spec) -> tuple[str, str]:

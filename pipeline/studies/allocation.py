@@ -23,8 +23,8 @@ import numpy as np
 
 from rss6core import ClearanceDraw, model_level, models_with, parse_scene, prepare_level, stored_draw
 
-from ..analysis.estimators import no_interval_at, one_sided_bounds
-from ..analysis.gate import Verdict, judge_all
+from ..analysis.estimators import one_sided_bounds
+from ..analysis.gate import Verdict, judge_all, upper_limit_problem
 from ..analysis.spec import Spec
 from ..ensemble.run import EnsembleSpec, ensemble
 from ..files.records import window_masks
@@ -283,13 +283,8 @@ def check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: flo
         raise AllocationError(f"{spec.source}: allocate needs [simulation] quasi_static_eccentricity = "
                               "\"drawn\" (the reaction mode's direction does not split by family)")
     for s in specs:
-        if why := no_interval_at(s.statistic, confidence, n):
-            raise AllocationError(f"--spec {s.text!r}: {why}")
-        if s.op not in ("<=", "<"):
-            raise AllocationError(f"--spec {s.text!r}: an allocation bounds the error from above; use <= or <")
-        if s.window is not None and s.window not in WINDOWS:
-            raise AllocationError(f"--spec {s.text!r}: unknown window {s.window!r}; choose one of "
-                                  f"{', '.join(WINDOWS)}")
+        if why := upper_limit_problem(s, confidence, n, "an allocation"):
+            raise AllocationError(why)
 
 
 def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float, options: dict,

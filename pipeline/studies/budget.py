@@ -29,12 +29,11 @@ from pathlib import Path
 
 from rss6core import model_level, models_with
 
-from ..analysis.gate import Verdict, check_confidence, judge_all
+from ..analysis.gate import Verdict, check_confidence, judge_all, upper_limit_problem
 from ..ensemble.run import EnsembleSpec, ensemble
 from ..scenes.variant import scene_variant
 from ..analysis.spec import Spec
-from ..analysis.estimators import no_interval_at
-from ..vocabulary import CONFIDENCE, UserError, WINDOWS
+from ..vocabulary import CONFIDENCE, UserError
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
            "BudgetError"]
@@ -125,13 +124,8 @@ def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> 
     except ValueError as exc:
         raise BudgetError(f"--{exc}") from None
     for s in specs:
-        if why := no_interval_at(s.statistic, confidence, n):
-            raise BudgetError(f"--spec {s.text!r}: {why}")
-        if s.op not in ("<=", "<"):
-            raise BudgetError(f"--spec {s.text!r}: a budget bounds the error from above; use <= or <")
-        if s.window is not None and s.window not in WINDOWS:
-            raise BudgetError(f"--spec {s.text!r}: unknown window {s.window!r}; choose one of "
-                              f"{', '.join(WINDOWS)}")
+        if why := upper_limit_problem(s, confidence, n, "a budget"):
+            raise BudgetError(why)
 
 
 def _trial(spec: EnsembleSpec, specs, scale: float, n: int, folder: Path, confidence: float,
