@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from .clearance import CLEARANCE_RADII
 from .kinematics import RigidMotion, crank_points, forward_kinematics, leg_jacobian, platform_joints
-from .trajectory import PlatformMotion, _euler_rate_matrix_dot, euler_rate_matrix, rotation
+from .trajectory import PlatformMotion, euler_rate_matrix, euler_rate_matrix_dot, rotation
 
 __all__ = ["GEOMETRY_KEYS", "realised_geometry", "realised_clearances", "realised_scene", "realised_motion",
            "motion_error", "linear_length_error"]
@@ -122,7 +122,7 @@ def realised_motion(geometry, nominal: RigidMotion) -> RigidMotion:
     c_ddot = dc * alpha_ddot[..., None] + d2c * (alpha_dot ** 2)[..., None]
     E = euler_rate_matrix(pose[:, 3:])
     euler_rate = np.linalg.solve(E, omega[..., None])[..., 0]
-    euler_acc = np.linalg.solve(E, (omega_dot - np.einsum("tij,tj->ti", _euler_rate_matrix_dot(
+    euler_acc = np.linalg.solve(E, (omega_dot - np.einsum("tij,tj->ti", euler_rate_matrix_dot(
         pose[:, 3:], euler_rate), euler_rate))[..., None])[..., 0]
     platform = PlatformMotion(nominal.t, pose, np.concatenate([v, euler_rate], -1),
                               np.concatenate([a, euler_acc], -1), R, omega, omega_dot)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["rotation", "euler_rate_matrix", "PlatformMotion", "platform_motion"]
+__all__ = ["rotation", "euler_rate_matrix", "euler_rate_matrix_dot", "PlatformMotion", "platform_motion"]
 
 
 def rotation(n: np.ndarray) -> np.ndarray:
@@ -34,7 +34,7 @@ def euler_rate_matrix(n: np.ndarray) -> np.ndarray:
                      np.stack([-sb, z, o], -1)], -2)
 
 
-def _euler_rate_matrix_dot(n: np.ndarray, nd: np.ndarray) -> np.ndarray:
+def euler_rate_matrix_dot(n: np.ndarray, nd: np.ndarray) -> np.ndarray:
     """Time derivative of E(n) along n' (exact)."""
     cb, cg = np.cos(n[..., 1]), np.cos(n[..., 2])
     sb, sg = np.sin(n[..., 1]), np.sin(n[..., 2])
@@ -78,5 +78,5 @@ def platform_motion(trajectory, t: np.ndarray) -> PlatformMotion:
     E = euler_rate_matrix(n)
     omega = np.einsum("tij,tj->ti", E, nd)
     omega_dot = np.einsum("tij,tj->ti", E, ndd) + np.einsum("tij,tj->ti",
-                                                            _euler_rate_matrix_dot(n, nd), nd)
+                                                            euler_rate_matrix_dot(n, nd), nd)
     return PlatformMotion(t, pose, rate, acc, rotation(n), omega, omega_dot)
