@@ -370,7 +370,8 @@ def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
     conf = f"{100 * float(ds.attrs['confidence']):g} %"
     head = "".join(f"{g:>24s}" for g in da["group"].values)
     window = ds[f"{statistic}_sobol"].attrs.get("analysis_window", "whole run")
-    lines = [f"total Sobol' indices ST of the per-realisation {statistic} by joint family (and uncertain input), "
+    by = "joint family" + (" and uncertain input" if set(da["group"].values) - set(JOINT_FAMILIES) else "")
+    lines = [f"total Sobol' indices ST of the per-realisation {statistic} by {by}, "
              f"{ds.attrs['model']} level, {window}, N = {ds.attrs['n_base_samples']}, "
              f"[{conf} bootstrap interval]",
              f"{'quantity':<13s}{'dir':<4s}{head}  largest"]
