@@ -49,8 +49,9 @@ from .dynamics import platform_inertia_world, rod_angular_motion
 from .elastic import quasi_static_state
 from .results import PEAK_WINDOWS, ContactBatch, time_grid
 from .integrators import Integrator, StepWeights, make_integrator
-from .kinematics import crank_axes, rigid_motion
+from .kinematics import crank_axes
 from .quasi_static import closure_matrix
+from .realised import JointLaws, ReferenceMotion, realised_contact_laws
 from .status import DIVERGENCE_LIMIT, FAILED, FINISHED, contact_failure
 
 __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactStepper", "CompiledStepper",
@@ -147,7 +148,8 @@ class _Condensed:
 
 @dataclass(frozen=True)
 class _Joints:
-    """Per-realisation contact data (leading axis R): clearance sizes, stiffnesses, initial draw."""
+    """Per-realisation contact data (leading axis R): clearance sizes, stiffnesses, initial draw,
+    friction coefficients and restitutions per joint."""
     radial: np.ndarray   # (R, 6) m
     axial: np.ndarray
     size_C: np.ndarray
@@ -158,9 +160,14 @@ class _Joints:
     e_A: np.ndarray      # (R, 6, 3) initial eccentricities, base frame
     e_C: np.ndarray
     e_B: np.ndarray
+    mu: np.ndarray       # (R, 6, 3) friction coefficient per joint [A, C, B] (eq. 18)
+    restitution: np.ndarray  # (R, 6, 3) restitution per joint [A, C, B] (eq. 17)
 
 
-def _joints(scene, draws) -> _Joints:
+def _joints(scene, draws, laws=None) -> _Joints:
+    """The batch's joints from its clearance draws and its :class:`.realised.JointLaws` (one per
+    draw; None: the scene's [contact] friction and restitution at every joint)."""
+    laws = laws or [realised_contact_laws(scene)] * len(draws)
     stack = {f: np.stack([getattr(d, f) for d in draws]) for f in
              ("radial_size", "axial_size", "size_C", "size_B", "e_A", "e_C", "e_B")}
     for name, key in (("radial_size", "revolute_radial_m"), ("axial_size", "revolute_axial_m"),
@@ -177,13 +184,15 @@ def _joints(scene, draws) -> _Joints:
 
     return _Joints(stack["radial_size"], stack["axial_size"], stack["size_C"], stack["size_B"],
                    k(ct.journal_radius, stack["radial_size"]), k(ct.sphere_radius, stack["size_C"]),
-                   k(ct.sphere_radius, stack["size_B"]), stack["e_A"], stack["e_C"], stack["e_B"])
+                   k(ct.sphere_radius, stack["size_B"]), stack["e_A"], stack["e_C"], stack["e_B"],
+                   np.stack([law.friction for law in laws]), np.stack([law.restitution for law in laws]))
 
 
-def _ball(e, de, size, stiffness, impact, law, omega, radius, friction=True):
+def _ball(e, de, size, stiffness, impact, law, omega, radius, mu=None, restitution=None, friction=True):
     """Force on the ball (journal) side of a ball-in-socket pair and its Jacobians (base frame).
 
-    e, de (..., 3) relative displacement and velocity; returns force (..., 3),
+    e, de (..., 3) relative displacement and velocity; mu and restitution (...) the pairs' (default:
+    the scene's [contact] ``law``, which gives the exponent and friction velocities); returns force (..., 3),
     d force/d e and d force/d de (..., 3, 3), penetration, its rate and F_N (...).
     """
     rho = np.linalg.norm(e, axis=-1)
@@ -191,18 +200,19 @@ def _ball(e, de, size, stiffness, impact, law, omega, radius, friction=True):
     n = e / safe[..., None]
     delta = rho - size
     rate = (n * de).sum(-1)
-    F, dF, dFr = lankarani_nikravesh(delta, rate, impact, stiffness, law.exponent, law.restitution)
+    mu = law.friction_coefficient if mu is None else mu
+    restitution = law.restitution if restitution is None else restitution
+    F, dF, dFr = lankarani_nikravesh(delta, rate, impact, stiffness, law.exponent, restitution)
     nn = n[..., :, None] * n[..., None, :]
     eye = np.eye(3)
     force = -F[..., None] * n
     De = -dF[..., None, None] * nn - (F / safe)[..., None, None] * (eye - nn)
     Dv = -dFr[..., None, None] * nn
-    if friction and law.friction_coefficient > 0.0:
+    if friction and np.any(np.asarray(mu) > 0.0):
         Pn = eye - nn
         v = de + radius * np.cross(omega, n)
         slip = v - (n * v).sum(-1)[..., None] * n
-        ft, jac, dft = coulomb_friction(F, slip, law.friction_coefficient, law.stick_velocity,
-                                        law.slip_velocity)
+        ft, jac, dft = coulomb_friction(F, slip, mu, law.stick_velocity, law.slip_velocity)
         force = force + ft
         De = De + dft[..., :, None] * (dF[..., None] * n)[..., None, :]
         Dv = Dv + jac @ Pn + dft[..., :, None] * (dFr[..., None] * n)[..., None, :]
@@ -223,14 +233,15 @@ def _contacts(e, de, w, joints: _Joints, impact, law, omega, radius):
     radial = np.concatenate([(Pw @ eA[..., None])[..., None, :, 0], e[..., 1:, :]], -2)
     size = np.stack([joints.radial, joints.size_C, joints.size_B], -1)
     stiffness = np.stack([joints.k_A, joints.k_C, joints.k_B], -1)
-    f, De, Dv, d, r, _ = _ball(radial, de, size, stiffness, impact[..., [0, 2, 3]], law, omega, radius)
+    f, De, Dv, d, r, _ = _ball(radial, de, size, stiffness, impact[..., [0, 2, 3]], law, omega, radius,
+                               joints.mu, joints.restitution)
     s = (w * eA).sum(-1)
     sign = np.where(s >= 0.0, 1.0, -1.0)
     na = sign[..., None] * w
     da = np.abs(s) - joints.axial
     ra = (na * de[..., 0, :]).sum(-1)
     Fa, dFa, dFra = lankarani_nikravesh(da, ra, impact[..., 1], joints.k_A, law.exponent,
-                                        law.restitution)
+                                        joints.restitution[..., 0])
     ww = w[:, :, None] * w[:, None, :]
     f[..., 0, :] -= Fa[..., None] * na
     De[..., 0, :, :] = De[..., 0, :, :] @ Pw - dFa[..., None, None] * ww
@@ -242,11 +253,13 @@ def _contacts(e, de, w, joints: _Joints, impact, law, omega, radius):
 
 class _Chunk:
     """Shared, per-instant data of a run of steps: joint maps, loads, ideal angular velocities
-    (and the joint radii [journal, sphere, sphere] (3, 1), m, that the contact evaluation needs)."""
+    (and the joint radii [journal, sphere, sphere] (3, 1), m, that the contact evaluation needs), about
+    the ``reference`` motion (:class:`.realised.ReferenceMotion`; default: the scene's nominal one)."""
 
-    def __init__(self, scene, jm: JointModel, t: np.ndarray):
+    def __init__(self, scene, jm: JointModel, t: np.ndarray, reference: ReferenceMotion | None = None):
         self.t = t
-        motion = rigid_motion(scene, t)
+        at = (reference or ReferenceMotion(scene)).at(t)
+        motion, self.offset = at.motion, np.ascontiguousarray(at.error)
         Rc, Rr = link_frames(motion, scene.geometry)
         Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
         self.Mp = _platform_mass(jm, Ip)                       # (T, 6, 6)
@@ -273,7 +286,8 @@ class _Chunk:
 
     def arrays(self) -> ChunkArrays:
         """What :func:`.contact_kernel.advance_chunk` reads of the chunk."""
-        return ChunkArrays(F=self.F, Mp=self.Mp, Rc=self.Rc, J=self.J, Rr=self.Rr, omega=self.omega, t=self.t)
+        return ChunkArrays(F=self.F, Mp=self.Mp, Rc=self.Rc, J=self.J, Rr=self.Rr, omega=self.omega, t=self.t,
+                           offset=self.offset)
 
 
 def _platform_mass(jm: JointModel, Ip: np.ndarray) -> np.ndarray:
@@ -383,7 +397,7 @@ def _lift(jm: JointModel, maps, x: np.ndarray) -> np.ndarray:
     return join(crank, np.concatenate([f, e_C, e_B], -1), p)
 
 
-def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
+def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0, reference: ReferenceMotion | None = None):
     """The elastic level's quasi-static state with every link rigidly offset by the drawn eccentricities.
 
     The links carry the quasi-static deformation of the ideal-joint robot (so
@@ -391,13 +405,15 @@ def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0):
     at rest relative to it; crank i translates by e_A,i; the platform takes the
     linearised-closure error of the draw (so that no rod is stretched); each rod
     follows its two ends rigidly (static condensation of its end offsets
-    reproduces a rigid motion).  Returns (d, v) (R, N).
+    reproduces a rigid motion).  Returns (d, v) (R, N), about the ``reference`` motion (default: the
+    scene's nominal one).
     """
-    motion = rigid_motion(scene, np.array([t0]))
+    reference = reference or ReferenceMotion(scene)
+    motion = reference.at(np.array([t0])).motion
     crank_frames, rod_frames = link_frames(motion, scene.geometry)
     Rc, Rr = crank_frames[0], rod_frames[0]
     maps = frame_maps(jm.elastic, motion, crank_frames, rod_frames)[0]
-    d_el, v_el, _ = quasi_static_state(scene, jm.elastic, t0)
+    d_el, v_el, _ = quasi_static_state(scene, jm.elastic, t0, motion=lambda t: reference.at(t).motion)
     R = joints.e_A.shape[0]
     G, n = closure_matrix(motion)
     rhs = np.einsum("li,rli->rl", n[0], joints.e_A + joints.e_C - joints.e_B)
@@ -423,13 +439,13 @@ contact level's layout, the largest force imbalance per realisation (N; not comp
 drawn start), the Newton iterations taken, and a failure message per realisation ('' where it holds)."""
 
 
-def drawn_start(scene, jm: JointModel, joints: _Joints) -> StartState:
+def drawn_start(scene, jm: JointModel, joints: _Joints, reference: ReferenceMotion | None = None) -> StartState:
     """The drawn start (:func:`initial_state`) as a :class:`StartState`; refuses a scene that asks for
     another start, which :func:`.contact_start.contact_initial_state` makes."""
     if scene.simulation.contact_start != "drawn":
         raise ValueError(f"the scene's contact_start is {scene.simulation.contact_start!r}: pass "
                          "initial=rss6core.contact_start.contact_initial_state to simulate_contact")
-    d, v = initial_state(scene, jm, joints)
+    d, v = initial_state(scene, jm, joints, reference=reference)
     R = len(d)
     return StartState(d, v, np.full(R, np.nan), np.zeros(R, np.int64), [""] * R)
 
@@ -439,11 +455,16 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
                      model: JointModel | None = None, chunk: int = 200,
                      divergence_limit: float = DIVERGENCE_LIMIT, settle: float | None = None,
                      stepper: type[ContactStepper] | None = None, tolerance: float | None = None,
-                     refinements: int | None = None, initial=None) -> ContactBatch:
+                     refinements: int | None = None, initial=None, reference: ReferenceMotion | None = None,
+                     laws: list[JointLaws] | None = None) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (see :func:`_simulate_contact`).
 
-    ``initial(scene, jm, joints)`` makes the batch's :class:`StartState` (default :func:`drawn_start`;
-    :func:`.contact_start.contact_initial_state` makes the scene's ``contact_start``).
+    ``initial(scene, jm, joints, reference)`` makes the batch's :class:`StartState` (default
+    :func:`drawn_start`; :func:`.contact_start.contact_initial_state` makes the scene's ``contact_start``).
+    ``reference``: the rigid motion the batch perturbs (default: the scene's nominal one; a realised
+    robot's under the nominal commands, whose geometric error the peaks then include; the histories
+    are the perturbation alone).  ``laws``: each draw's friction and restitution per joint (default:
+    the scene's).
 
     Overflow in a diverging realisation is detected and reported as its failure, not warned about.
     ``stepper`` runs the steps: :class:`CompiledStepper` (the default; numba, :mod:`.contact_kernel`) or
@@ -462,9 +483,10 @@ def simulate_contact(scene, draws, elements: int = 4, integrator: Integrator | N
         raise ValueError(f"contact step refinements must be an integer in [0, {MAX_CONTACT_REFINEMENTS}], "
                          f"got {refinements!r}")
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        return _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
-                                 divergence_limit, settle, stepper, tolerance, refinements,
-                                 initial or drawn_start)
+        setup = dataclasses.replace(_setup(scene, draws, elements, integrator, dt, output_step, model,
+                                           divergence_limit, settle, tolerance, refinements, laws),
+                                    initial=initial or drawn_start, reference=reference or ReferenceMotion(scene))
+        return _simulate_contact(setup, chunk, stepper)
 
 
 @dataclass(frozen=True)
@@ -493,7 +515,8 @@ class _Setup:
     tolerance: float        # m, local error per step (0: refine only where Newton fails)
     limit: float            # m, divergence limit
     refinements: int
-    initial: object = None  # (scene, jm, joints) -> StartState: the batch's initial state
+    initial: object = None  # (scene, jm, joints, reference) -> StartState: the batch's initial state
+    reference: ReferenceMotion | None = None   # the rigid motion the batch perturbs
 
     @property
     def fine(self) -> int:
@@ -505,7 +528,7 @@ class _Setup:
 
 
 def _setup(scene, draws, elements, integrator, dt, output_step, model, divergence_limit, settle,
-           tolerance, refinements) -> _Setup:
+           tolerance, refinements, laws=None) -> _Setup:
     sim = scene.simulation
     integrator = integrator or make_integrator(sim.contact_integrator, sim.newmark_beta,
                                                sim.newmark_gamma, sim.hht_alpha, sim.spectral_radius)
@@ -524,7 +547,7 @@ def _setup(scene, draws, elements, integrator, dt, output_step, model, divergenc
                                cM + cC * lam1, integrator.weights(hl),
                                abs(integrator.beta - 1.0 / 6.0) * hl * hl))
     settle_at = (sim.settle_time if settle is None else settle) - 1e-9 * h
-    return _Setup(scene, jm, _joints(scene, draws), integrator, tuple(sizes),
+    return _Setup(scene, jm, _joints(scene, draws, laws), integrator, tuple(sizes),
                   time_grid(scene.trajectory.duration, h), every, settle_at,
                   sim.steady_after - 1e-9 * h, float(tolerance),
                   float(divergence_limit), int(refinements))
@@ -569,10 +592,11 @@ class _Workspace:
         live = self.alive
         self.hist[:, live, k] = np.stack([self.d[live, -6:], self.v[live, -6:], self.a[live, -6:]])
 
-    def peaks(self, idx, window, d, v, a, f):
-        """Peaks of |platform error| in ``window`` (index into PEAK_WINDOWS) and of |contact force| of
-        realisations idx updated with a step."""
-        p = np.stack([d[..., -6:], v[..., -6:], a[..., -6:]], 1)     # (R, 3, 6)
+    def peaks(self, idx, window, d, v, a, f, offset):
+        """Peaks of |platform error| (plus the reference's own ``offset`` (3, 6), as the compiled
+        kernel's) in ``window`` (index into PEAK_WINDOWS) and of |contact force| of realisations idx
+        updated with a step."""
+        p = np.stack([d[..., -6:], v[..., -6:], a[..., -6:]], 1) + offset     # (R, 3, 6)
         self.peak[idx, window] = np.maximum(self.peak[idx, window], np.abs(p))
         mags = np.swapaxes(np.linalg.norm(f, axis=-1), -1, -2).reshape(len(idx), 18)
         self.cpeak[idx] = np.maximum(self.cpeak[idx], mags)
@@ -614,8 +638,8 @@ class ContactStepper(abc.ABC):
     def start(self):
         """The initial state (the setup's ``initial``) and its accelerations at t = 0, output sample 0."""
         su, ws = self.setup, self.ws
-        ch = _Chunk(su.scene, su.jm, su.t[:1])
-        first = su.initial(su.scene, su.jm, su.joints)
+        ch = _Chunk(su.scene, su.jm, su.t[:1], su.reference)
+        first = su.initial(su.scene, su.jm, su.joints, su.reference)
         ws.d, ws.v = first.d, first.v
         for r in np.flatnonzero([bool(m) for m in first.message]):
             ws.alive[r], ws.status[r], ws.message[r] = False, FAILED, first.message[r]
@@ -627,7 +651,7 @@ class ContactStepper(abc.ABC):
         ws.contacts.update(everyone, first.delta, first.rate, first.impact)
         ws.Ma, ws.balance = _mass(su.jm, ch.Mp[0], ws.a), ch.F[0] + first.g - rest
         if 0.0 >= su.settle_at:
-            ws.peaks(everyone, int(0.0 >= su.steady_at), ws.d, ws.v, ws.a, first.f)
+            ws.peaks(everyone, int(0.0 >= su.steady_at), ws.d, ws.v, ws.a, first.f, ch.offset[0])
         ws.history(0)
 
     @abc.abstractmethod
@@ -704,10 +728,11 @@ class CompiledStepper(ContactStepper):
         return Joints(size=np.ascontiguousarray(np.stack([j.radial, j.size_C, j.size_B], -1)[idx]),
                       axial=np.ascontiguousarray(j.axial[idx]),
                       stiffness=np.ascontiguousarray(np.stack([j.k_A, j.k_C, j.k_B], -1)[idx]),
+                      mu=np.ascontiguousarray(j.mu[idx], dtype=float),
+                      restitution=np.ascontiguousarray(j.restitution[idx], dtype=float),
                       w=np.ascontiguousarray(su.scene.geometry.w, dtype=float),
                       radius=np.array([law.journal_radius, law.sphere_radius, law.sphere_radius], float),
-                      law=Law(exponent=float(law.exponent), restitution=float(law.restitution),
-                              mu=float(law.friction_coefficient), v0=float(law.stick_velocity),
+                      law=Law(exponent=float(law.exponent), v0=float(law.stick_velocity),
                               v1=float(law.slip_velocity)))
 
     def _solve(self, idx, ch, j, sy, ab, ap, bh2, gh, wf):
@@ -742,8 +767,7 @@ class CompiledStepper(ContactStepper):
         return self._progress(ch)
 
 
-def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model, chunk,
-                      divergence_limit, settle, stepper, tolerance, refinements, initial) -> ContactBatch:
+def _simulate_contact(setup: _Setup, chunk: int, stepper) -> ContactBatch:
     """Integrate the contact level for a batch of clearance draws (one realisation each).
 
     ``dt`` is the base step and ``integrator`` the method (default: the scene's
@@ -757,15 +781,14 @@ def _simulate_contact(scene, draws, elements, integrator, dt, output_step, model
     scene's settle time, the start-up transient left out).  A realisation whose Newton
     iteration fails at the finest step or whose state diverges is marked failed; the others go on.
     """
-    setup = dataclasses.replace(_setup(scene, draws, elements, integrator, dt, output_step, model,
-                                       divergence_limit, settle, tolerance, refinements), initial=initial)
     stepper = stepper(setup)
     stepper.start()
     t, fine, h = setup.t, setup.fine, setup.sizes[0].weights.h
     for s0 in range(1, len(t), chunk):
         s1 = min(s0 + chunk, len(t))
         # the chunk's instants on the finest grid, from the start of its first step
-        ch = _Chunk(scene, setup.jm, ((s0 - 1) * fine + np.arange((s1 - s0) * fine + 1)) * (h / fine))
+        ch = _Chunk(setup.scene, setup.jm, ((s0 - 1) * fine + np.arange((s1 - s0) * fine + 1)) * (h / fine),
+                    setup.reference)
         if stepper.advance(ch, s0, s1 - s0).reason == ALL_FAILED:
             break
     return stepper.batch()

@@ -151,19 +151,22 @@ Settings.__doc__ = """Rayleigh lambda_1 (1/s), lambda_2 (s); alpha_m, alpha_f; s
 steady window (s, peaks of steps ending from then on go to window 1, earlier ones to 0); impact speed
 floor (m/s); local error tolerance (m); divergence limit (m); Newton's tolerances on displacement (m)
 and velocity (m/s) and its iteration cap; step refinements allowed."""
-ChunkArrays = namedtuple("ChunkArrays", "F Mp Rc J Rr omega t")
+ChunkArrays = namedtuple("ChunkArrays", "F Mp Rc J Rr omega t offset")
 ChunkArrays.__doc__ = """A chunk's instants on the finest grid (T): loads F (T, N), platform mass matrices
 (T, 6, 6), crank frames Rc (T, 6, 3, 3) (with Rr the joint maps' blocks, :func:`_gmap`), platform point
 maps J (T, 6, 3, 6), rod frames Rr (T, 6, 3, 3),
-ideal relative angular velocities omega (T, 6, 3, 3) rad/s, t (T,) s."""
+ideal relative angular velocities omega (T, 6, 3, 3) rad/s, t (T,) s, and the reference motion's own
+error against the ideal pose (T, 3, 6) [displacement, velocity, acceleration] (zero for the nominal
+robot; a realised robot's geometric error, rss6core/realised.py), which the peaks add."""
 Frame = namedtuple("Frame", "Rc J Rr omega")
 Frame.__doc__ = """One instant of a chunk: Rc (6, 3, 3), J (6, 3, 6), Rr (6, 3, 3), omega (6, 3, 3)."""
-Law = namedtuple("Law", "exponent restitution mu v0 v1")
-Law.__doc__ = """Contact law: force exponent, restitution, mu_d, stick and slip velocities (m/s)."""
-Joints = namedtuple("Joints", "size axial stiffness w radius law")
+Law = namedtuple("Law", "exponent v0 v1")
+Law.__doc__ = """Contact law shared by every joint: force exponent, stick and slip velocities (m/s)."""
+Joints = namedtuple("Joints", "size axial stiffness mu restitution w radius law")
 Joints.__doc__ = """Per realisation (R): radial clearances [A radial, C, B] (R, 6, 3) m, A axial (R, 6) m,
-stiffnesses [A, C, B] (R, 6, 3) N/m^1.5; revolute axes w (6, 3), radii [journal, sphere, sphere]
-(3,) m, the :class:`Law`."""
+stiffnesses [A, C, B] (R, 6, 3) N/m^1.5, friction coefficients mu_d and restitutions [A, C, B]
+(R, 6, 3) (A's axial faces take A's); revolute axes w (6, 3), radii [journal, sphere, sphere] (3,) m,
+the :class:`Law`."""
 State = namedtuple("State", "d v a Ma balance stored in_contact crate a_past h_past coarsest")
 State.__doc__ = """The batch's state (R, N): d, v, a and, for the alpha-weighted integrators, M a and
 the force balance F + g - (C v + K d) (loads, generalised contact forces, internal forces:
@@ -302,12 +305,12 @@ def _store(out, f, De, Dv, leg, j):
 
 
 @njit(cache=True, fastmath=_FAST)
-def ball(e, de, size, k, impact, law, omega, radius, f, De, Dv):
+def ball(e, de, size, k, impact, law, mu, restitution, omega, radius, f, De, Dv):
     """:func:`_pair` on (3,) arrays e, de, omega: force into f, d f/d e into De, d f/d de into Dv
-    (3, 3); law a :class:`Law`.  Returns (penetration m, its rate m/s)."""
+    (3, 3); law a :class:`Law`, mu and restitution the pair's.  Returns (penetration m, its rate m/s)."""
     out = np.empty(21)
-    delta, rate = _pair(e[0], e[1], e[2], de[0], de[1], de[2], size, k, impact, law.exponent, law.restitution,
-                        law.mu, law.v0, law.v1, omega[0], omega[1], omega[2], radius, out)
+    delta, rate = _pair(e[0], e[1], e[2], de[0], de[1], de[2], size, k, impact, law.exponent, restitution,
+                        mu, law.v0, law.v1, omega[0], omega[1], omega[2], radius, out)
     f[:] = out[:3]
     De[:, :] = out[3:12].reshape((3, 3))
     Dv[:, :] = out[12:].reshape((3, 3))
@@ -356,7 +359,7 @@ def _evaluate(fr, jt, r, impact, xb, xp, ub, up, s, out):
     Rc, Rr, J, w, omega, radius = fr.Rc, fr.Rr, fr.J, jt.w, fr.omega, jt.radius
     relative(Rc, Rr, J, xb, xp, e)
     relative(Rc, Rr, J, ub, up, de)
-    exponent, restitution, mu, v0, v1 = jt.law.exponent, jt.law.restitution, jt.law.mu, jt.law.v0, jt.law.v1
+    exponent, v0, v1 = jt.law.exponent, jt.law.v0, jt.law.v1
     for leg in range(6):
         w0, w1, w2 = w[leg, 0], w[leg, 1], w[leg, 2]
         sA = w0 * e[leg, 0, 0] + w1 * e[leg, 0, 1] + w2 * e[leg, 0, 2]
@@ -364,7 +367,8 @@ def _evaluate(fr, jt, r, impact, xb, xp, ub, up, s, out):
         # A radial: the journal's eccentricity projected on the bearing plane (normal to w)
         d, rt = _pair(e[leg, 0, 0] - sA * w0, e[leg, 0, 1] - sA * w1, e[leg, 0, 2] - sA * w2,
                       de[leg, 0, 0], de[leg, 0, 1], de[leg, 0, 2], jt.size[r, leg, 0], kA,
-                      impact[leg, 0], exponent, restitution, mu, v0, v1, omega[leg, 0, 0], omega[leg, 0, 1],
+                      impact[leg, 0], exponent, jt.restitution[r, leg, 0], jt.mu[r, leg, 0], v0, v1,
+                      omega[leg, 0, 0], omega[leg, 0, 1],
                       omega[leg, 0, 2], radius[0], s.pair)
         _store(s.pair, f, De, Dv, leg, 0)
         delta[leg, 0], rate[leg, 0] = d, rt
@@ -377,7 +381,7 @@ def _evaluate(fr, jt, r, impact, xb, xp, ub, up, s, out):
         sign = 1.0 if sA >= 0.0 else -1.0
         da = abs(sA) - jt.axial[r, leg]
         ra = sign * (w0 * de[leg, 0, 0] + w1 * de[leg, 0, 1] + w2 * de[leg, 0, 2])
-        Fa, dFa, dFra = _normal_law(da, ra, impact[leg, 1], kA, exponent, restitution)
+        Fa, dFa, dFra = _normal_law(da, ra, impact[leg, 1], kA, exponent, jt.restitution[r, leg, 0])
         wl = (w0, w1, w2)
         for a in range(3):
             f[leg, 0, a] -= Fa * sign * wl[a]
@@ -390,7 +394,8 @@ def _evaluate(fr, jt, r, impact, xb, xp, ub, up, s, out):
         for j in (1, 2):
             d, rt = _pair(e[leg, j, 0], e[leg, j, 1], e[leg, j, 2], de[leg, j, 0], de[leg, j, 1],
                           de[leg, j, 2], jt.size[r, leg, j], jt.stiffness[r, leg, j], impact[leg, 1 + j],
-                          exponent, restitution, mu, v0, v1, omega[leg, j, 0], omega[leg, j, 1],
+                          exponent, jt.restitution[r, leg, j], jt.mu[r, leg, j], v0, v1, omega[leg, j, 0],
+                          omega[leg, j, 1],
                           omega[leg, j, 2], radius[j], s.pair)
             _store(s.pair, f, De, Dv, leg, j)
             delta[leg, 1 + j], rate[leg, 1 + j] = d, rt
@@ -998,7 +1003,7 @@ def _accept(r, k1, layout, cfg, ch, st, rec, work):
             st.balance[r, n] = balance_next(work.tmp[n], st.Ma[r, n], st.balance[r, n], cfg.alpha_m, cfg.alpha_f)
             st.Ma[r, n] = work.tmp[n]
     if ch.t[k1] >= cfg.settle_at:
-        _peaks(r, 1 if ch.t[k1] >= cfg.steady_at else 0, work, rec)
+        _peaks(r, 1 if ch.t[k1] >= cfg.steady_at else 0, ch.offset[k1], work, rec)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -1013,14 +1018,14 @@ def balance_next(ma_new, ma, balance, alpha_m, alpha_f):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _peaks(r, w, work, rec):
-    """Realisation r's peaks of |platform error| in window w and of |contact force| updated with the
-    candidate step."""
+def _peaks(r, w, offset, work, rec):
+    """Realisation r's peaks of |platform error| (the step's plus the reference's own ``offset``
+    (3, 6)) in window w and of |contact force| updated with the candidate step."""
     N = work.d_new.shape[0]
     for b in range(6):
-        rec.peak[r, w, 0, b] = max(rec.peak[r, w, 0, b], abs(work.d_new[N - 6 + b]))
-        rec.peak[r, w, 1, b] = max(rec.peak[r, w, 1, b], abs(work.v_new[N - 6 + b]))
-        rec.peak[r, w, 2, b] = max(rec.peak[r, w, 2, b], abs(work.a_new[N - 6 + b]))
+        rec.peak[r, w, 0, b] = max(rec.peak[r, w, 0, b], abs(work.d_new[N - 6 + b] + offset[0, b]))
+        rec.peak[r, w, 1, b] = max(rec.peak[r, w, 1, b], abs(work.v_new[N - 6 + b] + offset[1, b]))
+        rec.peak[r, w, 2, b] = max(rec.peak[r, w, 2, b], abs(work.a_new[N - 6 + b] + offset[2, b]))
     f = work.f
     for leg in range(6):
         for j in range(3):

@@ -66,10 +66,11 @@ def friction_factor(speed, stick_velocity: float, slip_velocity: float):
             np.where(inside, 1.0 / (slip_velocity - stick_velocity), 0.0))
 
 
-def coulomb_friction(normal_force, slip, mu: float, stick_velocity: float, slip_velocity: float):
+def coulomb_friction(normal_force, slip, mu, stick_velocity: float, slip_velocity: float):
     """Friction force F_t = -mu c_d F_N v_t / |v_t| (eq. 18, direction normalised), N.
 
-    ``slip`` (..., 3) is the tangential sliding velocity v_t (m/s).  Returns F_t
+    ``slip`` (..., 3) is the tangential sliding velocity v_t (m/s), ``mu`` a scalar or one per
+    pair (...).  Returns F_t
     (..., 3), dF_t/dv_t (..., 3, 3) and dF_t/dF_N (..., 3).
     """
     speed = np.linalg.norm(slip, axis=-1)
@@ -81,4 +82,4 @@ def coulomb_friction(normal_force, slip, mu: float, stick_velocity: float, slip_
     tt = t[..., :, None] * t[..., None, :]
     eye = np.eye(3)
     jac = scale[..., None, None] * ((cd / safe)[..., None, None] * (eye - tt) + dcd[..., None, None] * tt)
-    return force, jac, -mu * cd[..., None] * t
+    return force, jac, -(np.asarray(mu) * cd)[..., None] * t

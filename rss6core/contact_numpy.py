@@ -173,7 +173,7 @@ class NumpyStepper(ContactStepper):
             ws.balance[kept] = balance_next(ma, ws.Ma[kept], ws.balance[kept], it.alpha_m, it.alpha_f)
             ws.Ma[kept] = ma
         if ch.t[k1] >= su.settle_at:
-            ws.peaks(kept, int(ch.t[k1] >= su.steady_at), d, v, a, f)
+            ws.peaks(kept, int(ch.t[k1] >= su.steady_at), d, v, a, f, ch.offset[k1])
 
 
 def _extrapolated(h, a, a_past, h_past):

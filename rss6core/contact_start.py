@@ -32,7 +32,7 @@ from .contact_dynamics import (_Chunk, _Condensed, _evaluate, _full_contact, _ge
                                _joint_nodes, _solve_arrow, _tangent, StartState,
                                drawn_start, initial_state)
 from .dynamics import inverse_dynamics
-from .kinematics import rigid_motion
+from .realised import ReferenceMotion
 from .quasi_static import reaction_eccentricities
 from .status import failure_message
 
@@ -45,21 +45,22 @@ __all__ = ["contact_initial_state", "equilibrium_state", "static_residual"]
 RESIDUAL_TOLERANCE = 1e-9
 MAX_ITERATIONS = 50
 
-def contact_initial_state(scene, jm, joints) -> StartState:
-    """The scene's ``contact_start`` ('drawn' or 'equilibrium') of a batch with joints ``joints``:
-    what :func:`.contact_dynamics.simulate_contact` takes as ``initial``."""
+def contact_initial_state(scene, jm, joints, reference=None) -> StartState:
+    """The scene's ``contact_start`` ('drawn' or 'equilibrium') of a batch with joints ``joints``
+    about the ``reference`` motion (:class:`.realised.ReferenceMotion`; default the scene's nominal
+    one): what :func:`.contact_dynamics.simulate_contact` takes as ``initial``."""
     start = scene.simulation.contact_start
     if start not in CONTACT_STARTS:
         raise ValueError(f"contact start must be one of {', '.join(CONTACT_STARTS)}, not {start!r}")
     if start == "equilibrium":
-        return equilibrium_state(scene, jm, joints)
-    return drawn_start(scene, jm, joints)
+        return equilibrium_state(scene, jm, joints, reference)
+    return drawn_start(scene, jm, joints, reference)
 
 
-def _penetrated(scene, joints):
+def _penetrated(scene, joints, reference: ReferenceMotion | None = None):
     """The batch's joints with the reaction eccentricities at t = 0, each pushed into its wall by the
     Hertz penetration of its rigid reaction force: Newton's starting point."""
-    motion = rigid_motion(scene, np.array([0.0]))
+    motion = (reference or ReferenceMotion(scene)).at(np.array([0.0])).motion
     loads = inverse_dynamics(scene, motion)
     w = scene.geometry.w
     n = scene.contact.exponent
@@ -81,10 +82,10 @@ def _penetrated(scene, joints):
     return dataclasses.replace(joints, **{k: np.stack(v) for k, v in e.items()})
 
 
-def static_residual(scene, jm, joints, d, v):
+def static_residual(scene, jm, joints, d, v, reference=None):
     """Force imbalance F(0) - C v - K d + g(d, v) (R, N) of the contact level at t = 0, N (or N m):
     M a(0) of the state (d, v); zero at the static equilibrium."""
-    ch = _Chunk(scene, jm, np.array([0.0]))
+    ch = _Chunk(scene, jm, np.array([0.0]), reference)
     impact = np.full(d.shape[:1] + (6, 4), scene.contact.impact_speed_floor)
     xb, xp = _joint_nodes(jm, d)
     vb, vp = _joint_nodes(jm, v)
@@ -101,13 +102,14 @@ joint nodes and the condensed loads F(0) - C v0, what recovers the links' interi
 nodes' velocities, the (unused: zero rate) impact speeds and the force tolerance, N."""
 
 
-def equilibrium_state(scene, jm, joints) -> StartState:
+def equilibrium_state(scene, jm, joints, reference=None) -> StartState:
     """The static contact equilibrium at t = 0 (module docstring), by damped Newton.  Without
     friction it converges in 2 iterations from the reaction start; the kinetic friction, which turns
     with the contact normal (a dependence the step kernel's Jacobian leaves out), makes it ~30,
     most of them halved steps, then quadratic (0.1 s for 4 realisations of the smoke scene)."""
-    d0, v = initial_state(scene, jm, _penetrated(scene, joints))
-    ch = _Chunk(scene, jm, np.array([0.0]))
+    reference = reference or ReferenceMotion(scene)
+    d0, v = initial_state(scene, jm, _penetrated(scene, joints, reference), reference=reference)
+    ch = _Chunk(scene, jm, np.array([0.0]), reference)
     cond = _Condensed(jm, 0.0, 1.0)
     rc, rr, rp = split(jm, ch.F[0] - _internal(jm, ch.Mp[0], np.zeros_like(v), v))
     rb, keep = cond.condense(rc, rr)

@@ -58,15 +58,17 @@ def euler_moment(I: np.ndarray, omega: np.ndarray, omega_dot: np.ndarray) -> np.
 
 
 def inverse_dynamics(scene, m: RigidMotion) -> RigidLoads:
-    """Actuator torques and joint reactions that drive the rigid robot along ``m``."""
+    """Actuator torques and joint reactions that drive the rigid robot along ``m`` (a realised
+    robot's link lengths may differ per leg)."""
     g = scene.gravity_vector
     geo, pm = scene.geometry, m.platform
     crank, rod = crank_inertia(scene), rod_inertia(scene)
-    L = geo.rod_length
+    L = _per_leg(geo.rod_length)
+    rod_mass, crank_mass = _per_leg(rod.mass), _per_leg(crank.mass)
     u, _, wd_rod = rod_angular_motion(m)
     a_rod = 0.5 * (m.c_ddot + m.b_ddot)
     # rod moment balance about C: (b - c) x F = I_t w' + (g - c) x m (a_g - g), F on rod at B
-    m_req = rod.inertia[1] * wd_rod + np.cross(-0.5 * L * u, rod.mass * (a_rod - g))
+    m_req = _per_leg(rod.inertia[1]) * wd_rod + np.cross(-0.5 * L * u, rod_mass * (a_rod - g))
     f_perp = np.cross(u, m_req) / L
     # platform Newton-Euler fixes the axial part: F_i = f_i u_i + f_perp_i
     Ip = platform_inertia_world(scene.platform.inertia, pm.R)
@@ -76,16 +78,21 @@ def inverse_dynamics(scene, m: RigidMotion) -> RigidLoads:
     G = np.concatenate([u, np.cross(m.r, u)], axis=-1).transpose(0, 2, 1)  # columns per leg
     f_axial = np.linalg.solve(G, rhs[..., None])[..., 0]
     f_rod_B = f_axial[..., None] * u + f_perp
-    f_rod_C = rod.mass * (a_rod - g) - f_rod_B
+    f_rod_C = rod_mass * (a_rod - g) - f_rod_B
     # crank about its fixed axis e: I_A alpha'' = tau + e . [(c - a) x (-F_C) + (g_c - a) x m_c g]
     e = crank_axes(geo)[None]
     arm = m.c - geo.a[None]
-    load = np.cross(arm, -f_rod_C) + np.cross(0.5 * arm, crank.mass * g)
+    load = np.cross(arm, -f_rod_C) + np.cross(0.5 * arm, crank_mass * g)
     I_A = crank.inertia[1]
     torque = I_A * m.alpha_ddot - _dot(e, load)
-    force_A = crank.mass * (0.5 * m.c_ddot - g) + f_rod_C
+    force_A = crank_mass * (0.5 * m.c_ddot - g) + f_rod_C
     moment_A = (I_A * m.alpha_ddot - torque)[..., None] * e - load
     return RigidLoads(torque, force_A, moment_A, f_rod_C, -f_rod_B)
+
+
+def _per_leg(value) -> np.ndarray:
+    """A link property, one value or one per leg (6,), shaped to multiply (..., 6, 3) vectors."""
+    return np.asarray(value, float)[..., None]
 
 
 def mechanical_energy(scene, m: RigidMotion) -> tuple[np.ndarray, np.ndarray]:

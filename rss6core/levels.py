@@ -45,7 +45,7 @@ MODEL_LEVELS = MappingProxyType({level.name: level for level in (
                draws_clearances=True, redraws_every_step=True, contact_forces=True),
     ModelLevel(name="contact", rung="L4", description="clearance contact dynamics, by far the dearest",
                elastic_links=True, draws_clearances=True, function_of_one_draw=True, contact_forces=True,
-               contact_joints=True, contact_start=True, time_step_field="contact_time_step",
+               contact_joints=True, contact_start=True, realised_robot=True, time_step_field="contact_time_step",
                integrator_field="contact_integrator"),
 )})
 MODELS = tuple(MODEL_LEVELS)   # the level names, cheapest first
@@ -81,6 +81,10 @@ def check_uncertain_level(scene, model: str) -> None:
         raise ValueError(f"the {model} level cannot take [uncertain.*] inputs yet (the "
                          f"{', '.join(some)} and {last} levels can)")
     level = model_level(model)
+    per_link = [i.name for i in scene.uncertain.inputs if i.each == "link"] if scene.uncertain else []
+    if level.contact_joints and per_link:
+        raise ValueError(f"[uncertain.{per_link[0]}] each = \"link\": the contact level takes one shared draw of "
+                         "a link material (its kernel holds one crank and one rod matrix); set each = \"one\"")
     if scene.uncertain and scene.simulation.quasi_static_eccentricity == "reaction" and level.draws_clearances:
         raise ValueError("the quasi-static level's reaction eccentricities cannot take [uncertain.*] inputs "
                          "yet; set [simulation] quasi_static_eccentricity = \"drawn\"")

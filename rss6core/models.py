@@ -31,8 +31,8 @@ from .levels import (check_uncertain_level, default_integrator, default_time_ste
                      model_level, models_with)
 from .paper_method import PaperClosure, output_step, paper_contact_forces, paper_draw, paper_result
 from .quasi_static import quasi_static_result
-from .realised import (is_nominal, motion_error, realised_clearances, realised_geometry, realised_motion,
-                       realised_scene, scene_is_nominal)
+from .realised import (ReferenceMotion, is_nominal, motion_error, realised_clearances, realised_contact_laws,
+                       realised_geometry, realised_motion, realised_scene, scene_is_nominal)
 from .results import SimulationResult, time_grid
 from .status import FAILED, FINISHED, check_history
 from .uncertain import draw_inputs
@@ -116,9 +116,9 @@ class Level:
         realizations = list(realizations)
         kind = model_level(self.model)
         if self.scene.uncertain:
-            clearances = model_level(self.model).draws_clearances
-            return [self._realised(realised_draw(self.scene, seed, r, uniforms) if clearances else None,
-                                   stored_inputs(self.scene, seed, r, uniforms)) for r in realizations]
+            return self.simulate_draws([realised_draw(self.scene, seed, r, uniforms) if kind.draws_clearances else None
+                                        for r in realizations],
+                                       [stored_inputs(self.scene, seed, r, uniforms) for r in realizations])
         if not kind.draws_clearances:      # every realisation is the same run
             return [self.elastic if kind.elastic_links else self._rigid()] * len(realizations)
         if kind.redraws_every_step:
@@ -134,6 +134,8 @@ class Level:
         if bool(self.scene.uncertain) != (inputs is not None):
             raise ValueError("given draws need given uncertain inputs exactly when the scene has [uncertain.*] "
                              "tables")
+        if inputs is not None and kind.contact_joints:
+            return self._realised_contact(draws, inputs)
         if inputs is not None:
             return [self._realised(draw, given) for draw, given in zip(draws, inputs, strict=True)]
         if not kind.function_of_one_draw:
@@ -191,10 +193,51 @@ class Level:
             return self._failed_kinematics(exc, inputs)
         return dataclasses.replace(_plus(result, motion_error(real, self.motion)), inputs=inputs)
 
+    def _realised_contact(self, draws, inputs) -> list[SimulationResult]:
+        """The contact level on realised robots (docs/model.md section 4b): those whose geometry,
+        material and platform are the nominal ones (their friction, restitution and clearances drawn)
+        as one batch about the nominal motion; each other one on its own about its realised motion,
+        whose geometric error its peaks and histories include."""
+        scenes = [realised_scene(self.scene, given) for given in inputs]
+        out = [None] * len(draws)
+        same = [k for k, scene in enumerate(scenes) if scene_is_nominal(self.scene, scene)]
+        if same:
+            batch = self._contact([draws[k] for k in same], [inputs[k] for k in same], self.scene, None)
+            for k, result in zip(same, batch):
+                out[k] = result
+        for k in (k for k in range(len(draws)) if out[k] is None):
+            out[k] = self._contact([draws[k]], [inputs[k]], scenes[k],
+                                   ReferenceMotion(self.scene, scenes[k].geometry))[0]
+        return out
+
+    def _contact(self, draws, inputs, scene, reference) -> list[SimulationResult]:
+        """One contact batch of ``scene`` (a realised one with its ``reference`` motion, or the
+        nominal with None): the link matrices at the nominal link lengths (the realised material),
+        each draw's joint laws, the geometric error added to the histories."""
+        dynamics, start = _contact_solver()
+        geometry = dataclasses.replace(scene.geometry, crank_length=self.scene.geometry.crank_length,
+                                       rod_length=self.scene.geometry.rod_length)
+        try:
+            batch = dynamics.simulate_contact(
+                scene, draws, self.elements, self.integrator, self.dt, tolerance=self.tolerance,
+                refinements=self.refinements, initial=start.contact_initial_state, reference=reference,
+                model=dynamics.build_joint_model(dataclasses.replace(scene, geometry=geometry), self.elements),
+                laws=[realised_contact_laws(self.scene, given) for given in inputs])
+        except (ArithmeticError, np.linalg.LinAlgError) as exc:   # a realised robot out of its workspace
+            return [self._failed_kinematics(exc, given) for given in inputs]
+        out = [dataclasses.replace(batch.result(k), draw=draw, inputs=given)
+               for k, (draw, given) in enumerate(zip(draws, inputs, strict=True))]
+        if reference is None:
+            return out
+        error = reference.at(out[0].t).error
+        return [_plus(result, (error[:, 0], error[:, 1], error[:, 2])) for result in out]
+
     def _failed_kinematics(self, exc, inputs) -> SimulationResult:
         """A realised robot out of its workspace: NaN errors and the reason, not an exception."""
-        nan = np.full_like(self.motion.platform.pose, np.nan)
-        return SimulationResult(self.motion.t, nan, nan, nan, FAILED,
+        t = time_grid(self.scene.trajectory.duration, self.scene.simulation.time_step) if self.motion is None \
+            else self.motion.t
+        nan = np.full((len(t), 6), np.nan)
+        return SimulationResult(t, nan, nan, nan, FAILED,
                                 f"the realised robot's forward kinematics failed: {exc}", 0, inputs=inputs)
 
     def _paper(self, seed: int, realizations: list, uniforms) -> list[SimulationResult]:

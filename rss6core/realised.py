@@ -18,11 +18,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .clearance import CLEARANCE_RADII
-from .kinematics import RigidMotion, crank_points, forward_kinematics, leg_jacobian, platform_joints
+from .kinematics import RigidMotion, crank_points, forward_kinematics, leg_jacobian, platform_joints, rigid_motion
 from .trajectory import PlatformMotion, euler_rate_matrix, euler_rate_matrix_dot, rotation
 
 __all__ = ["GEOMETRY_KEYS", "realised_geometry", "realised_clearances", "realised_scene", "realised_motion",
-           "motion_error", "linear_length_error"]
+           "motion_error", "linear_length_error", "Reference", "ReferenceMotion", "JointLaws", "realised_contact_laws"]
 
 # each drawable [geometry] key and the Geometry field it sets
 GEOMETRY_KEYS = {"geometry.crank_length_m": "crank_length", "geometry.rod_length_m": "rod_length",
@@ -147,3 +147,48 @@ def linear_length_error(geometry, ideal: RigidMotion, d_crank, d_rod) -> np.ndar
     rhs = (_dot(n, ideal.c - geometry.a) / geometry.crank_length * np.asarray(d_crank)
            - geometry.rod_length * np.asarray(d_rod))
     return np.linalg.solve(G, rhs[..., None])[..., 0]
+
+
+@dataclasses.dataclass(frozen=True)
+class Reference:
+    """The rigid motion a dynamic level perturbs at some instants, and that motion's own error
+    against the ideal pose (T, 3, 6) [displacement, velocity, acceleration] (zero for the nominal
+    robot, the geometric error of a realised one): the level's error is its perturbation plus this."""
+    motion: RigidMotion
+    error: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class ReferenceMotion:
+    """Where the contact level linearises: the nominal robot's rigid motion (``geometry`` None), or a
+    realised robot's under the nominal commands of ``scene`` (:func:`realised_motion`)."""
+    scene: object
+    geometry: object = None
+
+    def at(self, t) -> Reference:
+        """The :class:`Reference` at instants t (s)."""
+        nominal = rigid_motion(self.scene, np.asarray(t, float))
+        if self.geometry is None:
+            return Reference(nominal, np.zeros((len(nominal.t), 3, 6)))
+        real = realised_motion(self.geometry, nominal)
+        return Reference(real, np.stack(motion_error(real, nominal), 1))
+
+
+@dataclasses.dataclass(frozen=True)
+class JointLaws:
+    """Per joint of each leg (6, 3) [A, C, B]: friction coefficient mu_d (eq. 18) and restitution xi
+    (eq. 17); A's axial faces take A's."""
+    friction: np.ndarray
+    restitution: np.ndarray
+
+
+def realised_contact_laws(scene, inputs=None) -> JointLaws:
+    """The :class:`JointLaws` of one realised robot: the drawn values ((18,) A1..A6, C1..C6, B1..B6,
+    or one shared (1,)), the scene's [contact] values elsewhere (everywhere for ``inputs`` None)."""
+    out = []
+    for key, nominal in (("contact.friction_coefficient", scene.contact.friction_coefficient),
+                         ("contact.restitution", scene.contact.restitution)):
+        drawn = None if inputs is None else inputs.realised(key)
+        values = np.full(18, float(nominal)) if drawn is None else np.broadcast_to(np.asarray(drawn, float), (18,))
+        out.append(np.ascontiguousarray(values.reshape(3, 6).T))
+    return JointLaws(*out)

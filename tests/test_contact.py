@@ -223,8 +223,7 @@ def test_compiled_contact_pair_matches_the_vectorised_one(depth, spin, exponent)
     Hertz's 3/2 (computed as delta sqrt(delta)) and another exponent (pow)."""
     from rss6core.contact_kernel import Law, ball
     law = _law(exponent)
-    law_v = Law(exponent=float(law.exponent), restitution=float(law.restitution),
-                mu=float(law.friction_coefficient), v0=float(law.stick_velocity), v1=float(law.slip_velocity))
+    law_v = Law(exponent=float(law.exponent), v0=float(law.stick_velocity), v1=float(law.slip_velocity))
     rng = np.random.default_rng(9)
     e = rng.normal(size=3)
     e *= (2.5e-4 + depth) / np.linalg.norm(e)
@@ -232,7 +231,8 @@ def test_compiled_contact_pair_matches_the_vectorised_one(depth, spin, exponent)
     omega = spin * rng.normal(size=3)
     f, De, Dv, delta, rate, _ = _ball(e, de, 2.5e-4, 3e10, 0.05, law, omega, 0.01)
     fc, Dec, Dvc = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
-    dc, rc = ball(e, de, 2.5e-4, 3e10, 0.05, law_v, omega, 0.01, fc, Dec, Dvc)
+    dc, rc = ball(e, de, 2.5e-4, 3e10, 0.05, law_v, float(law.friction_coefficient), float(law.restitution), omega,
+                  0.01, fc, Dec, Dvc)
     assert (dc, rc) == pytest.approx((delta, rate), rel=1e-12, abs=1e-22)
     for mine, ref in ((fc, f), (Dec, De), (Dvc, Dv)):
         np.testing.assert_allclose(mine, ref, rtol=1e-10, atol=1e-12 * max(np.abs(ref).max(), 1.0))
