@@ -57,7 +57,7 @@ def main():
     for r in range(args.n):
         e, t = compare(scene, level, r)
         worst_e, worst_t = np.maximum(worst_e, e), np.maximum(worst_t, t)
-    np.set_printoptions(precision=2)
+    np.set_printoptions(formatter={"float": "{:.1e}".format})
     print(f"{args.n} realisations of {SCENE.name}, steady window, x y z rx ry rz")
     for q, name in enumerate(("displacement", "velocity", "acceleration")):
         print(f"{name:13s} of the elastic part {worst_e[q]}  of the total error {worst_t[q]}")

@@ -202,13 +202,32 @@ def test_sobol_indices_by_input_follow_the_physics(configs):
         assert not st.sel(group=group, bound="estimate").any()
 
 
-def test_studies_refuse_what_they_cannot_answer(text, tmp_path, capsys):
-    """A budget scales clearances only, Sobol' indices need independent inputs: one line, exit 2."""
+def test_a_budget_of_realised_robots_is_a_measured_sweep(text, tmp_path, capsys):
+    """Their geometric error does not scale with the clearances, so the budget sweeps: its answer
+    passes, a scale within 5 % above fails; a limit below the geometric error alone (z q50 about
+    0.021 mm at the rigid level) has no budget: one line, exit 2."""
     scene = tmp_path / "u.toml"
     scene.write_text(text)
+    spec = "displacement:z<=0.06mm@q50"
+    assert main(["budget", str(scene), "--model", "quasi-static", "--spec", spec, "-n", "64",
+                 "-o", str(tmp_path / "b"), "--workers", "1"]) == 0
+    printed = capsys.readouterr().out
+    assert "measured sweep" in printed
+    passes, fails = (float(w.rstrip(",")) for w in printed.split("limiting: scale ")[1].split()[0:3:2])
+    assert passes < 1 and fails / passes <= 1.05 + 1e-9
+    assert main(["budget", str(scene), "--model", "quasi-static", "--spec", "displacement:z<=0.01mm@q50",
+                 "-n", "64", "-o", str(tmp_path / "c"), "--workers", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "still fails at clearance scale" in err and "geometric error" in err
+
+
+def test_studies_refuse_what_they_cannot_answer(text, tmp_path, capsys):
+    """A budget cannot scale drawn clearance sizes, Sobol' indices need independent inputs: one line, exit 2."""
+    scene = tmp_path / "u.toml"
+    scene.write_text(text + '[uncertain.c]\nparameter = "clearance.spherical_C_m"\nlaw = "normal"\nstd_m = 1e-6\n')
     assert main(["budget", str(scene), "--model", "quasi-static", "--spec", "displacement:z<=1mm@q50",
                  "-n", "64", "-o", str(tmp_path / "b"), "--workers", "1"]) == 2
-    assert "does not follow; budget the scene without its [uncertain.*] tables" in capsys.readouterr().err
+    assert "[uncertain.c] draws clearance sizes about the [clearance] values" in capsys.readouterr().err
     rod = TABLES.split("[uncertain.zero]")[0].replace("crank]", "rod]").replace("crank_length", "rod_length")
     scene.write_text(text + rod + '[correlation.c]\ninputs = ["crank", "rod"]\nmatrix = [[1, 0.5], [0.5, 1]]\n')
     assert main(["sensitivity", str(scene), "--model", "quasi-static", "-n", "64", "-o", str(tmp_path / "s.nc"),

@@ -12,7 +12,8 @@ upper bound is within it, with every [clearance] size of the scene times s.
   as large, and so is every bound rss6 gives: quantile bounds are order statistics, and
   the mean and std bounds are location-scale equivariant (the skewness and kurtosis that
   enter them do not change).  Hence upper(s) = s upper(1) and s* = min(limit / upper(1)).
-- other levels: a measured sweep: ensembles of the same realisations (same seed) at
+- other levels, and a scene with [uncertain.*] inputs at any level (its realised robots' geometric
+  error does not scale with the clearances): a measured sweep: ensembles of the same realisations (same seed) at
   scales doubled or halved from 1 until one passes and one does not, then bisection to the
   stated relative tolerance; the answer is the largest scale whose ensemble passed.  It
   assumes the verdict changes once along the scale (errors grow with the clearance).
@@ -101,10 +102,11 @@ def _check_scene(spec: EnsembleSpec) -> None:
     """BudgetError for a scene whose sizes a [clearance] scale would not move: a family whose
     [tolerance.<family>] band (absolute limits, m) draws them. A relative [sampling] size_tolerance
     scales with the nominal size, so it does not stop a budget."""
-    if spec.scene().uncertain:
-        raise BudgetError(f"{spec.source}: a clearance budget scales the error with the clearances, which the "
-                          "realised robot's geometric error of its [uncertain.*] inputs does not follow; budget the "
-                          "scene without its [uncertain.*] tables")
+    drawn = [i.name for i in spec.scene().uncertain.inputs if i.parameter.startswith("clearance.")]
+    if drawn:
+        raise BudgetError(f"{spec.source}: [uncertain.{drawn[0]}] draws clearance sizes about the [clearance] "
+                          "values, which a clearance budget (a scale on those values) would not scale alike; "
+                          "budget the scene without that table")
     tolerance = spec.scene().tolerance
     banded = [k.removesuffix("_m") for k in FAMILY_KEYS if getattr(tolerance, k.removesuffix("_m")) is not None]
     if banded:
@@ -164,7 +166,9 @@ def _sweep(run, tolerance: float) -> list[Trial]:
         if len(trials) > MAX_DOUBLINGS:
             kind = "passes" if trials[0].passed else "fails"
             raise BudgetError(f"the spec still {kind} at clearance scale {trials[-1].scale:g}; "
-                              "no budget in 2^-12..2^12")
+                              "no budget in 2^-12..2^12" + ("" if trials[0].passed else
+                                                            " (an error no clearance scale removes, such as a "
+                                                            "realised robot's geometric error, exceeds it)"))
         trials.append(run(trials[-1].scale * factor))
     lo = max(t.scale for t in trials if t.passed)
     hi = min(t.scale for t in trials if not t.passed and t.scale > lo)
@@ -192,7 +196,7 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
                               "so they set no clearance budget")
         return _trial(spec, specs, scale, n, folder, confidence, workers)
 
-    if model_level(spec.model).linear_in_clearances:
+    if model_level(spec.model).linear_in_clearances and not spec.scene().uncertain:
         first = run(1.0)
         ratio, limiting = exact_scale(list(first.verdicts))
         scale = round_down(ratio)
