@@ -254,27 +254,58 @@ def _contacts(e, de, w, joints: _Joints, impact, law, omega, radius):
 class _Chunk:
     """Shared, per-instant data of a run of steps: joint maps, loads, ideal angular velocities
     (and the joint radii [journal, sphere, sphere] (3, 1), m, that the contact evaluation needs), about
-    the ``reference`` motion (:class:`.realised.ReferenceMotion`; default: the scene's nominal one)."""
+    the ``reference`` motion (:class:`.realised.ReferenceMotion`; default: the scene's nominal one).
 
-    def __init__(self, scene, jm: JointModel, t: np.ndarray, reference: ReferenceMotion | None = None):
-        self.t = t
-        at = (reference or ReferenceMotion(scene)).at(t)
-        motion, self.offset = at.motion, np.ascontiguousarray(at.error)
-        Rc, Rr = link_frames(motion, scene.geometry)
-        Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
-        self.Mp = _platform_mass(jm, Ip)                       # (T, 6, 6)
-        fc, fr, fp = link_loads(jm.elastic, motion, scene, Rc, Rr, Ip)
-        self.F = F = np.empty((len(t), jm.dofs))          # join(crank, rod, platform), one copy less
-        legs = F[:, :-6].reshape(len(t), 6, jm.leg_dofs)   # a view: the legs' part of each row
-        legs[..., :3], legs[..., 3:jm.crank_dofs], legs[..., jm.crank_dofs:] = fc[..., :3], fc[..., 6:], fr
-        F[:, -6:] = fp
-        self.J = np.ascontiguousarray(platform_point_map(motion.r))   # (T, 6, 3, 6)
-        self.Rc, self.Rr = np.ascontiguousarray(Rc), np.ascontiguousarray(Rr)
-        w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
-        w_rod = rod_angular_motion(motion)[1]
-        self.omega = np.stack([w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :]], -2)
+    ``t`` holds the chunk's instants on the finest grid, ``fine`` of them per base step.  Only the
+    base steps' ends are computed at first; a base step's interior instants, which only a refined
+    step reads, when :meth:`fill` asks for them (``filled`` per base step): each instant's values are
+    the same bits either way, and most base steps are never refined."""
+
+    def __init__(self, scene, jm: JointModel, t: np.ndarray, reference: ReferenceMotion | None = None,
+                 fine: int = 1):
+        self.t, self.fine, self.scene, self.jm = t, fine, scene, jm
+        self.reference = reference or ReferenceMotion(scene)
+        T = len(t)
+        self.F = np.empty((T, jm.dofs))
+        self.Mp, self.J = np.empty((T, 6, 6)), np.empty((T, 6, 3, 6))
+        self.Rc, self.Rr, self.omega = (np.empty((T, 6, 3, 3)) for _ in range(3))
+        self.offset = np.empty((T, 3, 6))
+        self.filled = np.full(max((T - 1) // fine, 0), fine == 1)
+        self._rows(np.arange(0, T, fine))
         law = scene.contact
         self.radius = np.array([[law.journal_radius], [law.sphere_radius], [law.sphere_radius]])
+
+    def fill(self, steps) -> None:
+        """Compute the interior instants of base steps ``steps`` (those not yet filled)."""
+        steps = np.asarray(steps, np.int64)
+        steps = steps[~self.filled[steps]]
+        if len(steps):
+            self._rows((steps[:, None] * self.fine + np.arange(1, self.fine)).ravel())
+            self.filled[steps] = True
+
+    def fill_all(self) -> None:
+        self.fill(np.arange(len(self.filled)))
+
+    def _rows(self, rows: np.ndarray) -> None:
+        """The chunk's arrays at instants ``rows``."""
+        jm, scene = self.jm, self.scene
+        at = self.reference.at(self.t[rows])
+        motion = at.motion
+        Rc, Rr = link_frames(motion, scene.geometry)
+        Ip = platform_inertia_world(jm.platform_inertia, motion.platform.R)
+        self.Mp[rows] = _platform_mass(jm, Ip)
+        fc, fr, fp = link_loads(jm.elastic, motion, scene, Rc, Rr, Ip)
+        F = np.empty((len(rows), jm.dofs))               # join(crank, rod, platform), one copy less
+        legs = F[:, :-6].reshape(len(rows), 6, jm.leg_dofs)   # a view: the legs' part of each row
+        legs[..., :3], legs[..., 3:jm.crank_dofs], legs[..., jm.crank_dofs:] = fc[..., :3], fc[..., 6:], fr
+        F[:, -6:] = fp
+        self.F[rows] = F
+        self.J[rows] = platform_point_map(motion.r)
+        self.Rc[rows], self.Rr[rows] = Rc, Rr
+        w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
+        w_rod = rod_angular_motion(motion)[1]
+        self.omega[rows] = np.stack([w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :]], -2)
+        self.offset[rows] = at.error
 
     @functools.cached_property
     def G(self) -> np.ndarray:
@@ -287,7 +318,7 @@ class _Chunk:
     def arrays(self) -> ChunkArrays:
         """What :func:`.contact_kernel.advance_chunk` reads of the chunk."""
         return ChunkArrays(F=self.F, Mp=self.Mp, Rc=self.Rc, J=self.J, Rr=self.Rr, omega=self.omega, t=self.t,
-                           offset=self.offset)
+                           offset=self.offset, filled=self.filled)
 
 
 def _platform_mass(jm: JointModel, Ip: np.ndarray) -> np.ndarray:
@@ -692,6 +723,9 @@ class ContactStepper(abc.ABC):
         :func:`.contact_kernel.newton_one`), from the first iterate ab, ap."""
 
 
+FILL_STEPS = 8   # base steps whose interior instants a refined step's pause fills at once (impacts cluster)
+
+
 class CompiledStepper(ContactStepper):
     """The same steps compiled (:func:`.contact_kernel.advance_chunk`), one realisation after another."""
 
@@ -758,10 +792,17 @@ class CompiledStepper(ContactStepper):
         records = Records(peak=ws.peak, cpeak=ws.cpeak, hist=ws.hist, alive=ws.alive, fail=ws.fail,
                           fail_t=ws.fail_t, fail_h=ws.fail_h, fail_size=ws.fail_size, steps=ws.steps,
                           iters=ws.iters, refined=ws.refined)
-        with fast_inlining():
-            advance_chunk(np.flatnonzero(ws.alive), first, n_base, self.setup.every, lv, self.layout,
-                          self.settings, ch.arrays(), self._joints_of(slice(None)), state, records,
-                          self.work, self.scratch)
+        live, arrays, joints = np.flatnonzero(ws.alive), ch.arrays(), self._joints_of(slice(None))
+        begin, pause = np.zeros(len(ws.alive), np.int64), np.full(2, -1, np.int64)
+        while True:
+            with fast_inlining():
+                advance_chunk(live, first, n_base, self.setup.every, lv, self.layout, self.settings, arrays,
+                              joints, state, records, self.work, self.scratch, begin, pause)
+            if pause[0] < 0:
+                break
+            r, step = int(pause[0]), int(pause[1])     # r needs step's interior instants: fill a few steps
+            ch.fill(np.arange(step, min(step + FILL_STEPS, n_base)))
+            live, begin[:], begin[r] = live[np.searchsorted(live, r):], 0, step
         for r in np.flatnonzero(before & ~ws.alive):
             ws.failed(r, ws.fail[r], ws.fail_t[r], ws.fail_h[r], ws.fail_size[r], self.setup.limit)
         return self._progress(ch)
@@ -788,7 +829,7 @@ def _simulate_contact(setup: _Setup, chunk: int, stepper) -> ContactBatch:
         s1 = min(s0 + chunk, len(t))
         # the chunk's instants on the finest grid, from the start of its first step
         ch = _Chunk(setup.scene, setup.jm, ((s0 - 1) * fine + np.arange((s1 - s0) * fine + 1)) * (h / fine),
-                    setup.reference)
+                    setup.reference, fine)
         if stepper.advance(ch, s0, s1 - s0).reason == ALL_FAILED:
             break
     return stepper.batch()

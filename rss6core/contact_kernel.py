@@ -151,13 +151,15 @@ Settings.__doc__ = """Rayleigh lambda_1 (1/s), lambda_2 (s); alpha_m, alpha_f; s
 steady window (s, peaks of steps ending from then on go to window 1, earlier ones to 0); impact speed
 floor (m/s); local error tolerance (m); divergence limit (m); Newton's tolerances on displacement (m)
 and velocity (m/s) and its iteration cap; step refinements allowed."""
-ChunkArrays = namedtuple("ChunkArrays", "F Mp Rc J Rr omega t offset")
+ChunkArrays = namedtuple("ChunkArrays", "F Mp Rc J Rr omega t offset filled")
 ChunkArrays.__doc__ = """A chunk's instants on the finest grid (T): loads F (T, N), platform mass matrices
 (T, 6, 6), crank frames Rc (T, 6, 3, 3) (with Rr the joint maps' blocks, :func:`_gmap`), platform point
 maps J (T, 6, 3, 6), rod frames Rr (T, 6, 3, 3),
 ideal relative angular velocities omega (T, 6, 3, 3) rad/s, t (T,) s, and the reference motion's own
 error against the ideal pose (T, 3, 6) [displacement, velocity, acceleration] (zero for the nominal
-robot; a realised robot's geometric error, rss6core/realised.py), which the peaks add."""
+robot; a realised robot's geometric error, rss6core/realised.py), which the peaks add; filled (n_base,)
+whether a base step's interior instants hold values (its ends always do: a refined step of an unfilled
+base step pauses the chunk, :func:`advance_chunk`)."""
 Frame = namedtuple("Frame", "Rc J Rr omega")
 Frame.__doc__ = """One instant of a chunk: Rc (6, 3, 3), J (6, 3, 6), Rr (6, 3, 3), omega (6, 3, 3)."""
 Law = namedtuple("Law", "exponent v0 v1")
@@ -1058,15 +1060,25 @@ def _largest(x):
     return big
 
 
+STEP_DONE, STEP_FAILED, STEP_NEEDS_FINE = 0, 1, 2   # what :func:`_base_step` returns
+
+
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _base_step(r, k_start, lv, layout, cfg, ch, jt, st, rec, work, scratch):
     """Carry realisation r through one base step from fine instant k_start, halving where Newton fails
     or the local error estimate exceeds the tolerance: a failed attempt at level l is retried at
     l + 1 from the same instant; after an accepted step the next attempt takes the coarsest level
     whose step starts at the instant reached, but none coarser than the step-size memory
-    (:func:`coarsest_next`) allows.  Returns False where r failed (recorded in rec)."""
+    (:func:`coarsest_next`) allows.  Returns STEP_DONE, STEP_FAILED (recorded in rec), or
+    STEP_NEEDS_FINE where a refined step needs the base step's interior instants, which the chunk
+    has not filled: nothing of the step is kept then (no state changes before a refined step is
+    accepted; the counts are restored), and the step is taken again once they are."""
     k, level = k_start, st.coarsest[r]
+    iters, refined = rec.iters[r], rec.refined[r]
     while k < k_start + lv.span[0]:
+        if level > 0 and not ch.filled[k_start // lv.span[0]]:
+            rec.iters[r], rec.refined[r] = iters, refined
+            return STEP_NEEDS_FINE
         k1 = k + lv.span[level]
         for start in range(2):     # one call site: _attempt is inlined once
             # extrapolation can mislead Newton across an impact: where it fails from there, retry
@@ -1091,7 +1103,7 @@ def _base_step(r, k_start, lv, layout, cfg, ch, jt, st, rec, work, scratch):
             rec.alive[r] = False
             rec.fail[r] = NEWTON_FAILED if not ok else DIVERGED
             rec.fail_t[r], rec.fail_h[r], rec.fail_size[r] = ch.t[k1], lv.h[level], big
-            return False
+            return STEP_FAILED
         _remember(r, lv.h[level], st)
         _accept(r, k1, layout, cfg, ch, st, rec, work)
         rec.steps[r] += 1
@@ -1101,20 +1113,27 @@ def _base_step(r, k_start, lv, layout, cfg, ch, jt, st, rec, work, scratch):
         while (k - k_start) % lv.span[level] != 0:
             level += 1
         level = max(level, st.coarsest[r])
-    return True
+    return STEP_DONE
 
 
 @njit(cache=True, fastmath=_FAST, _nrt=False)
-def advance_chunk(live, first, n_base, every, lv, layout, cfg, ch, jt, st, rec, work, scratch):
+def advance_chunk(live, first, n_base, every, lv, layout, cfg, ch, jt, st, rec, work, scratch, begin, pause):
     """Carry realisations ``live`` through base steps first .. first + n_base - 1 (the chunk's
-    instants on the finest grid start at the first one's start), in place; a realisation that fails
-    is recorded in rec (:class:`Records`) and stops.  Histories are kept at base steps divisible by
-    ``every``.  Returns the number of realisations still alive."""
+    instants on the finest grid start at the first one's start), in place, realisation r from its
+    chunk step begin[r]; a realisation that fails is recorded in rec (:class:`Records`) and stops.
+    Histories are kept at base steps divisible by ``every``.  Where a step needs instants the chunk
+    has not filled, pause = [r, step] and the call returns (the caller fills them and goes on from
+    there); else pause = [-1, -1].  Returns the number of realisations still alive."""
     N = st.d.shape[1]
     alive = 0
+    pause[0], pause[1] = -1, -1
     for r in live:
-        for s in range(n_base):
-            if not _base_step(r, s * lv.span[0], lv, layout, cfg, ch, jt, st, rec, work, scratch):
+        for s in range(begin[r], n_base):
+            code = _base_step(r, s * lv.span[0], lv, layout, cfg, ch, jt, st, rec, work, scratch)
+            if code == STEP_NEEDS_FINE:
+                pause[0], pause[1] = r, s
+                return alive
+            if code == STEP_FAILED:
                 break
             if (first + s) % every == 0:
                 k = (first + s) // every

@@ -82,6 +82,7 @@ class NumpyStepper(ContactStepper):
 
     def advance(self, ch: _Chunk, first: int, n_base: int) -> Progress:
         su, ws = self.setup, self.ws
+        ch.fill_all()
         for j in range(n_base):
             live = np.flatnonzero(ws.alive)
             if not len(live):

@@ -476,6 +476,35 @@ def test_contact_batch_equals_one_at_a_time_bit_for_bit(smoke, tolerance, refine
         assert one.steps[0] == batch.steps[k]
 
 
+def test_chunks_filled_on_demand_give_the_bits_of_chunks_filled_up_front(smoke, monkeypatch):
+    """A chunk computes its base steps' interior instants only where a refined step needs them
+    (_Chunk.fill, the kernel pausing): the run equals one whose chunks were filled up front, bit for
+    bit, with base steps left unfilled, and the same iteration and refinement counts."""
+    from rss6core import contact_dynamics
+    scene = _with(smoke, trajectory=dict(duration=0.05))
+    draws = [draw_clearances(scene, 5, r) for r in range(2)]
+    filled = []
+    original = contact_dynamics._Chunk.__init__
+
+    def watched(self, *args, **kw):
+        original(self, *args, **kw)
+        filled.append(self.filled)
+
+    monkeypatch.setattr(contact_dynamics._Chunk, "__init__", watched)
+    lazy = simulate_contact(scene, draws, tolerance=1e-8, refinements=3)
+    share = np.concatenate(filled).mean()
+    assert (lazy.refined > 0).all() and 0 < share < 0.9, share   # the start-up refines most steps
+
+    def eager(self, *args, **kw):
+        original(self, *args, **kw)
+        self.fill_all()
+
+    monkeypatch.setattr(contact_dynamics._Chunk, "__init__", eager)
+    full = simulate_contact(scene, draws, tolerance=1e-8, refinements=3)
+    for q in ("displacement", "velocity", "acceleration", "peak", "contact_peak", "steps", "iterations", "refined"):
+        assert np.array_equal(getattr(lazy, q), getattr(full, q)), q
+
+
 def test_adaptive_step_limits_are_the_fixed_steps(smoke):
     """A vanishing tolerance refines every step: the fixed run at the finest step, bit for bit,
     with each coarser level refused once, in the first base step (the step-size memory then keeps

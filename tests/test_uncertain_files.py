@@ -221,6 +221,21 @@ def test_a_budget_of_realised_robots_is_a_measured_sweep(text, tmp_path, capsys)
     assert len(err.splitlines()) == 1 and "still fails at clearance scale" in err and "geometric error" in err
 
 
+def test_until_grows_an_ensemble_of_realised_robots_with_the_same_draws(text, tmp_path):
+    """--until adds realisations to a scene with [uncertain.*] inputs; each row holds the inputs a
+    plain run of that realisation draws."""
+    scene = tmp_path / "u.toml"
+    scene.write_text(text)
+    out = tmp_path / "until.nc"
+    assert main(["run", str(scene), "--model", "quasi-static", "--until", "displacement:z@q50<=20%", "-n", "64",
+                 "--workers", "1", "-o", str(out)]) in (0, 3)
+    ds = load_netcdf(out)
+    n = ds.sizes["realization"]
+    assert n > 6
+    plain = run_chunk(_spec(text), [n - 1])
+    assert np.array_equal(ds["uncertain_input"].values[-1], plain["uncertain_input"].values[0])
+
+
 def test_studies_refuse_what_they_cannot_answer(text, tmp_path, capsys):
     """A budget cannot scale drawn clearance sizes, Sobol' indices need independent inputs: one line, exit 2."""
     scene = tmp_path / "u.toml"
