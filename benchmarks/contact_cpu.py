@@ -1,9 +1,13 @@
 """Benchmark: CPU time of the contact level's steps on configs/paper.toml, and what they count.
 
-Run on demand: ``python benchmarks/contact_cpu.py [--realizations R] [--json]``.
+Run on demand: ``python benchmarks/contact_cpu.py [--realizations R] [--config TOML] [--json]``
+(``--config``: another scene, for example configs/paper_manufacturing.toml, whose realised robots
+each run as a batch of their own: "per batch" then sums their precomputes).
 One batch of R realisations (seed 0) after a warm-up of one, timed with the process's CPU time
 (``time.process_time``: on a shared machine wall times mean little), split into the compiled steps
-(``CompiledStepper.advance``), the fine-grid precompute (``_Chunk``) and the rest; with the batch's
+(``CompiledStepper.advance``), the fine-grid precompute (``_Chunk``: its base-step instants up front,
+and, where the code has it, the interior instants a refined step fills during the steps) and the rest;
+with the batch's
 accepted steps, refused attempts (each retried as two halves) and Newton updates per attempt.
 For an A/B comparison run it alternately with two installs' interpreters (each imports its own
 ``rss6core``) and compare medians.
@@ -30,7 +34,7 @@ class _Meter:
     """CPU seconds spent in the wrapped methods, and the last batch the stepper handed over."""
 
     def __init__(self):
-        self.cpu = {"steps": 0.0, "precompute": 0.0}
+        self.cpu = {"steps": 0.0, "precompute": 0.0, "fill": 0.0}
         self.batch = None
 
     def timed(self, key, method):
@@ -47,6 +51,8 @@ class _Meter:
         cls.advance = self.timed("steps", cls.advance)
         chunk = contact_dynamics._Chunk
         chunk.__init__ = self.timed("precompute", chunk.__init__)
+        if hasattr(chunk, "fill"):      # instants filled during the steps (an install that has them)
+            chunk.fill = self.timed("fill", chunk.fill)
         handover = contact_dynamics.ContactStepper.batch
 
         def keep(stepper):
@@ -55,8 +61,8 @@ class _Meter:
         contact_dynamics.ContactStepper.batch = keep
 
 
-def measure(realizations: int) -> dict:
-    scene = load_scene(CONFIG)
+def measure(realizations: int, config=CONFIG) -> dict:
+    scene = load_scene(config)
     meter = _Meter()
     meter.install()
     simulate_batch(scene, "contact", realizations=[0])          # warm-up: numba's cache, imports
@@ -65,6 +71,9 @@ def measure(realizations: int) -> dict:
     simulate_batch(scene, "contact", realizations=range(realizations))
     total = time.process_time() - start
     b = meter.batch
+    fill = meter.cpu.pop("fill")
+    meter.cpu["steps"] -= fill
+    meter.cpu["precompute"] += fill
     attempts = int(b.steps.sum() + b.refined.sum())
     return {"realizations": realizations, "cpu_s": total,
             "steps_cpu_s_per_realization": meter.cpu["steps"] / realizations,
@@ -79,15 +88,16 @@ def measure(realizations: int) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--realizations", type=int, default=8, metavar="R", help="batch size (default 8)")
+    parser.add_argument("--config", type=Path, default=CONFIG, help="scene TOML (default configs/paper.toml)")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args(argv)
     if args.realizations < 1:
         parser.error("--realizations must be at least 1")
-    out = measure(args.realizations)
+    out = measure(args.realizations, args.config)
     if args.json:
         print(json.dumps(out))
         return 0
-    print(f"contact, configs/paper.toml, {out['realizations']} realisations: {out['cpu_s']:.2f} s CPU; "
+    print(f"contact, {args.config.name}, {out['realizations']} realisations: {out['cpu_s']:.2f} s CPU; "
           f"steps {out['steps_cpu_s_per_realization']:.4f} s per realisation, precompute "
           f"{out['precompute_cpu_s_per_batch']:.2f} s per batch, other {out['other_cpu_s']:.2f} s; "
           f"{sum(out['accepted_steps'])} steps, {sum(out['refused_attempts'])} refused, "
