@@ -171,3 +171,15 @@ def test_greedy_never_beats_the_exact_optimum(paper, exhaustive, tmp_path):
     options, best, _, passing = exhaustive
     a = greedy_allocate(paper, [parse_spec(SPEC)], N, tmp_path, 0.95, options, workers=1, max_ensembles=27)
     assert a.cost >= best - 1e-9 and a.classes in passing
+    uniform = min((c for c in passing if len({x.name for x in c}) == 1), key=_cost)
+    assert a.uniform == uniform and a.cost <= a.uniform_cost
+
+
+def test_greedy_finds_the_cheapest_uniform_class_by_bisection(paper, exhaustive, tmp_path):
+    """With a budget of 3 ensembles on 3 classes the bisection (dearest, cheapest, middle) closes its
+    bracket on the cheapest passing uniform class, and the answer is no dearer than it."""
+    from pipeline.studies.allocation_greedy import greedy_allocate
+    options, _, _, passing = exhaustive
+    uniform = min((c for c in passing if len({x.name for x in c}) == 1), key=_cost)
+    a = greedy_allocate(paper, [parse_spec(SPEC)], N, tmp_path, 0.95, options, workers=1, max_ensembles=3)
+    assert a.combinations <= 3 and a.uniform == uniform and a.classes == uniform

@@ -20,7 +20,7 @@ COST_NOTE = (f"relative units per joint: ISO 286 fit cost C(T_hole) + C(T_shaft)
 def _saving(a: Allocation) -> str:
     if a.uniform_cost is None:
         return ("no single class for every family meets the specs" if a.method.startswith("exact") else
-                "no single class for every family met the specs within the ensemble budget")
+                "the cheapest uniform class that meets the specs was not found within the ensemble budget")
     name = a.uniform[0].name
     return (f"cheapest uniform class {name}: cost {a.uniform_cost:.4g}; allocation saves "
             f"{a.uniform_cost - a.cost:.4g} ({100 * (1 - a.cost / a.uniform_cost):.1f} %)")
