@@ -97,7 +97,7 @@ def test_refusals_in_one_line(configs, tmp_path, capsys):
     base = ["allocate", paper, "--spec", SPEC, "-n", str(N), "-o", str(tmp_path / "x")]
     _refused(base + ["--classes", "H7/x6"], capsys, "H7/x6")
     _refused(base + ["--model", "elastic"], capsys, "--model elastic", "no clearances")
-    _refused(base + ["--per-joint"], capsys, "--per-joint")
+    _refused(base + ["--per-joint", "--model", "paper"], capsys, "--per-joint")
     _refused(["allocate", paper, "--spec", "displacement:x<=0.01mm@q95", "-n", str(N), "-o", str(tmp_path / "y")],
              capsys, "displacement:x<=0.01mm@q95", "best attainable")
     costs = tmp_path / "costs.toml"

@@ -6,7 +6,7 @@ order, as ``rss6 budget``'s sweep assumes).  First the uniform choices (one clas
 family, in rising cost) are bisected: the dearest must pass (else the spec is out of reach), the
 cheapest is tried next, then the middle of the bracket until the cheapest passing uniform class is
 found (about log2 of the classes' number of ensembles), which is also the baseline the saving is
-stated against.  From there, the one-step loosenings (a family moved to its next cheaper class) are
+stated against.  From there, the one-step loosenings (a family moved to its next strictly cheaper class) are
 tried in order of the cost they save, an ensemble each, and the first that passes every spec at the
 gate is kept; a family whose loosening failed is not loosened again (by the assumption it would
 fail with the others looser too).  It stops when no family can be loosened or the ensemble budget is
@@ -63,13 +63,13 @@ class _Runner:
 
 
 def _loosenings(combo, ranked: dict, frozen: frozenset = frozenset()) -> list[tuple]:
-    """The one-step cheaper combinations of the families not in ``frozen``, most cost saved first."""
+    """The one-step cheaper combinations of the families not in ``frozen``, most cost saved first: each
+    family to its next strictly cheaper class (a class costing the same as a tighter one saves nothing)."""
     out = []
     for k, family in enumerate(ALLOCATED):
-        order = ranked[family]
-        i = order.index(combo[k])
-        if family not in frozen and i + 1 < len(order):
-            out.append(combo[:k] + (order[i + 1],) + combo[k + 1:])
+        cheaper = [c for c in ranked[family] if c.cost < combo[k].cost]
+        if family not in frozen and cheaper:
+            out.append(combo[:k] + (cheaper[0],) + combo[k + 1:])
     return sorted(out, key=cost_of)
 
 
@@ -136,8 +136,8 @@ def greedy_allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confi
         _out_of_reach(spec, start)
     uniforms = uniform_combos(options)
     uniform = _bisect_uniform(run, uniforms) if uniforms else None
-    passing = [t for t in run.trials.values() if t.passed]
-    best = _descend(run, min(passing, key=lambda t: cost_of(t.combo)), ranked)
+    cheapest = min((t for t in run.trials.values() if t.passed), key=lambda t: cost_of(t.combo))
+    best = _descend(run, uniform or cheapest, ranked)
     scene_path = folder / f"{spec.scene().name}_allocated.toml"
     scene_path.write_text(allocated_scene(spec.scene_text, spec.source, best.combo))
     predicted = {s.text: max((v.upper for v in best.verdicts if v.spec == s.text and v.upper is not None),
