@@ -24,8 +24,9 @@ import numpy as np
 from rss6core import ClearanceDraw, model_level, models_with, parse_scene, prepare_level, stored_draw
 
 from ..analysis.estimators import one_sided_bounds
+from ..analysis.exceedance import one_sided_cp
 from ..analysis.gate import Verdict, judge_all, upper_limit_problem
-from ..analysis.spec import Spec
+from ..analysis.spec import PF, Spec
 from ..ensemble.run import EnsembleSpec, ensemble
 from ..files.records import window_masks
 from ..scenes.variant import dump_scene_toml
@@ -36,7 +37,7 @@ __all__ = ["ALLOCATED", "DEFAULT_FITS", "ClassOption", "Allocation", "Allocation
            "Responses", "responses", "spec_uppers", "error_uppers", "search", "allocate", "allocated_scene",
            "check_request",
            "cost_of", "cheapest_uniform", "unit_eccentricity", "family_draw", "fixed_draw", "cells_history",
-           "probe_scene", "PROBE_LOW", "PROBE_HIGH"]
+           "probe_scene", "PROBE_LOW", "PROBE_HIGH", "allowed_exceedances", "pf_order_statistic", "out_of_reach"]
 
 ALLOCATED = ("revolute_radial", "spherical_C", "spherical_B")   # families given fit classes
 RADII = {"revolute_radial": "journal_radius", "spherical_C": "sphere_radius", "spherical_B": "sphere_radius"}
@@ -256,8 +257,35 @@ def error_uppers(err: np.ndarray, cells, t: np.ndarray, specs: list[Spec], scene
         cols = [cells.index((s.quantity, d)) for d in s.directions]
         e = err[:, mask][:, :, cols]
         x = e.max(axis=1) if s.measure == "max" else e.mean(axis=1)
-        out.append(one_sided_bounds(x, confidence)[STATISTICS.index(s.statistic), 1])
+        out.append(pf_order_statistic(x, s, confidence) if s.statistic == PF else
+                   one_sided_bounds(x, confidence)[STATISTICS.index(s.statistic), 1])
     return out
+
+
+def allowed_exceedances(spec: Spec, n: int, confidence: float) -> int:
+    """The most realisations of n whose maximum may violate ``spec``'s limit with its pf requirement
+    still met: the largest k whose one-sided Clopper-Pearson upper bound of P meets pf (the gate's
+    rule, pipeline.analysis.gate); -1 if not even k = 0 does at this n."""
+    upper = one_sided_cp(np.arange(n + 1), n, confidence)[1]
+    ok = upper <= spec.pf_limit if spec.pf_op == "<=" else upper < spec.pf_limit
+    return int(np.flatnonzero(ok).max()) if ok.any() else -1
+
+
+def pf_order_statistic(x: np.ndarray, spec: Spec, confidence: float) -> np.ndarray:
+    """The (k+1)-th largest of the maxima x (n, directions) (SI), k = allowed_exceedances: the pf
+    requirement holds exactly when this value meets the limit, so a pf spec is searched as an upper
+    bound like the others."""
+    k = allowed_exceedances(spec, x.shape[0], confidence)
+    return np.sort(x, axis=0)[x.shape[0] - 1 - k] if k >= 0 else np.full(x.shape[1], np.inf)
+
+
+def out_of_reach(spec: Spec, best: float, n: int, confidence: float) -> AllocationError:
+    """The error for a spec no combination meets, with the best attainable value (SI ``best``)."""
+    what = (f"{allowed_exceedances(spec, n, confidence) + 1}-th largest maximum |error| (pf {spec.pf_op} "
+            f"{spec.pf_limit:g} allows {allowed_exceedances(spec, n, confidence)} of {n} above the limit)"
+            if spec.statistic == PF else f"{spec.statistic} upper bound")
+    return AllocationError(f"--spec {spec.text!r}: no class combination meets it; the best attainable "
+                           f"{what} is {best / spec.factor:.4g} {spec.unit}")
 
 
 def cost_of(combo) -> float:
@@ -304,7 +332,10 @@ def check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: flo
         raise AllocationError(f"{spec.source}: allocate needs [simulation] quasi_static_eccentricity = "
                               "\"drawn\" (the reaction mode's direction does not split by family)")
     for s in specs:
-        if why := upper_limit_problem(s, confidence, n, "an allocation"):
+        if s.statistic == PF and allowed_exceedances(s, n, confidence) < 0:
+            raise AllocationError(f"--spec {s.text!r}: even with no realisation above the limit, n = {n} cannot "
+                                  f"show pf {s.pf_op} {s.pf_limit:g} at {100 * confidence:g} % (raise -n)")
+        if s.statistic != PF and (why := upper_limit_problem(s, confidence, n, "an allocation")):
             raise AllocationError(why)
 
 
@@ -319,9 +350,7 @@ def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: 
     combo, judged, best = search(res, options, specs, scene, confidence)
     if combo is None:
         worst = max(range(len(specs)), key=lambda i: best[i] / specs[i].limit)
-        s = specs[worst]
-        raise AllocationError(f"--spec {s.text!r}: no class combination meets it; the best attainable "
-                              f"{s.statistic} upper bound is {best[worst] / s.factor:.4g} {s.unit}")
+        raise out_of_reach(specs[worst], best[worst], n, confidence)
     uniform = cheapest_uniform(res, options, specs, scene, confidence)
     predicted = {s.text: float(np.max(u)) for s, u in zip(specs, spec_uppers(res, combo, specs, scene, confidence))}
     folder = Path(folder)

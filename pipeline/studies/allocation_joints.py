@@ -30,9 +30,9 @@ from ..analysis.spec import Spec
 from ..ensemble.run import EnsembleSpec
 from ..files.records import chunk_dataset, finish_ensemble
 from ..files.writing import write_netcdf
-from .allocation import (ALLOCATED, PROBE_LOW, Allocation, AllocationError, Responses,
+from .allocation import (ALLOCATED, PROBE_LOW, Allocation, Responses,
                          cells_history, check_request, cheapest_uniform, cost_of, error_uppers, family_draw,
-                         fixed_draw, probe_scene, search, unit_eccentricity)
+                         fixed_draw, out_of_reach, probe_scene, search, unit_eccentricity)
 
 __all__ = ["EXHAUSTIVE_LIMIT", "JOINT_LETTERS", "JointResponses", "joint_labels", "joint_responses", "joint_uppers",
            "joint_search", "verify_per_joint", "allocate_per_joint"]
@@ -151,9 +151,7 @@ def joint_search(res: JointResponses, options: dict, specs: list[Spec], scene, c
     family_combo, judged, best = search(res.family(), options, specs, scene, confidence)
     if family_combo is None:
         worst = max(range(len(specs)), key=lambda i: best[i] / specs[i].limit)
-        s = specs[worst]
-        raise AllocationError(f"--spec {s.text!r}: no class combination meets it; the best attainable "
-                              f"{s.statistic} upper bound is {best[worst] / s.factor:.4g} {s.unit}")
+        raise out_of_reach(specs[worst], best[worst], res.u.shape[1], confidence)
     if math.prod(len(options[f]) ** 6 for f in ALLOCATED) <= EXHAUSTIVE_LIMIT:
         combo, k = _exhaustive(res, options, specs, scene, confidence)
         return combo, judged + k, "exact linear scaling, per joint (exhaustive)", family_combo
