@@ -7,9 +7,9 @@ drawing s_j = lo_j + (hi_j - lo_j) u_j gives the error sum_j s_j U_j(t) + the re
 Summed over a family's joints these are the family responses A_f, B_f, so the per-family optimum
 comes first (exhaustive, exact) and is the start.  If the per-joint combinations number at most
 EXHAUSTIVE_LIMIT, all are judged in rising cost (exact); otherwise a greedy descent loosens one joint
-by one class at a time, the most cost saved first and, among equal savings, the one that leaves the
-largest margin (the smallest worst ratio of upper bound to limit), until no loosening meets every
-spec (not proven least-cost, and it says so).  Every judgement is a linear combination, so no
+to its next strictly cheaper class at a time, the most cost saved first and, among equal savings,
+the one that leaves the largest margin (the smallest worst ratio of upper bound to limit), until no
+loosening meets every spec (not proven least-cost, and it says so).  Every judgement is a linear combination, so no
 ensemble runs during the search.  The verification simulates the seed's realisations 0..n-1 at the
 answer's per-joint sizes (the same uniforms: a scene's [tolerance] bands are per family, so no
 scene can express a per-joint answer) and judges their Dataset with the gate.
@@ -130,14 +130,13 @@ def _greedy(res, options, specs, scene, confidence, start):
     while True:
         best = None
         for j, family in enumerate(families):
-            order = ranked[family]
-            i = order.index(combo[j])
-            if i + 1 == len(order):
+            cheaper = [c for c in ranked[family] if c.cost < combo[j].cost]   # strictly: a tie saves nothing
+            if not cheaper:
                 continue
-            candidate = combo[:j] + (order[i + 1],) + combo[j + 1:]
+            candidate = combo[:j] + (cheaper[0],) + combo[j + 1:]
             judged += 1
             margin = _margin(joint_uppers(res, candidate, specs, scene, confidence), specs)
-            key = (combo[j].cost - order[i + 1].cost, -margin if margin is not None else 0.0)
+            key = (combo[j].cost - cheaper[0].cost, -margin if margin is not None else 0.0)
             if margin is not None and (best is None or key > best[0]):
                 best = (key, candidate)
         if best is None:

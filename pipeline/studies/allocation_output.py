@@ -33,16 +33,17 @@ def _rows(a: Allocation) -> list[str]:
 
 def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_note: str) -> str:
     """The answer as lines: the class table, total against uniform, the verification's verdicts."""
+    width = 21 if a.joints else 18
     lines = [f"fit allocation: scene {scene_name}, {model} level, n = {n} realisations, "
              f"{a.combinations} class combinations judged ({a.method})",
              f"costs: {cost_note}",
-             f"{'joint' if a.joints else 'family':18}{'class':10}{'radial band (um)':>20}{'cost/joint':>12}"
+             f"{'joint' if a.joints else 'family':{width}}{'class':10}{'radial band (um)':>20}{'cost/joint':>12}"
              f"{'joints':>8}"]
     for label, c in zip(_rows(a), a.classes):
         band = f"{c.low * 1e6:.4g}-{c.high * 1e6:.4g}"
-        lines.append(f"{label:18}{c.name:10}{band:>20}{c.cost:12.4g}{1 if a.joints else 6:8d}")
+        lines.append(f"{label:{width}}{c.name:10}{band:>20}{c.cost:12.4g}{1 if a.joints else 6:8d}")
     lines.append(f"total cost {a.cost:.4g}; {_saving(a)}")
-    how = "predicted by the linear scaling" if a.method.startswith("exact") else "measured"
+    how = "predicted by the linear scaling" if "linear scaling" in a.method else "measured"
     lines.append(f"upper bounds at the answer ({how}): " + "; ".join(f"{k}: {v * 1e3:.4g} mm"
                                                                       for k, v in a.predicted.items()))
     lines.append(f"scene at the answer: {a.scene_path or 'none (per-joint bands; a scene has one band a family)'}")
