@@ -6,9 +6,9 @@ order, as ``rss6 budget``'s sweep assumes).  First the uniform choices (one clas
 family, in rising cost) are bisected: the dearest must pass (else the spec is out of reach), the
 cheapest is tried next, then the middle of the bracket until the cheapest passing uniform class is
 found (about log2 of the classes' number of ensembles), which is also the baseline the saving is
-stated against.  From there, the one-step loosenings (a family moved to its next strictly cheaper class) are
-tried in order of the cost they save, an ensemble each, and the first that passes every spec at the
-gate is kept; a family whose loosening failed is not loosened again (by the assumption it would
+stated against.  From there, the one-step loosenings (a family moved to its next strictly cheaper
+class) are tried in order of the cost they save, an ensemble each, and the first that passes every
+spec at the gate is kept; a family whose loosening failed is not loosened again (by the assumption it would
 fail with the others looser too).  It stops when no family can be loosened or the ensemble budget is
 spent; it is greedy, so it may stop above the least cost, and says so.  The passing ensemble of the
 answer is its verification.
