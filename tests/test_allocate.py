@@ -6,6 +6,7 @@ import itertools
 import json
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from pipeline.analysis.gate import judge_all
@@ -97,7 +98,7 @@ def test_refusals_in_one_line(configs, tmp_path, capsys):
     base = ["allocate", paper, "--spec", SPEC, "-n", str(N), "-o", str(tmp_path / "x")]
     _refused(base + ["--classes", "H7/x6"], capsys, "H7/x6")
     _refused(base + ["--model", "elastic"], capsys, "--model elastic", "no clearances")
-    _refused(base + ["--per-joint"], capsys, "--per-joint")
+    _refused(base + ["--per-joint", "--model", "paper"], capsys, "--per-joint")
     _refused(["allocate", paper, "--spec", "displacement:x<=0.01mm@q95", "-n", str(N), "-o", str(tmp_path / "y")],
              capsys, "displacement:x<=0.01mm@q95", "best attainable")
     costs = tmp_path / "costs.toml"
@@ -171,3 +172,45 @@ def test_greedy_never_beats_the_exact_optimum(paper, exhaustive, tmp_path):
     options, best, _, passing = exhaustive
     a = greedy_allocate(paper, [parse_spec(SPEC)], N, tmp_path, 0.95, options, workers=1, max_ensembles=27)
     assert a.cost >= best - 1e-9 and a.classes in passing
+    uniform = min((c for c in passing if len({x.name for x in c}) == 1), key=_cost)
+    assert a.uniform == uniform and a.cost <= a.uniform_cost
+
+
+def test_greedy_finds_the_cheapest_uniform_class_by_bisection(paper, exhaustive, tmp_path):
+    """With a budget of 3 ensembles on 3 classes the bisection (dearest, cheapest, middle) closes its
+    bracket on the cheapest passing uniform class, and the answer is no dearer than it."""
+    from pipeline.studies.allocation_greedy import greedy_allocate
+    options, _, _, passing = exhaustive
+    uniform = min((c for c in passing if len({x.name for x in c}) == 1), key=_cost)
+    a = greedy_allocate(paper, [parse_spec(SPEC)], N, tmp_path, 0.95, options, workers=1, max_ensembles=3)
+    assert a.combinations <= 3 and a.uniform == uniform and a.classes == uniform
+
+
+PF_SPEC = "displacement:x,y,z<=0.1mm@pf<=1e-1"   # n = 60 at 95 %: at most 1 realisation above 0.1 mm
+
+
+def test_a_pf_spec_is_searched_on_the_gates_rule(paper):
+    """A pf spec at the quasi-static level: the predicted verdict of the answer and of every one-step
+    looser or tighter combination equals the gate's verdict (Clopper-Pearson) on a plain run."""
+    from pipeline.studies.allocation import allowed_exceedances
+    specs = [parse_spec(PF_SPEC)]
+    assert allowed_exceedances(specs[0], N, 0.95) == 1
+    options = class_options(paper.scene(), SMALL)
+    res = responses(paper, specs, N)
+    combo, _, _ = search(res, options, specs, paper.scene(), 0.95)
+    ranked = {f: list(options[f]) for f in ALLOCATED}
+    neighbours = [combo[:k] + (ranked[f][i],) + combo[k + 1:] for k, f in enumerate(ALLOCATED)
+                  for i in (ranked[f].index(combo[k]) - 1, ranked[f].index(combo[k]) + 1) if 0 <= i < len(ranked[f])]
+    verdicts = []
+    for c in [combo, *neighbours]:
+        predicted = bool(np.all(specs[0].holds(spec_uppers(res, c, specs, paper.scene(), 0.95)[0])))
+        ds = run_chunk(replace(paper, scene_text=allocated_scene(paper.scene_text, "paper", c)), list(range(N)))
+        gate = [v.outcome for v in judge_all(specs, ds, 0.95)]
+        assert predicted == (gate == ["pass"] * 3), (c, gate)
+        verdicts.append(predicted)
+    assert verdicts[0] and not all(verdicts)
+
+
+def test_a_pf_spec_the_sample_cannot_show_is_refused(configs, tmp_path, capsys):
+    _refused(["allocate", str(configs / "paper.toml"), "--spec", "displacement:x<=0.1mm@pf<=1e-2", "-n", "100",
+              "-o", str(tmp_path / "p")], capsys, "pf <= 0.01", "n = 100", "raise -n")

@@ -3,7 +3,8 @@ import pytest
 
 from pipeline.studies.fits import COST_LAW, IT_UM, SHAFT_ES_UM, FitError, fit_limits, parse_fit
 
-# ANSI B4.2-1978 Table 1 (preferred metric hole-basis clearance fits, ISO 286 limits), mm:
+# ANSI B4.2-1978 Table 2 (preferred hole basis clearance fits, ISO 286 limits; its Table 1 is the
+# preferred sizes), mm:
 # (fit, basic size mm): (min, max) diametral clearance
 PUBLISHED_MM = {
     ("H11/c11", 20): (0.110, 0.370), ("H9/d9", 20): (0.065, 0.169), ("H8/f7", 20): (0.020, 0.074),

@@ -24,7 +24,7 @@ WORK = ("pipeline.ensemble.run.ensemble", "pipeline.analysis.until.run_until", "
         "pipeline.studies.report.write_report", "pipeline.studies.tradeoff.tradeoff",
         "pipeline.studies.stability.stability", "rss6core.compile_kernels",
         "pipeline.studies.workspace_map.workspace_map", "pipeline.studies.allocation.responses",
-        "pipeline.studies.reliability.reliability")
+        "pipeline.studies.allocation_joints.joint_responses", "pipeline.studies.reliability.reliability")
 
 
 def _commands() -> dict[str, argparse.ArgumentParser]:
@@ -111,6 +111,8 @@ COMBINATIONS = [
     ["multifidelity", "-o", "{tmp}/m.nc", "-n", "8", "--low-n", "4"],
     ["multifidelity", "-o", "{tmp}/m.nc", "--width", "0.1"],
     ["report", "smoke", "--worker-timeout", "5"],
+    ["allocate", "smoke", "--spec", "displacement:x<=1mm@q95", "--per-joint", "--model", "contact"],
+    ["allocate", "smoke", "--spec", "displacement:x<=1mm@pf<=1e-2", "-n", "100", "--per-joint"],
     ["sensitivity", "smoke", "-n", "100"],
     ["simulate", "smoke", "--model", "elastic", "--start", "equilibrium"],
     ["map", "smoke", "--model", "elastic"],

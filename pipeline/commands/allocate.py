@@ -21,7 +21,8 @@ def add_parser(sub) -> None:
                    help="an upper limit QUANTITY:DIRECTIONS <= VALUE UNIT@STATISTIC, as for rss6 budget, e.g. "
                         "'displacement:x,y,z<=0.1mm@q95' (repeatable; required)")
     p.add_argument("--per-joint", action="store_true",
-                   help="a class per joint rather than per family (not implemented: refused)")
+                   help="a class per joint (A1-A6, C1-C6, B1-B6) rather than per family; quasi-static level only "
+                        "(exhaustive up to 4096 combinations, else greedy from the per-family optimum)")
     add_model(p, "model level (default quasi-static: exhaustive search by its exact linear scaling; paper, "
                  "contact: a greedy search of ensembles, at most --max-ensembles)", choices=MODELS,
               default="quasi-static")
@@ -59,20 +60,24 @@ def main(args) -> int:
     from ..files.writing import write_netcdf
     from ..studies.allocation import allocate, check_request, class_options
     from ..studies.allocation_greedy import greedy_allocate
+    from ..studies.allocation_joints import allocate_per_joint
     from ..studies.allocation_output import COST_NOTE, allocation_dataset, allocation_json, format_allocation
     specs = _specs(args.spec)
-    if args.per_joint:
-        raise OptionError("--per-joint: a class per joint needs per-joint size bands, which a scene's "
-                          "[tolerance.<family>] tables cannot give yet; allocate per family")
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
+    if args.per_joint and not model_level(level.model).linear_in_clearances:
+        raise OptionError(f"--per-joint: at the {', '.join(m for m in MODELS if model_level(m).linear_in_clearances)} "
+                          f"level only (exact linear scaling); at the {level.model} level each per-joint step "
+                          "would need its own ensemble, and a scene has one size band a family")
     options = class_options(level.scene, [f.strip() for f in args.classes.split(",") if f.strip()], args.costs)
     check_request(level.ensemble_spec(args.seed), specs, args.n, args.confidence)
     folder = check_output_folder(args.output or f"allocate_{level.scene.name}_{level.model}", args.parents)
     warn_oversubscription(cluster.workers, None)
     try:
         spec = level.ensemble_spec(args.seed)
-        if model_level(level.model).linear_in_clearances:
+        if args.per_joint:
+            a = allocate_per_joint(spec, specs, args.n, folder, args.confidence, options)
+        elif model_level(level.model).linear_in_clearances:
             a = allocate(spec, specs, args.n, folder, args.confidence, options, cluster.workers)
         else:
             a = greedy_allocate(spec, specs, args.n, folder, args.confidence, options, cluster.workers,
@@ -80,7 +85,8 @@ def main(args) -> int:
     except KeyboardInterrupt:
         return interrupted(f"finished chunks of the verification ensemble are kept in {folder}")
     note = f"per joint from {args.costs}" if args.costs else COST_NOTE
-    opts = f"-n {args.n} --seed {args.seed} --confidence {args.confidence} --classes {args.classes} " + " ".join(
+    opts = ("--per-joint " if args.per_joint else "") + f"-n {args.n} --seed {args.seed} --confidence " \
+        f"{args.confidence} --classes {args.classes} " + " ".join(
         f"--spec '{s}'" for s in args.spec)
     ds = allocation_dataset(a, level.scene, level.model, level.integrator, level.dt, level.elements, opts, note)
     write_netcdf(ds, folder / "allocation.nc")

@@ -24,8 +24,9 @@ import numpy as np
 from rss6core import ClearanceDraw, model_level, models_with, parse_scene, prepare_level, stored_draw
 
 from ..analysis.estimators import one_sided_bounds
+from ..analysis.exceedance import one_sided_cp
 from ..analysis.gate import Verdict, judge_all, upper_limit_problem
-from ..analysis.spec import Spec
+from ..analysis.spec import PF, Spec
 from ..ensemble.run import EnsembleSpec, ensemble
 from ..files.records import window_masks
 from ..scenes.variant import dump_scene_toml
@@ -33,8 +34,10 @@ from ..vocabulary import DIRECTIONS, QUANTITIES, STATISTICS, WINDOWS, UserError
 from .fits import COST_LAW, DEFAULT_FITS, FitError, fit_limits, parse_fit
 
 __all__ = ["ALLOCATED", "DEFAULT_FITS", "ClassOption", "Allocation", "AllocationError", "class_options",
-           "Responses", "responses", "spec_uppers", "search", "allocate", "allocated_scene", "check_request",
-           "cost_of"]
+           "Responses", "responses", "spec_uppers", "error_uppers", "search", "allocate", "allocated_scene",
+           "check_request",
+           "cost_of", "cheapest_uniform", "unit_eccentricity", "family_draw", "fixed_draw", "cells_history",
+           "probe_scene", "PROBE_LOW", "PROBE_HIGH", "allowed_exceedances", "pf_order_statistic", "out_of_reach"]
 
 ALLOCATED = ("revolute_radial", "spherical_C", "spherical_B")   # families given fit classes
 RADII = {"revolute_radial": "journal_radius", "spherical_C": "sphere_radius", "spherical_B": "sphere_radius"}
@@ -57,8 +60,8 @@ class ClassOption:
 
 @dataclass(frozen=True)
 class Allocation:
-    """The answer: a class per family, its total cost (6 joints a family), the cheapest uniform
-    choice (one class name for every family) and the verification's verdicts."""
+    """The answer: a class per family (or per joint, ``joints``), its total cost (6 joints a family),
+    the cheapest uniform choice (one class name for every family) and the verification's verdicts."""
     classes: tuple[ClassOption, ...]
     cost: float
     uniform: tuple[ClassOption, ...] | None
@@ -67,8 +70,9 @@ class Allocation:
     verdicts: tuple[Verdict, ...]
     predicted: dict         # spec text -> largest predicted upper bound over its directions (SI)
     ensemble_path: Path
-    scene_path: Path
+    scene_path: Path | None  # None per joint: a scene's [tolerance] bands are per family
     method: str = "exact linear scaling"
+    joints: tuple[str, ...] = ()   # per joint: the joint of each class (A1-A6, C1-C6, B1-B6); else per family
 
 
 def _read_costs(path) -> dict:
@@ -161,32 +165,39 @@ class Responses:
     t: np.ndarray
 
 
-def _unit_draws(scene, draw: ClearanceDraw, family: str):
-    """Two draws of ``family`` alone (others zero) at sizes 1 and u_j (module doc), scaled by PROBE_LOW
-    so that no divergence check sees metre-sized clearances."""
-    w = scene.geometry.w
-    zero6, zero63 = np.zeros(6), np.zeros((6, 3))
+def unit_eccentricity(scene, draw: ClearanceDraw, family: str) -> tuple[np.ndarray, np.ndarray]:
+    """(unit, u) of ``family`` in a probe draw: each joint's eccentricity per metre of its size (6, 3)
+    (the revolute's radial part) and its size uniform in the probe band (6,) (module doc)."""
     if family == "revolute_radial":
+        w = scene.geometry.w
         size = draw.radial_size
         radial = draw.e_A - np.einsum("li,li->l", draw.e_A, w)[:, None] * w
         unit = radial / size[:, None]
     else:
         size = draw.size_C if family == "spherical_C" else draw.size_B
         unit = (draw.e_C if family == "spherical_C" else draw.e_B) / size[:, None]
-    u = (size - PROBE_LOW) / (PROBE_HIGH - PROBE_LOW)
-    out = []
-    for c in (np.ones(6), u):
-        s, e = PROBE_LOW * c, PROBE_LOW * c[:, None] * unit
-        fields = dict(radial_size=zero6, axial_size=zero6, size_C=zero6, size_B=zero6, e_A=zero63, e_C=zero63,
-                      e_B=zero63)
-        key = {"revolute_radial": ("radial_size", "e_A"), "spherical_C": ("size_C", "e_C"),
-               "spherical_B": ("size_B", "e_B")}[family]
-        fields.update({key[0]: s, key[1]: e})
-        out.append(ClearanceDraw(**fields))
-    return out
+    return unit, (size - PROBE_LOW) / (PROBE_HIGH - PROBE_LOW)
 
 
-def _fixed_draw(scene, draw: ClearanceDraw) -> ClearanceDraw:
+def family_draw(family: str, sizes: np.ndarray, eccentricity: np.ndarray) -> ClearanceDraw:
+    """A draw with ``family``'s sizes (6,) and eccentricities (6, 3) (m) and every other family at zero."""
+    zero6, zero63 = np.zeros(6), np.zeros((6, 3))
+    fields = dict(radial_size=zero6, axial_size=zero6, size_C=zero6, size_B=zero6, e_A=zero63, e_C=zero63,
+                  e_B=zero63)
+    key = {"revolute_radial": ("radial_size", "e_A"), "spherical_C": ("size_C", "e_C"),
+           "spherical_B": ("size_B", "e_B")}[family]
+    fields.update({key[0]: sizes, key[1]: eccentricity})
+    return ClearanceDraw(**fields)
+
+
+def _unit_draws(scene, draw: ClearanceDraw, family: str):
+    """Two draws of ``family`` alone (others zero) at sizes 1 and u_j (module doc), scaled by PROBE_LOW
+    so that no divergence check sees metre-sized clearances."""
+    unit, u = unit_eccentricity(scene, draw, family)
+    return [family_draw(family, PROBE_LOW * c, PROBE_LOW * c[:, None] * unit) for c in (np.ones(6), u)]
+
+
+def fixed_draw(scene, draw: ClearanceDraw) -> ClearanceDraw:
     """The draw with the allocated families' eccentricities zeroed: the revolute axial part alone."""
     w = scene.geometry.w
     axial = np.einsum("li,li->l", draw.e_A, w)[:, None] * w
@@ -195,29 +206,34 @@ def _fixed_draw(scene, draw: ClearanceDraw) -> ClearanceDraw:
                          e_C=zero63, e_B=zero63)
 
 
-def _cells_history(result, cells) -> np.ndarray:
+def cells_history(result, cells) -> np.ndarray:
     """(T, cell) of a result's error histories, SI."""
     q = [QUANTITIES.index(c[0]) for c in cells]
     d = [DIRECTIONS.index(c[1]) for c in cells]
     return np.stack([result.displacement, result.velocity, result.acceleration])[q, :, d].T
 
 
+def probe_scene(spec: EnsembleSpec):
+    """The scene with every allocated family drawn in the probe band (its draws give the responses)."""
+    probe = [ClassOption(f, "probe", PROBE_LOW, PROBE_HIGH, 0.0) for f in ALLOCATED]
+    return parse_scene(allocated_scene(spec.scene_text, spec.source, probe), spec.source)
+
+
 def responses(spec: EnsembleSpec, specs: list[Spec], n: int) -> Responses:
     """A_f and B_f of realisations 0..n-1 of the seed, for the cells the specs read."""
     cells = tuple(dict.fromkeys((s.quantity, d) for s in specs for d in s.directions))
-    probe = [ClassOption(f, "probe", PROBE_LOW, PROBE_HIGH, 0.0) for f in ALLOCATED]
-    scene = parse_scene(allocated_scene(spec.scene_text, spec.source, probe), spec.source)
+    scene = probe_scene(spec)
     level = prepare_level(scene, spec.model, dt=spec.dt)
     t = scene.times
     offset = np.empty((len(ALLOCATED), n, len(t), len(cells)))
     spread, fixed = np.empty_like(offset), np.empty((n, len(t), len(cells)))
     for r in range(n):
         draw = stored_draw(scene, spec.model, spec.seed, r, spec.dt)
-        fixed[r] = _cells_history(level.simulate_draws([_fixed_draw(scene, draw)])[0], cells)
+        fixed[r] = cells_history(level.simulate_draws([fixed_draw(scene, draw)])[0], cells)
         for k, family in enumerate(ALLOCATED):
             one, u = level.simulate_draws(_unit_draws(scene, draw, family))
-            offset[k, r] = _cells_history(one, cells) / PROBE_LOW
-            spread[k, r] = _cells_history(u, cells) / PROBE_LOW
+            offset[k, r] = cells_history(one, cells) / PROBE_LOW
+            spread[k, r] = cells_history(u, cells) / PROBE_LOW
     return Responses(offset, spread, fixed, cells, t)
 
 
@@ -227,16 +243,49 @@ def spec_uppers(res: Responses, combo, specs: list[Spec], scene, confidence: flo
     lows = np.array([c.low for c in combo])
     widths = np.array([c.high - c.low for c in combo])
     err = np.abs(np.tensordot(lows, res.offset, 1) + np.tensordot(widths, res.spread, 1) + res.fixed)  # (n, T, cell)
+    return error_uppers(err, res.cells, res.t, specs, scene, confidence)
+
+
+def error_uppers(err: np.ndarray, cells, t: np.ndarray, specs: list[Spec], scene, confidence: float) -> list:
+    """Per spec, the one-sided upper bound (SI) of its statistic per direction, from the |error|
+    histories ``err`` (n, T, cell) of the (quantity, direction) ``cells`` at times ``t`` (s)."""
     sim = scene.simulation
-    masks = window_masks(res.t, sim.settle_time, sim.steady_after)
+    masks = window_masks(t, sim.settle_time, sim.steady_after)
     out = []
     for s in specs:
         mask = masks[WINDOWS.index(s.window or "whole")]
-        cols = [res.cells.index((s.quantity, d)) for d in s.directions]
+        cols = [cells.index((s.quantity, d)) for d in s.directions]
         e = err[:, mask][:, :, cols]
         x = e.max(axis=1) if s.measure == "max" else e.mean(axis=1)
-        out.append(one_sided_bounds(x, confidence)[STATISTICS.index(s.statistic), 1])
+        out.append(pf_order_statistic(x, s, confidence) if s.statistic == PF else
+                   one_sided_bounds(x, confidence)[STATISTICS.index(s.statistic), 1])
     return out
+
+
+def allowed_exceedances(spec: Spec, n: int, confidence: float) -> int:
+    """The most realisations of n whose maximum may violate ``spec``'s limit with its pf requirement
+    still met: the largest k whose one-sided Clopper-Pearson upper bound of P meets pf (the gate's
+    rule, pipeline.analysis.gate); -1 if not even k = 0 does at this n."""
+    upper = one_sided_cp(np.arange(n + 1), n, confidence)[1]
+    ok = upper <= spec.pf_limit if spec.pf_op == "<=" else upper < spec.pf_limit
+    return int(np.flatnonzero(ok).max()) if ok.any() else -1
+
+
+def pf_order_statistic(x: np.ndarray, spec: Spec, confidence: float) -> np.ndarray:
+    """The (k+1)-th largest of the maxima x (n, directions) (SI), k = allowed_exceedances: the pf
+    requirement holds exactly when this value meets the limit, so a pf spec is searched as an upper
+    bound like the others."""
+    k = allowed_exceedances(spec, x.shape[0], confidence)
+    return np.sort(x, axis=0)[x.shape[0] - 1 - k] if k >= 0 else np.full(x.shape[1], np.inf)
+
+
+def out_of_reach(spec: Spec, best: float, n: int, confidence: float) -> AllocationError:
+    """The error for a spec no combination meets, with the best attainable value (SI ``best``)."""
+    what = (f"{allowed_exceedances(spec, n, confidence) + 1}-th largest maximum |error| (pf {spec.pf_op} "
+            f"{spec.pf_limit:g} allows {allowed_exceedances(spec, n, confidence)} of {n} above the limit)"
+            if spec.statistic == PF else f"{spec.statistic} upper bound")
+    return AllocationError(f"--spec {spec.text!r}: no class combination meets it; the best attainable "
+                           f"{what} is {best / spec.factor:.4g} {spec.unit}")
 
 
 def cost_of(combo) -> float:
@@ -258,7 +307,7 @@ def search(res: Responses, options: dict, specs: list[Spec], scene, confidence: 
     return None, len(combos), best
 
 
-def _uniform(res: Responses, options: dict, specs: list[Spec], scene, confidence: float):
+def cheapest_uniform(res: Responses, options: dict, specs: list[Spec], scene, confidence: float):
     """The cheapest combo naming one class for every family that meets every spec, or None."""
     names = [c.name for c in options[ALLOCATED[0]]
              if all(any(o.name == c.name for o in options[f]) for f in ALLOCATED)]
@@ -283,7 +332,10 @@ def check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: flo
         raise AllocationError(f"{spec.source}: allocate needs [simulation] quasi_static_eccentricity = "
                               "\"drawn\" (the reaction mode's direction does not split by family)")
     for s in specs:
-        if why := upper_limit_problem(s, confidence, n, "an allocation"):
+        if s.statistic == PF and allowed_exceedances(s, n, confidence) < 0:
+            raise AllocationError(f"--spec {s.text!r}: even with no realisation above the limit, n = {n} cannot "
+                                  f"show pf {s.pf_op} {s.pf_limit:g} at {100 * confidence:g} % (raise -n)")
+        if s.statistic != PF and (why := upper_limit_problem(s, confidence, n, "an allocation")):
             raise AllocationError(why)
 
 
@@ -298,10 +350,8 @@ def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: 
     combo, judged, best = search(res, options, specs, scene, confidence)
     if combo is None:
         worst = max(range(len(specs)), key=lambda i: best[i] / specs[i].limit)
-        s = specs[worst]
-        raise AllocationError(f"--spec {s.text!r}: no class combination meets it; the best attainable "
-                              f"{s.statistic} upper bound is {best[worst] / s.factor:.4g} {s.unit}")
-    uniform = _uniform(res, options, specs, scene, confidence)
+        raise out_of_reach(specs[worst], best[worst], n, confidence)
+    uniform = cheapest_uniform(res, options, specs, scene, confidence)
     predicted = {s.text: float(np.max(u)) for s, u in zip(specs, spec_uppers(res, combo, specs, scene, confidence))}
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)

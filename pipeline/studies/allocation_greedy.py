@@ -1,13 +1,17 @@
 """``rss6 allocate`` at a level whose error is not linear in the clearances (paper, contact): a greedy
 search of measured ensembles with a bound on their number.
 
-Start with every family at its most expensive class (taken as its tightest); then repeatedly try
-the one-step loosenings (a family moved to its next cheaper class) in order of the cost they save,
-running an ensemble for each until one passes every spec at the gate, and keep it; stop when no
-loosening passes or the ensemble budget is spent.  It assumes a cheaper class errs at least as much
-(the verdict changes once along each family's class order, as ``rss6 budget``'s sweep assumes);
-it is greedy, so it may stop above the least cost, and says so.  The passing ensemble of the answer
-is its verification; the cheapest uniform class is sought with the ensembles left.
+It assumes a cheaper class errs at least as much (the verdict changes once along each family's class
+order, as ``rss6 budget``'s sweep assumes).  First the uniform choices (one class name for every
+family, in rising cost) are bisected: the dearest must pass (else the spec is out of reach), the
+cheapest is tried next, then the middle of the bracket until the cheapest passing uniform class is
+found (about log2 of the classes' number of ensembles), which is also the baseline the saving is
+stated against.  From there, the one-step loosenings (a family moved to its next strictly cheaper
+class) are tried in order of the cost they save, an ensemble each, and the first that passes every
+spec at the gate is kept; a family whose loosening failed is not loosened again (by the assumption it would
+fail with the others looser too).  It stops when no family can be loosened or the ensemble budget is
+spent; it is greedy, so it may stop above the least cost, and says so.  The passing ensemble of the
+answer is its verification.
 """
 from __future__ import annotations
 
@@ -58,45 +62,65 @@ class _Runner:
         return self.trials[key]
 
 
-def _loosenings(combo, ranked: dict) -> list[tuple]:
-    """The one-step cheaper combinations, most cost saved first."""
+def _loosenings(combo, ranked: dict, frozen: frozenset = frozenset()) -> list[tuple]:
+    """The one-step cheaper combinations of the families not in ``frozen``, most cost saved first: each
+    family to its next strictly cheaper class (a class costing the same as a tighter one saves nothing)."""
     out = []
     for k, family in enumerate(ALLOCATED):
-        order = ranked[family]
-        i = order.index(combo[k])
-        if i + 1 < len(order):
-            out.append(combo[:k] + (order[i + 1],) + combo[k + 1:])
+        cheaper = [c for c in ranked[family] if c.cost < combo[k].cost]
+        if family not in frozen and cheaper:
+            out.append(combo[:k] + (cheaper[0],) + combo[k + 1:])
     return sorted(out, key=cost_of)
 
 
 def _descend(run: _Runner, start: Trial, ranked: dict) -> Trial:
-    """Greedy loosening from ``start`` while the budget lasts."""
-    best = start
+    """Greedy loosening from ``start`` while the budget lasts, freezing a family once its loosening fails."""
+    best, frozen = start, set()
     while run.left > 0:
-        for candidate in _loosenings(best.combo, ranked):
+        for candidate in _loosenings(best.combo, ranked, frozenset(frozen)):
             if run.left <= 0:
                 break
             trial = run(candidate)
             if trial.passed:
                 best = trial
                 break
+            frozen.add(ALLOCATED[next(k for k, c in enumerate(candidate) if c != best.combo[k])])
         else:
             break
     return best
 
 
-def _uniform(run: _Runner, options: dict):
-    """The cheapest uniform combination that passes, with the ensembles left (None if none or no budget)."""
+def uniform_combos(options: dict) -> list[tuple]:
+    """The combinations naming one class for every family (a name every family offers), dearest first."""
     names = [c.name for c in options[ALLOCATED[0]]
              if all(any(o.name == c.name for o in options[f]) for f in ALLOCATED)]
-    combos = sorted((tuple(next(c for c in options[f] if c.name == n) for f in ALLOCATED) for n in names),
-                    key=cost_of)
-    for combo in combos:
-        if run.left <= 0 and tuple(c.name for c in combo) not in run.trials:
-            return None
-        if run(combo).passed:
-            return combo
-    return None
+    combos = [tuple(next(c for c in options[f] if c.name == n) for f in ALLOCATED) for n in names]
+    return sorted(combos, key=lambda c: -cost_of(c))
+
+
+def _bisect_uniform(run: _Runner, combos: list[tuple]) -> Trial | None:
+    """The cheapest passing uniform trial: the dearest, the cheapest, then bisection of the bracket
+    (module doc); None if the dearest fails or the budget ends before the bracket closes."""
+    if not run(combos[0]).passed:
+        return None
+    good, bad = 0, len(combos)
+    if len(combos) > 1 and run.left > 0:
+        if run(combos[-1]).passed:
+            return run(combos[-1])
+        bad = len(combos) - 1
+    while bad - good > 1 and run.left > 0:
+        mid = (good + bad) // 2
+        good, bad = (mid, bad) if run(combos[mid]).passed else (good, mid)
+    return run(combos[good]) if bad - good == 1 else None
+
+
+def _out_of_reach(spec: EnsembleSpec, start: Trial):
+    """AllocationError: the dearest classes fail; name the worst direction's bound."""
+    worst = max(start.verdicts, key=lambda v: (v.outcome != "pass", (v.upper or float("inf")) / v.limit))
+    raise AllocationError(f"--spec {worst.spec!r}: the most expensive classes do not meet it at the {spec.model} "
+                          f"level (the {worst.direction} {worst.statistic} bound is "
+                          f"{'none' if worst.upper is None else f'{worst.upper / worst.factor:.4g}'} {worst.unit}, "
+                          f"{worst.outcome}; {start.path})")
 
 
 def greedy_allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float, options: dict,
@@ -109,17 +133,16 @@ def greedy_allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confi
     run = _Runner(spec, specs, n, folder, confidence, workers, max_ensembles)
     start = run(tuple(ranked[f][0] for f in ALLOCATED))
     if not start.passed:
-        worst = max(start.verdicts, key=lambda v: (v.outcome != "pass", (v.upper or float("inf")) / v.limit))
-        raise AllocationError(f"--spec {worst.spec!r}: the most expensive classes do not meet it at the {spec.model} "
-                              f"level (the {worst.direction} {worst.statistic} bound is "
-                              f"{'none' if worst.upper is None else f'{worst.upper / worst.factor:.4g}'} {worst.unit}, "
-                              f"{worst.outcome}; {start.path})")
-    best = _descend(run, start, ranked)
-    uniform = _uniform(run, options)
+        _out_of_reach(spec, start)
+    uniforms = uniform_combos(options)
+    uniform = _bisect_uniform(run, uniforms) if uniforms else None
+    cheapest = min((t for t in run.trials.values() if t.passed), key=lambda t: cost_of(t.combo))
+    best = _descend(run, uniform or cheapest, ranked)
     scene_path = folder / f"{spec.scene().name}_allocated.toml"
     scene_path.write_text(allocated_scene(spec.scene_text, spec.source, best.combo))
     predicted = {s.text: max((v.upper for v in best.verdicts if v.spec == s.text and v.upper is not None),
                              default=float("nan")) for s in specs}
+    uniform = None if uniform is None else uniform.combo
     return Allocation(best.combo, cost_of(best.combo), uniform, None if uniform is None else cost_of(uniform),
                       len(run.trials), best.verdicts, predicted, best.path, scene_path,
                       method=f"greedy loosening, {len(run.trials)} of at most {max_ensembles} ensembles "

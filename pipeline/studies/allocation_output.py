@@ -20,25 +20,33 @@ COST_NOTE = (f"relative units per joint: ISO 286 fit cost C(T_hole) + C(T_shaft)
 def _saving(a: Allocation) -> str:
     if a.uniform_cost is None:
         return ("no single class for every family meets the specs" if a.method.startswith("exact") else
-                "no single class for every family met the specs within the ensemble budget")
+                "the cheapest uniform class that meets the specs was not found within the ensemble budget")
     name = a.uniform[0].name
     return (f"cheapest uniform class {name}: cost {a.uniform_cost:.4g}; allocation saves "
             f"{a.uniform_cost - a.cost:.4g} ({100 * (1 - a.cost / a.uniform_cost):.1f} %)")
 
 
+def _rows(a: Allocation) -> list[str]:
+    """The table's row labels: the joints (A1 revolute_radial, ...) or the families."""
+    return [f"{j} {c.family}" for j, c in zip(a.joints, a.classes)] if a.joints else [c.family for c in a.classes]
+
+
 def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_note: str) -> str:
     """The answer as lines: the class table, total against uniform, the verification's verdicts."""
+    width = 21 if a.joints else 18
     lines = [f"fit allocation: scene {scene_name}, {model} level, n = {n} realisations, "
              f"{a.combinations} class combinations judged ({a.method})",
              f"costs: {cost_note}",
-             f"{'family':18}{'class':10}{'radial band (um)':>20}{'cost/joint':>12}{'joints':>8}"]
-    for c in a.classes:
-        lines.append(f"{c.family:18}{c.name:10}{f'{c.low * 1e6:.4g}-{c.high * 1e6:.4g}':>20}{c.cost:12.4g}{6:8d}")
+             f"{'joint' if a.joints else 'family':{width}}{'class':10}{'radial band (um)':>20}{'cost/joint':>12}"
+             f"{'joints':>8}"]
+    for label, c in zip(_rows(a), a.classes):
+        band = f"{c.low * 1e6:.4g}-{c.high * 1e6:.4g}"
+        lines.append(f"{label:{width}}{c.name:10}{band:>20}{c.cost:12.4g}{1 if a.joints else 6:8d}")
     lines.append(f"total cost {a.cost:.4g}; {_saving(a)}")
-    how = "predicted by the linear scaling" if a.method.startswith("exact") else "measured"
+    how = "predicted by the linear scaling" if "linear scaling" in a.method else "measured"
     lines.append(f"upper bounds at the answer ({how}): " + "; ".join(f"{k}: {v * 1e3:.4g} mm"
                                                                       for k, v in a.predicted.items()))
-    lines.append(f"scene at the answer: {a.scene_path}")
+    lines.append(f"scene at the answer: {a.scene_path or 'none (per-joint bands; a scene has one band a family)'}")
     lines.append(f"verification ensemble {a.ensemble_path}: {overall(list(a.verdicts))}")
     lines.append(format_verdicts(list(a.verdicts)))
     return "\n".join(lines)
@@ -50,22 +58,26 @@ def allocation_dataset(a: Allocation, scene, model: str, integrator: str, dt: fl
     verification's outcome and bounds; totals in the global attributes."""
     v = list(a.verdicts)
     upper = [np.nan if x.upper is None else x.upper for x in v]
+    row = "joint" if a.joints else "family"
+    extra = ({"joint_family": ("joint", [c.family for c in a.classes], {"long_name": "joint family"})}
+             if a.joints else {})
     ds = xr.Dataset(
-        {"fit_class": ("family", [c.name for c in a.classes], {"long_name": "ISO 286 fit class chosen"}),
-         "band_low": ("family", [c.low for c in a.classes], {"long_name": "smallest radial clearance of the class",
-                                                             "units": "m"}),
-         "band_high": ("family", [c.high for c in a.classes], {"long_name": "largest radial clearance of the class",
-                                                               "units": "m"}),
-         "cost_per_joint": ("family", [c.cost for c in a.classes], {"long_name": f"cost per joint ({cost_note})",
-                                                                    "units": "1"}),
+        {"fit_class": (row, [c.name for c in a.classes], {"long_name": "ISO 286 fit class chosen"}),
+         "band_low": (row, [c.low for c in a.classes], {"long_name": "smallest radial clearance of the class",
+                                                        "units": "m"}),
+         "band_high": (row, [c.high for c in a.classes], {"long_name": "largest radial clearance of the class",
+                                                          "units": "m"}),
+         "cost_per_joint": (row, [c.cost for c in a.classes], {"long_name": f"cost per joint ({cost_note})",
+                                                               "units": "1"}),
+         **extra,
          "verdict_spec": ("verdict", [x.spec for x in v], {"long_name": "requirement spec"}),
          "verdict_direction": ("verdict", [x.direction for x in v], {"long_name": "direction judged"}),
          "verdict_outcome": ("verdict", [x.outcome for x in v], {"long_name": "verification verdict"}),
          "verdict_upper": ("verdict", upper, {"long_name": "one-sided upper bound of the statistic (SI: m, rad "
                                                            "and their rates)", "units": "1"}),
          "verdict_limit": ("verdict", [x.limit for x in v], {"long_name": "limit of the spec (SI)", "units": "1"})},
-        coords={"family": [c.family for c in a.classes]})
-    title = "least-cost fit class per joint family meeting the requirement specs"
+        coords={row: list(a.joints) if a.joints else [c.family for c in a.classes]})
+    title = f"least-cost fit class per {'joint' if a.joints else 'joint family'} meeting the requirement specs"
     ds.attrs.update(_provenance(scene, title, model=model, integrator=integrator, dt=dt, elements=elements,
                                 history=command_line("allocate", scene, model=model, integrator=integrator, dt=dt,
                                                      elements=elements, options=options)))
@@ -78,10 +90,12 @@ def allocation_dataset(a: Allocation, scene, model: str, integrator: str, dt: fl
 
 def allocation_json(a: Allocation) -> dict:
     """The allocation as plain data (SI)."""
+    joints = a.joints or (None,) * len(a.classes)
     return {"classes": [{"family": c.family, "class": c.name, "band_low_m": c.low, "band_high_m": c.high,
-                         "cost_per_joint": c.cost, "joints": 6} for c in a.classes],
+                         "cost_per_joint": c.cost, "joints": 1 if j else 6} | ({"joint": j} if j else {})
+                        for j, c in zip(joints, a.classes)],
             "total_cost": a.cost, "uniform_class": a.uniform[0].name if a.uniform else None,
             "uniform_cost": a.uniform_cost, "combinations_judged": a.combinations, "method": a.method,
             "predicted_upper": a.predicted, "verification": overall(list(a.verdicts)),
-            "verification_file": str(a.ensemble_path), "scene": str(a.scene_path),
+            "verification_file": str(a.ensemble_path), "scene": a.scene_path and str(a.scene_path),
             "verdicts": verdicts_json(list(a.verdicts))}

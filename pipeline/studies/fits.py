@@ -3,8 +3,13 @@
 Tables (micrometres, nominal sizes in mm over a, up to and including b), as tabulated, not from
 the formula i = 0.45 D^(1/3) + 0.001 D, whose ISO rounding they carry:
 - standard tolerance grades IT5-IT11: ISO 286-1:2010, Table 1;
-- shaft fundamental deviations es of c, d, e, f, g, h: ISO 286-1:2010, Table 2 (the limits of ISO
-  286-2:2010, Tables 17-22); hole H has EI = 0 (ISO 286-1, 4.1.2).
+- shaft fundamental deviations es of c, d, e, f, g, h: ISO 286-1:2010, its table of the shafts'
+  fundamental deviations (a to j); hole H has EI = 0.
+Both are reproduced in ANSI B4.2-1978 (R2020), Appendix B ("Tables of international tolerance
+grades, fundamental deviations and their derivations"); its Table 2 ("Preferred hole basis clearance
+fits") lists the resulting clearance limits that tests/test_fits.py checks, and the `pressfit`
+package's independent tabulation is checked at 22 sizes.  (The ISO table numbers other than ISO
+286-1 Table 1 were not checked against the standard's text, which is not public.)
 A fit H<p>/<l><q> at diameter D: hole D + [0, IT_p], shaft D + [es - IT_q, es], so the diametral
 clearance runs from -es (min) to IT_p + IT_q - es (max).  rss6's revolute radial clearance
 ([clearance] revolute_radial_m, docs/model.md section 4) is the largest eccentricity of the journal in
