@@ -192,7 +192,7 @@ PF_SPEC = "displacement:x,y,z<=0.1mm@pf<=1e-1"   # n = 60 at 95 %: at most 1 rea
 def test_a_pf_spec_is_searched_on_the_gates_rule(paper):
     """A pf spec at the quasi-static level: the predicted verdict of the answer and of every one-step
     looser or tighter combination equals the gate's verdict (Clopper-Pearson) on a plain run."""
-    from pipeline.studies.allocation import allowed_exceedances
+    from pipeline.analysis.gate import allowed_exceedances
     specs = [parse_spec(PF_SPEC)]
     assert allowed_exceedances(specs[0], N, 0.95) == 1
     options = class_options(paper.scene(), SMALL)

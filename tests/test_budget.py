@@ -13,6 +13,7 @@ from pipeline.analysis.gate import judge_all
 from pipeline.ensemble.run import EnsembleSpec, run_chunk
 from pipeline.analysis.spec import parse_spec
 from pipeline.analysis.stats import ensemble_stats
+from rss6core import load_scene
 
 SPEC = "displacement:x,y,z<=0.1mm@q95"
 N = 64
@@ -175,3 +176,24 @@ def test_a_scene_with_tolerance_bands_is_refused_in_one_line_before_any_work(con
     err = capsys.readouterr().err.strip()
     assert code == 2 and "\n" not in err and "[tolerance.revolute_radial]" in err and "paper_tolerance.toml" in err
     assert not out.exists()
+
+
+def test_a_pf_spec_is_swept_and_lands_at_the_largest_maximum(configs, tmp_path, capsys):
+    """displacement:z<=L@pf<=0.05 at n = 64: the gate allows no exceedance (Clopper-Pearson: k = 0 gives
+    0.046, k = 1 0.072), so the budget is L over the largest z maximum at scale 1 (the quasi-static
+    error scales with the clearances), which the sweep brackets within its 5 %; a pf that n cannot
+    show is one line, exit 2."""
+    spec = _spec(load_scene(configs / "smoke.toml"))
+    z = _ensemble_at(spec, 1.0)["max_abs_error"].sel(window="whole", quantity="displacement", direction="z")
+    limit = 0.1e-3
+    exact = limit / float(z.max())
+    assert main(["budget", str(configs / "smoke.toml"), "--spec", "displacement:z<=0.1mm@pf<=0.05", "-n", str(N),
+                 "--workers", "1", "-o", str(tmp_path / "b")]) == 0
+    printed = capsys.readouterr().out
+    assert "measured sweep" in printed
+    passes, fails = (float(w.rstrip(",")) for w in printed.split("limiting: scale ")[1].split()[0:3:2])
+    assert passes <= exact < fails and fails / passes <= 1.05 + 1e-9
+    code = main(["budget", str(configs / "smoke.toml"), "--spec", "displacement:z<=0.1mm@pf<=1e-3", "-n", str(N),
+                 "-o", str(tmp_path / "c")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "n = 64 cannot show pf <= 0.001" in err, err

@@ -35,7 +35,7 @@ from .estimators import QUANTILE_DECISION_CAP, interval_floor, no_interval_at, q
 from .stats import ensemble_stats, finished_values
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
-           "overall", "judge", "judge_all", "verdicts_json"]
+           "allowed_exceedances", "overall", "judge", "judge_all", "verdicts_json"]
 
 OUTCOMES = ("pass", "undecided", "fail")
 EXIT_CODES = {"pass": 0, "fail": 1, "undecided": 3}
@@ -95,13 +95,25 @@ def check_confidence(confidence: float) -> None:
 def upper_limit_problem(spec: Spec, confidence: float, n: int, study: str) -> str | None:
     """Why ``spec`` cannot serve a study (``study``: "a budget", "an allocation") that bounds the error
     from above with n realisations at ``confidence``, as a one-line message; None if it can."""
-    if why := no_interval_at(spec.statistic, confidence, n):
+    if spec.statistic == PF and allowed_exceedances(spec, n, confidence) < 0:
+        return (f"--spec {spec.text!r}: even with no realisation above the limit, n = {n} cannot show pf "
+                f"{spec.pf_op} {spec.pf_limit:g} at {100 * confidence:g} % (raise -n)")
+    if spec.statistic != PF and (why := no_interval_at(spec.statistic, confidence, n)):
         return f"--spec {spec.text!r}: {why}"
     if spec.op not in ("<=", "<"):
         return f"--spec {spec.text!r}: {study} bounds the error from above; use <= or <"
     if spec.window is not None and spec.window not in WINDOWS:
         return f"--spec {spec.text!r}: unknown window {spec.window!r}; choose one of {', '.join(WINDOWS)}"
     return None
+
+
+def allowed_exceedances(spec: Spec, n: int, confidence: float) -> int:
+    """The most realisations of n whose maximum may violate ``spec``'s limit with its pf requirement
+    still met: the largest k whose one-sided Clopper-Pearson upper bound of P meets pf (the gate's
+    rule, pipeline.analysis.gate); -1 if not even k = 0 does at this n."""
+    upper = one_sided_cp(np.arange(n + 1), n, confidence)[1]
+    ok = upper <= spec.pf_limit if spec.pf_op == "<=" else upper < spec.pf_limit
+    return int(np.flatnonzero(ok).max()) if ok.any() else -1
 
 
 def _sides(spec: Spec) -> tuple[str, str]:

@@ -24,8 +24,7 @@ import numpy as np
 from rss6core import ClearanceDraw, model_level, models_with, parse_scene, prepare_level, stored_draw
 
 from ..analysis.estimators import one_sided_bounds
-from ..analysis.exceedance import one_sided_cp
-from ..analysis.gate import Verdict, judge_all, upper_limit_problem
+from ..analysis.gate import Verdict, allowed_exceedances, judge_all, upper_limit_problem
 from ..analysis.spec import PF, Spec
 from ..ensemble.run import EnsembleSpec, ensemble
 from ..files.records import window_masks
@@ -262,15 +261,6 @@ def error_uppers(err: np.ndarray, cells, t: np.ndarray, specs: list[Spec], scene
     return out
 
 
-def allowed_exceedances(spec: Spec, n: int, confidence: float) -> int:
-    """The most realisations of n whose maximum may violate ``spec``'s limit with its pf requirement
-    still met: the largest k whose one-sided Clopper-Pearson upper bound of P meets pf (the gate's
-    rule, pipeline.analysis.gate); -1 if not even k = 0 does at this n."""
-    upper = one_sided_cp(np.arange(n + 1), n, confidence)[1]
-    ok = upper <= spec.pf_limit if spec.pf_op == "<=" else upper < spec.pf_limit
-    return int(np.flatnonzero(ok).max()) if ok.any() else -1
-
-
 def pf_order_statistic(x: np.ndarray, spec: Spec, confidence: float) -> np.ndarray:
     """The (k+1)-th largest of the maxima x (n, directions) (SI), k = allowed_exceedances: the pf
     requirement holds exactly when this value meets the limit, so a pf spec is searched as an upper
@@ -332,10 +322,7 @@ def check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: flo
         raise AllocationError(f"{spec.source}: allocate needs [simulation] quasi_static_eccentricity = "
                               "\"drawn\" (the reaction mode's direction does not split by family)")
     for s in specs:
-        if s.statistic == PF and allowed_exceedances(s, n, confidence) < 0:
-            raise AllocationError(f"--spec {s.text!r}: even with no realisation above the limit, n = {n} cannot "
-                                  f"show pf {s.pf_op} {s.pf_limit:g} at {100 * confidence:g} % (raise -n)")
-        if s.statistic != PF and (why := upper_limit_problem(s, confidence, n, "an allocation")):
+        if why := upper_limit_problem(s, confidence, n, "an allocation"):
             raise AllocationError(why)
 
 

@@ -12,8 +12,9 @@ upper bound is within it, with every [clearance] size of the scene times s.
   as large, and so is every bound rss6 gives: quantile bounds are order statistics, and
   the mean and std bounds are location-scale equivariant (the skewness and kurtosis that
   enter them do not change).  Hence upper(s) = s upper(1) and s* = min(limit / upper(1)).
-- other levels, and a scene with [uncertain.*] inputs at any level (its realised robots' geometric
-  error does not scale with the clearances): a measured sweep: ensembles of the same realisations (same seed) at
+- other levels, a scene with [uncertain.*] inputs at any level (its realised robots' geometric
+  error does not scale with the clearances), and pf specs (a count of exceedances, not a bound that
+  scales): a measured sweep: ensembles of the same realisations (same seed) at
   scales doubled or halved from 1 until one passes and one does not, then bisection to the
   stated relative tolerance; the answer is the largest scale whose ensemble passed.  It
   assumes the verdict changes once along the scale (errors grow with the clearance).
@@ -33,7 +34,7 @@ from rss6core import model_level, models_with
 from ..analysis.gate import Verdict, check_confidence, judge_all, upper_limit_problem
 from ..ensemble.run import EnsembleSpec, ensemble
 from ..scenes.variant import scene_variant
-from ..analysis.spec import Spec
+from ..analysis.spec import PF, Spec
 from ..vocabulary import CONFIDENCE, UserError
 
 __all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
@@ -196,7 +197,8 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
                               "so they set no clearance budget")
         return _trial(spec, specs, scale, n, folder, confidence, workers)
 
-    if model_level(spec.model).linear_in_clearances and not spec.scene().uncertain:
+    if model_level(spec.model).linear_in_clearances and not spec.scene().uncertain and \
+            not any(s.statistic == PF for s in specs):
         first = run(1.0)
         ratio, limiting = exact_scale(list(first.verdicts))
         scale = round_down(ratio)
