@@ -42,7 +42,7 @@ MODEL_LEVELS = MappingProxyType({level.name: level for level in (
     ModelLevel(name="elastic", rung="L2", description="flexible links, no clearances", elastic_links=True,
                realised_robot=True),
     ModelLevel(name="paper", rung="L3", description="elastic + the paper's clearance closure", elastic_links=True,
-               draws_clearances=True, redraws_every_step=True, contact_forces=True),
+               draws_clearances=True, redraws_every_step=True, contact_forces=True, realised_robot=True),
     ModelLevel(name="contact", rung="L4", description="clearance contact dynamics, by far the dearest",
                elastic_links=True, draws_clearances=True, function_of_one_draw=True, contact_forces=True,
                contact_joints=True, contact_start=True, realised_robot=True, time_step_field="contact_time_step",

@@ -46,7 +46,9 @@ def stored_draw(scene, model: str, seed: int, realization: int, dt: float, unifo
     draw (``uniforms`` as in :func:`.clearance.draw_clearances`)."""
     if model_level(model).redraws_every_step:
         steps = len(time_grid(scene.trajectory.duration, dt))
-        return output_step(paper_draw(scene, seed, realization, steps, uniforms))
+        inputs = stored_inputs(scene, seed, realization, uniforms, steps)
+        sized = scene if inputs is None else realised_clearances(scene, inputs)
+        return output_step(paper_draw(sized, seed, realization, steps, uniforms))
     return realised_draw(scene, seed, realization, uniforms)
 
 
@@ -58,12 +60,13 @@ def realised_draw(scene, seed: int, realization: int, uniforms=None):
     return draw_clearances(drawn, seed, realization, uniforms=uniforms)
 
 
-def stored_inputs(scene, seed: int, realization: int, uniforms=None):
+def stored_inputs(scene, seed: int, realization: int, uniforms=None, steps: int | None = None):
     """The uncertain inputs an ensemble file records for a realisation (:class:`.uncertain.InputDraw`),
-    None for a scene without; the levels that take them draw them after one clearance draw."""
+    None for a scene without; with ``uniforms``, from the coordinates after the clearance draw's (one
+    draw, or ``steps`` of them: the paper level's)."""
     if not scene.uncertain:
         return None
-    return draw_inputs(scene, seed, realization, uniforms, offset=uniform_dimension(None))
+    return draw_inputs(scene, seed, realization, uniforms, offset=uniform_dimension(steps))
 
 
 def simulate(scene, model: str | None = None, integrator: str | None = None,
@@ -115,6 +118,8 @@ class Level:
         (``uniforms``: a quasi-Monte Carlo design, as in :func:`simulate_batch`)."""
         realizations = list(realizations)
         kind = model_level(self.model)
+        if self.scene.uncertain and kind.redraws_every_step:
+            return [self._realised_paper(seed, r, uniforms) for r in realizations]
         if self.scene.uncertain:
             return self.simulate_draws([realised_draw(self.scene, seed, r, uniforms) if kind.draws_clearances else None
                                         for r in realizations],
@@ -231,6 +236,26 @@ class Level:
             return out
         error = reference.at(out[0].t).error
         return [_plus(result, (error[:, 0], error[:, 1], error[:, 2])) for result in out]
+
+    def _realised_paper(self, seed: int, r: int, uniforms) -> SimulationResult:
+        """The paper level on one realised robot: its elastic run and geometric error
+        (:meth:`_realised_elastic`) plus the paper's closure of the per-step draw (with the drawn
+        sizes) about its realised motion, contact forces with its material and restitutions."""
+        steps = len(self.elastic.t)
+        inputs = stored_inputs(self.scene, seed, r, uniforms, steps)
+        scene = realised_scene(self.scene, inputs)
+        draw = paper_draw(realised_clearances(self.scene, inputs), seed, r, steps, uniforms)
+        elastic, closure = self.elastic, self.closure
+        if not scene_is_nominal(self.scene, scene):
+            elastic = self._realised_elastic(inputs)
+            if elastic.status == FAILED:
+                return elastic
+            reference = ReferenceMotion(self.scene, scene.geometry)
+            closure = PaperClosure(scene, elastic.t, motion=lambda t: reference.at(t).motion)
+        xi = realised_contact_laws(self.scene, inputs).restitution.T.ravel()
+        result = paper_result(elastic, closure, draw, paper_contact_forces(scene, draw, self.dt, xi),
+                              output_step(draw))
+        return dataclasses.replace(result, inputs=inputs)
 
     def _failed_kinematics(self, exc, inputs) -> SimulationResult:
         """A realised robot out of its workspace: NaN errors and the reason, not an exception."""

@@ -51,10 +51,12 @@ END_TAG = 7340033   # third SeedSequence word of the stream of the steps drawn b
 
 class PaperClosure:
     """Link axes and the linearised leg closure along the ideal motion at times t (s) and CENTRAL_PAD
-    steps beyond each end, shared by every realisation's draws."""
+    steps beyond each end, shared by every realisation's draws; ``motion`` (t -> RigidMotion): another
+    rigid motion (a realised robot's under the nominal commands, rss6core/realised.py)."""
 
-    def __init__(self, scene, t: np.ndarray):
-        motion = rigid_motion(scene, padded_grid(t, CENTRAL_PAD))
+    def __init__(self, scene, t: np.ndarray, motion=None):
+        grid = padded_grid(t, CENTRAL_PAD)
+        motion = rigid_motion(scene, grid) if motion is None else motion(grid)
         crank, rod = link_frames(motion, scene.geometry)
         self.x_c, self.x_r = crank[..., 0], rod[..., 0]   # unit link axes (T + 2 pad, 6, 3)
         self.G, n = closure_matrix(motion)
@@ -75,12 +77,13 @@ class PaperClosure:
         return time_derivatives(np.linalg.solve(self.G, rhs[..., None])[..., 0], self.t, CENTRAL_PAD)
 
 
-def paper_contact_forces(scene, draw, dt: float) -> np.ndarray:
+def paper_contact_forces(scene, draw, dt: float, restitution=None) -> np.ndarray:
     """Normal contact force magnitudes (T, 18) N of eq. 17 for a :func:`paper_draw`, joints A, C, B.
 
     The penetration rate is the central difference of |e| between steps (the pads make it central
     at the ends too); the initial contact speed is the joint's first positive rate (the scene's
-    floor otherwise).
+    floor otherwise).  ``restitution``: one per joint (18,) A1..A6, C1..C6, B1..B6 (default the
+    scene's).
     """
     w = scene.geometry.w
     e_r = draw.e_A - np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
@@ -97,7 +100,8 @@ def paper_contact_forces(scene, draw, dt: float) -> np.ndarray:
     rate = np.gradient(rho, dt, axis=0)[CENTRAL_PAD:-CENTRAL_PAD]
     rho = rho[CENTRAL_PAD:-CENTRAL_PAD]
     impact = np.maximum(np.max(rate, axis=0), ct.impact_speed_floor)
-    return lankarani_nikravesh(rho - size, rate, impact, K, ct.exponent, ct.restitution)[0]
+    xi = ct.restitution if restitution is None else restitution
+    return lankarani_nikravesh(rho - size, rate, impact, K, ct.exponent, xi)[0]
 
 
 INSIDE_MARGIN = 1.0 - 1e-9   # |e|^2 below this times size^2: no penetration despite rounding

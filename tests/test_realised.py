@@ -161,10 +161,3 @@ def test_drawn_clearance_sizes_scale_the_quasi_static_error_and_are_the_draws_si
     zero = simulate(parse_scene(smoke_text + _table("r", "clearance.revolute_radial_m", 'law = "normal"\nstd_m = 0.0',
                                                     "joint")), "quasi-static", seed=2, realization=5)
     assert np.array_equal(zero.displacement, nominal.displacement)
-
-
-def test_levels_that_cannot_take_uncertain_inputs_refuse_them(smoke_text):
-    scene = _lengths(smoke_text, 1e-4)
-    for model in ("paper",):
-        with pytest.raises(ValueError, match=rf"^the {model} level cannot take \[uncertain.\*\] inputs yet"):
-            simulate(scene, model)

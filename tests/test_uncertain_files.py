@@ -65,12 +65,14 @@ def test_the_file_records_every_draw_with_names_units_and_laws_and_is_cf(text, t
     xr.testing.assert_identical(load_netcdf(path), ds)
 
 
-def test_qmc_draws_take_the_points_last_coordinates(text):
+@pytest.mark.parametrize("model, steps", [("quasi-static", None), ("paper", 201)])
+def test_qmc_draws_take_the_points_last_coordinates(text, model, steps):
+    """After the clearance draw's coordinates: one draw's, or the paper level's 201 steps'."""
     scene = parse_scene(text)
-    ds = run_chunk(_spec(text, replicates=4), [5])
-    u = QMCDesign(0, 4)(5, uniform_dimension(None, scene))
-    assert u.size == uniform_dimension() + 13
-    want = inputs_from_uniforms(scene.uncertain, u[uniform_dimension():]).values
+    ds = run_chunk(_spec(text, model, replicates=4), [5])
+    u = QMCDesign(0, 4)(5, uniform_dimension(steps, scene))
+    assert u.size == uniform_dimension(steps) + 13
+    want = inputs_from_uniforms(scene.uncertain, u[uniform_dimension(steps):]).values
     assert np.array_equal(ds["uncertain_input"].values[0], want)
 
 
@@ -109,7 +111,7 @@ def test_the_file_check_refuses_draws_that_do_not_fit_the_scene(text, configs):
                        "f.nc")
 
 
-def test_check_lists_the_inputs_and_run_refuses_levels_without_them(text, tmp_path, capsys):
+def test_check_lists_the_inputs(text, tmp_path, capsys):
     scene = tmp_path / "u.toml"
     scene.write_text(text)
     assert main(["check", str(scene)]) == 0
@@ -117,15 +119,6 @@ def test_check_lists_the_inputs_and_run_refuses_levels_without_them(text, tmp_pa
     assert ("uncertain input crank: geometry.crank_length_m, each leg (6 draws), uniform deviation "
             "(low_m=-0.0001, high_m=0.0001)") in out
     assert "uncertain input mass: platform.mass_kg, each one (1 draws), lognormal factor" in out
-    assert main(["run", str(scene), "--model", "paper", "-n", "2", "-o", str(tmp_path / "x.nc")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err == ("rss6: error: --model paper: the paper level cannot take [uncertain.*] inputs yet "
-                   "(the rigid, quasi-static, elastic and contact levels can)")
-    assert not (tmp_path / "x.nc").exists()
-    (paper := tmp_path / "p.toml").write_text(text.replace('model = "elastic"', 'model = "paper"', 1))
-    assert main(["run", str(paper), "-n", "2", "-o", str(tmp_path / "x.nc")]) == 2   # the scene's own level
-    assert "[simulation] model = 'paper': the paper level cannot" in capsys.readouterr().err
-    assert not (tmp_path / "x.nc").exists()
 
 
 def test_drawn_clearance_sizes_are_the_files_sizes_in_an_ensemble_and_a_sensitivity_design(text):
