@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import time
 
 from .levels import MODELS, model_level
 
-__all__ = ["level_kernels", "kernels_to_compile", "compile_kernels", "kernel_cache_folder", "ENTRY_POINTS"]
+__all__ = ["level_kernels", "kernels_to_compile", "compile_kernels", "compile_kernel", "kernel_cache_folder",
+           "ENTRY_POINTS"]
 
 ENTRY_POINTS = ("advance_chunk", "newton_step")   # .contact_kernel's, called by the contact-joint levels
 
@@ -61,6 +63,49 @@ def compile_kernels(scene) -> dict[str, float]:
     with event.install_recorder("numba:compile") as recorder:
         prepare_level(short, "contact").simulate(0, [0])
     return {name: seconds for name, seconds in _compile_times(recorder.buffer).items() if name in todo}
+
+
+class _Arguments(Exception):
+    """Raised by a stand-in kernel with the arguments it was called with."""
+
+
+def compile_kernel(name: str, scene) -> float:
+    """Compile only the entry point ``name`` (of :data:`ENTRY_POINTS`) into numba's cache, for the
+    arguments the contact level passes it on ``scene``, and return the seconds it took (0 when it
+    was cached): a short run whose calls of both entry points are stand-ins, the other one doing
+    nothing (its results are not used) and this one handing over its arguments, which are then
+    compiled as a call would (the dispatcher's own argument types, the same overload and cache
+    entry).  Two processes can so compile the two entry points at once, each then loading the
+    other's from the cache (pipeline.ensemble.run)."""
+    from . import contact_dynamics, contact_kernel
+    from .models import prepare_level
+    if name not in ENTRY_POINTS:
+        raise ValueError(f"unknown kernel {name!r}; choose one of {', '.join(ENTRY_POINTS)}")
+    kernel = getattr(contact_kernel, name)
+    if _cached(kernel):
+        return 0.0
+
+    def hand_over(*args):
+        raise _Arguments(args)
+
+    stand_ins = {other: (hand_over if other == name else (lambda *args: None)) for other in ENTRY_POINTS}
+    saved = {other: getattr(contact_dynamics, other) for other in ENTRY_POINTS}
+    sim = scene.simulation
+    short = dataclasses.replace(scene, trajectory=dataclasses.replace(scene.trajectory, duration=2 * sim.time_step))
+    try:
+        for other, stand_in in stand_ins.items():
+            setattr(contact_dynamics, other, stand_in)
+        prepare_level(short, "contact").simulate(0, [0])
+        raise RuntimeError(f"the contact level did not call {name}")
+    except _Arguments as called:
+        args = called.args[0]
+    finally:
+        for other, original in saved.items():
+            setattr(contact_dynamics, other, original)
+    start = time.perf_counter()
+    with contact_kernel.fast_inlining():
+        kernel.compile(tuple(kernel.typeof_pyval(a) for a in args))
+    return time.perf_counter() - start
 
 
 def _dispatchers(model: str) -> list:

@@ -139,3 +139,46 @@ def test_warm_compiles_into_an_empty_cache_what_a_contact_run_then_loads(tmp_pat
     assert _rss6(tmp_path, "warm").stdout.startswith(f"rss6 warm: nothing to compile: {KERNELS}")
     simulated = _rss6(tmp_path, "simulate", "smoke", "--model", "contact")
     assert "compiling" not in simulated.stderr and "finished" in simulated.stdout, simulated
+
+
+_COMPILE_ONE = """
+import json, sys
+from rss6core import compile_kernel, kernels_to_compile
+from pipeline.scenes.catalogue import find_scene
+seconds = compile_kernel(sys.argv[1], find_scene("smoke"))
+print(json.dumps(dict(seconds=seconds, left=kernels_to_compile("contact"))))
+"""
+
+
+def _compile_one(cache: Path, name: str) -> dict:
+    proc = subprocess.run([sys.executable, "-c", _COMPILE_ONE, name], env=_env(cache), capture_output=True,
+                          text=True, timeout=3600)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow   # compiles both kernels into two empty caches, one of them by a two-worker run: minutes
+def test_each_kernel_compiled_on_its_own_serves_a_run_with_the_same_bits(tmp_path):
+    """compile_kernel compiles the one entry point it names (the other is still to compile
+    afterwards, then neither); a run on that cache loads both and gives the bits of a run that
+    compiled them itself. A two-worker ensemble on an empty cache (its workers compile one kernel
+    each, pipeline.ensemble.progress.compile_apart) writes the file a warm-cache run writes."""
+    split, cold = tmp_path / "split", tmp_path / "cold"
+    split.mkdir()
+    cold.mkdir()
+    args = ["run", "smoke", "--model", "contact", "-n", "4", "--workers", "2", "--seed", "2"]
+    ensemble = subprocess.Popen([sys.executable, "-m", "pipeline.cli", *args, "-o", str(cold / "e.nc")],
+                                env=_env(cold / "cache"), cwd=cold, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE, text=True)
+    first = _compile_one(split / "cache", "newton_step")
+    assert first["seconds"] > 0 and first["left"] == ["contact_kernel.advance_chunk"], first
+    second = _compile_one(split / "cache", "advance_chunk")
+    assert second["seconds"] > 0 and second["left"] == [], second
+    assert _compile_one(split / "cache", "advance_chunk")["seconds"] == 0.0     # cached: nothing to do
+    reference = subprocess.Popen([sys.executable, "-c", _ONE, str(SMOKE)], stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True)   # the suite's own cache, compiled whole
+    _assert_same_bits(_finished_json(_one_realisation(split / "cache")), _finished_json(reference))
+    _, err = ensemble.communicate(timeout=3600)
+    assert ensemble.returncode == 0 and err.count(f"rss6 run: compiling {KERNELS} first") == 1, err
+    _rss6(split / "cache", *args, "-o", str(split / "e.nc"))
+    assert (cold / "e.nc").read_bytes() == (split / "e.nc").read_bytes()

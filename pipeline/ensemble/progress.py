@@ -77,3 +77,31 @@ def _kernels_to_compile(client, model: str) -> list[str]:
     except (OSError, TimeoutError):
         return []
     return sorted({name for names in answers.values() for name in names})
+
+
+def compile_apart(client, kernels: list[str], scheduler: str | None, interrupted: list) -> None:
+    """On a local cluster where every worker would compile both contact kernels first, compile them
+    once, one per worker at once (rss6core.compile_kernel), each worker then loading the other's
+    from numba's on-disk cache: the first run waits for the longer compile instead of both, one
+    after the other, in every worker.  Nothing on an external scheduler (its workers may not share
+    a cache) or with fewer than two kernels or workers.  A Ctrl-C held in ``interrupted``
+    (pipeline.files.writing.sigint_deferred) stops the wait between polls, never inside dask."""
+    workers = sorted(client.scheduler_info()["workers"]) if not scheduler else []
+    if len(kernels) < 2 or len(workers) < 2:
+        return
+    futures = [client.submit(_compile_one, name.rsplit(".", 1)[-1], workers=[worker], allow_other_workers=False,
+                             pure=False) for name, worker in zip(kernels, workers)]
+    while not all(f.done() for f in futures):
+        if interrupted:
+            client.cancel(futures)
+            raise KeyboardInterrupt
+        time.sleep(0.2)
+    client.gather(futures)     # a compile's error, raised
+
+
+def _compile_one(entry_point: str) -> float:
+    """A worker's part of :func:`compile_apart`: one entry point, for the arguments of the embedded
+    smoke scene's run (one overload serves every scene, tests/test_kernels.py)."""
+    from rss6core import compile_kernel
+    from ..scenes.catalogue import find_scene
+    return compile_kernel(entry_point, find_scene("smoke"))

@@ -37,7 +37,7 @@ from ..files.records import finish_ensemble, chunk_dataset
 from ..files.schema import EnsembleFileError, ensemble_identity, identity
 from ..files.writing import sigint_deferred, write_netcdf
 from .cluster import WORKER_TIMEOUT_S, _finished, dask_client
-from .progress import _kernels_to_compile, _Progress
+from .progress import _kernels_to_compile, _Progress, compile_apart
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
            "parts_dir", "MAX_AUTO_CHUNK", "MAX_AUTO_CHUNK_BY_MODEL"]
@@ -299,10 +299,11 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
     (histories stay on disk). The merged file is checked (:func:`ensemble`), the parts are not."""
     written, shared = [], client is not None
     with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
-        if bar:
-            with sigint_deferred():   # a Ctrl-C meanwhile is raised after it, not inside dask's client
-                kernels = _kernels_to_compile(client, spec.model)
-            bar.compiling(kernels)
+        with sigint_deferred() as interrupted:   # a Ctrl-C meanwhile is raised after it, not inside dask's client
+            kernels = _kernels_to_compile(client, spec.model)
+            if bar:
+                bar.compiling(kernels)
+            compile_apart(client, kernels, scheduler, interrupted)
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
         try:
             with sigint_deferred() as interrupted:   # Ctrl-C is acted on in _finished
