@@ -43,9 +43,7 @@ __all__ = ["contact_initial_state", "equilibrium_state", "static_residual"]
 # platform and a displacement below 1e-14 m at the joints' contact stiffness (> 1e6 N/m): far under
 # anything the level reports, and ~100x above the round-off of K d (terms of ~1e4 N, 1e-16 relative)
 RESIDUAL_TOLERANCE = 1e-9
-# about 30 iterations with friction (equilibrium_state); a realised robot of paper_manufacturing took
-# 51 (one of the 1088 rows of a contact-level sensitivity design): the cap leaves room for that
-MAX_ITERATIONS = 100
+MAX_ITERATIONS = 100   # friction makes ~30 common (docs/model.md, contact start)
 
 def contact_initial_state(scene, jm, joints, reference=None) -> StartState:
     """The scene's ``contact_start`` ('drawn' or 'equilibrium') of a batch with joints ``joints``
