@@ -41,9 +41,9 @@ def _core_modules_imported(node) -> set[str]:
 
 # the imports inside functions, for import time and not to dodge a cycle: the contact level's
 # compiled kernel (numba, 0.3 s per process) loads only when a contact level runs or its kernels
-# are asked about or compiled (rss6 warm; kernels.compile_kernels runs a level, and numba's compile events)
+# are asked about or compiled (rss6 warm; kernels.compile_kernel runs a level with stand-in kernels)
 LAZY = {("models", "contact_dynamics"), ("models", "contact_start"), ("kernels", "contact_kernel"),
-        ("kernels", "models"), ("kernels", "<not core: numba.core>")}
+        ("kernels", "models"), ("kernels", "contact_dynamics")}
 # the modules that run a level: none of them is the scene's business
 LADDER = {"models", "assembly", "elastic", "quasi_static", "paper_method", "contact_dynamics", "contact_kernel",
           "contact_numpy", "contact_start"}
