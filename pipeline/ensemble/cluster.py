@@ -192,4 +192,5 @@ def _gathered(client, pending: set):
         except TimeoutError:   # the worker died just now: ask again who holds the others
             return
         pending.discard(future)
+        future.release()   # the worker may drop it: a 1,000,000-realisation run held them all
         yield result
