@@ -41,22 +41,25 @@ def in_memory(tmp_path_factory, cluster_client) -> Path:
     return out
 
 
-def test_a_run_of_more_than_a_block_writes_the_same_file_from_pieces_left_on_disk(tmp_path, in_memory,
-                                                                                   cluster_client, monkeypatch):
-    _small_blocks(monkeypatch)
+def test_a_run_of_more_than_a_block_writes_the_same_file_from_groups_left_on_disk(tmp_path, in_memory,
+                                                                                  cluster_client, monkeypatch):
+    """Blocks of 4: the chunks of 2 come back in groups of two chunks (realisations 0-3, 4-5), each
+    written to a scratch file and read back with its summaries on disk; the file is the same."""
+    _small_blocks(monkeypatch, 4)
     read = []
     load = reading.load_netcdf
 
     def spy(path, lazy=False, verify=True, summary_block=None):
         ds = load(path, lazy, verify, summary_block)
-        read.append(ds["max_abs_error"].chunks is not None)
+        read.append((Path(path).name, ds["max_abs_error"].chunks is not None))
         return ds
     monkeypatch.setattr(run, "load_netcdf", spy)
     out = tmp_path / "large.nc"
     outcome = ensemble(_spec(), N, out, chunk=2, progress=False, client=cluster_client)
-    assert read == [True] * 3   # every piece read back with its summaries left on disk
-    assert outcome.dataset["max_abs_error"].chunks is not None   # and the file read back so
+    assert sorted(read) == [("group-0000000-0000003.nc", True), ("group-0000004-0000005.nc", True)]
+    assert outcome.dataset["max_abs_error"].chunks is not None   # the file read back so too
     assert out.read_bytes() == in_memory.read_bytes()
+    assert not Path(str(out) + ".parts").exists()
 
 
 def test_the_statistics_of_a_file_read_in_blocks_are_those_of_all_values_at_once(in_memory, monkeypatch):

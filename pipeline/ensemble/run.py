@@ -305,16 +305,49 @@ def _merged(pieces: list, spec: EnsembleSpec):
     return _finish(pieces, spec.scene(), spec)
 
 
+class _Groups:
+    """The finished chunks of a large run, held in memory until their group of consecutive chunks
+    (about SUMMARY_BLOCK realisations) is complete, then written as one scratch file in
+    OUT.nc.parts/merge/ and read back lazily: the final merge opens a few files, not about
+    MAX_AUTO_CHUNKS (beyond xarray's 128 open files it reopened them by turns, for every variable:
+    the merge of 100,000 realisations took minutes, section 26). Scratch files are not parts: a
+    resumed run reads the parts, and the folder goes with OUT.nc.parts."""
+
+    def __init__(self, chunks: list, folder: Path, spec: EnsembleSpec):
+        per = max(1, SUMMARY_BLOCK // max(len(c) for c in chunks))
+        self.group = {c[0]: i // per for i, c in enumerate(chunks)}
+        self.left = {}
+        for g in self.group.values():
+            self.left[g] = self.left.get(g, 0) + 1
+        self.held, self.folder, self.spec = {}, folder, spec
+
+    def add(self, ds) -> list:
+        """The chunk ``ds`` taken in; its group read back from its scratch file if it is now complete."""
+        g = self.group[int(ds["realization"][0])]
+        self.held.setdefault(g, []).append(ds)
+        self.left[g] -= 1
+        if self.left[g]:
+            return []
+        merged = _merged(self.held.pop(g), self.spec)
+        first, last = int(merged["realization"][0]), int(merged["realization"][-1])
+        self.folder.mkdir(parents=True, exist_ok=True)
+        path = self.folder / f"group-{first:07d}-{last:07d}.nc"
+        write_netcdf(merged, path)
+        return [load_netcdf(path, lazy=True, verify=False, summary_block=0)]
+
+
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
              scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S, client=None,
              summary_block: int | None = None) -> list:
     """Run the chunks on dask (on ``client``, else on a cluster of this call); each finished chunk
     is stored as a part at once. Returns the parts: a chunk of summaries as it came (a few hundred
-    kB; the merged file has the same bytes as from the part read back, tests/test_merge.py), a
-    chunk with histories, or any chunk of a run of more than ``summary_block`` realisations, as
-    read back from its part, lazily, while the workers compute the others (histories, and then
-    summaries, stay on disk). The merged file is checked (:func:`ensemble`), the parts are not."""
+    kB; the merged file has the same bytes as from the part read back, tests/test_merge.py), in a
+    run of more than ``summary_block`` realisations (``summary_block`` 0) in groups left on disk
+    (:class:`_Groups`), a chunk with histories as read back from its part, lazily, while the
+    workers compute the others (histories stay on disk). The merged file is checked
+    (:func:`ensemble`), the parts are not."""
     written, shared = [], client is not None
+    groups = _Groups(chunks, manifest.folder / "merge", spec) if summary_block == 0 else None
     with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
         if bar:
             with sigint_deferred():   # a Ctrl-C meanwhile is raised after it, not inside dask's client
@@ -326,8 +359,10 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
                 for ds in _finished(client, futures, scheduler, worker_timeout, interrupted):
                     first, last = int(ds.realization[0]), int(ds.realization[-1])
                     path = manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
-                    written.append(load_netcdf(path, lazy=True, verify=False, summary_block=summary_block)
-                                   if "time" in ds.dims or summary_block == 0 else ds)
+                    if "time" in ds.dims:
+                        written.append(load_netcdf(path, lazy=True, verify=False))
+                    else:
+                        written += groups.add(ds) if groups else [ds]
                     if bar:
                         bar.advance(ds.sizes["realization"])
         except BaseException:
