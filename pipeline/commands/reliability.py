@@ -36,6 +36,8 @@ def add_parser(sub) -> None:
     add_parents(p)
     add_json(p, "print one JSON object: pf, lower, upper, confidence, cov, evaluations, method, ...")
     add_workers(p, what="local dask workers for large batches (1: in this process)")
+    p.add_argument("--plot", metavar="PNG", help="also write a figure: the levels' thresholds against the limit, "
+                                                 "and the inputs' shift among the failing evaluations")
     p.set_defaults(main=main)
 
 
@@ -65,6 +67,7 @@ def main(args) -> int:
     cluster = resolve_cluster(args.workers)
     output = check_new_output(args.output or f"{level.scene.name}_{level.model}_reliability.nc",
                               "rss6 reliability", args.parents)
+    figure = check_new_output(args.plot, "rss6 reliability --plot", args.parents) if args.plot else None
     spec = level.ensemble_spec(args.seed)
     start = time.perf_counter()
     with OutputLock(output):
@@ -75,8 +78,27 @@ def main(args) -> int:
         options = f"--event '{event.text}' --method {args.method}" + (f" -n {args.n}" if args.n else "") + \
             (f" --p0 {args.p0:g}" if args.method == "subset" else "") + f" --seed {args.seed}"
         write_netcdf(reliability_dataset(est, event, spec, time.perf_counter() - start, options), output)
-    print(json.dumps(_strict(est.summary()), indent=2) if args.json else _text(est, event, output))
+    _report(args, est, event, level, output, figure)
     return 0
+
+
+def _report(args, est, event, level, output, figure) -> None:
+    """Print the estimate and what fails (text or JSON); write the figure if asked."""
+    from ..analysis.failure_domain import failure_domain_json, format_failure_domain
+    from ..studies.reliability import what_fails
+    fd, physical = what_fails(est, event, level.scene, level.model)
+    if figure is not None:
+        from ..analysis.reliability_plots import plot_reliability
+        plot_reliability(est, event, fd, figure, f"rss6 reliability: P({event.text}) = {est.pf:.3g}, scene "
+                                                 f"{level.scene.name}, {level.model} level, {output.name}")
+    if args.json:
+        out = _strict(est.summary()) | {"failure_domain": failure_domain_json(fd, physical) if fd else None}
+        print(json.dumps(out, indent=2))
+        return
+    print(_text(est, event, output))
+    print(format_failure_domain(fd, physical) if fd else "what fails: no evaluation exceeded the limit")
+    if figure is not None:
+        print(f"wrote {figure}")
 
 
 def _strict(summary: dict) -> dict:

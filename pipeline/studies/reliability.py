@@ -12,13 +12,15 @@ workers of pipeline.ensemble.cluster when a batch is large.
 from __future__ import annotations
 
 import contextlib
+import re
 from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 from scipy import stats as sps
 
-from rss6core import FINISHED, model_level, prepare_level, uniform_dimension
+from rss6core import (FINISHED, SIZE_UNIFORMS, UNIFORM_BLOCKS, clearances_from_named_uniforms, clearances_from_uniforms,
+                      inputs_from_uniforms, model_level, prepare_level, size_band, uniform_dimension)
 
 from ..analysis.exceedance import Event, clopper_pearson
 from ..analysis.subset import SubsetSettings, subset_simulation
@@ -26,8 +28,8 @@ from ..ensemble.cluster import dask_client
 from ..files.records import window_summaries
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
 
-__all__ = ["ReliabilityError", "Estimate", "input_dimension", "evaluate", "reliability", "reliability_dataset",
-           "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
+__all__ = ["ReliabilityError", "Estimate", "input_dimension", "input_labels", "physical_inputs", "what_fails",
+           "evaluate", "reliability", "reliability_dataset", "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
 
 METHODS = ("subset", "mc")
 MC_BLOCK = 1000          # plain Monte Carlo draws block b of z from SeedSequence([seed, MC_TAG, b])
@@ -81,6 +83,82 @@ def input_dimension(scene, model: str, source: str = "") -> int:
         raise ReliabilityError(f"{source or scene.name}: a scene with no uncertain input at the {model} level "
                                "(it draws no clearances and has no [uncertain.*] table): nothing to be probable")
     return clearances + uncertain
+
+
+def input_labels(scene, model: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(label, family) of every standard normal input of a realisation, in the order of
+    :func:`input_dimension`: the clearance draw's blocks of six uniforms (legs 1-6; the four size
+    blocks, then the eccentricity blocks the draw takes), then the [uncertain.*] draws (family: the
+    input's name); inputs that no draw takes, and the size uniforms of a family whose sizes are nominal
+    (taken but not used), are in family 'unused': their shift shows the noise of the estimate."""
+    labels, families = [], []
+    if model_level(model).draws_clearances:
+        nominal = {block for block, family in zip(UNIFORM_BLOCKS, CLEARANCE_FAMILIES)
+                   if size_band(scene, family) is None}
+        for block in UNIFORM_BLOCKS[:SIZE_UNIFORMS // 6] + _eccentricity_blocks(scene):
+            labels += [f"{block}[leg {i}]" for i in range(1, 7)]
+            families += ["unused" if block in nominal else block] * 6
+        _pad(labels, families, uniform_dimension(None))
+    if scene.uncertain:
+        labels += list(scene.uncertain.labels())
+        families += list(scene.uncertain.columns(lambda i: i.name))
+    _pad(labels, families, input_dimension(scene, model))
+    return tuple(labels), tuple(families)
+
+
+# the joint families of the four size blocks, in their order (rss6core.clearance.FAMILIES, not exported)
+CLEARANCE_FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
+
+
+def _pad(labels: list, families: list, size: int) -> None:
+    labels += [f"unused[{k}]" for k in range(len(labels), size)]
+    families += ["unused"] * (size - len(families))
+
+
+def _eccentricity_blocks(scene) -> tuple[str, ...]:
+    """The eccentricity blocks of UNIFORM_BLOCKS a clearance draw of ``scene`` takes, in its order (a
+    point law takes none): asked of rss6core's draw by name, one missing block at a time."""
+    given, order = {block: np.full(6, 0.5) for block in UNIFORM_BLOCKS[:SIZE_UNIFORMS // 6]}, []
+    for _ in UNIFORM_BLOCKS:
+        try:
+            clearances_from_named_uniforms(scene, given)
+            return tuple(order)
+        except ValueError as exc:
+            missing = re.search(r"uniforms '(\w+)'", str(exc))
+            if missing is None or missing.group(1) in given:
+                raise
+            given[missing.group(1)] = np.full(6, 0.5)
+            order.append(missing.group(1))
+    raise ValueError("the clearance draw asks for more blocks than UNIFORM_BLOCKS holds")
+
+
+def physical_inputs(scene, model: str, z: np.ndarray) -> list[tuple[str, tuple[float, ...], str]]:
+    """(name, values, unit) of the realisation at z: its clearance sizes and eccentricity magnitudes,
+    legs 1-6 (m), and each [uncertain.*] input's draws (its units: SI deviations, or factors)."""
+    u = np.minimum(sps.norm.cdf(np.asarray(z, float)), _ONE_BELOW)
+    rows, offset = [], uniform_dimension(None)
+    if model_level(model).draws_clearances:
+        d = clearances_from_uniforms(scene, u[:offset])
+        for name, values in (("A_radial_size", d.radial_size), ("A_axial_size", d.axial_size), ("C_size", d.size_C),
+                             ("B_size", d.size_B), ("|e_A|", np.linalg.norm(d.e_A, axis=1)),
+                             ("|e_C|", np.linalg.norm(d.e_C, axis=1)), ("|e_B|", np.linalg.norm(d.e_B, axis=1))):
+            rows.append((f"{name} (legs 1-6)", tuple(map(float, values)), "m"))
+    if scene.uncertain and u.size >= offset + scene.uncertain.dimension:
+        drawn = inputs_from_uniforms(scene.uncertain, u[offset:offset + scene.uncertain.dimension])
+        rows += [(i.name, tuple(map(float, drawn.of(i.name))), i.draw_units) for i in scene.uncertain.inputs]
+    return rows
+
+
+def what_fails(est: "Estimate", event: Event, scene, model: str):
+    """The failure domain of a reliability estimate (pipeline.analysis.failure_domain) and the
+    physical inputs of its most probable failing realisation; None when no evaluation failed."""
+    from ..analysis.failure_domain import failure_domain
+    failing = _response(event, est.maxima) > event.limit
+    if not failing.any():
+        return None, []
+    labels, families = input_labels(scene, model)
+    fd = failure_domain(est.z, est.level, failing, labels, families)
+    return fd, physical_inputs(scene, model, fd.most_probable_z)
 
 
 def _evaluate_rows(spec, window: str, z: np.ndarray) -> np.ndarray:
