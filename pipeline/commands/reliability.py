@@ -36,6 +36,9 @@ def add_parser(sub) -> None:
     add_parents(p)
     add_json(p, "print one JSON object: pf, lower, upper, confidence, cov, evaluations, method, ...")
     add_workers(p, what="local dask workers for large batches (1: in this process)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run from OUTPUT.checkpoint.nc (the same command otherwise): the "
+                        "result is that of an uninterrupted run; without it, a checkpoint left there is refused")
     p.add_argument("--plot", metavar="PNG", help="also write a figure: the levels' thresholds against the limit, "
                                                  "and the inputs' shift among the failing evaluations")
     p.set_defaults(main=main)
@@ -63,21 +66,26 @@ def main(args) -> int:
     from ..files.outputs import OutputLock, check_new_output
     from ..files.writing import write_netcdf
     from ..studies.reliability import reliability, reliability_dataset
+    from ..studies.reliability_checkpoint import Checkpoint, checkpoint_path
     event, level = _settings(args)
     cluster = resolve_cluster(args.workers)
     output = check_new_output(args.output or f"{level.scene.name}_{level.model}_reliability.nc",
                               "rss6 reliability", args.parents)
     figure = check_new_output(args.plot, "rss6 reliability --plot", args.parents) if args.plot else None
     spec = level.ensemble_spec(args.seed)
+    options = f"--event '{event.text}' --method {args.method}" + (f" -n {args.n}" if args.n else "") + \
+        (f" --p0 {args.p0:g}" if args.method == "subset" else "") + f" --seed {args.seed}"
     start = time.perf_counter()
     with OutputLock(output):
+        checkpoint = Checkpoint(checkpoint_path(output), {**spec.attrs(), "options": options}, args.resume)
         try:
-            est = reliability(spec, event, args.method, args.n, args.p0, args.confidence, cluster.workers)
+            est = reliability(spec, event, args.method, args.n, args.p0, args.confidence, cluster.workers,
+                              checkpoint)
         except KeyboardInterrupt:
-            return interrupted(None)
-        options = f"--event '{event.text}' --method {args.method}" + (f" -n {args.n}" if args.n else "") + \
-            (f" --p0 {args.p0:g}" if args.method == "subset" else "") + f" --seed {args.seed}"
+            kept = f"the evaluations so far are kept in {checkpoint.path} (add --resume)"
+            return interrupted(kept if checkpoint.batches else None)
         write_netcdf(reliability_dataset(est, event, spec, time.perf_counter() - start, options), output)
+        checkpoint.remove()
     _report(args, est, event, level, output, figure)
     return 0
 

@@ -192,11 +192,19 @@ def _response(event: Event, maxima: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(r), np.inf, r)
 
 
-def _subset(spec, event: Event, dimension: int, settings: SubsetSettings, client) -> Estimate:
-    collected = []
+def _batches(spec, window: str, client, checkpoint):
+    """The function evaluating a batch of rows z: through ``checkpoint`` (a
+    reliability_checkpoint.Checkpoint: stored batches replayed, new ones stored) when given."""
+    def compute(z):
+        return evaluate(spec, window, z, client)
+    return compute if checkpoint is None else (lambda z: checkpoint.evaluate(z, compute))
+
+
+def _subset(spec, event: Event, dimension: int, settings: SubsetSettings, client, checkpoint=None) -> Estimate:
+    collected, batch = [], _batches(spec, event.window, client, checkpoint)
 
     def response(z):
-        collected.append(evaluate(spec, event.window, z, client))
+        collected.append(batch(z))
         return _response(event, collected[-1])
 
     res = subset_simulation(response, dimension, event.limit, settings)
@@ -206,11 +214,13 @@ def _subset(spec, event: Event, dimension: int, settings: SubsetSettings, client
                     res.status, res.message, e.z, e.level, np.concatenate(collected))
 
 
-def _monte_carlo(spec, event: Event, dimension: int, n: int, seed: int, confidence: float, client) -> Estimate:
+def _monte_carlo(spec, event: Event, dimension: int, n: int, seed: int, confidence: float, client,
+                 checkpoint=None) -> Estimate:
     blocks = [np.random.default_rng(np.random.SeedSequence([seed, MC_TAG, b])).standard_normal((MC_BLOCK, dimension))
               for b in range(-(-n // MC_BLOCK))]
     z = np.concatenate(blocks)[:n]
-    maxima = evaluate(spec, event.window, z, client)
+    batch = _batches(spec, event.window, client, checkpoint)   # a block at a time: an interrupt loses one
+    maxima = np.concatenate([batch(z[i:i + MC_BLOCK]) for i in range(0, n, MC_BLOCK)])
     k = int(np.count_nonzero(_response(event, maxima) > event.limit))
     lower, upper = (float(b) for b in clopper_pearson(k, n, confidence))
     pf = k / n
@@ -231,15 +241,16 @@ def _client(workers: int):
 
 
 def reliability(spec, event: Event, method: str = "subset", n: int | None = None, p0: float = 0.1,
-                confidence: float = CONFIDENCE, workers: int = 1) -> Estimate:
+                confidence: float = CONFIDENCE, workers: int = 1, checkpoint=None) -> Estimate:
     """P(event) at the level of ``spec`` (pipeline.ensemble.run.EnsembleSpec) by ``method``: subset
-    simulation with N = ``n`` (default 1000) per level, or plain Monte Carlo of ``n`` (default 20000)."""
+    simulation with N = ``n`` (default 1000) per level, or plain Monte Carlo of ``n`` (default 20000);
+    every batch through ``checkpoint`` (pipeline.studies.reliability_checkpoint) when given."""
     dimension = input_dimension(spec.scene(), spec.model, spec.source)
     with _client(workers) as client:
         if method == "mc":
-            return _monte_carlo(spec, event, dimension, n or 20000, spec.seed, confidence, client)
+            return _monte_carlo(spec, event, dimension, n or 20000, spec.seed, confidence, client, checkpoint)
         settings = SubsetSettings(n or 1000, p0, spec.seed, confidence)
-        return _subset(spec, event, dimension, settings, client)
+        return _subset(spec, event, dimension, settings, client, checkpoint)
 
 
 def reliability_dataset(est: Estimate, event: Event, spec, elapsed: float, options: str = "") -> xr.Dataset:
