@@ -83,3 +83,63 @@ def test_a_left_checkpoint_needs_resume_and_a_finished_output_is_not_rerun(tmp_p
     for extra in ([], ["--resume"]):
         assert main(_argv(out, *extra)) == 2
         assert "exists; rss6 reliability does not overwrite" in capsys.readouterr().err
+
+
+# --cov: a CoV target (issue 40 "Rare events")
+
+EVENT = "displacement:z>0.15mm"   # P about 0.1 at the smoke scene's quasi-static level
+
+
+def _run_json(capsys, argv) -> dict:
+    capsys.readouterr()
+    assert main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_mc_adds_blocks_until_the_cov_target_and_no_further(tmp_path, capsys):
+    """The CoV sqrt((1 - P) / (n P)), recomputed from the file after each block of 1000: above the
+    target until the last block, at most the target after it; the draws are those of a plain run."""
+    out = tmp_path / "m.nc"
+    res = _run_json(capsys, ["reliability", "smoke", "--event", EVENT, "--method", "mc", "--cov", "0.06",
+                             "--workers", "1", "-o", str(out), "--json"])
+    hits = load_netcdf(out)["max_abs_error"].sel(quantity="displacement", direction="z").values > 1.5e-4
+    n = len(hits)
+    assert n % 1000 == 0 and res["evaluations"] == n and res["status"] == "converged"
+
+    def cov(m):
+        k = hits[:m].sum()
+        return np.sqrt((1 - k / m) / k)
+    assert cov(n) <= 0.06 < cov(n - 1000) and res["cov"] == pytest.approx(cov(n))
+    plain = _run_json(capsys, ["reliability", "smoke", "--event", EVENT, "--method", "mc", "-n", str(n),
+                               "--workers", "1", "-o", str(tmp_path / "p.nc"), "--json"])
+    assert plain["pf"] == res["pf"] and plain["upper"] == res["upper"]
+
+
+def test_subset_doubles_n_within_its_budget(tmp_path, capsys):
+    """A target the first run meets: one run. An unreachable one: N = 200, then 400, and no third run,
+    which would take the evaluations beyond the budget (status 'budget')."""
+    base = ["reliability", "smoke", "--event", RARE, "-n", "200", "--workers", "1", "--json"]
+    met = _run_json(capsys, base + ["--cov", "0.9", "-o", str(tmp_path / "a.nc")])
+    assert met["status"] == "converged" and met["evaluations_per_level"][0] == 200 and met["cov"] <= 0.9
+    assert "1 run(s) up to N = 200" in met["message"]
+    capped = _run_json(capsys, base + ["--cov", "0.01", "--budget", "2000", "-o", str(tmp_path / "b.nc")])
+    assert capped["status"] == "budget" and capped["evaluations_per_level"][0] == 400
+    assert "2 run(s) up to N = 400" in capped["message"] and capped["cov"] > 0.01
+    spent = int(capped["message"].split("evaluations in all")[0].rsplit(", ", 1)[1])
+    assert spent <= 2000 < spent + 2 * capped["evaluations"]
+
+
+@pytest.mark.parametrize("extra, token", [
+    (["--cov", "0"], "between 0 and 1"), (["--cov", "1"], "between 0 and 1"), (["--cov", "-0.2"], "between 0 and 1"),
+    (["--budget", "5000"], "--budget: applies with --cov only"),
+    (["--method", "mc", "--cov", "0.1", "-n", "5000"], "cap them with --budget"),
+])
+def test_a_bad_cov_request_is_one_line_exit_2(tmp_path, capsys, monkeypatch, extra, token):
+    monkeypatch.setattr(study, "reliability", lambda *a, **k: pytest.fail("work started"))
+    capsys.readouterr()
+    try:
+        code = main(["reliability", "smoke", "--event", EVENT, *extra, "-o", str(tmp_path / "x.nc")])
+    except SystemExit as exc:   # argparse's refusal of a value
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and token in err, err

@@ -35,6 +35,7 @@ METHODS = ("subset", "mc")
 MC_BLOCK = 1000          # plain Monte Carlo draws block b of z from SeedSequence([seed, MC_TAG, b])
 MC_TAG = 40404040
 IN_PROCESS_ROWS = 64     # batches up to this many rows are evaluated here, larger ones on the workers
+DEFAULT_BUDGET = {"subset": 20_000, "mc": 200_000}   # evaluations at most with a CoV target (--budget)
 _ONE_BELOW = np.nextafter(1.0, 0.0)
 
 
@@ -214,20 +215,55 @@ def _subset(spec, event: Event, dimension: int, settings: SubsetSettings, client
                     res.status, res.message, e.z, e.level, np.concatenate(collected))
 
 
+def _mc_cov(k: int, n: int) -> float:
+    """The CoV of the Monte Carlo estimate k / n: sqrt((1 - P) / (n P)); infinite for k = 0."""
+    return float(np.sqrt((1 - k / n) / k)) if k else float("inf")
+
+
 def _monte_carlo(spec, event: Event, dimension: int, n: int, seed: int, confidence: float, client,
-                 checkpoint=None) -> Estimate:
-    blocks = [np.random.default_rng(np.random.SeedSequence([seed, MC_TAG, b])).standard_normal((MC_BLOCK, dimension))
-              for b in range(-(-n // MC_BLOCK))]
-    z = np.concatenate(blocks)[:n]
+                 checkpoint=None, cov_target: float | None = None) -> Estimate:
+    """Plain Monte Carlo of n draws, block b of MC_BLOCK from SeedSequence([seed, MC_TAG, b]); with
+    ``cov_target``, stopped after the first block at which the CoV is at most the target (n the cap)."""
     batch = _batches(spec, event.window, client, checkpoint)   # a block at a time: an interrupt loses one
-    maxima = np.concatenate([batch(z[i:i + MC_BLOCK]) for i in range(0, n, MC_BLOCK)])
-    k = int(np.count_nonzero(_response(event, maxima) > event.limit))
-    lower, upper = (float(b) for b in clopper_pearson(k, n, confidence))
-    pf = k / n
-    cov = float(np.sqrt((1 - pf) / (n * pf))) if k else float("inf")
-    return Estimate("mc", pf, lower, upper, confidence, cov, "Clopper-Pearson exact binomial interval", (n,),
-                    (event.limit,), "converged", f"{k} of {n} realisations exceed the limit",
-                    z, np.zeros(n, int), maxima)
+    zs, maxima, k = [], [], 0
+    for b in range(-(-n // MC_BLOCK)):
+        rng = np.random.default_rng(np.random.SeedSequence([seed, MC_TAG, b]))
+        zs.append(rng.standard_normal((MC_BLOCK, dimension))[:n - b * MC_BLOCK])
+        maxima.append(batch(zs[-1]))
+        k += int(np.count_nonzero(_response(event, maxima[-1]) > event.limit))
+        if cov_target is not None and _mc_cov(k, b * MC_BLOCK + len(zs[-1])) <= cov_target:
+            break
+    z, maxima = np.concatenate(zs), np.concatenate(maxima)
+    m = len(z)
+    lower, upper = (float(v) for v in clopper_pearson(k, m, confidence))
+    status, message = "converged", f"{k} of {m} realisations exceed the limit"
+    if cov_target is not None:
+        met = _mc_cov(k, m) <= cov_target
+        status = "converged" if met else "budget"
+        message += (f"; CoV target {cov_target:g} met" if met else
+                    f"; CoV target {cov_target:g} not met within the budget of {n} realisations")
+    return Estimate("mc", k / m, lower, upper, confidence, _mc_cov(k, m), "Clopper-Pearson exact binomial interval",
+                    (m,), (event.limit,), status, message, z, np.zeros(m, int), maxima)
+
+
+def _subset_to_cov(spec, event: Event, dimension: int, settings: SubsetSettings, client, checkpoint,
+                   cov_target: float, budget: int) -> Estimate:
+    """Subset simulation with N doubled (a fresh run each time, its own seed schedule) until its CoV is
+    at most ``cov_target``, while the evaluations of all runs stay within ``budget``; the last run's
+    estimate and file, the runs and evaluations spent in its message."""
+    from dataclasses import replace
+    spent, runs = 0, 0
+    while True:
+        est = _subset(spec, event, dimension, settings, client, checkpoint)
+        spent, runs = spent + est.level.size, runs + 1
+        done = f"{runs} run(s) up to N = {settings.n_per_level}, {spent} evaluations in all"
+        if est.status in ("certain", "impossible") or est.cov <= cov_target:
+            return replace(est, message=f"{est.message}; CoV target {cov_target:g} met ({done})"
+                           if est.cov <= cov_target else est.message)
+        if spent + 2 * est.level.size > budget:
+            return replace(est, status="budget", message=f"{est.message}; CoV target {cov_target:g} not met: "
+                                                         f"the next run would exceed the budget of {budget} ({done})")
+        settings = replace(settings, n_per_level=2 * settings.n_per_level)
 
 
 @contextlib.contextmanager
@@ -241,15 +277,22 @@ def _client(workers: int):
 
 
 def reliability(spec, event: Event, method: str = "subset", n: int | None = None, p0: float = 0.1,
-                confidence: float = CONFIDENCE, workers: int = 1, checkpoint=None) -> Estimate:
+                confidence: float = CONFIDENCE, workers: int = 1, checkpoint=None, cov_target: float | None = None,
+                budget: int | None = None) -> Estimate:
     """P(event) at the level of ``spec`` (pipeline.ensemble.run.EnsembleSpec) by ``method``: subset
     simulation with N = ``n`` (default 1000) per level, or plain Monte Carlo of ``n`` (default 20000);
-    every batch through ``checkpoint`` (pipeline.studies.reliability_checkpoint) when given."""
+    every batch through ``checkpoint`` (pipeline.studies.reliability_checkpoint) when given. With
+    ``cov_target``: Monte Carlo adds blocks, subset simulation doubles N, until the CoV is at most the
+    target or the ``budget`` of evaluations (default DEFAULT_BUDGET) would be exceeded."""
     dimension = input_dimension(spec.scene(), spec.model, spec.source)
+    budget = budget or DEFAULT_BUDGET[method]
     with _client(workers) as client:
         if method == "mc":
-            return _monte_carlo(spec, event, dimension, n or 20000, spec.seed, confidence, client, checkpoint)
+            return _monte_carlo(spec, event, dimension, budget if cov_target else n or 20000, spec.seed, confidence,
+                                client, checkpoint, cov_target)
         settings = SubsetSettings(n or 1000, p0, spec.seed, confidence)
+        if cov_target is not None:
+            return _subset_to_cov(spec, event, dimension, settings, client, checkpoint, cov_target, budget)
         return _subset(spec, event, dimension, settings, client, checkpoint)
 
 
