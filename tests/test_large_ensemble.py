@@ -92,3 +92,18 @@ def test_a_large_run_is_cut_into_at_most_about_max_auto_chunks_chunks():
     assert default_chunk(20_000, 2, "quasi-static") == 64   # as before
     chunk = default_chunk(1_000_000, 2, "quasi-static")
     assert -(-1_000_000 // chunk) <= run.MAX_AUTO_CHUNKS and chunk == 977
+
+
+def test_a_resumed_large_run_with_a_part_inside_a_group_writes_the_same_file(tmp_path, in_memory, cluster_client,
+                                                                             monkeypatch):
+    """Realisations 2-3 stored by an earlier run: the group of the chunks computed now (0-1, 4-5)
+    surrounds that part; the merge puts them in order and the file is the uninterrupted one."""
+    from pipeline.ensemble.run import run_chunk
+    from pipeline.files.outputs import PartsManifest
+    _small_blocks(monkeypatch, 4)
+    out = tmp_path / "resumed.nc"
+    PartsManifest(Path(str(out) + ".parts"), _spec().attrs()).write(run_chunk(_spec(), [2, 3]),
+                                                                      "chunk-0000002-0000003.nc")
+    outcome = ensemble(_spec(), N, out, chunk=2, progress=False, client=cluster_client)
+    assert outcome.stored_before == 2 and outcome.computed == 4
+    assert out.read_bytes() == in_memory.read_bytes()
