@@ -12,7 +12,7 @@ BAD_TEXT = {"require": "displacement:x<=1parsec@q95", "event": "displacement:z>1
             "until": "displacement:x@q95<=5 furlongs",
             "spec": "displacement:x<=1mm@q101", "quantity": "torque", "direction": "w", "window": "midnight",
             "output": "{missing}/out", "classes": "H7/x6", "costs": "{missing}/costs.toml",
-            "plots": None, "data": None, "configs": None, "file": None, "config": None}
+            "plots": None, "data": None, "configs": None, "file": None, "config": None, "plot": "{missing}/fig.png"}
 # per command, what else must be given for the option to be judged (a file to read, a required option)
 ANY_TEXT = {("report", "output")}   # report creates its output folder, parents included
 NEEDS = {"stats": ["{file}"], "plot": ["{file}"], "budget": ["--spec", "displacement:x<=1mm@q95"],

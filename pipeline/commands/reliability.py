@@ -9,7 +9,8 @@ from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError
 from .messages import interrupted
-from .options import add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, positive_int
+from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, fraction,
+                      positive_int)
 
 
 def add_parser(sub) -> None:
@@ -28,6 +29,12 @@ def add_parser(sub) -> None:
                         "Monte Carlo with an exact Clopper-Pearson interval (default subset)")
     p.add_argument("-n", type=positive_int, help="subset: evaluations per level N, a multiple of 1 / p0 "
                                                  "(default 1000); mc: realisations (default 20000)")
+    p.add_argument("--cov", type=fraction, metavar="C",
+                   help="a CoV target in (0, 1): mc adds realisations (blocks of 1000), subset doubles N (a fresh "
+                        "run each time), until the estimated CoV is at most C or --budget would be exceeded "
+                        "(exit 0 either way; status 'budget' if not met)")
+    p.add_argument("--budget", type=positive_int, metavar="E",
+                   help="with --cov: evaluations at most, over all runs (default 20000 subset, 200000 mc)")
     p.add_argument("-p0", "--p0", type=float, default=0.1,
                    help="subset: conditional probability of each level, in (0, 0.5] (default 0.1)")
     add_seed(p)
@@ -36,6 +43,11 @@ def add_parser(sub) -> None:
     add_parents(p)
     add_json(p, "print one JSON object: pf, lower, upper, confidence, cov, evaluations, method, ...")
     add_workers(p, what="local dask workers for large batches (1: in this process)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run from OUTPUT.checkpoint.nc (the same command otherwise): the "
+                        "result is that of an uninterrupted run; without it, a checkpoint left there is refused")
+    p.add_argument("--plot", metavar="PNG", help="also write a figure: the levels' thresholds against the limit, "
+                                                 "and the inputs' shift among the failing evaluations")
     p.set_defaults(main=main)
 
 
@@ -52,6 +64,11 @@ def _settings(args):
             raise OptionError(f"-n/--p0: {exc}") from None
     elif args.p0 != 0.1:
         raise OptionError("--p0: applies with --method subset only")
+    if args.budget and args.cov is None:
+        raise OptionError("--budget: applies with --cov only")
+    if args.method == "mc" and args.cov is not None and args.n:
+        raise OptionError("-n: with --method mc --cov the realisations are added until the CoV target; cap them "
+                          "with --budget")
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
     input_dimension(level.scene, level.model, args.config)   # ReliabilityError: no random inputs
     return event, level
@@ -61,22 +78,48 @@ def main(args) -> int:
     from ..files.outputs import OutputLock, check_new_output
     from ..files.writing import write_netcdf
     from ..studies.reliability import reliability, reliability_dataset
+    from ..studies.reliability_checkpoint import Checkpoint, checkpoint_path
     event, level = _settings(args)
     cluster = resolve_cluster(args.workers)
     output = check_new_output(args.output or f"{level.scene.name}_{level.model}_reliability.nc",
                               "rss6 reliability", args.parents)
+    figure = check_new_output(args.plot, "rss6 reliability --plot", args.parents) if args.plot else None
     spec = level.ensemble_spec(args.seed)
+    options = f"--event '{event.text}' --method {args.method}" + (f" -n {args.n}" if args.n else "") + \
+        (f" --p0 {args.p0:g}" if args.method == "subset" else "") + f" --seed {args.seed}" + \
+        (f" --cov {args.cov:g}" if args.cov else "") + (f" --budget {args.budget}" if args.budget else "")
     start = time.perf_counter()
     with OutputLock(output):
+        checkpoint = Checkpoint(checkpoint_path(output), {**spec.attrs(), "options": options}, args.resume)
         try:
-            est = reliability(spec, event, args.method, args.n, args.p0, args.confidence, cluster.workers)
+            est = reliability(spec, event, args.method, args.n, args.p0, args.confidence, cluster.workers,
+                              checkpoint, args.cov, args.budget)
         except KeyboardInterrupt:
-            return interrupted(None)
-        options = f"--event '{event.text}' --method {args.method}" + (f" -n {args.n}" if args.n else "") + \
-            (f" --p0 {args.p0:g}" if args.method == "subset" else "") + f" --seed {args.seed}"
+            kept = f"the evaluations so far are kept in {checkpoint.path} (add --resume)"
+            return interrupted(kept if checkpoint.batches else None)
         write_netcdf(reliability_dataset(est, event, spec, time.perf_counter() - start, options), output)
-    print(json.dumps(_strict(est.summary()), indent=2) if args.json else _text(est, event, output))
+        checkpoint.remove()
+    _report(args, est, event, level, output, figure)
     return 0
+
+
+def _report(args, est, event, level, output, figure) -> None:
+    """Print the estimate and what fails (text or JSON); write the figure if asked."""
+    from ..analysis.failure_domain import failure_domain_json, format_failure_domain
+    from ..studies.reliability import what_fails
+    fd, physical = what_fails(est, event, level.scene, level.model)
+    if figure is not None:
+        from ..analysis.reliability_plots import plot_reliability
+        plot_reliability(est, event, fd, figure, f"rss6 reliability: P({event.text}) = {est.pf:.3g}, scene "
+                                                 f"{level.scene.name}, {level.model} level, {output.name}")
+    if args.json:
+        out = _strict(est.summary()) | {"failure_domain": failure_domain_json(fd, physical) if fd else None}
+        print(json.dumps(out, indent=2))
+        return
+    print(_text(est, event, output))
+    print(format_failure_domain(fd, physical) if fd else "what fails: no evaluation exceeded the limit")
+    if figure is not None:
+        print(f"wrote {figure}")
 
 
 def _strict(summary: dict) -> dict:

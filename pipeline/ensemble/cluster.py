@@ -94,6 +94,7 @@ def _workers_ignore_ctrl_c():
 CONNECT_TIMEOUT_S = 5.0   # an external scheduler that does not answer in this time is unreachable
 WORKER_TIMEOUT_S = 60.0   # default wait, s, for an external scheduler that has no workers
 POLL_S = 1.0              # how often, s, the workers of an external scheduler are counted
+POLL_WAIT_S = 0.02        # how often, s, the chunks' futures are looked at
 
 
 class SchedulerUnavailable(RuntimeError):
@@ -177,11 +178,16 @@ def _gathered(client, pending: set):
     """Results of the futures in ``pending`` that finish within about POLL_S, removed from it.
 
     A result held by a worker that has died cannot be gathered (dask computes it again, and
-    gathering would wait for that); such a future stays in ``pending``."""
-    from dask.distributed import wait
-    try:
-        done = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED").done
-    except TimeoutError:
+    gathering would wait for that); such a future stays in ``pending``. The futures' states are
+    looked at every POLL_WAIT_S: a dask ``wait`` that timed out left one waiter per pending future
+    behind, so that with ~1000 chunks pending the main process grew by megabytes a second
+    (docs/performance.md section 26)."""
+    deadline = time.monotonic() + POLL_S
+    done = [f for f in pending if f.done()]
+    while not done and time.monotonic() < deadline:
+        time.sleep(POLL_WAIT_S)
+        done = [f for f in pending if f.done()]
+    if not done:
         return
     held = client.who_has(list(done))
     for future in done:
@@ -192,4 +198,5 @@ def _gathered(client, pending: set):
         except TimeoutError:   # the worker died just now: ask again who holds the others
             return
         pending.discard(future)
+        future.release()   # the worker may drop it: a 1,000,000-realisation run held them all
         yield result

@@ -32,7 +32,7 @@ from rss6core import (FAILED, MODEL_LEVELS, SimulationResult, __version__, parse
 
 from ..files.outputs import OutputLock, PartsManifest
 from ..files.opening import open_ensemble
-from ..files.reading import load_netcdf
+from ..files.reading import SUMMARY_BLOCK, load_netcdf
 from ..files.records import finish_ensemble, chunk_dataset
 from ..files.schema import EnsembleFileError, ensemble_identity, identity
 from ..files.writing import sigint_deferred, write_netcdf
@@ -40,7 +40,7 @@ from .cluster import WORKER_TIMEOUT_S, _finished, dask_client
 from .progress import _kernels_to_compile, _Progress, compile_apart
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
-           "parts_dir", "MAX_AUTO_CHUNK", "MAX_AUTO_CHUNK_BY_MODEL"]
+           "parts_dir", "MAX_AUTO_CHUNK", "MAX_AUTO_CHUNK_BY_MODEL", "MAX_AUTO_CHUNKS"]
 
 
 @dataclass(frozen=True)
@@ -165,15 +165,17 @@ def _check_version(path, attrs: dict) -> None:
                                 "would mix results of two versions in one file: choose another -o")
 
 
-def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest) -> tuple[list, set]:
+def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest, summary_block: int | None = None
+            ) -> tuple[list, set]:
     """Datasets already stored for this ensemble (final file and verified parts, their histories
-    left on disk), and their realisations.
+    left on disk, and their summaries too beyond ``summary_block`` realisations, see
+    :func:`_summary_block`), and their realisations.
 
     Each realisation is taken once: parts left beside a finished file (a run stopped
     between writing it and removing the parts) add only what the file lacks.
     """
     pieces, done = [], set()
-    parts = _checked_parts(manifest, spec)
+    parts = _checked_parts(manifest, spec, summary_block)
     final = [(output, open_ensemble(output, lazy=True))] if output.exists() else []
     for path, ds in final:
         _check_identity(path, ds.attrs, spec)
@@ -185,7 +187,7 @@ def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest) -> tuple[
     return pieces, done
 
 
-def _checked_parts(manifest: PartsManifest, spec: EnsembleSpec) -> list:
+def _checked_parts(manifest: PartsManifest, spec: EnsembleSpec, summary_block: int | None = None) -> list:
     """Every stored part with its Dataset (histories on disk), after checking them all: the bad
     ones are named together in one EnsembleFileError (:meth:`PartsManifest.refuse`). A part the
     manifest vouches for is not read again for its checksums (its bytes were)."""
@@ -194,7 +196,7 @@ def _checked_parts(manifest: PartsManifest, spec: EnsembleSpec) -> list:
         problems[path] = manifest.problem(path)
         if problems[path] is None:
             try:
-                ds = open_ensemble(path, lazy=True, verify=False)
+                ds = open_ensemble(path, lazy=True, verify=False, summary_block=summary_block)
                 _check_identity(path, ds.attrs, spec)
                 parts.append((path, ds))
             except EnsembleFileError as exc:
@@ -215,6 +217,8 @@ MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run lo
 # its part, 15-20 ms CPU, and dask's messages), taken from the workers' cores, is then half as
 # often paid (section 18)
 MAX_AUTO_CHUNK_INTEGRATED = 128
+# a larger run has larger chunks: every chunk is a part file that the merge opens (section 26)
+MAX_AUTO_CHUNKS = 1024
 # the cap of the levels that integrate the flexible links for every clearance draw, by name, the
 # dearest first (as the --chunk help names them)
 MAX_AUTO_CHUNK_BY_MODEL = {name: MAX_AUTO_CHUNK_INTEGRATED for name, level in reversed(MODEL_LEVELS.items())
@@ -225,10 +229,11 @@ def default_chunk(n: int, workers: int, model: str | None = None) -> int:
     """Realisations per task: every worker busy, batches large, little work lost on an interrupt.
 
     The n realisations are cut into a multiple of ``workers`` chunks of nearly equal size (at most
-    MAX_AUTO_CHUNK, or the model's entry in MAX_AUTO_CHUNK_BY_MODEL), so that the workers finish
-    together: 400 on two workers are 8 chunks of 50, not 6 of 64 and one of 16.
+    MAX_AUTO_CHUNK, or the model's entry in MAX_AUTO_CHUNK_BY_MODEL, unless that makes more than
+    about MAX_AUTO_CHUNKS chunks), so that the workers finish together: 400 on two workers are 8
+    chunks of 50, not 6 of 64 and one of 16.
     """
-    largest = MAX_AUTO_CHUNK_BY_MODEL.get(model, MAX_AUTO_CHUNK)
+    largest = max(MAX_AUTO_CHUNK_BY_MODEL.get(model, MAX_AUTO_CHUNK), -(-n // MAX_AUTO_CHUNKS))
     rounds = -(-n // (workers * largest))
     return max(1, -(-n // (rounds * workers)))
 
@@ -264,14 +269,16 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
     output = Path(output)
     with OutputLock(output):
         manifest = PartsManifest(parts_dir(output), spec.attrs())
-        pieces, done = _stored(output, spec, manifest)
+        summary_block = _summary_block(n)
+        pieces, done = _stored(output, spec, manifest, summary_block)
         todo = [r for r in range(n) if r not in done]
         if todo:
             chunks = [todo[i:i + chunk] for i in range(0, len(todo), chunk)]
             bar = _Progress(n, n - len(todo)) if progress else None
             if bar:
                 bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
-            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout, client)
+            pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout, client,
+                               summary_block)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
         merged = pieces[0] if up_to_date else _merged(pieces, spec)
         extra = annotate(merged) if annotate else {}
@@ -284,20 +291,63 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
     return EnsembleOutcome(merged, len(todo), len(done), not up_to_date)
 
 
+def _summary_block(n: int) -> int | None:
+    """The ``summary_block`` of :func:`load_netcdf` for the pieces of an n-realisation run (None: its
+    default; 0: every piece's summaries stay on disk): none are
+    held in memory beyond SUMMARY_BLOCK realisations (the pieces of a 1,000,000-realisation run
+    took 8 kB each, section 26); the file then is written from them block by block."""
+    return None if n <= SUMMARY_BLOCK else 0
+
+
 def _merged(pieces: list, spec: EnsembleSpec):
     """The stored pieces as one ensemble, in realisation order; histories stay lazy (on disk)."""
     pieces = sorted(pieces, key=lambda ds: int(ds["realization"][0]))
     return _finish(pieces, spec.scene(), spec)
 
 
+class _Groups:
+    """The finished chunks of a large run, held in memory until their group of consecutive chunks
+    (about SUMMARY_BLOCK realisations) is complete, then written as one scratch file in
+    OUT.nc.parts/merge/ and read back lazily: the final merge opens a few files, not about
+    MAX_AUTO_CHUNKS (beyond xarray's 128 open files it reopened them by turns, for every variable:
+    the merge of 100,000 realisations took minutes, section 26). Scratch files are not parts: a
+    resumed run reads the parts, and the folder goes with OUT.nc.parts."""
+
+    def __init__(self, chunks: list, folder: Path, spec: EnsembleSpec):
+        per = max(1, SUMMARY_BLOCK // max(len(c) for c in chunks))
+        self.group = {c[0]: i // per for i, c in enumerate(chunks)}
+        self.left = {}
+        for g in self.group.values():
+            self.left[g] = self.left.get(g, 0) + 1
+        self.held, self.folder, self.spec = {}, folder, spec
+
+    def add(self, ds) -> list:
+        """The chunk ``ds`` taken in; its group read back from its scratch file if it is now complete."""
+        g = self.group[int(ds["realization"][0])]
+        self.held.setdefault(g, []).append(ds)
+        self.left[g] -= 1
+        if self.left[g]:
+            return []
+        merged = _merged(self.held.pop(g), self.spec)
+        first, last = int(merged["realization"][0]), int(merged["realization"][-1])
+        self.folder.mkdir(parents=True, exist_ok=True)
+        path = self.folder / f"group-{first:07d}-{last:07d}.nc"
+        write_netcdf(merged, path)
+        return [load_netcdf(path, lazy=True, verify=False, summary_block=0)]
+
+
 def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers: int,
-             scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S, client=None) -> list:
+             scheduler: str | None, bar, worker_timeout: float = WORKER_TIMEOUT_S, client=None,
+             summary_block: int | None = None) -> list:
     """Run the chunks on dask (on ``client``, else on a cluster of this call); each finished chunk
     is stored as a part at once. Returns the parts: a chunk of summaries as it came (a few hundred
-    kB; the merged file has the same bytes as from the part read back, tests/test_merge.py), a
-    chunk with histories as read back from its part, lazily, while the workers compute the others
-    (histories stay on disk). The merged file is checked (:func:`ensemble`), the parts are not."""
+    kB; the merged file has the same bytes as from the part read back, tests/test_merge.py), in a
+    run of more than ``summary_block`` realisations (``summary_block`` 0) in groups left on disk
+    (:class:`_Groups`), a chunk with histories as read back from its part, lazily, while the
+    workers compute the others (histories stay on disk). The merged file is checked
+    (:func:`ensemble`), the parts are not."""
     written, shared = [], client is not None
+    groups = _Groups(chunks, manifest.folder / "merge", spec) if summary_block == 0 else None
     with contextlib.nullcontext(client) if shared else dask_client(workers, scheduler) as client:
         with sigint_deferred() as interrupted:   # a Ctrl-C meanwhile is raised after it, not inside dask's client
             kernels = _kernels_to_compile(client, spec.model)
@@ -310,8 +360,10 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
                 for ds in _finished(client, futures, scheduler, worker_timeout, interrupted):
                     first, last = int(ds.realization[0]), int(ds.realization[-1])
                     path = manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
-                    written.append(load_netcdf(path, lazy=True, verify=False) if "time" in ds.dims
-                                   else ds)
+                    if "time" in ds.dims:
+                        written.append(load_netcdf(path, lazy=True, verify=False))
+                    else:
+                        written += groups.add(ds) if groups else [ds]
                     if bar:
                         bar.advance(ds.sizes["realization"])
         except BaseException:

@@ -11,10 +11,11 @@ from .schema import EnsembleFileError
 __all__ = ["open_ensemble", "checked_ensemble", "open_results"]
 
 
-def open_ensemble(path, lazy: bool = False, verify: bool = True) -> xr.Dataset:
-    """Open an ensemble file into memory (``lazy``: its histories stay on disk; ``verify``: its
-    checksums checked, see :func:`load_netcdf`); EnsembleFileError names the file and the problem."""
-    return checked_ensemble(load_netcdf(path, lazy, verify), path)
+def open_ensemble(path, lazy: bool = False, verify: bool = True, summary_block: int | None = None) -> xr.Dataset:
+    """Open an ensemble file into memory (``lazy``: its histories, and the summaries of a file of more
+    than ``summary_block`` (default SUMMARY_BLOCK) realisations, stay on disk; ``verify``: its checksums checked, see
+    :func:`load_netcdf`); EnsembleFileError names the file and the problem."""
+    return checked_ensemble(load_netcdf(path, lazy, verify, summary_block), path)
 
 
 def checked_ensemble(ds: xr.Dataset, path) -> xr.Dataset:

@@ -10,16 +10,24 @@ import xarray as xr
 from .checksums import verify_checksums
 from .schema import _ELAPSED, CHECKSUM, EnsembleFileError, cf_decode
 
-__all__ = ["HISTORY_BLOCK", "load_netcdf", "note_unverified"]
+__all__ = ["HISTORY_BLOCK", "SUMMARY_BLOCK", "load_netcdf", "note_unverified"]
 
 HISTORY_BLOCK = 64   # realisations per block of a history read lazily (a merge holds one block)
+# a file read lazily with more realisations than this keeps its per-realisation summaries on disk
+# too, in blocks of this many (24 MB of max_abs_error each), so that the memory of reading a
+# 1,000,000-realisation file stays bounded (docs/performance.md section 26); smaller files are
+# read into memory, which is 3x faster than through dask
+SUMMARY_BLOCK = 2 ** 16
 
 
-def load_netcdf(path, lazy: bool = False, verify: bool = True) -> xr.Dataset:
+def load_netcdf(path, lazy: bool = False, verify: bool = True, summary_block: int | None = None) -> xr.Dataset:
     """Any netCDF file fully into memory; EnsembleFileError names the file if it is missing or unreadable.
 
     ``lazy``: the variables over time (histories) stay on disk as dask arrays of HISTORY_BLOCK
-    realisations, read block by block when used; the file stays open while the Dataset is used.
+    realisations, read block by block when used, and so do all variables along ``realization``
+    (in blocks of SUMMARY_BLOCK) when the file holds more than ``summary_block`` (default
+    SUMMARY_BLOCK) realisations;
+    the file stays open while the Dataset is used.
     ``verify``: the values are checked against the checksums written with the file
     (:func:`verify_checksums`; read once more, block by block, when ``lazy``); a file without them
     is marked ``encoding["rss6_unverified"]`` (see :func:`note_unverified`).
@@ -31,12 +39,10 @@ def load_netcdf(path, lazy: bool = False, verify: bool = True) -> xr.Dataset:
             # opened without dask: only the histories become dask arrays (loading each small
             # variable through dask took 3x as long as reading it)
             ds = xr.open_dataset(path, engine="netcdf4", decode_times=False)
-            histories = {name: var.chunk({"realization": HISTORY_BLOCK})
-                         for name, var in ds.data_vars.items() if {_ELAPSED, "realization"} <= set(var.dims)}
+            ds = ds.assign(_on_disk(ds, SUMMARY_BLOCK if summary_block is None else summary_block))
             for var in ds.variables.values():
-                if _ELAPSED not in var.dims:
+                if _ELAPSED not in var.dims and var.chunks is None:
                     var.load()
-            ds = ds.assign(histories)
         else:
             with xr.open_dataset(path, engine="netcdf4", decode_times=False) as opened:
                 ds = opened.load()
@@ -51,6 +57,16 @@ def load_netcdf(path, lazy: bool = False, verify: bool = True) -> xr.Dataset:
     if verify and not verified:
         out.encoding["rss6_unverified"] = True
     return out
+
+
+def _on_disk(ds: xr.Dataset, summary_block: int) -> dict:
+    """The variables :func:`load_netcdf` leaves on disk as dask arrays: the histories, and every
+    numeric variable along ``realization`` of a file with more than ``summary_block`` realisations
+    (its strings, status and messages, are read: rss6 looks at them all at once)."""
+    large = ds.sizes.get("realization", 0) > summary_block
+    return {name: var.chunk({"realization": HISTORY_BLOCK if _ELAPSED in var.dims else SUMMARY_BLOCK})
+            for name, var in ds.data_vars.items()
+            if "realization" in var.dims and (_ELAPSED in var.dims or (large and var.dtype.kind not in "OUS"))}
 
 
 def note_unverified(ds: xr.Dataset, path, stream=None) -> None:

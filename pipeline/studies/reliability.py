@@ -12,13 +12,15 @@ workers of pipeline.ensemble.cluster when a batch is large.
 from __future__ import annotations
 
 import contextlib
+import re
 from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 from scipy import stats as sps
 
-from rss6core import FINISHED, model_level, prepare_level, uniform_dimension
+from rss6core import (FINISHED, SIZE_UNIFORMS, UNIFORM_BLOCKS, clearances_from_named_uniforms, clearances_from_uniforms,
+                      inputs_from_uniforms, model_level, prepare_level, size_band, uniform_dimension)
 
 from ..analysis.exceedance import Event, clopper_pearson
 from ..analysis.subset import SubsetSettings, subset_simulation
@@ -26,13 +28,14 @@ from ..ensemble.cluster import dask_client
 from ..files.records import window_summaries
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
 
-__all__ = ["ReliabilityError", "Estimate", "input_dimension", "evaluate", "reliability", "reliability_dataset",
-           "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
+__all__ = ["ReliabilityError", "Estimate", "input_dimension", "input_labels", "physical_inputs", "what_fails",
+           "evaluate", "reliability", "reliability_dataset", "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
 
 METHODS = ("subset", "mc")
 MC_BLOCK = 1000          # plain Monte Carlo draws block b of z from SeedSequence([seed, MC_TAG, b])
 MC_TAG = 40404040
 IN_PROCESS_ROWS = 64     # batches up to this many rows are evaluated here, larger ones on the workers
+DEFAULT_BUDGET = {"subset": 20_000, "mc": 200_000}   # evaluations at most with a CoV target (--budget)
 _ONE_BELOW = np.nextafter(1.0, 0.0)
 
 
@@ -83,6 +86,82 @@ def input_dimension(scene, model: str, source: str = "") -> int:
     return clearances + uncertain
 
 
+def input_labels(scene, model: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(label, family) of every standard normal input of a realisation, in the order of
+    :func:`input_dimension`: the clearance draw's blocks of six uniforms (legs 1-6; the four size
+    blocks, then the eccentricity blocks the draw takes), then the [uncertain.*] draws (family: the
+    input's name); inputs that no draw takes, and the size uniforms of a family whose sizes are nominal
+    (taken but not used), are in family 'unused': their shift shows the noise of the estimate."""
+    labels, families = [], []
+    if model_level(model).draws_clearances:
+        nominal = {block for block, family in zip(UNIFORM_BLOCKS, CLEARANCE_FAMILIES)
+                   if size_band(scene, family) is None}
+        for block in UNIFORM_BLOCKS[:SIZE_UNIFORMS // 6] + _eccentricity_blocks(scene):
+            labels += [f"{block}[leg {i}]" for i in range(1, 7)]
+            families += ["unused" if block in nominal else block] * 6
+        _pad(labels, families, uniform_dimension(None))
+    if scene.uncertain:
+        labels += list(scene.uncertain.labels())
+        families += list(scene.uncertain.columns(lambda i: i.name))
+    _pad(labels, families, input_dimension(scene, model))
+    return tuple(labels), tuple(families)
+
+
+# the joint families of the four size blocks, in their order (rss6core.clearance.FAMILIES, not exported)
+CLEARANCE_FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
+
+
+def _pad(labels: list, families: list, size: int) -> None:
+    labels += [f"unused[{k}]" for k in range(len(labels), size)]
+    families += ["unused"] * (size - len(families))
+
+
+def _eccentricity_blocks(scene) -> tuple[str, ...]:
+    """The eccentricity blocks of UNIFORM_BLOCKS a clearance draw of ``scene`` takes, in its order (a
+    point law takes none): asked of rss6core's draw by name, one missing block at a time."""
+    given, order = {block: np.full(6, 0.5) for block in UNIFORM_BLOCKS[:SIZE_UNIFORMS // 6]}, []
+    for _ in UNIFORM_BLOCKS:
+        try:
+            clearances_from_named_uniforms(scene, given)
+            return tuple(order)
+        except ValueError as exc:
+            missing = re.search(r"uniforms '(\w+)'", str(exc))
+            if missing is None or missing.group(1) in given:
+                raise
+            given[missing.group(1)] = np.full(6, 0.5)
+            order.append(missing.group(1))
+    raise ValueError("the clearance draw asks for more blocks than UNIFORM_BLOCKS holds")
+
+
+def physical_inputs(scene, model: str, z: np.ndarray) -> list[tuple[str, tuple[float, ...], str]]:
+    """(name, values, unit) of the realisation at z: its clearance sizes and eccentricity magnitudes,
+    legs 1-6 (m), and each [uncertain.*] input's draws (its units: SI deviations, or factors)."""
+    u = np.minimum(sps.norm.cdf(np.asarray(z, float)), _ONE_BELOW)
+    rows, offset = [], uniform_dimension(None)
+    if model_level(model).draws_clearances:
+        d = clearances_from_uniforms(scene, u[:offset])
+        for name, values in (("A_radial_size", d.radial_size), ("A_axial_size", d.axial_size), ("C_size", d.size_C),
+                             ("B_size", d.size_B), ("|e_A|", np.linalg.norm(d.e_A, axis=1)),
+                             ("|e_C|", np.linalg.norm(d.e_C, axis=1)), ("|e_B|", np.linalg.norm(d.e_B, axis=1))):
+            rows.append((f"{name} (legs 1-6)", tuple(map(float, values)), "m"))
+    if scene.uncertain and u.size >= offset + scene.uncertain.dimension:
+        drawn = inputs_from_uniforms(scene.uncertain, u[offset:offset + scene.uncertain.dimension])
+        rows += [(i.name, tuple(map(float, drawn.of(i.name))), i.draw_units) for i in scene.uncertain.inputs]
+    return rows
+
+
+def what_fails(est: "Estimate", event: Event, scene, model: str):
+    """The failure domain of a reliability estimate (pipeline.analysis.failure_domain) and the
+    physical inputs of its most probable failing realisation; None when no evaluation failed."""
+    from ..analysis.failure_domain import failure_domain
+    failing = _response(event, est.maxima) > event.limit
+    if not failing.any():
+        return None, []
+    labels, families = input_labels(scene, model)
+    fd = failure_domain(est.z, est.level, failing, labels, families)
+    return fd, physical_inputs(scene, model, fd.most_probable_z)
+
+
 def _evaluate_rows(spec, window: str, z: np.ndarray) -> np.ndarray:
     """Maxima |error| (rows, quantity, direction), SI, over ``window`` of the level at rows z; NaN
     for a realisation that failed."""
@@ -114,11 +193,19 @@ def _response(event: Event, maxima: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(r), np.inf, r)
 
 
-def _subset(spec, event: Event, dimension: int, settings: SubsetSettings, client) -> Estimate:
-    collected = []
+def _batches(spec, window: str, client, checkpoint):
+    """The function evaluating a batch of rows z: through ``checkpoint`` (a
+    reliability_checkpoint.Checkpoint: stored batches replayed, new ones stored) when given."""
+    def compute(z):
+        return evaluate(spec, window, z, client)
+    return compute if checkpoint is None else (lambda z: checkpoint.evaluate(z, compute))
+
+
+def _subset(spec, event: Event, dimension: int, settings: SubsetSettings, client, checkpoint=None) -> Estimate:
+    collected, batch = [], _batches(spec, event.window, client, checkpoint)
 
     def response(z):
-        collected.append(evaluate(spec, event.window, z, client))
+        collected.append(batch(z))
         return _response(event, collected[-1])
 
     res = subset_simulation(response, dimension, event.limit, settings)
@@ -128,18 +215,55 @@ def _subset(spec, event: Event, dimension: int, settings: SubsetSettings, client
                     res.status, res.message, e.z, e.level, np.concatenate(collected))
 
 
-def _monte_carlo(spec, event: Event, dimension: int, n: int, seed: int, confidence: float, client) -> Estimate:
-    blocks = [np.random.default_rng(np.random.SeedSequence([seed, MC_TAG, b])).standard_normal((MC_BLOCK, dimension))
-              for b in range(-(-n // MC_BLOCK))]
-    z = np.concatenate(blocks)[:n]
-    maxima = evaluate(spec, event.window, z, client)
-    k = int(np.count_nonzero(_response(event, maxima) > event.limit))
-    lower, upper = (float(b) for b in clopper_pearson(k, n, confidence))
-    pf = k / n
-    cov = float(np.sqrt((1 - pf) / (n * pf))) if k else float("inf")
-    return Estimate("mc", pf, lower, upper, confidence, cov, "Clopper-Pearson exact binomial interval", (n,),
-                    (event.limit,), "converged", f"{k} of {n} realisations exceed the limit",
-                    z, np.zeros(n, int), maxima)
+def _mc_cov(k: int, n: int) -> float:
+    """The CoV of the Monte Carlo estimate k / n: sqrt((1 - P) / (n P)); infinite for k = 0."""
+    return float(np.sqrt((1 - k / n) / k)) if k else float("inf")
+
+
+def _monte_carlo(spec, event: Event, dimension: int, n: int, seed: int, confidence: float, client,
+                 checkpoint=None, cov_target: float | None = None) -> Estimate:
+    """Plain Monte Carlo of n draws, block b of MC_BLOCK from SeedSequence([seed, MC_TAG, b]); with
+    ``cov_target``, stopped after the first block at which the CoV is at most the target (n the cap)."""
+    batch = _batches(spec, event.window, client, checkpoint)   # a block at a time: an interrupt loses one
+    zs, maxima, k = [], [], 0
+    for b in range(-(-n // MC_BLOCK)):
+        rng = np.random.default_rng(np.random.SeedSequence([seed, MC_TAG, b]))
+        zs.append(rng.standard_normal((MC_BLOCK, dimension))[:n - b * MC_BLOCK])
+        maxima.append(batch(zs[-1]))
+        k += int(np.count_nonzero(_response(event, maxima[-1]) > event.limit))
+        if cov_target is not None and _mc_cov(k, b * MC_BLOCK + len(zs[-1])) <= cov_target:
+            break
+    z, maxima = np.concatenate(zs), np.concatenate(maxima)
+    m = len(z)
+    lower, upper = (float(v) for v in clopper_pearson(k, m, confidence))
+    status, message = "converged", f"{k} of {m} realisations exceed the limit"
+    if cov_target is not None:
+        met = _mc_cov(k, m) <= cov_target
+        status = "converged" if met else "budget"
+        message += (f"; CoV target {cov_target:g} met" if met else
+                    f"; CoV target {cov_target:g} not met within the budget of {n} realisations")
+    return Estimate("mc", k / m, lower, upper, confidence, _mc_cov(k, m), "Clopper-Pearson exact binomial interval",
+                    (m,), (event.limit,), status, message, z, np.zeros(m, int), maxima)
+
+
+def _subset_to_cov(spec, event: Event, dimension: int, settings: SubsetSettings, client, checkpoint,
+                   cov_target: float, budget: int) -> Estimate:
+    """Subset simulation with N doubled (a fresh run each time, its own seed schedule) until its CoV is
+    at most ``cov_target``, while the evaluations of all runs stay within ``budget``; the last run's
+    estimate and file, the runs and evaluations spent in its message."""
+    from dataclasses import replace
+    spent, runs = 0, 0
+    while True:
+        est = _subset(spec, event, dimension, settings, client, checkpoint)
+        spent, runs = spent + est.level.size, runs + 1
+        done = f"{runs} run(s) up to N = {settings.n_per_level}, {spent} evaluations in all"
+        if est.status in ("certain", "impossible") or est.cov <= cov_target:
+            return replace(est, message=f"{est.message}; CoV target {cov_target:g} met ({done})"
+                           if est.cov <= cov_target else est.message)
+        if spent + 2 * est.level.size > budget:
+            return replace(est, status="budget", message=f"{est.message}; CoV target {cov_target:g} not met: "
+                                                         f"the next run would exceed the budget of {budget} ({done})")
+        settings = replace(settings, n_per_level=2 * settings.n_per_level)
 
 
 @contextlib.contextmanager
@@ -153,15 +277,23 @@ def _client(workers: int):
 
 
 def reliability(spec, event: Event, method: str = "subset", n: int | None = None, p0: float = 0.1,
-                confidence: float = CONFIDENCE, workers: int = 1) -> Estimate:
+                confidence: float = CONFIDENCE, workers: int = 1, checkpoint=None, cov_target: float | None = None,
+                budget: int | None = None) -> Estimate:
     """P(event) at the level of ``spec`` (pipeline.ensemble.run.EnsembleSpec) by ``method``: subset
-    simulation with N = ``n`` (default 1000) per level, or plain Monte Carlo of ``n`` (default 20000)."""
+    simulation with N = ``n`` (default 1000) per level, or plain Monte Carlo of ``n`` (default 20000);
+    every batch through ``checkpoint`` (pipeline.studies.reliability_checkpoint) when given. With
+    ``cov_target``: Monte Carlo adds blocks, subset simulation doubles N, until the CoV is at most the
+    target or the ``budget`` of evaluations (default DEFAULT_BUDGET) would be exceeded."""
     dimension = input_dimension(spec.scene(), spec.model, spec.source)
+    budget = budget or DEFAULT_BUDGET[method]
     with _client(workers) as client:
         if method == "mc":
-            return _monte_carlo(spec, event, dimension, n or 20000, spec.seed, confidence, client)
+            return _monte_carlo(spec, event, dimension, budget if cov_target else n or 20000, spec.seed, confidence,
+                                client, checkpoint, cov_target)
         settings = SubsetSettings(n or 1000, p0, spec.seed, confidence)
-        return _subset(spec, event, dimension, settings, client)
+        if cov_target is not None:
+            return _subset_to_cov(spec, event, dimension, settings, client, checkpoint, cov_target, budget)
+        return _subset(spec, event, dimension, settings, client, checkpoint)
 
 
 def reliability_dataset(est: Estimate, event: Event, spec, elapsed: float, options: str = "") -> xr.Dataset:

@@ -1,0 +1,145 @@
+"""An interrupted `rss6 reliability` run resumes from OUT.checkpoint.nc to the result of an uninterrupted
+one (the same seed schedule): interrupted deterministically, by a Ctrl-C raised in the evaluation of a
+chosen batch (after level 0, or within level 1), not by timing. A checkpoint left behind is refused
+without --resume, and a second run on a finished output is refused (exit 2)."""
+import io
+import json
+from contextlib import redirect_stdout
+
+import numpy as np
+import pytest
+
+import pipeline.studies.reliability as study
+from pipeline.cli import main
+from pipeline.files.reading import load_netcdf
+
+RARE = "displacement:z>0.2mm"
+
+
+def _argv(out, *extra):
+    return ["reliability", "smoke", "--event", RARE, "-n", "200", "--workers", "1", "-o", str(out), "--json", *extra]
+
+
+def _interrupt_at(monkeypatch, batch: int) -> list:
+    """Ctrl-C when batch ``batch`` (0: level 0's draws) is evaluated; the sizes of the batches evaluated."""
+    seen, evaluate = [], study.evaluate
+
+    def stop(spec, window, z, client=None):
+        if len(seen) == batch:
+            raise KeyboardInterrupt
+        seen.append(len(z))
+        return evaluate(spec, window, z, client)
+    monkeypatch.setattr(study, "evaluate", stop)
+    return seen
+
+
+@pytest.fixture(scope="module")
+def whole(tmp_path_factory):
+    """An uninterrupted run: its JSON and file."""
+    out = tmp_path_factory.mktemp("whole") / "w.nc"
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(_argv(out)) == 0
+    return json.loads(buf.getvalue()), load_netcdf(out)
+
+
+def _same_file(a, b) -> None:
+    for name in ("z", "level", "max_abs_error"):
+        assert np.array_equal(a[name].values, b[name].values, equal_nan=True), name
+    assert json.loads(a.attrs["estimate"]) == json.loads(b.attrs["estimate"])
+
+
+@pytest.mark.parametrize("batch", [1, 5])   # after level 0; after level 0 and 4 steps of level 1's chains
+def test_a_run_interrupted_between_batches_resumes_to_the_uninterrupted_result(tmp_path, monkeypatch, capsys,
+                                                                              whole, batch):
+    out = tmp_path / "r.nc"
+    seen = _interrupt_at(monkeypatch, batch)
+    assert main(_argv(out)) == 130
+    assert len(seen) == batch and not out.exists()
+    assert "r.nc.checkpoint.nc (add --resume)" in capsys.readouterr().err
+    monkeypatch.undo()
+    computed = _interrupt_at(monkeypatch, 10 ** 6)   # only counts what the resumed run computes
+    assert main(_argv(out, "--resume")) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res == whole[0]
+    assert sum(computed) == res["evaluations"] - sum(seen)   # the stored batches were not computed again
+    _same_file(load_netcdf(out), whole[1])
+    assert not (tmp_path / "r.nc.checkpoint.nc").exists()
+
+
+def test_a_left_checkpoint_needs_resume_and_a_finished_output_is_not_rerun(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "r.nc"
+    _interrupt_at(monkeypatch, 1)
+    assert main(_argv(out)) == 130
+    monkeypatch.undo()
+    capsys.readouterr()
+    assert main(_argv(out)) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "checkpoint; rerun the same command with --resume" in err
+    assert main(_argv(out, "--resume", "--seed", "4")) == 2     # another request
+    assert "made by a different request" in capsys.readouterr().err
+    assert main(_argv(out, "--resume")) == 0
+    capsys.readouterr()
+    for extra in ([], ["--resume"]):
+        assert main(_argv(out, *extra)) == 2
+        assert "exists; rss6 reliability does not overwrite" in capsys.readouterr().err
+
+
+# --cov: a CoV target (issue 40 "Rare events")
+
+EVENT = "displacement:z>0.15mm"   # P about 0.1 at the smoke scene's quasi-static level
+
+
+def _run_json(capsys, argv) -> dict:
+    capsys.readouterr()
+    assert main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_mc_adds_blocks_until_the_cov_target_and_no_further(tmp_path, capsys):
+    """The CoV sqrt((1 - P) / (n P)), recomputed from the file after each block of 1000: above the
+    target until the last block, at most the target after it; the draws are those of a plain run."""
+    out = tmp_path / "m.nc"
+    res = _run_json(capsys, ["reliability", "smoke", "--event", EVENT, "--method", "mc", "--cov", "0.06",
+                             "--workers", "1", "-o", str(out), "--json"])
+    hits = load_netcdf(out)["max_abs_error"].sel(quantity="displacement", direction="z").values > 1.5e-4
+    n = len(hits)
+    assert n % 1000 == 0 and res["evaluations"] == n and res["status"] == "converged"
+
+    def cov(m):
+        k = hits[:m].sum()
+        return np.sqrt((1 - k / m) / k)
+    assert cov(n) <= 0.06 < cov(n - 1000) and res["cov"] == pytest.approx(cov(n))
+    plain = _run_json(capsys, ["reliability", "smoke", "--event", EVENT, "--method", "mc", "-n", str(n),
+                               "--workers", "1", "-o", str(tmp_path / "p.nc"), "--json"])
+    assert plain["pf"] == res["pf"] and plain["upper"] == res["upper"]
+
+
+def test_subset_doubles_n_within_its_budget(tmp_path, capsys):
+    """A target the first run meets: one run. An unreachable one: N = 200, then 400, and no third run,
+    which would take the evaluations beyond the budget (status 'budget')."""
+    base = ["reliability", "smoke", "--event", RARE, "-n", "200", "--workers", "1", "--json"]
+    met = _run_json(capsys, base + ["--cov", "0.9", "-o", str(tmp_path / "a.nc")])
+    assert met["status"] == "converged" and met["evaluations_per_level"][0] == 200 and met["cov"] <= 0.9
+    assert "1 run(s) up to N = 200" in met["message"]
+    capped = _run_json(capsys, base + ["--cov", "0.01", "--budget", "2000", "-o", str(tmp_path / "b.nc")])
+    assert capped["status"] == "budget" and capped["evaluations_per_level"][0] == 400
+    assert "2 run(s) up to N = 400" in capped["message"] and capped["cov"] > 0.01
+    spent = int(capped["message"].split("evaluations in all")[0].rsplit(", ", 1)[1])
+    assert spent <= 2000 < spent + 2 * capped["evaluations"]
+
+
+@pytest.mark.parametrize("extra, token", [
+    (["--cov", "0"], "between 0 and 1"), (["--cov", "1"], "between 0 and 1"), (["--cov", "-0.2"], "between 0 and 1"),
+    (["--budget", "5000"], "--budget: applies with --cov only"),
+    (["--method", "mc", "--cov", "0.1", "-n", "5000"], "cap them with --budget"),
+])
+def test_a_bad_cov_request_is_one_line_exit_2(tmp_path, capsys, monkeypatch, extra, token):
+    monkeypatch.setattr(study, "reliability", lambda *a, **k: pytest.fail("work started"))
+    capsys.readouterr()
+    try:
+        code = main(["reliability", "smoke", "--event", EVENT, *extra, "-o", str(tmp_path / "x.nc")])
+    except SystemExit as exc:   # argparse's refusal of a value
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and token in err, err
