@@ -86,3 +86,27 @@ def test_the_same_seed_gives_the_same_file_on_two_workers_as_in_this_process(tmp
         runs.append(load_netcdf(out))
     assert np.array_equal(runs[0]["max_abs_error"].values, runs[1]["max_abs_error"].values, equal_nan=True)
     assert np.array_equal(runs[0]["z"].values, runs[1]["z"].values)
+
+
+def test_a_level_without_clearances_takes_the_uncertain_inputs_after_the_clearance_coordinates(tmp_path, capsys,
+                                                                                              configs):
+    """The rigid level of a scene with [uncertain.*] inputs: the inputs sit where the core reads them,
+    after a clearance draw's coordinates (unused at this level), and the estimate is the exact count
+    of its evaluations' geometric errors above the limit."""
+    from rss6core import parse_scene, uniform_dimension
+    from pipeline.studies.reliability import input_dimension, input_labels
+    text = (configs / "smoke.toml").read_text() + (
+        '\n[uncertain.crank]\nparameter = "geometry.crank_length_m"\neach = "leg"\nlaw = "uniform"\n'
+        'low_m = -0.1e-3\nhigh_m = 0.1e-3\n')
+    scene_file = tmp_path / "u.toml"
+    scene_file.write_text(text)
+    scene = parse_scene(text)
+    assert input_dimension(scene, "rigid") == uniform_dimension(None) + 6 == len(input_labels(scene, "rigid")[0])
+    assert input_labels(scene, "rigid")[0][uniform_dimension(None)] == "crank[leg 1]"
+    out = tmp_path / "r.nc"
+    capsys.readouterr()
+    assert main(["reliability", str(scene_file), "--model", "rigid", "--event", "displacement:z>0.02mm",
+                 "--method", "mc", "-n", "200", "--workers", "1", "-o", str(out), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    z = load_netcdf(out)["max_abs_error"].sel(quantity="displacement", direction="z").values
+    assert 0 < res["pf"] < 1 and res["pf"] == np.count_nonzero(z > 2e-5) / 200

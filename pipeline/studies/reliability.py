@@ -34,7 +34,7 @@ __all__ = ["ReliabilityError", "Estimate", "input_dimension", "input_labels", "p
 METHODS = ("subset", "mc")
 MC_BLOCK = 1000          # plain Monte Carlo draws block b of z from SeedSequence([seed, MC_TAG, b])
 MC_TAG = 40404040
-IN_PROCESS_ROWS = 64     # batches up to this many rows are evaluated here, larger ones on the workers
+IN_PROCESS_ROWS = 64     # batches up to this many rows of a cheap level are evaluated here, larger ones on the workers
 DEFAULT_BUDGET = {"subset": 20_000, "mc": 200_000}   # evaluations at most with a CoV target (--budget)
 _ONE_BELOW = np.nextafter(1.0, 0.0)
 
@@ -78,12 +78,12 @@ def input_dimension(scene, model: str, source: str = "") -> int:
     if kind.redraws_every_step:
         raise ReliabilityError(f"--model {model}: the level redraws its clearances every step, so its "
                                "random inputs grow with the steps; use quasi-static or contact")
-    clearances = uniform_dimension(None, scene) if kind.draws_clearances else 0
-    uncertain = scene.uncertain.dimension if scene.uncertain else 0
-    if clearances + uncertain == 0:
+    if scene.uncertain:   # the core reads them after a clearance draw's uniforms, at every level
+        return uniform_dimension(None, scene)
+    if not kind.draws_clearances:
         raise ReliabilityError(f"{source or scene.name}: a scene with no uncertain input at the {model} level "
                                "(it draws no clearances and has no [uncertain.*] table): nothing to be probable")
-    return clearances + uncertain
+    return uniform_dimension(None)
 
 
 def input_labels(scene, model: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -99,7 +99,7 @@ def input_labels(scene, model: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
         for block in UNIFORM_BLOCKS[:SIZE_UNIFORMS // 6] + _eccentricity_blocks(scene):
             labels += [f"{block}[leg {i}]" for i in range(1, 7)]
             families += ["unused" if block in nominal else block] * 6
-        _pad(labels, families, uniform_dimension(None))
+    _pad(labels, families, uniform_dimension(None) if scene.uncertain else len(labels))
     if scene.uncertain:
         labels += list(scene.uncertain.labels())
         families += list(scene.uncertain.columns(lambda i: i.name))
@@ -176,11 +176,14 @@ def _evaluate_rows(spec, window: str, z: np.ndarray) -> np.ndarray:
 
 
 def evaluate(spec, window: str, z: np.ndarray, client=None) -> np.ndarray:
-    """:func:`_evaluate_rows` of a batch, in chunks on ``client``'s workers when it is large."""
-    if client is None or len(z) <= IN_PROCESS_ROWS:
+    """:func:`_evaluate_rows` of a batch, in chunks on ``client``'s workers when it is large, or
+    always for a level that integrates the links (a second or so per row at the contact level:
+    a subset level's chains, a few dozen rows a step, would otherwise run one by one here)."""
+    dear = model_level(spec.model).elastic_links
+    if client is None or (len(z) <= IN_PROCESS_ROWS and not dear):
         return _evaluate_rows(spec, window, z)
     workers = max(1, len(client.nthreads()))
-    chunk = max(IN_PROCESS_ROWS // 4, -(-len(z) // (4 * workers)))
+    chunk = -(-len(z) // workers) if dear else max(IN_PROCESS_ROWS // 4, -(-len(z) // (4 * workers)))
     parts = [slice(i, min(i + chunk, len(z))) for i in range(0, len(z), chunk)]
     scattered = client.scatter([z[p] for p in parts])   # the rows as data, not in the task graph
     futures = [client.submit(_evaluate_rows, spec, window, rows, pure=False) for rows in scattered]
