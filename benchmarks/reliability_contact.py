@@ -1,6 +1,7 @@
 """Benchmark: a rare event of the manufactured robot at the contact level by subset simulation (issue 40).
 
-Run on demand: ``python benchmarks/reliability_contact.py [--limit-mm L] [-n N] [--workers 2] [--keep DIR]``.
+Run on demand: ``python benchmarks/reliability_contact.py [--limit-mm L] [-n N] [--workers 2] [--keep DIR]
+[--plot PNG]`` (``--plot``: the run's figure of the levels' thresholds and of what fails).
 Runs ``rss6 reliability configs/paper_manufacturing.toml --model contact --event
 "displacement:z>Lmm/steady" --method subset -n N --json`` in a fresh process and prints its wall
 time, the estimate with its interval and coefficient of variation, the evaluations per level and
@@ -28,6 +29,7 @@ def main(argv=None) -> int:
     parser.add_argument("-n", type=int, default=N, help=f"evaluations per subset level (default {N})")
     parser.add_argument("--workers", type=int, default=2, help="local dask workers (default 2)")
     parser.add_argument("--keep", type=Path, help="folder to keep the reliability file in (default: a temporary one)")
+    parser.add_argument("--plot", type=Path, help="also write the run's figure (rss6 reliability --plot)")
     args = parser.parse_args(argv)
     folder = args.keep or Path(tempfile.mkdtemp(prefix="rss6-reliability-"))
     folder.mkdir(parents=True, exist_ok=True)
@@ -35,6 +37,8 @@ def main(argv=None) -> int:
     command = [sys.executable, "-m", "pipeline.cli", "reliability", str(CONFIG), "--model", "contact",
                "--event", f"displacement:z>{args.limit_mm:g}mm/steady", "--method", "subset", "-n", str(args.n),
                "--workers", str(args.workers), "-o", str(out), "--json"]
+    if args.plot:
+        command += ["--plot", str(args.plot.resolve())]
     load = os.getloadavg()[0]
     start = time.perf_counter()
     proc = subprocess.run(command, capture_output=True, text=True)
