@@ -1,0 +1,244 @@
+"""Issue 43's candidate causes, each as a switch on issue 43's case (docs/accelerations.md).
+
+The case: configs/paper.toml with settle_time_s = 0.3, contact level, realisation 0 of seed 0,
+drawn start; maxima of |acceleration error| over t >= 0.3 s on the 1 ms output grid (m/s^2,
+rad/s^2), with the displacement maxima (mm) and mean |velocity error| beside them.
+
+The switches run on the numpy stepper (rss6core/contact_numpy.py, the compiled kernel's
+reference), as a measurement, not yet a formulation of the product:
+
+- ``moments``: the spherical joints' friction moments.  rss6 applies the friction force at the
+  joint centre; at the contact point, R n from the centre of the element whose angular velocity
+  enters the sliding velocity with a plus sign, it also applies R n x f_t to that element and
+  -R n x f_t to the other (the moment conjugate to the relative rotation in the friction's power,
+  f_t . (de + R omega x n) = f_t . de + omega . (R n x f_t)).  C: rod end (bending rotations;
+  rss6 drops rod torsion, so the moment's axial part is lost) and crank tip; B: rod end and
+  platform.  Lagged: each step takes the last accepted step's forces and normals.
+- ``rates``: the sliding velocity with the joint nodes' elastic rotation rates added to the
+  ideal relative rotation (last accepted velocities).
+- ``C`` / ``B``: the moments at one joint family only.
+
+    python benchmarks/acceleration_candidates.py [--half-step] [--scale] [SWITCH ...]
+
+SWITCH in: plain, zero (the moments at scale 0: must print plain's numbers), moments, rates, both,
+C, B.  Each numpy run takes about 30 s (60-70 s with --half-step).
+"""
+import argparse
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rss6core.assembly import join, split
+from rss6core.clearance import draw_clearances
+from rss6core.contact_dynamics import StepSolution, _internal, _joint_nodes, _relative, simulate_contact
+from rss6core.contact_numpy import NumpyStepper, _extrapolated
+from rss6core.integrators import correct, predict
+from rss6core.kinematics import rigid_motion
+from rss6core.models import prepare_level
+from rss6core.scene import load_scene
+
+SCENE = Path(__file__).resolve().parents[1] / "configs" / "paper.toml"
+SETTLE = 0.3   # s, issue 43's window start
+
+
+def _to_local(R, m):
+    """R^T m per leg: base-frame vectors m (..., 6, 3) into the link frames R (6, 3, 3)."""
+    return np.einsum("lab,...la->...lb", R, m)
+
+
+def _friction(scene, normal, force, de, omega, radius):
+    """Modified Coulomb friction (eq. 18) (..., 3) on the + element of a pair in contact with normal
+    force ``force`` (...) N along -``normal``, relative velocity de and relative rotation omega."""
+    ct = scene.contact
+    v = de + radius * np.cross(omega, normal)
+    v = v - (v * normal).sum(-1, keepdims=True) * normal
+    speed = np.linalg.norm(v, axis=-1, keepdims=True)
+    ramp = np.clip((speed - ct.stick_velocity) / (ct.slip_velocity - ct.stick_velocity), 0.0, 1.0)
+    return -ct.friction_coefficient * force[..., None] * ramp * v / np.maximum(speed, 1e-300)
+
+
+class Switched(NumpyStepper):
+    """The numpy stepper with issue 43's lagged switches (class attributes, set by :func:`stepper`)."""
+    moments, rates, spin, scale, joints = False, False, False, 1.0, (1, 2)
+
+    def _rod_spin(self, idx, ch, k1):
+        """The rods' spin rates (6,) rad/s about their axes at which the friction moments of their two
+        spherical joints balance about the axis (the spin's inertia, 5e-5 kg m^2, left out: its time
+        constant under friction is tens of microseconds), from the last accepted state; bisection."""
+        jm, ws, scene = self.setup.jm, self.ws, self.setup.scene
+        if len(idx) != 1:
+            raise ValueError("the spin switch runs one realisation at a time")
+        last = getattr(ws, "spin_last", np.zeros(6))
+        if not hasattr(ws, "f_last"):
+            return last
+        e = _relative(ch, k1, *_joint_nodes(jm, ws.d[idx[0]]))
+        de = _relative(ch, k1, *_joint_nodes(jm, ws.v[idx[0]]))
+        axis, radius = ch.Rr[k1][:, :, 0], np.asarray(ch.radius).reshape(-1)[1]
+        normal = e[:, 1:] / np.maximum(np.linalg.norm(e[:, 1:], axis=-1, keepdims=True), 1e-300)
+        force = -(ws.f_last[idx[0]][:, 1:] * normal).sum(-1)          # (6, 2) C, B
+        if not (force > 0).any():
+            return last
+        omega = ch.omega_ideal[k1][:, 1:] if hasattr(ch, "omega_ideal") else ch.omega[k1][:, 1:]
+
+        def balance(s):
+            f = _friction(scene, normal, np.maximum(force, 0.0), de[:, 1:], omega + s[:, None, None] * axis[:, None],
+                          radius)
+            return (np.cross(radius * normal, f) * axis[:, None]).sum((-1, -2))
+
+        low, high = np.full(6, -1e3), np.full(6, 1e3)
+        for _ in range(60):
+            mid = 0.5 * (low + high)
+            up = balance(mid) > 0.0        # the moment decreases with the spin: the root is above
+            low, high = np.where(up, mid, low), np.where(up, high, mid)
+        stuck = (force <= 0).all(-1)
+        ws.spin_last = np.where(stuck, last, 0.5 * (low + high))
+        return ws.spin_last
+
+    def _friction_moments(self, idx, ch, k1):
+        """Generalised forces (R, N) of the friction moments at the last accepted state."""
+        jm, ws = self.setup.jm, self.ws
+        out = np.zeros((len(idx), ws.d.shape[-1]))
+        if not self.moments or not hasattr(ws, "f_last"):
+            return out
+        e = _relative(ch, k1, *_joint_nodes(jm, ws.d[idx]))
+        c, r, p = split(jm, out)
+        n, radius = jm.elements, np.asarray(ch.radius).reshape(-1)
+        for j in self.joints:
+            normal = e[:, :, j] / np.maximum(np.linalg.norm(e[:, :, j], axis=-1, keepdims=True), 1e-300)
+            f = ws.f_last[idx][:, :, j]
+            tangential = f - (f * normal).sum(-1, keepdims=True) * normal
+            m = self.scale * radius[j] * np.cross(normal, tangential)
+            rod = _to_local(ch.Rr[k1], m)[..., 1:3]          # bending rotations only
+            if j == 1:
+                r[..., 0:2] += rod
+                c[..., 6 * n:6 * n + 3] -= _to_local(ch.Rc[k1], m)
+            else:
+                r[..., 5 * n - 3:5 * n - 1] += rod
+                p[..., 3:] -= m.sum(1)
+        return join(c, r, p)
+
+    def _sliding_rotation(self, idx, ch, k1):
+        """ch.omega[k1]: the ideal relative rotations plus, as switched on, the joint nodes' elastic
+        rotation rates and the rods' spin."""
+        if len(idx) != 1:
+            raise ValueError("the rates and spin switches run one realisation at a time")
+        if not hasattr(ch, "omega_ideal"):
+            ch.omega_ideal = ch.omega.copy()
+        ch.omega[k1] = ch.omega_ideal[k1]
+        if self.rates:
+            c, r, p = split(self.setup.jm, self.ws.v[idx[0]])
+            n, Rc, Rr = self.setup.jm.elements, ch.Rc[k1], ch.Rr[k1]
+            tip = np.einsum("lab,lb->la", Rc, c[:, 6 * n:6 * n + 3])
+            ch.omega[k1, :, 1] += np.einsum("lab,lb->la", Rr[:, :, 1:3], r[:, 0:2]) - tip
+            ch.omega[k1, :, 2] += np.einsum("lab,lb->la", Rr[:, :, 1:3], r[:, 5 * n - 3:5 * n - 1]) - p[None, 3:]
+        if self.spin:
+            spin = self._rod_spin(idx, ch, k1)[:, None] * ch.Rr[k1][:, :, 0]
+            ch.omega[k1, :, 1] += spin
+            ch.omega[k1, :, 2] += spin
+
+    def _candidate(self, idx, ch, k0, k1, sz):
+        """NumpyStepper._candidate with the friction moments in the right-hand side."""
+        su, ws = self.setup, self.ws
+        d, v, a = ws.d[idx], ws.v[idx], ws.a[idx]
+        w = sz.weights
+        dp, vp = predict(d, v, a, w.h, w.d_pred, w.v_pred)
+        af, am = su.integrator.alpha_f, su.integrator.alpha_m
+        loads = ch.F[k1] + self._friction_moments(idx, ch, k1)
+        r = (1.0 - af) * (loads - _internal(su.jm, ch.Mp[k1], dp, vp))
+        if su.weighted:
+            r += af * ws.balance[idx] - am * ws.Ma[idx]
+        if self.rates or self.spin:
+            self._sliding_rotation(idx, ch, k1)
+        guess = _extrapolated(w.h, a, ws.a_past[idx], ws.h_past[idx])
+        sol = self._newton(idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp, guess, w.d_corr, w.v_corr, 1.0 - af)
+        ws.iters[idx] += sol.iterations
+        again = ~sol.converged & (ws.h_past[idx, 0] > 0.0)
+        if again.any():
+            retry = self._newton(idx[again], ch, k1, sz.cond, sz.coef_p, r[again], dp[again], vp[again],
+                                 a[again], w.d_corr, w.v_corr, 1.0 - af)
+            ws.iters[idx[again]] += retry.iterations
+            for name in StepSolution._fields:
+                getattr(sol, name)[again] = getattr(retry, name)
+        return sol, *correct(dp, vp, sol.a, w.d_corr, w.v_corr)
+
+    def _keep(self, kept, ch, k1, h, a, d, v, f, delta, rate, used):
+        super()._keep(kept, ch, k1, h, a, d, v, f, delta, rate, used)
+        if not hasattr(self.ws, "f_last"):
+            self.ws.f_last = np.zeros((len(self.ws.d),) + f.shape[1:])
+        self.ws.f_last[kept] = f
+
+
+SWITCHES = {"plain": None, "zero": dict(moments=True, scale=0.0), "moments": dict(moments=True),
+            "rates": dict(rates=True), "both": dict(moments=True, rates=True),
+            "C": dict(moments=True, joints=(1,)), "B": dict(moments=True, joints=(2,)),
+            "spin": dict(spin=True), "spin-moments": dict(spin=True, moments=True),
+            "all": dict(spin=True, moments=True, rates=True)}
+
+
+def stepper(name):
+    """The stepper class of switch ``name`` (None: the compiled kernel)."""
+    return None if SWITCHES[name] is None else type(name, (Switched,), SWITCHES[name])
+
+
+def run(scene, name):
+    """The case under switch ``name``: maxima and means over t >= SETTLE, and the wall time."""
+    level = prepare_level(scene, "contact")
+    start = time.perf_counter()
+    b = simulate_contact(scene, [draw_clearances(scene, 0, 0)], level.elements, level.integrator, level.dt,
+                         stepper=stepper(name))
+    inside = b.t >= SETTLE - 1e-12
+    return dict(acceleration=np.abs(b.acceleration[0, inside]).max(0),
+                displacement=np.abs(b.displacement[0, inside]).max(0),
+                velocity=np.abs(b.velocity[0, inside]).mean(0),
+                status=b.status[0], wall=time.perf_counter() - start)
+
+
+def linearisation_scale(scene):
+    """Candidate 1's size on the case: the rods' largest joint force over their Euler load, and the
+    largest crank rate over the links' first bending frequencies, squared (closed-form beams)."""
+    level = prepare_level(scene, "contact")
+    b = simulate_contact(scene, [draw_clearances(scene, 0, 0)], level.elements, level.integrator, level.dt)
+    mat, rod, crank = scene.material, scene.rod_section, scene.crank_section
+    E, rho, L = mat.youngs_modulus, mat.density, scene.geometry.rod_length
+    inertia = np.pi / 64 * (rod.outer_diameter ** 4 - rod.inner_diameter ** 4)
+    area = np.pi / 4 * (rod.outer_diameter ** 2 - rod.inner_diameter ** 2)
+    euler = np.pi ** 2 * E * inertia / L ** 2                         # N, pinned-pinned
+    rod_f1 = np.pi / (2 * L ** 2) * np.sqrt(E * inertia / (rho * area))   # Hz, pinned-pinned
+    Lc, h = scene.geometry.crank_length, crank.height
+    crank_f1 = 1.875 ** 2 / (2 * np.pi) * np.sqrt(E * h ** 2 / 12 / (rho * Lc ** 4))   # Hz, clamped-free
+    rate = np.abs(rigid_motion(scene).alpha_dot).max()
+    print(f"largest C or B joint force {b.contact_peak[0, 6:].max():.3g} N = {b.contact_peak[0, 6:].max() / euler:.2g} "
+          f"of the rod's Euler load {euler:.4g} N; largest crank rate {rate:.3g} rad/s; (rate / 2 pi f1)^2: "
+          f"rod {(rate / (2 * np.pi * rod_f1)) ** 2:.2g} (f1 {rod_f1:.4g} Hz), crank "
+          f"{(rate / (2 * np.pi * crank_f1)) ** 2:.2g} (f1 {crank_f1:.4g} Hz)")
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("switches", nargs="*", help=f"any of {', '.join(SWITCHES)} (default: all)")
+    p.add_argument("--half-step", action="store_true", help="half the scene's contact step")
+    p.add_argument("--scale", action="store_true", help="print candidate 1's size (linearisation) first")
+    args = p.parse_args(argv)
+    unknown = sorted(set(args.switches) - set(SWITCHES))
+    if unknown:
+        p.error(f"unknown switch {unknown[0]!r}; choose from {', '.join(SWITCHES)}")
+    scene = load_scene(SCENE)
+    sim = dataclasses.replace(scene.simulation, settle_time=SETTLE,
+                              contact_time_step=scene.simulation.contact_time_step * (0.5 if args.half_step else 1))
+    scene = dataclasses.replace(scene, simulation=sim)
+    print(f"issue 43's case, contact step {sim.contact_time_step:g} s; max |acceleration| x y z m/s^2, "
+          f"rx ry rz rad/s^2 | max |displacement| x y z mm | mean |velocity| x y z mm/s, rx ry rz mrad/s")
+    if args.scale:
+        linearisation_scale(scene)
+    for name in args.switches or list(SWITCHES):
+        r = run(scene, name)
+        print(f"{name:8s} " + " ".join(f"{x:.4g}" for x in r["acceleration"])
+              + " | " + " ".join(f"{1e3 * x:.4g}" for x in r["displacement"][:3])
+              + " | " + " ".join(f"{1e3 * x:.3g}" for x in r["velocity"])
+              + f" | {r['status']}, {r['wall']:.0f} s", flush=True)
+
+
+if __name__ == "__main__":
+    main()
