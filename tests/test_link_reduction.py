@@ -130,3 +130,13 @@ def test_bad_link_modes_name_the_key(paper, value, message):
         f"\n[beam]\nlink_modes = {value}\n"
     with pytest.raises(SceneError, match=rf"\[beam\] link_modes: .*{message}"):
         parse_scene(text)
+
+
+def test_elements_option_below_the_scenes_link_modes_is_one_line(paper, tmp_path, capsys):
+    """--elements that leaves a link fewer interior DOFs than the scene's link_modes: exit 2, one line."""
+    from pipeline.cli import main
+    scene = tmp_path / "reduced.toml"
+    scene.write_text(paper.source_text + "\n[beam]\nlink_modes = 8\n")
+    assert main(["simulate", str(scene), "--elements", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--elements 1" in err and "link_modes = 8" in err
