@@ -61,6 +61,7 @@ The elastic level's parts (the stability study's explicit sweep)
 - Integrator: a generalized-alpha family member (Newmark, HHT, central difference, ...).
 - build_elastic_model: the finite-element model of the links with ideal joints.
 - BeamTheory, BEAM_THEORIES: the links' beam theory (Euler-Bernoulli or Timoshenko, rotary inertia).
+- max_link_modes: the most Craig-Bampton modes per link ([beam] link_modes) a mesh allows.
 - quasi_static_state: the elastic state on the quasi-static path at one instant.
 - simulate_elastic: the elastic level with a given model, integrator and initial state.
 
@@ -83,6 +84,7 @@ from .elastic import quasi_static_state, simulate_elastic
 from .results import ContactBatch, SimulationResult, time_grid
 from .assembly import build_elastic_model
 from .beam import BEAM_THEORIES, BeamTheory
+from .link_reduction import max_link_modes
 from .clearance import (RELATIVE_BAND_REACH, SIZE_UNIFORMS, UNIFORM_BLOCKS, ClearanceDraw,
                         clearances_from_named_uniforms, clearances_from_uniforms, draw_clearances, size_band,
                         uniform_dimension)
@@ -118,7 +120,7 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII"
            "kernel_cache_folder",
            "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "size_band",
            "SIZE_UNIFORMS", "UNIFORM_BLOCKS", "clearances_from_named_uniforms", "Integrator", "build_elastic_model",
-           "BeamTheory", "BEAM_THEORIES",
+           "BeamTheory", "BEAM_THEORIES", "max_link_modes",
            "quasi_static_state", "simulate_elastic",
            "WorstCaseSizes", "worst_case_sizes", "revolute_support", "ball_support", "StaticClosure",
            "static_closure", "worst_case_error", "DrawnEccentricities", "drawn_eccentricities", "sampled_errors",

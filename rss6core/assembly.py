@@ -15,6 +15,9 @@ Each link's DOFs live in its own frame, where its matrices are constant:
   rigid rod angular acceleration normal to the rod), so this removes the rods'
   zero spin mode and changes no other response;
 - platform: rigid, 6 DOFs (translation of o_p and small rotation), base frame.
+With ``[beam] link_modes = m > 0`` each link's DOFs are its Craig-Bampton coordinates instead
+(:mod:`.link_reduction`): m fixed-interface modes, then the boundary DOFs (crank: the tip node;
+rod: its C and B end translations) kept exact and last, so every slice below holds.
 Only the small maps from crank tip and platform to the rod ends (and the
 platform inertia) vary in time: the link matrices are constant, so a step
 matrix is condensed once onto the crank tips and rod ends and factorised per
@@ -24,11 +27,13 @@ matrices; :func:`frame_coupling_forces` measures what they would add.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from .beam import link_matrices
+from .link_reduction import craig_bampton, link_modes, max_link_modes, reduce_pair
 from .dynamics import euler_moment, platform_inertia_world, rod_angular_motion
 from .kinematics import RigidMotion, crank_axes
 from .sections import section_properties, shear_correction_factor
@@ -36,7 +41,7 @@ from .sections import section_properties, shear_correction_factor
 __all__ = ["LegLayout", "ElasticModel", "build_elastic_model", "scene_link_matrices", "EndMaps", "end_maps",
            "link_frames", "frame_maps", "split", "join", "apply", "apply_pair", "internal_force", "StepSolver",
            "dense_matrices", "system_at", "rigid_loads", "link_loads", "platform_point_map",
-           "frame_coupling_forces"]
+           "frame_coupling_forces", "to_link_coordinates", "to_nodal"]
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -69,6 +74,10 @@ class ElasticModel(LegLayout):
 
     Leg vector: crank nodes 1..n (6 n, crank frame), then the rod's own DOFs
     (5 n - 1, rod frame).  Rod matrices are ordered [own DOFs, C end (3), B end (3)].
+    A Craig-Bampton model (``[beam] link_modes`` = m > 0) holds each link in the coordinates of its
+    basis (:mod:`.link_reduction`): crank [m modes, tip node (6)], rod [m modes, C end, B end];
+    ``crank_basis`` (6n, m + 6) and ``rod_basis`` (5n+5, m + 6) map them to the nodal DOFs above
+    (None: the full mesh, nodal DOFs).
     """
     elements: int
     crank_K: np.ndarray       # (6n, 6n) crank nodes 1..n; each link matrix (6, ...) per leg if they differ
@@ -82,6 +91,8 @@ class ElasticModel(LegLayout):
     platform_inertia: np.ndarray  # (3,) principal, platform frame
     mass_damping: float       # Rayleigh lambda_1, 1/s
     stiffness_damping: float  # Rayleigh lambda_2, s
+    crank_basis: np.ndarray | None = None   # Craig-Bampton T of the crank, or per leg (6, ...)
+    rod_basis: np.ndarray | None = None     # ... of the rod [own, C end, B end]
 
     @property
     def crank_dofs(self) -> int:
@@ -134,17 +145,44 @@ def scene_link_matrices(scene, link: str, elements: int) -> tuple[np.ndarray, np
 
 
 def build_elastic_model(scene, elements: int) -> ElasticModel:
-    """Link matrices and DOF layout for ``elements`` beam elements per link."""
+    """Link matrices and DOF layout for ``elements`` beam elements per link; with the scene's
+    ``[beam] link_modes`` > 0 each link reduced to that many Craig-Bampton modes."""
     Kc, Mc = scene_link_matrices(scene, "crank", elements)
     Kr, Mr = scene_link_matrices(scene, "rod", elements)
     n6 = 6 * elements
     ends = np.r_[0:3, n6:n6 + 3]
     torsion = np.arange(3, n6 + 6, 6)
     order = np.r_[np.setdiff1d(np.arange(n6 + 6), np.r_[ends, torsion]), ends]
-    return ElasticModel(elements, Kc[..., 6:, 6:], Mc[..., 6:, 6:], Mc, Kr[..., order[:, None], order],
-                        Mr[..., order[:, None], order], Mr, order, scene.platform.mass,
-                        np.array(scene.platform.inertia), scene.damping.mass_coefficient,
-                        scene.damping.stiffness_coefficient)
+    model = ElasticModel(elements, Kc[..., 6:, 6:], Mc[..., 6:, 6:], Mc, Kr[..., order[:, None], order],
+                         Mr[..., order[:, None], order], Mr, order, scene.platform.mass,
+                         np.array(scene.platform.inertia), scene.damping.mass_coefficient,
+                         scene.damping.stiffness_coefficient)
+    return _reduced(model, scene.beam.link_modes) if scene.beam.link_modes else model
+
+
+def _reduced(model: ElasticModel, modes: int) -> ElasticModel:
+    """The Craig-Bampton model of ``model`` with ``modes`` fixed-interface modes per link (all of a link's
+    interior if it has fewer); the boundary DOFs (the crank's tip node, the rod's end translations) are
+    the last six of each."""
+    if modes > max_link_modes(model.elements):
+        raise ValueError(f"[beam] link_modes: {modes} is more than the {max_link_modes(model.elements)} interior "
+                         f"DOFs of a link of {model.elements} elements")
+    tip, ends = np.arange(model.crank_dofs - 6, model.crank_dofs), np.arange(model.rod_dofs, model.rod_dofs + 6)
+    Tc = craig_bampton(model.crank_K, model.crank_M, tip, link_modes(modes, model.crank_dofs, tip))
+    Tr = craig_bampton(model.rod_K, model.rod_M, ends, link_modes(modes, model.rod_dofs + 6, ends))
+    (Kc, Mc), (Kr, Mr) = reduce_pair(model.crank_K, model.crank_M, Tc), reduce_pair(model.rod_K, model.rod_M, Tr)
+    return dataclasses.replace(model, crank_K=Kc, crank_M=Mc, rod_K=Kr, rod_M=Mr, crank_basis=Tc, rod_basis=Tr)
+
+
+def to_link_coordinates(basis: np.ndarray | None, f: np.ndarray) -> np.ndarray:
+    """Nodal loads f (..., 6, n) as generalised loads T^T f on a link's reduced coordinates (eq. CB2);
+    f itself for a full-mesh link (``basis`` None)."""
+    return f if basis is None else _rows(f, basis)
+
+
+def to_nodal(basis: np.ndarray | None, x: np.ndarray) -> np.ndarray:
+    """A link's reduced coordinates x (..., 6, k) as nodal DOFs T x (eq. CB1); x for a full mesh."""
+    return x if basis is None else _rows(x, np.swapaxes(basis, -1, -2))
 
 
 @dataclass(frozen=True)
@@ -338,7 +376,7 @@ def rigid_loads(model: ElasticModel, motion: RigidMotion, scene) -> np.ndarray:
 
 def _loads(model, motion, scene, crank, rod, maps) -> np.ndarray:
     f_crank, f_rod, f_platform = link_loads(model, motion, scene, crank, rod, maps.platform_inertia)
-    F = _to_independent(model, maps, f_crank[..., 6:], f_rod)
+    F = _to_independent(model, maps, to_link_coordinates(model.crank_basis, f_crank[..., 6:]), f_rod)
     F[:, -6:] += f_platform
     return F
 
@@ -348,7 +386,8 @@ def link_loads(model: ElasticModel, motion: RigidMotion, scene, crank: np.ndarra
     """Rigid-body inertia and gravity loads M (g - a_rigid) per link, in link frames, N.
 
     Returns the crank's (T, 6, 6(n+1)) on all its nodes (the clamped one first),
-    the rod's (T, 6, 5n+5) in the order [own, C end, B end], and the platform's (T, 6).
+    the rod's (T, 6, 5n+5) in the order [own, C end, B end] (on its reduced coordinates for a
+    Craig-Bampton model), and the platform's (T, 6).
     """
     geo, g = scene.geometry, scene.gravity_vector
     e = crank_axes(geo)[None]
@@ -363,7 +402,7 @@ def link_loads(model: ElasticModel, motion: RigidMotion, scene, crank: np.ndarra
     pm = motion.platform
     f_platform = np.concatenate([model.platform_mass * (g - pm.a),
                                  -euler_moment(platform_inertia, pm.omega, pm.omega_dot)], -1)
-    return f_crank, f_rod[..., model.rod_order], f_platform
+    return f_crank, to_link_coordinates(model.rod_basis, f_rod[..., model.rod_order]), f_platform
 
 
 def _to_independent(model: ElasticModel, maps: EndMaps, f_crank: np.ndarray,
@@ -392,9 +431,9 @@ def frame_coupling_forces(model: ElasticModel, motion: RigidMotion, scene,
     c, f, p = split(model, d)
     rod_ends = np.concatenate([(maps.Q @ c[..., model.tip, None])[..., 0],
                                (maps.H @ p[:, None, :, None])[..., 0]], -1)
-    crank_full = np.concatenate([np.zeros(c.shape[:2] + (6,)), c], -1)
+    crank_full = np.concatenate([np.zeros(c.shape[:2] + (6,)), to_nodal(model.crank_basis, c)], -1)
     rod_full = np.zeros(f.shape[:2] + (6 * model.elements + 6,))
-    rod_full[..., model.rod_order] = np.concatenate([f, rod_ends], -1)
+    rod_full[..., model.rod_order] = to_nodal(model.rod_basis, np.concatenate([f, rod_ends], -1))
 
     def extra(M, q, frames):
         Om = np.einsum("tlji,tljk->tlik", frames, np.gradient(frames, t, axis=0))
@@ -403,5 +442,7 @@ def frame_coupling_forces(model: ElasticModel, motion: RigidMotion, scene,
                + np.einsum("tlij,tlkj->tlki", np.gradient(Om, t, axis=0) + Om @ Om, q3))
         return -acc.reshape(q.shape) @ M
 
-    return _to_independent(model, maps, extra(model.crank_M_full, crank_full, crank)[..., 6:],
-                           extra(model.rod_M_full, rod_full, rod)[..., model.rod_order])
+    f_crank = extra(model.crank_M_full, crank_full, crank)[..., 6:]
+    f_rod = extra(model.rod_M_full, rod_full, rod)[..., model.rod_order]
+    return _to_independent(model, maps, to_link_coordinates(model.crank_basis, f_crank),
+                           to_link_coordinates(model.rod_basis, f_rod))

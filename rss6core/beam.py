@@ -35,16 +35,19 @@ MASS_MODELS = ("consistent", "lumped")
 @dataclass(frozen=True)
 class BeamTheory:
     """Which beam theory the links use: ``theory`` (one of BEAM_THEORIES), bending rotary inertia,
-    and the mass model (one of MASS_MODELS)."""
+    the mass model (one of MASS_MODELS), and ``link_modes``: 0 for the full mesh, m > 0 for each link
+    reduced to m Craig-Bampton fixed-interface modes plus its joint nodes (rss6core/link_reduction.py)."""
     theory: str = "euler-bernoulli"
     rotary_inertia: bool = False
     mass: str = "consistent"
+    link_modes: int = 0
 
     @property
     def label(self) -> str:
         name = {"euler-bernoulli": "Euler-Bernoulli", "timoshenko": "Timoshenko"}[self.theory]
         return (name + (" + rotary inertia" if self.rotary_inertia else "")
-                + (", lumped mass" if self.mass == "lumped" else ""))
+                + (", lumped mass" if self.mass == "lumped" else "")
+                + (f", Craig-Bampton {self.link_modes} modes" if self.link_modes else ""))
 
 
 def _bending(l: float, sign: float) -> tuple[np.ndarray, np.ndarray]:

@@ -40,7 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_frames, link_loads,
-                       platform_point_map, scene_link_matrices, split)
+                       platform_point_map, scene_link_matrices, split, to_link_coordinates)
+from .link_reduction import craig_bampton, reduce_pair
 from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Records, Settings, State, System,
                              Out, advance_chunk, fast_inlining, make_scratch, make_work, newton_step)
 from .contact_options import MAX_CONTACT_REFINEMENTS, TOL_DISPLACEMENT, TOL_VELOCITY
@@ -74,6 +75,7 @@ class JointModel(LegLayout):
     mass_damping: float
     stiffness_damping: float
     elastic: object           # the ElasticModel it shares loads and rod layout with
+    crank_basis: np.ndarray | None = None   # Craig-Bampton T (6n+3, m+9) of the crank: [node 0 (3), modes, tip (6)]
 
     @property
     def crank_dofs(self) -> int:
@@ -91,9 +93,22 @@ def build_joint_model(scene, elements: int) -> JointModel:
     keep = np.r_[0:3, 6:6 * (elements + 1)]
     n6 = 6 * elements
     boundary = np.r_[0:3, n6 - 3:n6]   # node 0 translations; node n translations (offset by the 3 kept)
-    return JointModel(elements, Kc[np.ix_(keep, keep)], Mc[np.ix_(keep, keep)], boundary,
-                      em.rod_K, em.rod_M, em.platform_mass, em.platform_inertia, em.mass_damping,
-                      em.stiffness_damping, em)
+    jm = JointModel(elements, Kc[np.ix_(keep, keep)], Mc[np.ix_(keep, keep)], boundary,
+                    em.rod_K, em.rod_M, em.platform_mass, em.platform_inertia, em.mass_damping,
+                    em.stiffness_damping, em)
+    return _reduced_crank(jm, em.crank_dofs - 6) if em.crank_basis is not None else jm
+
+
+def _reduced_crank(jm: JointModel, modes: int) -> JointModel:
+    """The Craig-Bampton crank of a reduced model: boundary = the journal's translations and the tip
+    node, so its fixed-interface modes are the elastic level's (same interior, same bits) and its
+    coordinates [node 0 (3), modes, tip node (6)] extend the elastic crank's as the full mesh's do."""
+    n = jm.crank_dofs
+    T = craig_bampton(jm.crank_K, jm.crank_M, np.r_[0:3, n - 6:n], modes)
+    T = T[:, np.r_[modes:modes + 3, 0:modes, modes + 3:modes + 9]]
+    K, M = reduce_pair(jm.crank_K, jm.crank_M, T)
+    return dataclasses.replace(jm, crank_K=K, crank_M=M, crank_boundary=np.r_[0:3, modes + 3:modes + 6],
+                               crank_basis=T)
 
 
 class _Condensed:
@@ -297,7 +312,12 @@ class _Chunk:
         fc, fr, fp = link_loads(jm.elastic, motion, scene, Rc, Rr, Ip)
         F = np.empty((len(rows), jm.dofs))               # join(crank, rod, platform), one copy less
         legs = F[:, :-6].reshape(len(rows), 6, jm.leg_dofs)   # a view: the legs' part of each row
-        legs[..., :3], legs[..., 3:jm.crank_dofs], legs[..., jm.crank_dofs:] = fc[..., :3], fc[..., 6:], fr
+        if jm.crank_basis is None:
+            legs[..., :3], legs[..., 3:jm.crank_dofs], legs[..., jm.crank_dofs:] = fc[..., :3], fc[..., 6:], fr
+        else:
+            kept = np.concatenate([fc[..., :3], fc[..., 6:]], -1)      # node 0 translations, nodes 1..n
+            legs[..., :jm.crank_dofs] = to_link_coordinates(jm.crank_basis, kept)
+            legs[..., jm.crank_dofs:] = fr
         F[:, -6:] = fp
         self.F[rows] = F
         self.J[rows] = platform_point_map(motion.r)
@@ -451,8 +471,11 @@ def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0, refer
     xp = np.linalg.solve(G[0], rhs[..., None])[..., 0]
     crank = np.zeros((R, 6, jm.crank_dofs))
     local_A = np.einsum("lji,rlj->rli", Rc, joints.e_A)
-    trans = np.r_[0:3, np.concatenate([3 + 6 * k + np.arange(3) for k in range(jm.elements)])]
-    crank[..., trans] = np.tile(local_A, jm.elements + 1)
+    if jm.crank_basis is None:
+        trans = np.r_[0:3, np.concatenate([3 + 6 * k + np.arange(3) for k in range(jm.elements)])]
+        crank[..., trans] = np.tile(local_A, jm.elements + 1)
+    else:   # a rigid translation is a sum of constraint modes: the boundary's translations, no modes
+        crank[..., jm.crank_boundary] = np.tile(local_A, 2)
     J = platform_point_map(motion.r[0])
     ends = np.concatenate([np.einsum("lji,rlj->rli", Rr, joints.e_A + joints.e_C),
                            np.einsum("lji,rlj->rli", Rr, np.einsum("lij,rj->rli", J, xp) + joints.e_B)],

@@ -23,6 +23,7 @@ from .clearance import CLEARANCE_RADII, RELATIVE_BAND_REACH, SizeBand
 from .contact_options import CONTACT_STARTS, MAX_CONTACT_REFINEMENTS
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
+from .link_reduction import max_link_modes
 from .levels import MODELS
 from .pose_csv import file_trajectory, with_pose_samples
 from .sections import RectangleSection, TubeSection
@@ -300,7 +301,8 @@ _SCHEMA: dict = {
     },
     "beam": {"theory": _Key(str, default="euler-bernoulli", choices=BEAM_THEORIES),
              "rotary_inertia": _Key(bool, default=False),
-             "mass": _Key(str, default="consistent", choices=MASS_MODELS)},
+             "mass": _Key(str, default="consistent", choices=MASS_MODELS),
+             "link_modes": _Key(int, default=0, check=_NONNEG)},   # Craig-Bampton modes per link, 0: full mesh
     "damping": {"mass_coefficient_per_s": _Key(float, check=_NONNEG),
                 "stiffness_coefficient_s": _Key(float, check=_NONNEG)},
     "clearance": {"revolute_radial_m": _Key(float, check=_NONNEG),
@@ -472,6 +474,13 @@ def _check_clearances(clearance: dict, contact: dict) -> None:
         _below_radius(f"[clearance] {key}", clearance[key], radius, contact)
 
 
+def _check_link_modes(modes: int, elements: int) -> None:
+    """[beam] link_modes: at most the interior DOFs of the scene's mesh (:func:`.link_reduction.max_link_modes`)."""
+    if modes > max_link_modes(elements):
+        raise SceneError(f"[beam] link_modes: {modes} is more than the {max_link_modes(elements)} interior DOFs "
+                         f"a link of [simulation] elements_per_link = {elements} has (0: the full mesh)")
+
+
 def _build(v: dict, text: str, source: str) -> Scene:
     g, tr, ct = v["geometry"], v["trajectory"], v["contact"]
     where = tr.duration_key
@@ -488,6 +497,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
     if v["beam"]["mass"] == "lumped" and not v["beam"]["rotary_inertia"]:
         raise SceneError("[beam] mass: 'lumped' puts the sections' rotary inertia on the nodes' "
                          "rotations; set [beam] rotary_inertia = true")
+    _check_link_modes(v["beam"]["link_modes"], v["simulation"]["elements_per_link"])
     _check_clearances(v["clearance"], ct)
     if any(g["actuator_offsets_deg"]):
         raise SceneError("[geometry] actuator_offsets_deg: the nominal offsets are 0 (the controller's zero); "
@@ -531,7 +541,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
                            ct["exponent"], ct["friction_coefficient"], ct["stick_velocity_m_s"],
                            ct["slip_velocity_m_s"], ct["impact_speed_floor_m_s"],
                            ct["stiffness_scale"]),
-        beam=BeamTheory(v["beam"]["theory"], v["beam"]["rotary_inertia"], v["beam"]["mass"]),
+        beam=BeamTheory(v["beam"]["theory"], v["beam"]["rotary_inertia"], v["beam"]["mass"], v["beam"]["link_modes"]),
         tolerance=_tolerances(v.get("tolerance", {}), v["clearance"], v["sampling"]["size_tolerance"], ct),
         uncertain=_uncertain(v),
         source_text=text, source_path=source)

@@ -59,6 +59,18 @@ def test_tradeoff_writes_every_setting_with_finite_columns(tradeoff_dir, capsys)
     np.testing.assert_allclose(ds["relative_error"].values, expected, rtol=1e-12, atol=0)
     others = ds["setting"].values != ds.attrs["reference"]
     assert np.all(ds["max_relative_error"].values[others] > 0)   # other settings do differ
+    # the Craig-Bampton rows, each against its full-mesh twin (the same label without the modes)
+    labels = list(ds["setting"].values)
+    reduced = [i for i, m in enumerate(ds["link_modes"].values) if m > 0]
+    assert {rows[i]["model"] for i in reduced} == {"elastic", "paper", "contact"}
+    for i in reduced:
+        twin = labels.index(labels[i].replace(f", Craig-Bampton {int(ds['link_modes'].values[i])} modes", ""))
+        expected = relative_errors(value[i], value[twin])
+        np.testing.assert_allclose(ds["relative_error_full_mesh"].values[i], expected, rtol=1e-12, atol=0)
+        assert float(rows[i]["max_rel_error_vs_full_mesh"]) == pytest.approx(expected.max(), rel=1e-5)
+        assert int(rows[i]["modes"]) < int(rows[twin]["modes"])
+    full_mesh = [i for i in range(len(labels)) if i not in reduced]
+    assert np.isnan(ds["max_relative_error_full_mesh"].values[full_mesh]).all()
     assert (tradeoff_dir / "tradeoff.png").stat().st_size > 10_000
 
 
@@ -69,16 +81,22 @@ def test_stability_map_and_the_explicit_limit(stability_dir):
     assert {r["status"] for r in rows} <= {"stable", "inaccurate", "failed"}
     assert all(np.isfinite(float(r[c])) for r in rows for c in ("dt_s", "max_rel_change",
                                                                  "seconds_per_realization"))
-    explicit = [r for r in rows if r["integrator"].startswith("central-difference")]
     from pipeline.scenes.catalogue import find_scene
+    from pipeline.studies.stability import STABILITY_LINK_MODES
     from rss6core.models import natural_frequencies
-    limit = 2.0 / natural_frequencies(find_scene(SMOKE))[-1]
-    for r in explicit:      # stable below 2/omega_max, diverging above it (within 3 %)
-        h = float(r["dt_s"])
-        if h < 0.97 * limit:
-            assert r["status"] != "failed", r
-        if h > 1.03 * limit:
-            assert r["status"] == "failed", r
+    full = find_scene(SMOKE)
+    reduced = dataclasses.replace(full, beam=dataclasses.replace(full.beam, link_modes=STABILITY_LINK_MODES))
+    for scene, name in ((full, "central-difference (undamped)"),
+                        (reduced, f"central-difference (undamped), Craig-Bampton {STABILITY_LINK_MODES} modes")):
+        explicit = [r for r in rows if r["integrator"] == name]
+        limit = 2.0 / natural_frequencies(scene)[-1]
+        assert len(explicit) == 7
+        for r in explicit:      # stable below 2/omega_max, diverging above it (within 3 %)
+            h = float(r["dt_s"])
+            if h < 0.97 * limit:
+                assert r["status"] != "failed", r
+            if h > 1.03 * limit:
+                assert r["status"] == "failed", r
     for r in rows:          # the implicit elastic methods are unconditionally stable
         if r["level"] == "elastic" and not r["integrator"].startswith("central"):
             assert r["status"] != "failed", r

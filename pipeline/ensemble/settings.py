@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from rss6core import (SceneError, check_uncertain_level, default_integrator, default_time_step,
+from rss6core import (SceneError, check_uncertain_level, default_integrator, default_time_step, max_link_modes,
                       draws_per_realisation, model_level, parse_scene, time_grid, uniform_dimension)
 
 from ..scenes.variant import scene_variant
@@ -60,6 +60,10 @@ def resolve_level(scene, config, *, model: str | None = None, integrator: str | 
         if dt:
             raise OptionError(f"--dt: {exc}") from None
         raise SceneError(f"{scene.source_path}: time step: {exc}") from None
+    if elements and scene.beam.link_modes > max_link_modes(elements):
+        raise OptionError(f"--elements {elements}: a link of {elements} elements has at most "
+                          f"{max_link_modes(elements)} interior DOFs, fewer than the scene's [beam] link_modes = "
+                          f"{scene.beam.link_modes}")
     return LevelSettings(scene, str(config), model, integrator or default_integrator(scene, model), step,
                          elements or sim.elements_per_link)
 

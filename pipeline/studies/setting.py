@@ -1,9 +1,9 @@
 """A setting of the trade-off and stability studies and its measurement: the ground both share.
 
 A setting is one way to compute an ensemble (model level, integrator, time step, elements per
-link, beam theory, contact stiffness, adaptive step).  :func:`measure` runs realisations 0..n-1 of
-it as one batch and gives the ensemble statistics users query, per quantity and direction: the
-mean and the 95 % quantile over realisations (pipeline.analysis.stats.estimates) of each
+link, beam theory, Craig-Bampton modes per link, contact stiffness, adaptive step).  :func:`measure`
+runs realisations 0..n-1 of it as one batch and gives the ensemble statistics users query, per
+quantity and direction: the mean and the 95 % quantile over realisations (pipeline.analysis.stats.estimates) of each
 realisation's max |error| (as stored in ensemble files: after the scene's settle time, over every
 internal step for the contact level).  Relative errors are taken against a reference setting, with
 a floor of 0.1 % of the largest translation (rotation) statistic of that quantity so that a
@@ -32,7 +32,8 @@ RELATIVE_FLOOR = 1e-3
 @dataclass(frozen=True)
 class Setting:
     """One way to compute the ensemble: model level, integrator, time step (s), elements per link,
-    beam theory (None: the scene's); for the contact level also the adaptive step's tolerance
+    beam theory (None: the scene's), Craig-Bampton modes per link (None: the scene's ``[beam]
+    link_modes``, 0: the full mesh); for the contact level also the adaptive step's tolerance
     (m, 0: fixed step) and refinements."""
     model: str
     integrator: str
@@ -42,12 +43,15 @@ class Setting:
     tolerance: float = 0.0
     refinements: int = 0
     beam: BeamTheory | None = None
+    link_modes: int | None = None
 
     @property
     def label(self) -> str:
         extra = f", K x{self.stiffness_scale:g}" if self.stiffness_scale != 1.0 else ""
         if self.beam is not None:
             extra += f", {self.beam.label}"
+        if self.link_modes is not None:
+            extra += f", Craig-Bampton {self.link_modes} modes" if self.link_modes else ", full mesh"
         if self.refinements:
             extra += (f", adaptive {self.tolerance:g} m down to "
                       f"{self.dt / 2 ** self.refinements * 1e6:g} us")
@@ -57,8 +61,11 @@ class Setting:
 
 
 def _scene_for(scene, setting: Setting):
+    """The scene as ``setting`` computes it: its beam theory, link modes and contact stiffness."""
     if setting.beam is not None and setting.beam != scene.beam:
         scene = dataclasses.replace(scene, beam=setting.beam)
+    if setting.link_modes is not None and setting.link_modes != scene.beam.link_modes:
+        scene = dataclasses.replace(scene, beam=dataclasses.replace(scene.beam, link_modes=setting.link_modes))
     if setting.stiffness_scale == scene.contact.stiffness_scale:
         return scene
     return dataclasses.replace(scene, contact=dataclasses.replace(

@@ -12,11 +12,11 @@ import textwrap
 import numpy as np
 import xarray as xr
 
-from rss6core import MODELS, BeamTheory, default_integrator, default_time_step, degrees_of_freedom
+from rss6core import MODELS, BeamTheory, default_integrator, default_time_step, degrees_of_freedom, max_link_modes
 
 from ..files.schema import MIXED_UNITS, _unit_table
 from ..vocabulary import DIRECTIONS, QUANTITIES
-from .setting import TRADEOFF_STATISTICS, Setting, _adaptive, _contact_step, measure, relative_errors
+from .setting import TRADEOFF_STATISTICS, Setting, _adaptive, _contact_step, _scene_for, measure, relative_errors
 
 __all__ = ["default_settings", "tradeoff", "pareto_front", "recommend", "write_tradeoff", "tradeoff_figure"]
 
@@ -52,9 +52,37 @@ def default_settings(scene) -> tuple[list[Setting], Setting]:
     other = BeamTheory("euler-bernoulli" if scene.beam.theory == "timoshenko" else "timoshenko",
                        not scene.beam.rotary_inertia)
     out += [default("elastic", beam=other), default("contact", tolerance=tol, refinements=levels, beam=other)]
+    out += _reduced_settings(scene, default, tol, levels)
     reference = default("contact", dt=_contact_step(scene, dtc / 2), elements=2 * el, tolerance=tol / 100,
                         refinements=levels + 2)
     return out + [reference], reference
+
+
+LINK_MODES = (2, 4, 8)   # Craig-Bampton modes per link of the reduced rows
+
+
+def _reduced_settings(scene, default, tol: float, levels: int) -> list[Setting]:
+    """The elastic, paper and (adaptive) contact rows with each link reduced to LINK_MODES
+    Craig-Bampton modes on the scene's mesh (a scene that reduces its links already gets none)."""
+    if scene.beam.link_modes:
+        return []
+    modes = [m for m in LINK_MODES if m < max_link_modes(scene.simulation.elements_per_link)]
+    return ([default("elastic", link_modes=m) for m in modes] + [default("paper", link_modes=m) for m in modes]
+            + [default("contact", tolerance=tol, refinements=levels, link_modes=m) for m in modes])
+
+
+def full_mesh_errors(scene, settings: list[Setting], runs: dict) -> np.ndarray:
+    """Relative errors (setting, quantity, direction, statistic) of each reduced-link setting's
+    statistics against the same setting on the full mesh (NaN where that was not measured)."""
+    out = np.full((len(settings), 3, 6, len(TRADEOFF_STATISTICS)), np.nan)
+    for i, s in enumerate(settings):
+        if not _scene_for(scene, s).beam.link_modes:
+            continue
+        full = next((f for f in (dataclasses.replace(s, link_modes=None), dataclasses.replace(s, link_modes=0))
+                     if f in runs and not _scene_for(scene, f).beam.link_modes), None)
+        if full is not None:
+            out[i] = relative_errors(runs[s]["statistics"], runs[full]["statistics"])
+    return out
 
 
 def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | None = None,
@@ -76,8 +104,15 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
                     attrs=_attributes(scene, reference, check, fine, n, seed))
     ds["max_relative_error"] = ds["relative_error"].max(("quantity", "direction", "statistic"))
     ds["max_relative_error"].attrs.update(units="1", long_name="largest relative_error of the setting")
-    ds["modes"] = ("setting", [degrees_of_freedom(scene, s.model, s.elements) for s in settings],
-                   {"units": "1", "long_name": "modes kept (no modal reduction is offered: all DOFs)"})
+    ds["modes"] = ("setting", [degrees_of_freedom(_scene_for(scene, s), s.model, s.elements) for s in settings],
+                   {"units": "1", "long_name": "degrees of freedom of the model (link DOFs after any "
+                                               "Craig-Bampton reduction)"})
+    ds["relative_error_full_mesh"] = (("setting", "quantity", "direction", "statistic"),
+                                      full_mesh_errors(scene, settings, runs),
+                                      {"units": "1", "long_name": "relative error of a reduced-link setting's "
+                                       "statistic against the same setting on the full mesh (NaN: not reduced)"})
+    ds["max_relative_error_full_mesh"] = ds["relative_error_full_mesh"].max(("quantity", "direction", "statistic"))
+    ds["max_relative_error_full_mesh"].attrs.update(units="1", long_name="largest relative_error_full_mesh")
     return ds
 
 
@@ -101,6 +136,8 @@ def _setting_variables(scene, settings: list[Setting], runs: dict) -> dict:
                               {"units": "1", "long_name": "beam elements per crank and per rod"}),
         "beam_theory": ("setting", [(s.beam or scene.beam).label for s in settings],
                         {"long_name": "beam theory of the links"}),
+        "link_modes": ("setting", [_scene_for(scene, s).beam.link_modes for s in settings],
+                       {"units": "1", "long_name": "Craig-Bampton modes per link (0: full mesh)"}),
         "stiffness_scale": ("setting", [s.stiffness_scale for s in settings],
                             {"units": "1", "long_name": "contact stiffness factor"}),
         "tolerance": ("setting", [s.tolerance for s in settings],
@@ -185,19 +222,20 @@ def write_tradeoff(ds: xr.Dataset, outdir, tolerance: float) -> dict:
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     header = ["setting", "model", "integrator", "dt_s", "elements_per_link", "beam_theory", "modes",
-              "stiffness_scale",
-              "tolerance_m", "refinements", "seconds_per_realization", "failed", "max_rel_error"] + _columns()
+              "link_modes", "stiffness_scale", "tolerance_m", "refinements", "seconds_per_realization", "failed",
+              "max_rel_error", "max_rel_error_vs_full_mesh"] + _columns()
     rows = []
     for i in range(ds.sizes["setting"]):
         rel = ds["relative_error"].values[i].reshape(-1)
         rows.append([str(ds["setting"].values[i]), str(ds["model"].values[i]),
                      str(ds["integrator"].values[i]), f"{float(ds['dt'].values[i]):.6g}",
                      str(int(ds["elements_per_link"].values[i])), str(ds["beam_theory"].values[i]),
-                     str(int(ds["modes"].values[i])),
+                     str(int(ds["modes"].values[i])), str(int(ds["link_modes"].values[i])),
                      f"{float(ds['stiffness_scale'].values[i]):g}",
                      f"{float(ds['tolerance'].values[i]):g}", str(int(ds["refinements"].values[i])),
                      f"{float(ds['seconds_per_realization'].values[i]):.6g}",
-                     str(int(ds["failed"].values[i])), f"{float(ds['max_relative_error'].values[i]):.6g}"]
+                     str(int(ds["failed"].values[i])), f"{float(ds['max_relative_error'].values[i]):.6g}",
+                     f"{float(ds['max_relative_error_full_mesh'].values[i]):.6g}"]
                     + [f"{x:.6g}" for x in rel])
     _write_csv(out / "tradeoff.csv", header, rows)
     write_netcdf(ds, out / "tradeoff.nc")
