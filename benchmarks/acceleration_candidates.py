@@ -48,6 +48,13 @@ def _to_local(R, m):
     return np.einsum("lab,...la->...lb", R, m)
 
 
+def _spin_inertia(scene) -> float:
+    """A rod's moment of inertia about its own axis, rho J_p L (kg m^2)."""
+    rod = scene.rod_section
+    return scene.material.density * np.pi / 32 * (rod.outer_diameter ** 4 - rod.inner_diameter ** 4) \
+        * scene.geometry.rod_length
+
+
 def _friction(scene, normal, force, de, omega, radius):
     """Modified Coulomb friction (eq. 18) (..., 3) on the + element of a pair in contact with normal
     force ``force`` (...) N along -``normal``, relative velocity de and relative rotation omega."""
@@ -61,40 +68,40 @@ def _friction(scene, normal, force, de, omega, radius):
 
 class Switched(NumpyStepper):
     """The numpy stepper with issue 43's lagged switches (class attributes, set by :func:`stepper`)."""
-    moments, rates, spin, scale, joints = False, False, False, 1.0, (1, 2)
+    moments, rates, spin, inertia, scale, joints = False, False, False, False, 1.0, (1, 2)
 
-    def _rod_spin(self, idx, ch, k1):
-        """The rods' spin rates (6,) rad/s about their axes at which the friction moments of their two
-        spherical joints balance about the axis (the spin's inertia, 5e-5 kg m^2, left out: its time
-        constant under friction is tens of microseconds), from the last accepted state; bisection."""
+    def _rod_spin(self, idx, ch, k1, h):
+        """The rods' spin rates (6,) rad/s about their axes over a step of h (s) from the last accepted
+        state: J (s - s_last) / h = the friction moments of their two spherical joints about the axis
+        (backward Euler; J = 0 with ``inertia`` off: the rates at which the moments balance), normal
+        forces and normals lagged; bisection (the moments fall as the spin grows)."""
         jm, ws, scene = self.setup.jm, self.ws, self.setup.scene
         if len(idx) != 1:
             raise ValueError("the spin switch runs one realisation at a time")
         last = getattr(ws, "spin_last", np.zeros(6))
         if not hasattr(ws, "f_last"):
+            ws.spin_try = last
             return last
         e = _relative(ch, k1, *_joint_nodes(jm, ws.d[idx[0]]))
         de = _relative(ch, k1, *_joint_nodes(jm, ws.v[idx[0]]))
         axis, radius = ch.Rr[k1][:, :, 0], np.asarray(ch.radius).reshape(-1)[1]
         normal = e[:, 1:] / np.maximum(np.linalg.norm(e[:, 1:], axis=-1, keepdims=True), 1e-300)
-        force = -(ws.f_last[idx[0]][:, 1:] * normal).sum(-1)          # (6, 2) C, B
-        if not (force > 0).any():
-            return last
-        omega = ch.omega_ideal[k1][:, 1:] if hasattr(ch, "omega_ideal") else ch.omega[k1][:, 1:]
+        force = np.maximum(-(ws.f_last[idx[0]][:, 1:] * normal).sum(-1), 0.0)     # (6, 2) C, B
+        omega = ch.omega_ideal[k1][:, 1:]
+        inertia = _spin_inertia(scene) if self.inertia else 0.0
 
-        def balance(s):
-            f = _friction(scene, normal, np.maximum(force, 0.0), de[:, 1:], omega + s[:, None, None] * axis[:, None],
-                          radius)
-            return (np.cross(radius * normal, f) * axis[:, None]).sum((-1, -2))
+        def residual(s):
+            f = _friction(scene, normal, force, de[:, 1:], omega + s[:, None, None] * axis[:, None], radius)
+            return (np.cross(radius * normal, f) * axis[:, None]).sum((-1, -2)) - inertia * (s - last) / h
 
-        low, high = np.full(6, -1e3), np.full(6, 1e3)
+        low, high = last - 1e3, last + 1e3
         for _ in range(60):
             mid = 0.5 * (low + high)
-            up = balance(mid) > 0.0        # the moment decreases with the spin: the root is above
+            up = residual(mid) > 0.0
             low, high = np.where(up, mid, low), np.where(up, high, mid)
-        stuck = (force <= 0).all(-1)
-        ws.spin_last = np.where(stuck, last, 0.5 * (low + high))
-        return ws.spin_last
+        free = (force <= 0).all(-1)        # no friction: the spin keeps its rate
+        ws.spin_try = np.where(free, last, 0.5 * (low + high))
+        return ws.spin_try
 
     def _friction_moments(self, idx, ch, k1):
         """Generalised forces (R, N) of the friction moments at the last accepted state."""
@@ -119,7 +126,7 @@ class Switched(NumpyStepper):
                 p[..., 3:] -= m.sum(1)
         return join(c, r, p)
 
-    def _sliding_rotation(self, idx, ch, k1):
+    def _sliding_rotation(self, idx, ch, k1, h):
         """ch.omega[k1]: the ideal relative rotations plus, as switched on, the joint nodes' elastic
         rotation rates and the rods' spin."""
         if len(idx) != 1:
@@ -134,7 +141,7 @@ class Switched(NumpyStepper):
             ch.omega[k1, :, 1] += np.einsum("lab,lb->la", Rr[:, :, 1:3], r[:, 0:2]) - tip
             ch.omega[k1, :, 2] += np.einsum("lab,lb->la", Rr[:, :, 1:3], r[:, 5 * n - 3:5 * n - 1]) - p[None, 3:]
         if self.spin:
-            spin = self._rod_spin(idx, ch, k1)[:, None] * ch.Rr[k1][:, :, 0]
+            spin = self._rod_spin(idx, ch, k1, h)[:, None] * ch.Rr[k1][:, :, 0]
             ch.omega[k1, :, 1] += spin
             ch.omega[k1, :, 2] += spin
 
@@ -150,7 +157,7 @@ class Switched(NumpyStepper):
         if su.weighted:
             r += af * ws.balance[idx] - am * ws.Ma[idx]
         if self.rates or self.spin:
-            self._sliding_rotation(idx, ch, k1)
+            self._sliding_rotation(idx, ch, k1, w.h)
         guess = _extrapolated(w.h, a, ws.a_past[idx], ws.h_past[idx])
         sol = self._newton(idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp, guess, w.d_corr, w.v_corr, 1.0 - af)
         ws.iters[idx] += sol.iterations
@@ -168,13 +175,17 @@ class Switched(NumpyStepper):
         if not hasattr(self.ws, "f_last"):
             self.ws.f_last = np.zeros((len(self.ws.d),) + f.shape[1:])
         self.ws.f_last[kept] = f
+        if self.spin:
+            self.ws.spin_last = self.ws.spin_try
 
 
 SWITCHES = {"plain": None, "zero": dict(moments=True, scale=0.0), "moments": dict(moments=True),
             "rates": dict(rates=True), "both": dict(moments=True, rates=True),
             "C": dict(moments=True, joints=(1,)), "B": dict(moments=True, joints=(2,)),
             "spin": dict(spin=True), "spin-moments": dict(spin=True, moments=True),
-            "all": dict(spin=True, moments=True, rates=True)}
+            "spin-inertia": dict(spin=True, inertia=True),
+            "spin-inertia-moments": dict(spin=True, inertia=True, moments=True),
+            "all": dict(spin=True, inertia=True, moments=True, rates=True)}
 
 
 def stepper(name):
