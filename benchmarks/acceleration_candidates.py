@@ -18,7 +18,7 @@ reference), as a measurement, not yet a formulation of the product:
   ideal relative rotation (last accepted velocities).
 - ``C`` / ``B``: the moments at one joint family only.
 
-    python benchmarks/acceleration_candidates.py [--half-step] [--scale] [SWITCH ...]
+    python benchmarks/acceleration_candidates.py [--half-step] [--realization K] [--scale] [SWITCH ...]
 
 SWITCH in: plain, zero (the moments at scale 0: must print plain's numbers), moments, rates, both,
 C, B.  Each numpy run takes about 30 s (60-70 s with --half-step).
@@ -193,12 +193,12 @@ def stepper(name):
     return None if SWITCHES[name] is None else type(name, (Switched,), SWITCHES[name])
 
 
-def run(scene, name):
+def run(scene, name, realization=0):
     """The case under switch ``name``: maxima and means over t >= SETTLE, and the wall time."""
     level = prepare_level(scene, "contact")
     start = time.perf_counter()
-    b = simulate_contact(scene, [draw_clearances(scene, 0, 0)], level.elements, level.integrator, level.dt,
-                         stepper=stepper(name))
+    b = simulate_contact(scene, [draw_clearances(scene, 0, realization)], level.elements, level.integrator,
+                         level.dt, stepper=stepper(name))
     inside = b.t >= SETTLE - 1e-12
     return dict(acceleration=np.abs(b.acceleration[0, inside]).max(0),
                 displacement=np.abs(b.displacement[0, inside]).max(0),
@@ -230,6 +230,7 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("switches", nargs="*", help=f"any of {', '.join(SWITCHES)} (default: all)")
     p.add_argument("--half-step", action="store_true", help="half the scene's contact step")
+    p.add_argument("--realization", type=int, default=0, help="realisation of seed 0 (default 0, the case's)")
     p.add_argument("--scale", action="store_true", help="print candidate 1's size (linearisation) first")
     args = p.parse_args(argv)
     unknown = sorted(set(args.switches) - set(SWITCHES))
@@ -244,7 +245,7 @@ def main(argv=None):
     if args.scale:
         linearisation_scale(scene)
     for name in args.switches or list(SWITCHES):
-        r = run(scene, name)
+        r = run(scene, name, args.realization)
         print(f"{name:8s} " + " ".join(f"{x:.4g}" for x in r["acceleration"])
               + " | " + " ".join(f"{1e3 * x:.4g}" for x in r["displacement"][:3])
               + " | " + " ".join(f"{1e3 * x:.3g}" for x in r["velocity"])
