@@ -46,8 +46,9 @@ def lankarani_nikravesh(delta, delta_dot, impact_speed, stiffness, exponent: flo
     """
     delta = np.asarray(delta, float)
     pen = np.maximum(delta, 0.0)
-    spring = stiffness * pen ** exponent
-    d_spring = exponent * stiffness * pen ** (exponent - 1.0)
+    with np.errstate(invalid="ignore"):   # a zero clearance's infinite K times zero penetration: masked below
+        spring = stiffness * pen ** exponent
+        d_spring = exponent * stiffness * pen ** (exponent - 1.0)
     c = 0.75 * (1.0 - restitution ** 2) / impact_speed
     factor = 1.0 + c * delta_dot
     force = spring * factor
