@@ -55,15 +55,43 @@ def _spin_inertia(scene) -> float:
         * scene.geometry.rod_length
 
 
-def _friction(scene, normal, force, de, omega, radius):
+def friction(contact, normal, force, de, omega, radius):
     """Modified Coulomb friction (eq. 18) (..., 3) on the + element of a pair in contact with normal
-    force ``force`` (...) N along -``normal``, relative velocity de and relative rotation omega."""
-    ct = scene.contact
+    force ``force`` (...) N along -``normal``, relative velocity de (m/s) and relative rotation omega
+    (rad/s), sliding at R n (``radius`` R, m); ``contact`` the scene's [contact] laws."""
     v = de + radius * np.cross(omega, normal)
     v = v - (v * normal).sum(-1, keepdims=True) * normal
     speed = np.linalg.norm(v, axis=-1, keepdims=True)
-    ramp = np.clip((speed - ct.stick_velocity) / (ct.slip_velocity - ct.stick_velocity), 0.0, 1.0)
-    return -ct.friction_coefficient * force[..., None] * ramp * v / np.maximum(speed, 1e-300)
+    ramp = np.clip((speed - contact.stick_velocity) / (contact.slip_velocity - contact.stick_velocity), 0.0, 1.0)
+    return -contact.friction_coefficient * force[..., None] * ramp * v / np.maximum(speed, 1e-300)
+
+
+def friction_moment(radius, normal, force):
+    """R n x f_t (..., 3) N m: the moment about its centre of a pair force ``force`` (..., 3) N acting on
+    the + element at its contact point R n (``radius`` R, m; ``normal`` n unit); only the tangential
+    (friction) part has one.  With the relative rotation omega it carries the friction's power:
+    f_t . (de + R omega x n) = f_t . de + omega . (R n x f_t)."""
+    tangential = force - (force * normal).sum(-1, keepdims=True) * normal
+    return radius * np.cross(normal, tangential)
+
+
+def spin_step(contact, last, h, inertia, normal, force, de, omega, axis, radius):
+    """The rods' spin rates (6,) rad/s after a step of h (s) from ``last``: J (s - last) / h = the axial
+    friction moments a . (R n x f) of each rod's two spherical joints (backward Euler; ``inertia`` J
+    = 0: the rates at which the moments balance), f = :func:`friction` with the rod turning at s about
+    its ``axis`` (6, 3) on top of the ideal relative rotations ``omega`` (6, 2, 3); ``normal``,
+    ``de`` (6, 2, 3) and ``force`` (6, 2) of joints C and B.  Bisection: the moments fall as s grows.
+    A rod touching neither socket keeps its rate."""
+    def residual(s):
+        f = friction(contact, normal, force, de, omega + s[:, None, None] * axis[:, None], radius)
+        return (np.cross(radius * normal, f) * axis[:, None]).sum((-1, -2)) - inertia * (s - last) / h
+
+    low, high = last - 1e3, last + 1e3
+    for _ in range(60):
+        mid = 0.5 * (low + high)
+        up = residual(mid) > 0.0
+        low, high = np.where(up, mid, low), np.where(up, high, mid)
+    return np.where((force <= 0).all(-1), last, 0.5 * (low + high))
 
 
 class Switched(NumpyStepper):
@@ -71,10 +99,8 @@ class Switched(NumpyStepper):
     moments, rates, spin, inertia, scale, joints = False, False, False, False, 1.0, (1, 2)
 
     def _rod_spin(self, idx, ch, k1, h):
-        """The rods' spin rates (6,) rad/s about their axes over a step of h (s) from the last accepted
-        state: J (s - s_last) / h = the friction moments of their two spherical joints about the axis
-        (backward Euler; J = 0 with ``inertia`` off: the rates at which the moments balance), normal
-        forces and normals lagged; bisection (the moments fall as the spin grows)."""
+        """The rods' spin rates (6,) over a step of h (s) from the last accepted state (:func:`spin_step`;
+        normal forces, normals and relative velocities lagged)."""
         jm, ws, scene = self.setup.jm, self.ws, self.setup.scene
         if len(idx) != 1:
             raise ValueError("the spin switch runs one realisation at a time")
@@ -82,25 +108,13 @@ class Switched(NumpyStepper):
         if not hasattr(ws, "f_last"):
             ws.spin_try = last
             return last
-        e = _relative(ch, k1, *_joint_nodes(jm, ws.d[idx[0]]))
-        de = _relative(ch, k1, *_joint_nodes(jm, ws.v[idx[0]]))
-        axis, radius = ch.Rr[k1][:, :, 0], np.asarray(ch.radius).reshape(-1)[1]
-        normal = e[:, 1:] / np.maximum(np.linalg.norm(e[:, 1:], axis=-1, keepdims=True), 1e-300)
+        e = _relative(ch, k1, *_joint_nodes(jm, ws.d[idx[0]]))[:, 1:]
+        de = _relative(ch, k1, *_joint_nodes(jm, ws.v[idx[0]]))[:, 1:]
+        normal = e / np.maximum(np.linalg.norm(e, axis=-1, keepdims=True), 1e-300)
         force = np.maximum(-(ws.f_last[idx[0]][:, 1:] * normal).sum(-1), 0.0)     # (6, 2) C, B
-        omega = ch.omega_ideal[k1][:, 1:]
-        inertia = _spin_inertia(scene) if self.inertia else 0.0
-
-        def residual(s):
-            f = _friction(scene, normal, force, de[:, 1:], omega + s[:, None, None] * axis[:, None], radius)
-            return (np.cross(radius * normal, f) * axis[:, None]).sum((-1, -2)) - inertia * (s - last) / h
-
-        low, high = last - 1e3, last + 1e3
-        for _ in range(60):
-            mid = 0.5 * (low + high)
-            up = residual(mid) > 0.0
-            low, high = np.where(up, mid, low), np.where(up, high, mid)
-        free = (force <= 0).all(-1)        # no friction: the spin keeps its rate
-        ws.spin_try = np.where(free, last, 0.5 * (low + high))
+        ws.spin_try = spin_step(scene.contact, last, h, _spin_inertia(scene) if self.inertia else 0.0, normal,
+                                force, de, ch.omega_ideal[k1][:, 1:], ch.Rr[k1][:, :, 0],
+                                float(np.asarray(ch.radius).reshape(-1)[1]))
         return ws.spin_try
 
     def _friction_moments(self, idx, ch, k1):
@@ -114,9 +128,7 @@ class Switched(NumpyStepper):
         n, radius = jm.elements, np.asarray(ch.radius).reshape(-1)
         for j in self.joints:
             normal = e[:, :, j] / np.maximum(np.linalg.norm(e[:, :, j], axis=-1, keepdims=True), 1e-300)
-            f = ws.f_last[idx][:, :, j]
-            tangential = f - (f * normal).sum(-1, keepdims=True) * normal
-            m = self.scale * radius[j] * np.cross(normal, tangential)
+            m = self.scale * friction_moment(radius[j], normal, ws.f_last[idx][:, :, j])
             rod = _to_local(ch.Rr[k1], m)[..., 1:3]          # bending rotations only
             if j == 1:
                 r[..., 0:2] += rod
