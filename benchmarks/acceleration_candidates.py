@@ -18,7 +18,8 @@ reference), as a measurement, not yet a formulation of the product:
   ideal relative rotation (last accepted velocities).
 - ``C`` / ``B``: the moments at one joint family only.
 
-    python benchmarks/acceleration_candidates.py [--half-step] [--realization K] [--scale] [SWITCH ...]
+    python benchmarks/acceleration_candidates.py [--half-step] [--realization K] [--contact FIELD=VALUE]
+        [--scale] [SWITCH ...]
 
 SWITCH in: plain, zero (the moments at scale 0: must print plain's numbers), moments, rates, both,
 C, B.  Each numpy run takes about 30 s (60-70 s with --half-step).
@@ -242,6 +243,8 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("switches", nargs="*", help=f"any of {', '.join(SWITCHES)} (default: all)")
     p.add_argument("--half-step", action="store_true", help="half the scene's contact step")
+    p.add_argument("--contact", action="append", default=[], metavar="FIELD=VALUE",
+                   help="a [contact] law field (rss6core ContactLaw name, e.g. slip_velocity=1e-3), repeatable")
     p.add_argument("--realization", type=int, default=0, help="realisation of seed 0 (default 0, the case's)")
     p.add_argument("--scale", action="store_true", help="print candidate 1's size (linearisation) first")
     args = p.parse_args(argv)
@@ -251,8 +254,15 @@ def main(argv=None):
     scene = load_scene(SCENE)
     sim = dataclasses.replace(scene.simulation, settle_time=SETTLE,
                               contact_time_step=scene.simulation.contact_time_step * (0.5 if args.half_step else 1))
-    scene = dataclasses.replace(scene, simulation=sim)
-    print(f"issue 43's case, contact step {sim.contact_time_step:g} s; max |acceleration| x y z m/s^2, "
+    law = {}
+    for item in args.contact:
+        field, _, value = item.partition("=")
+        if field not in {f.name for f in dataclasses.fields(scene.contact)}:
+            p.error(f"--contact {item}: no [contact] law field {field!r}")
+        law[field] = float(value)
+    scene = dataclasses.replace(scene, simulation=sim, contact=dataclasses.replace(scene.contact, **law))
+    laws = "".join(", " + c for c in args.contact)
+    print(f"issue 43's case, contact step {sim.contact_time_step:g} s{laws}; max |acceleration| x y z m/s^2, "
           f"rx ry rz rad/s^2 | max |displacement| x y z mm | mean |velocity| x y z mm/s, rx ry rz mrad/s")
     if args.scale:
         linearisation_scale(scene)
