@@ -17,12 +17,21 @@ reference), as a measurement, not yet a formulation of the product:
 - ``rates``: the sliding velocity with the joint nodes' elastic rotation rates added to the
   ideal relative rotation (last accepted velocities).
 - ``C`` / ``B``: the moments at one joint family only.
+- ``spin-inertia``: each rod's spin about its own axis (rss6 drops rod torsion and with it the
+  spin), advanced by backward Euler under the axial friction moments of its two spherical joints
+  (:func:`spin_step`) and added to the sliding velocity at C and B; ``spin`` the same without the
+  rod's polar inertia (the rates at which the two moments balance); ``spin-moments``,
+  ``spin-inertia-moments`` with the friction moments; ``all``: spin with inertia, moments, rates.
+
+``--contact FIELD=VALUE`` changes one of the scene's contact-law parameters (the compiled kernel's
+``plain`` run measures the law's own sensitivity).
 
     python benchmarks/acceleration_candidates.py [--half-step] [--realization K] [--contact FIELD=VALUE]
         [--scale] [SWITCH ...]
 
-SWITCH in: plain, zero (the moments at scale 0: must print plain's numbers), moments, rates, both,
-C, B.  Each numpy run takes about 30 s (60-70 s with --half-step).
+SWITCH in: plain (the compiled kernel), zero (the moments at scale 0: must print plain's numbers),
+moments, rates, both, C, B, spin, spin-moments, spin-inertia, spin-inertia-moments, all.  Each numpy
+run takes 20-220 s on the shared 2-core machine (about twice that with --half-step).
 """
 import argparse
 import dataclasses
@@ -208,6 +217,8 @@ def stepper(name):
 
 def run(scene, name, realization=0):
     """The case under switch ``name``: maxima and means over t >= SETTLE, and the wall time."""
+    if scene.beam.link_modes:
+        raise ValueError("the switches address nodal DOFs: run them on the full mesh ([beam] link_modes = 0)")
     level = prepare_level(scene, "contact")
     start = time.perf_counter()
     b = simulate_contact(scene, [draw_clearances(scene, 0, realization)], level.elements, level.integrator,
