@@ -11,8 +11,8 @@ from pipeline.files.writing import write_netcdf
 from rss6core import SimulationResult
 from rss6core.clearance import _combine, draw_clearances, realization_rng, sphere_directions
 from rss6core.contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
-from rss6core.paper_method import paper_contact_forces, paper_draw
-from rss6core.quasi_static import CENTRAL_PAD
+from rss6core.paper_method import PaperClosure, paper_contact_forces, paper_draw
+from rss6core.quasi_static import CENTRAL_PAD, time_derivatives
 
 
 def test_draws_equal_the_broadcast_formulas_bit_for_bit():
@@ -31,6 +31,19 @@ def test_draws_equal_the_broadcast_formulas_bit_for_bit():
     u, v, w = rng.normal(size=(3, 6, 3))
     broadcast = a[..., None] * u + b[..., None] * v + c[..., None] * w
     assert _combine(a, u, b, v, c, w).tobytes() == broadcast.tobytes()
+
+
+def test_spherical_eccentricities_equal_the_broadcast_product_bit_for_bit(paper):
+    """e_C and e_B of a per-step draw, scaled one component at a time, are (k_s delta_s)[..., None]
+    times the sphere directions of the same uniforms, bit for bit (docs/performance.md section 29)."""
+    steps = 37
+    draw = draw_clearances(paper, 0, 5, steps=steps)
+    rng = realization_rng(0, 5)
+    rng.uniform(size=24 + 3 * 6 * steps)             # the sizes, then radial, angle and axial of A
+    for joint, got, size in (("C", draw.e_C, draw.size_C), ("B", draw.e_B, draw.size_B)):
+        magnitude = rng.uniform(size=(steps, 6)) * size
+        direction = sphere_directions(rng, 6 * steps, paper.sampling.direction, joint).reshape(steps, 6, 3)
+        assert got.tobytes() == (magnitude[..., None] * direction).tobytes(), joint
 
 
 def _eq17(scene, draw, dt):
@@ -74,6 +87,44 @@ def test_window_reductions_of_scattered_samples_are_those_of_the_samples():
     for k, mask in enumerate(masks):
         np.testing.assert_array_equal(peak[k], np.abs(err[:, mask]).max(axis=1))
         np.testing.assert_allclose(mean[k], np.abs(err[:, mask]).mean(axis=1), rtol=1e-15)
+
+
+def _nan_aware_reductions(err, masks):
+    """The window maxima and means of |err| written out with NaN masking (the general path)."""
+    e = [np.abs(err)[:, mask] for mask in masks]
+    return (np.stack([np.max(np.where(np.isfinite(x), x, -np.inf), axis=1) for x in e]),
+            np.stack([np.nanmean(x, axis=1) for x in e]))
+
+
+@pytest.mark.parametrize("steps", [9, 2001])
+def test_window_reductions_of_finite_histories_equal_the_nan_aware_ones_bit_for_bit(steps):
+    """A finished run's history (no NaN) takes the short path: its maxima and means are those of
+    the NaN-aware reductions bit for bit, over the windows of window_masks (docs/performance.md
+    section 29); a history with a NaN keeps the general path's answer."""
+    t = np.arange(steps) / (steps - 1)
+    masks = window_masks(t, 0.1, 0.5)
+    err = np.random.default_rng(steps).normal(size=(3, steps, 6)) * np.logspace(-9, 3, 6)
+    peak, mean = window_reductions(err, masks)
+    want_peak, want_mean = _nan_aware_reductions(err, masks)
+    assert peak.tobytes() == want_peak.tobytes() and mean.tobytes() == want_mean.tobytes()
+    err[1, steps // 2, 3] = np.nan
+    peak, mean = window_reductions(err, masks)
+    want_peak, want_mean = _nan_aware_reductions(err, masks)
+    np.testing.assert_array_equal(peak, want_peak)
+    np.testing.assert_array_equal(mean, want_mean)
+
+
+def test_the_paper_closure_map_is_the_leg_closure_solved_step_by_step(paper):
+    """PaperClosure.error's precomputed map G^-1 [(n . x_c) x_c, -x_r] applied to a draw equals the
+    linearised closure G dp = (n . x_c) dl_ac - dl_cb solved at every step (eq. 33), to round-off."""
+    t = paper.times[:300]
+    closure = PaperClosure(paper, t)
+    draw = paper_draw(paper, 1, 4, len(t))
+    dl_ac, dl_cb = closure.virtual_lengths(draw)
+    solved = np.linalg.solve(closure.G, (closure.n_dot_xc * dl_ac - dl_cb)[..., None])[..., 0]
+    for got, want in zip(closure.error(draw), time_derivatives(solved, closure.t, CENTRAL_PAD)):
+        assert np.abs(got - want).max() < 1e-14 * np.abs(want).max()
+        assert np.abs(want).max() > 0
 
 
 def _result(t, seed, peak=None):
