@@ -78,6 +78,9 @@ def _uniform(rng, name: str, low=0.0, high=1.0, size=None):
     order; the name unused) or a :class:`NamedUniforms` (by name)."""
     if isinstance(rng, NamedUniforms):
         return rng.take(name, low, high, size)
+    if isinstance(rng, np.random.Generator):   # Generator.uniform's doubles and arithmetic, without its
+        u = rng.random(size)                   # per-value call (a third of the time for 12 000 values)
+        return u if np.array_equal(low, 0.0) and np.array_equal(high, 1.0) else low + (high - low) * u
     return rng.uniform(low, high, size)
 
 

@@ -121,7 +121,7 @@ def _inside(e_r, e_C, e_B, size) -> bool:
     A cheap test (squared lengths) with a margin that rounding cannot cross."""
     inner = slice(CENTRAL_PAD, -CENTRAL_PAD)
     squared = np.concatenate([np.einsum("tli,tli->tl", e[inner], e[inner]) for e in (e_r, e_C, e_B)], -1)
-    return bool((squared < INSIDE_MARGIN * size ** 2).all())
+    return bool((squared.max(axis=0) < INSIDE_MARGIN * size ** 2).all())   # a NaN fails it, as before
 
 
 def paper_draw(scene, seed: int, realization: int, steps: int, uniforms=None) -> ClearanceDraw:
