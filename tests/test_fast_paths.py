@@ -9,7 +9,7 @@ from pipeline.files.reading import load_netcdf
 from pipeline.files.records import chunk_dataset, window_masks, window_reductions
 from pipeline.files.writing import write_netcdf
 from rss6core import SimulationResult
-from rss6core.clearance import _combine, draw_clearances, realization_rng, sphere_directions
+from rss6core.clearance import _combine, _uniform, draw_clearances, realization_rng, sphere_directions
 from rss6core.contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from rss6core.paper_method import PaperClosure, paper_contact_forces, paper_draw
 from rss6core.quasi_static import CENTRAL_PAD, time_derivatives
@@ -31,6 +31,16 @@ def test_draws_equal_the_broadcast_formulas_bit_for_bit():
     u, v, w = rng.normal(size=(3, 6, 3))
     broadcast = a[..., None] * u + b[..., None] * v + c[..., None] * w
     assert _combine(a, u, b, v, c, w).tobytes() == broadcast.tobytes()
+
+
+@pytest.mark.parametrize("low, high", [(0.0, 1.0), (0.0, 2.0 * np.pi), (0.3e-3, 0.7e-3), (-1e-4, 1e-4)])
+def test_a_generators_uniforms_are_those_of_generator_uniform_bit_for_bit(low, high):
+    """_uniform takes a Generator's doubles from random() and scales them itself: the values and
+    the stream after them are those of Generator.uniform(low, high) (docs/performance.md section 29)."""
+    ours, theirs = realization_rng(3, 9), realization_rng(3, 9)
+    got = _uniform(ours, "A_radial_angle", low, high, size=(2001, 6))
+    assert got.tobytes() == theirs.uniform(low, high, size=(2001, 6)).tobytes()
+    assert ours.uniform(size=5).tobytes() == theirs.uniform(size=5).tobytes()
 
 
 def test_spherical_eccentricities_equal_the_broadcast_product_bit_for_bit(paper):
