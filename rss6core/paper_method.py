@@ -94,10 +94,10 @@ def paper_contact_forces(scene, draw, dt: float, restitution=None) -> np.ndarray
     scene's).
     """
     w = scene.geometry.w
-    e_r = draw.e_A - np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
     size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
-    if _inside(e_r, draw.e_C, draw.e_B, size):
+    if _inside(draw, w, size):
         return np.zeros((len(draw.e_A) - 2 * CENTRAL_PAD, len(size)))
+    e_r = draw.e_A - np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
     ct, mat = scene.contact, scene.material
     nu = poisson_ratio(mat.youngs_modulus, mat.shear_modulus)
     E = mat.youngs_modulus
@@ -115,13 +115,22 @@ def paper_contact_forces(scene, draw, dt: float, restitution=None) -> np.ndarray
 INSIDE_MARGIN = 1.0 - 1e-9   # |e|^2 below this times size^2: no penetration despite rounding
 
 
-def _inside(e_r, e_C, e_B, size) -> bool:
-    """Whether every output step's eccentricity (T + 2 pad, 6, 3) per family, m, lies clearly inside
-    its clearance ``size`` (18,) m: then no force can act (eq. 17), and the force history is zero.
-    A cheap test (squared lengths) with a margin that rounding cannot cross."""
+def _inside(draw, w, size) -> bool:
+    """Whether every output step's eccentricity of a :func:`paper_draw` (the revolute's radial part
+    off its axis w (6, 3)) lies clearly inside its clearance ``size`` (18,) m: then no force can
+    act (eq. 17), and the force history is zero.  A cheap test (squared lengths, formed component
+    by component from strided views) with a margin that rounding cannot cross."""
     inner = slice(CENTRAL_PAD, -CENTRAL_PAD)
-    squared = np.concatenate([np.einsum("tli,tli->tl", e[inner], e[inner]) for e in (e_r, e_C, e_B)], -1)
-    return bool((squared.max(axis=0) < INSIDE_MARGIN * size ** 2).all())   # a NaN fails it, as before
+    x, y, z = (draw.e_A[inner, :, k] for k in range(3))
+    along = x * w[:, 0] + y * w[:, 1] + z * w[:, 2]
+    radial = [x - along * w[:, 0], y - along * w[:, 1], z - along * w[:, 2]]
+    squared = np.concatenate([_squared(*radial), _squared(*(draw.e_C[inner, :, k] for k in range(3))),
+                              _squared(*(draw.e_B[inner, :, k] for k in range(3)))], -1)
+    return bool((squared < INSIDE_MARGIN * size ** 2).all())   # a NaN fails it
+
+
+def _squared(x, y, z) -> np.ndarray:
+    return x * x + y * y + z * z
 
 
 def paper_draw(scene, seed: int, realization: int, steps: int, uniforms=None) -> ClearanceDraw:

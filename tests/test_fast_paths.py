@@ -11,7 +11,7 @@ from pipeline.files.writing import write_netcdf
 from rss6core import SimulationResult
 from rss6core.clearance import _combine, _uniform, draw_clearances, realization_rng, sphere_directions
 from rss6core.contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
-from rss6core.paper_method import PaperClosure, paper_contact_forces, paper_draw
+from rss6core.paper_method import PaperClosure, _inside, paper_contact_forces, paper_draw
 from rss6core.quasi_static import CENTRAL_PAD, time_derivatives
 
 
@@ -97,6 +97,29 @@ def test_window_reductions_of_scattered_samples_are_those_of_the_samples():
     for k, mask in enumerate(masks):
         np.testing.assert_array_equal(peak[k], np.abs(err[:, mask]).max(axis=1))
         np.testing.assert_allclose(mean[k], np.abs(err[:, mask]).mean(axis=1), rtol=1e-15)
+
+
+@pytest.mark.parametrize("scale", [1.0 - 1e-12, 1.0, 1.02])
+def test_paper_contact_forces_see_a_revolute_pushed_radially_onto_its_wall(paper, scale):
+    """The revolute's radial part (off its axis w) pushed to within rounding of the radial clearance,
+    onto it and 2 % beyond, its axial part kept, one leg at a time: the forces are eq. 17's (the inside test forms the
+    radial part from strided components, docs/performance.md section 29)."""
+    draw = paper_draw(paper, 0, 3, 400)
+    w = paper.geometry.w
+    axial = np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
+    radial = draw.e_A - axial
+    unit = radial / np.linalg.norm(radial, axis=-1, keepdims=True)
+    for leg in range(6):   # one leg at a time: the inside test must see that leg alone
+        e_A = draw.e_A.copy()
+        e_A[:, leg] = unit[:, leg] * scale * draw.radial_size[leg] + axial[:, leg]
+        pushed = dataclasses.replace(draw, e_A=e_A)
+        got, want = paper_contact_forces(paper, pushed, 1e-3), _eq17(paper, pushed, 1e-3)
+        np.testing.assert_array_equal(got, want)
+        assert (want[:, leg] > 0).all() == (scale > 1.0) and not want[:, 6:].any()
+        size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
+        assert not _inside(pushed, w, size)            # within the margin, on the wall or beyond it
+        e_A[:, leg] = unit[:, leg] * 0.999 * draw.radial_size[leg] + axial[:, leg]
+        assert _inside(dataclasses.replace(draw, e_A=e_A), w, size)   # clearly inside: the shortcut
 
 
 def _nan_aware_reductions(err, masks):
