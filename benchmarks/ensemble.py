@@ -21,6 +21,14 @@ Measures, in one run and on this machine:
   targets on one line: contact 1000 <= 120 s, paper 1000 <= 10 s, batched >= 10x,
   2 workers >= 1.8x one; then, for configs/paper.toml, the targets the run misses, judged on the
   unrounded values (a 1.798x prints as 1.80x on that line).
+``--models paper`` (or ``contact``) measures one level only (the memory runs and the contact 1000
+run belong to the paper and the contact level respectively). ``--baseline DIR`` measures another
+checkout (e.g. a ``git worktree`` of the commit before a change) in the same run, right after this
+one: this script again in a fresh process with ``PYTHONPATH`` at DIR (so it, its dask workers and its
+``rss6 run`` subprocesses import DIR's ``rss6core`` and ``pipeline``), then prints each figure of both
+checkouts side by side with the ratio, and issue 42's steady-cost targets: contact steps (batched
+seconds per realisation) >= 1.7x, paper (2-worker throughput) >= 1.6x, contact 1000 <= 45 s wall,
+paper 1000 <= 4 s wall.
 ``--quick`` uses configs/smoke.toml (0.2 s) and small counts, and finishes in
 under a minute once the contact steps are compiled (the first run on a machine compiles for
 about a minute); ``--profile`` adds the top entries of a profile of each batched run.
@@ -217,7 +225,7 @@ def _peak_rss(config, n, tmp, model="paper"):
     return peak / 2 ** 20, time.perf_counter() - start
 
 
-def measure(quick: bool, profile: bool, repeat: int = 1) -> dict:
+def measure(quick: bool, profile: bool, repeat: int = 1, models=("paper", "contact")) -> dict:
     plan = QUICK if quick else FULL
     config = CONFIGS / plan["config"]
     scene = load_scene(config)
@@ -226,7 +234,7 @@ def measure(quick: bool, profile: bool, repeat: int = 1) -> dict:
            "runs": {}, "machine_ratio": {}, "workers_busy": {}, "task_time_ratio": {},
            "first_task_extra_s": {}, "profile": {}}
     with tempfile.TemporaryDirectory() as tmp:
-        for model in ("paper", "contact"):
+        for model in models:
             loop, batched = _per_realization(scene, model, plan[model])
             out["per_realization_s"][model] = {"loop": loop, "batched": batched}
             out["batched_speedup"][model] = loop / batched
@@ -244,14 +252,16 @@ def measure(quick: bool, profile: bool, repeat: int = 1) -> dict:
                                                 for w in ("1", "2")}
             if profile:
                 out["profile"][model] = _profile(scene, model, plan[model][1])
-        for n in plan["memory"]:
+        for n in plan["memory"] if "paper" in models else ():
             peak, wall = _peak_rss(config, n, tmp)
             out["peak_rss_MiB"][str(n)] = peak
             out["run_wall_s"][str(n)] = wall
-        out["contact_run_wall_s"] = {str(plan["contact_run"]): _peak_rss(config, plan["contact_run"], tmp,
-                                                                         "contact")[1]}
-    lo, hi = (str(n) for n in plan["memory"])
-    out["memory_growth"] = out["peak_rss_MiB"][hi] / out["peak_rss_MiB"][lo] - 1.0
+        if "contact" in models:
+            out["contact_run_wall_s"] = {str(plan["contact_run"]): _peak_rss(config, plan["contact_run"], tmp,
+                                                                             "contact")[1]}
+    if "paper" in models:
+        lo, hi = (str(n) for n in plan["memory"])
+        out["memory_growth"] = out["peak_rss_MiB"][hi] / out["peak_rss_MiB"][lo] - 1.0
     out["projected_1000_s_2_workers"] = {m: 1000 / r["2"] for m, r in out["realizations_per_s"].items()}
     out["machine"] = f"{os.cpu_count()} cores, {sys.platform}, numpy {np.__version__}"
     if not profile:
@@ -259,20 +269,8 @@ def measure(quick: bool, profile: bool, repeat: int = 1) -> dict:
     return out
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="configs/smoke.toml, small counts (< 1 min)")
-    parser.add_argument("--json", action="store_true", help="print the figures as JSON")
-    parser.add_argument("--profile", action="store_true", help="add each batched run's top profile entries")
-    parser.add_argument("--repeat", type=int, default=1, metavar="R",
-                        help="throughput runs per worker count; their median is reported")
-    args = parser.parse_args(argv)
-    if args.repeat < 1:
-        parser.error("--repeat must be at least 1")
-    out = measure(args.quick, args.profile, args.repeat)
-    if args.json:
-        print(json.dumps(out, indent=2))
-        return 0
+def _print(out: dict) -> None:
+    """One checkout's figures, as the benchmark has always printed them."""
     print(f"{out['config']} ({out['machine']})")
     print(f"{'model':8s} {'loop s/real':>12s} {'batched s/real':>15s} {'speedup':>8s} "
           f"{'1 worker real/s':>16s} {'2 workers real/s':>17s} {'efficiency':>10s} {'1000 with 2 (s)':>16s}")
@@ -291,9 +289,12 @@ def main(argv=None) -> int:
         first = out["first_task_extra_s"][m]
         print(f"{'':8s} a worker's first task took {first['1']:.2f} s (1 worker), {first['2']:.2f} s "
               "(2 workers) longer than its others (the level's preparation, once per worker)")
-    print("rss6 run --model paper --store summary: " + ", ".join(
-        f"N = {n}: peak {out['peak_rss_MiB'][n]:.0f} MiB, {out['run_wall_s'][n]:.1f} s"
-        for n in out["peak_rss_MiB"]) + f"; growth {100 * out['memory_growth']:.1f} %")
+    if out["peak_rss_MiB"]:
+        print("rss6 run --model paper --store summary: " + ", ".join(
+            f"N = {n}: peak {out['peak_rss_MiB'][n]:.0f} MiB, {out['run_wall_s'][n]:.1f} s"
+            for n in out["peak_rss_MiB"]) + f"; growth {100 * out['memory_growth']:.1f} %")
+    if "contact_run_wall_s" not in out or not out["run_wall_s"]:
+        return                                   # one level measured: issue 20's line needs both
     (n_contact, contact_wall), = out["contact_run_wall_s"].items()
     hi = max(out["run_wall_s"], key=int)
     print(f"targets (issue 20): contact {n_contact} wall {contact_wall:.1f} s (<= 120 s for 1000); "
@@ -304,10 +305,114 @@ def main(argv=None) -> int:
     if out["config"].endswith("paper.toml"):     # the targets name the paper scene's full counts
         missed = _missed_targets(out)
         print("targets missed: " + "; ".join(missed) if missed else "every target holds (unrounded)")
-    for m, lines in out.get("profile", {}).items():
+
+
+def _commit(checkout: Path) -> str:
+    """The checkout's commit, with ``+changes`` where its tracked files differ from it."""
+    def git(*args):
+        proc = subprocess.run(["git", "-C", str(checkout), *args], capture_output=True, text=True)
+        return proc.stdout.strip() if proc.returncode == 0 else "?"
+    dirty = git("status", "--porcelain", "--untracked-files=no")
+    return git("rev-parse", "--short", "HEAD") + ("+changes" if dirty else "")
+
+
+def _baseline(checkout: Path, argv: list[str]) -> dict:
+    """This benchmark's figures for another checkout: this script in a fresh process whose
+    ``rss6core`` and ``pipeline`` (and those of its workers and subprocesses) are the checkout's."""
+    env = dict(os.environ, PYTHONPATH=str(checkout))
+    proc = subprocess.run([sys.executable, __file__, *argv, "--json"], env=env, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"ensemble.py for the baseline {checkout} failed ({proc.returncode}):\n{proc.stderr}")
+    return json.loads(proc.stdout)
+
+
+def _side_by_side(this: dict, base: dict) -> list[tuple]:
+    """(figure, this, baseline, baseline / this or this / baseline: the speed-up, > 1 faster) of the
+    figures both checkouts measured."""
+    rows = []
+    for m in this["per_realization_s"]:
+        for kind in ("loop", "batched"):
+            a, b = this["per_realization_s"][m][kind], base["per_realization_s"][m][kind]
+            rows.append((f"{m} {kind} s per realisation", a, b, b / a))
+        for w in ("1", "2"):
+            a, b = this["realizations_per_s"][m][w], base["realizations_per_s"][m][w]
+            rows.append((f"{m} realisations per s, {w} worker{'s' if w == '2' else ''}", a, b, a / b))
+    for key, label in (("run_wall_s", "rss6 run paper --store summary, N = {} wall s"),
+                       ("contact_run_wall_s", "rss6 run contact --store summary, N = {} wall s")):
+        for n, a in this.get(key, {}).items():
+            rows.append((label.format(n), a, base[key][n], base[key][n] / a))
+    return rows
+
+
+def _issue42(this: dict, rows: list[tuple]) -> str:
+    """Issue 42's steady-cost targets on this run's figures, each with its unrounded value."""
+    ratio = {name: r for name, _, _, r in rows}
+    checks = []
+    if "contact" in this["per_realization_s"]:
+        checks.append(("contact steps (batched s per realisation) speed-up",
+                       ratio["contact batched s per realisation"], 1.7, "x", True))
+    if "paper" in this["per_realization_s"]:
+        checks.append(("paper speed-up (2 workers' realisations per s)",
+                       ratio["paper realisations per s, 2 workers"], 1.6, "x", True))
+    walls = [("contact 1000 wall", this.get("contact_run_wall_s", {}).get("1000"), 45.0),
+             ("paper 1000 wall", this.get("run_wall_s", {}).get("1000"), 4.0)]
+    checks += [(name, value, limit, " s", False) for name, value, limit in walls if value is not None]
+    return "; ".join(f"{name} {value:.4g}{unit} ({'>=' if at_least else '<='} {limit:g}{unit}: "
+                     f"{'holds' if (value >= limit if at_least else value <= limit) else 'MISSED'})"
+                     for name, value, limit, unit, at_least in checks)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="configs/smoke.toml, small counts (< 1 min)")
+    parser.add_argument("--json", action="store_true", help="print the figures as JSON")
+    parser.add_argument("--profile", action="store_true", help="add each batched run's top profile entries")
+    parser.add_argument("--repeat", type=int, default=1, metavar="R",
+                        help="throughput runs per worker count; their median is reported")
+    parser.add_argument("--models", default="paper,contact", help="levels to measure, comma-separated")
+    parser.add_argument("--baseline", type=Path, help="another checkout to measure in the same run, after this one")
+    args = parser.parse_args(argv)
+    models = tuple(m for m in ("paper", "contact") if m in args.models.split(","))
+    if args.repeat < 1:
+        parser.error("--repeat must be at least 1")
+    if not models or set(args.models.split(",")) - {"paper", "contact"}:
+        parser.error(f"--models {args.models}: choose paper, contact or both")
+    load = os.getloadavg()[0]
+    out = measure(args.quick, args.profile, args.repeat, models)
+    out["load_before"] = load
+    if args.baseline:
+        forwarded = [*(["--quick"] if args.quick else []), "--repeat", str(args.repeat), "--models", ",".join(models)]
+        base = _baseline(args.baseline.resolve(), forwarded)
+        out = {"this": out, "baseline": base, "commits": {"this": _commit(Path(__file__).resolve().parent.parent),
+                                                          "baseline": _commit(args.baseline)}}
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    if not args.baseline:
+        _print(out)
+    else:
+        _report_pair(out, args)
+    for m, lines in (out if not args.baseline else out["this"]).get("profile", {}).items():
         print(f"\nprofile of one batched {m} run (top entries by own time):")
         print("\n".join(lines))
     return 0
+
+
+def _report_pair(out: dict, args) -> None:
+    """Both checkouts' figures, then side by side with the speed-ups and issue 42's targets."""
+    this, base = out["this"], out["baseline"]
+    print(f"date {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; load before this "
+          f"{this['load_before']:.1f}, before the baseline {base['load_before']:.1f}")
+    print(f"--- this: {out['commits']['this']}")
+    _print(this)
+    print(f"--- baseline: {out['commits']['baseline']} ({args.baseline})")
+    _print(base)
+    rows = _side_by_side(this, base)
+    print(f"\n{'figure':55s} {'this':>10s} {'baseline':>10s} {'speed-up':>9s}")
+    for name, a, b, r in rows:
+        print(f"{name:55s} {a:10.4g} {b:10.4g} {r:8.2f}x")
+    if this["config"].endswith("paper.toml"):
+        print("targets (issue 42, steady cost): " + _issue42(this, rows))
 
 
 if __name__ == "__main__":

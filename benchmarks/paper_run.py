@@ -14,6 +14,12 @@ cluster start, first and last chunk back, merge, final write, statistics.
 three chunks of 63) of the paper level's parts in one process: the per-step draw, the contact
 forces of eq. 17, the error (leg closure, central differences, elastic part added) and the chunk's
 Dataset (window reductions, provenance). Run it with each install's interpreter for an A/B.
+
+``python benchmarks/paper_run.py floor`` prints the CPU milliseconds per realisation of what the
+per-step draw cannot do without while its bits stay those of numpy and scipy: the uniforms from the
+realisation's stream (9 per joint-step), the 10 sines and cosines (glibc's, as numpy's float64 sin
+and cos are), the 2 inverse normal CDFs (scipy's ndtri) and the 2 arccosines per joint-step, each
+over the 12 030 joint-steps of configs/paper.toml (median of 7 repeats).
 """
 from __future__ import annotations
 
@@ -172,15 +178,39 @@ def parts() -> dict:
     return {key: round(statistics.median(r[key] for r in runs), 2) for key in runs[0]}
 
 
+def floor() -> dict:
+    """CPU ms per realisation of the per-step draw's unavoidable arithmetic (see the module doc)."""
+    import numpy as np
+    from scipy.special import ndtri
+    n = 6 * 2005                                   # 2001 output steps and 2 x 2 pads, 6 legs
+    rng = np.random.default_rng(0)
+    u = rng.random(n)
+    angle = 2.0 * np.pi * u                        # the azimuths' range; the polar angles' is [0, pi]
+    parts = {"uniforms": lambda: rng.random(9 * n), "sin_cos": lambda: [np.sin(angle) for _ in range(10)],
+             "ndtri": lambda: [ndtri(u) for _ in range(2)], "arccos": lambda: [np.arccos(u) for _ in range(2)]}
+    out = {}
+    for name, f in parts.items():
+        times = []
+        for _ in range(7):
+            start = time.process_time()
+            f()
+            times.append((time.process_time() - start) * 1e3)
+        out[name] = round(statistics.median(times), 3)
+    out["sum"] = round(sum(out.values()), 3)
+    return out
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("what", choices=("run", "phases", "parts"))
+    parser.add_argument("what", choices=("run", "phases", "parts", "floor"))
     parser.add_argument("--rss6", default=str(Path(sys.executable).with_name("rss6")),
                         help="the rss6 executable to time (default: this interpreter's)")
     parser.add_argument("-n", type=int, default=1000)
     args = parser.parse_args(argv)
     if args.what == "phases":
         print(json.dumps(phases(args.n)))
+    elif args.what == "floor":
+        print(json.dumps(floor()))
     else:
         print(json.dumps(whole_run(args.rss6, args.n) if args.what == "run" else parts()))
 

@@ -62,6 +62,14 @@ class PaperClosure:
         self.G, n = closure_matrix(motion)
         self.n_dot_xc = np.einsum("tli,tli->tl", n, self.x_c)
         self.t = motion.t
+        # the closure as one linear map per step (T + 2 pad, 6, 36) of [e_A, e_C - e_B] (36,):
+        # G^-1 [(n . x_c) x_c, -x_r] (eq. 33 and the closure), shared by every draw instead of a
+        # solve per draw; it equals the solve to round-off (G is well conditioned, about 30)
+        g_inv = np.linalg.inv(self.G)
+        along_crank = g_inv[..., None] * (self.n_dot_xc[:, None, :, None] * self.x_c[:, None])
+        along_rod = -g_inv[..., None] * self.x_r[:, None]
+        self.closure_map = np.concatenate([along_crank.reshape(len(self.t), 6, 18),
+                                           along_rod.reshape(len(self.t), 6, 18)], -1)
 
     def virtual_lengths(self, draw) -> tuple[np.ndarray, np.ndarray]:
         """Crank and rod virtual lengths dl_ac, dl_cb (T + 2 pad, 6), m (eq. 33) for a
@@ -72,9 +80,9 @@ class PaperClosure:
     def error(self, draw):
         """Platform error (T, 6) of the virtual lengths, and its first and second time derivatives,
         the same central differences at every output step (the pads cut off)."""
-        dl_ac, dl_cb = self.virtual_lengths(draw)
-        rhs = self.n_dot_xc * dl_ac - dl_cb
-        return time_derivatives(np.linalg.solve(self.G, rhs[..., None])[..., 0], self.t, CENTRAL_PAD)
+        steps = len(self.t)
+        offsets = np.concatenate([draw.e_A.reshape(steps, 18), (draw.e_C - draw.e_B).reshape(steps, 18)], -1)
+        return time_derivatives(np.einsum("tij,tj->ti", self.closure_map, offsets), self.t, CENTRAL_PAD)
 
 
 def paper_contact_forces(scene, draw, dt: float, restitution=None) -> np.ndarray:
@@ -86,10 +94,10 @@ def paper_contact_forces(scene, draw, dt: float, restitution=None) -> np.ndarray
     scene's).
     """
     w = scene.geometry.w
-    e_r = draw.e_A - np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
     size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
-    if _inside(e_r, draw.e_C, draw.e_B, size):
+    if _inside(draw, w, size):
         return np.zeros((len(draw.e_A) - 2 * CENTRAL_PAD, len(size)))
+    e_r = draw.e_A - np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
     ct, mat = scene.contact, scene.material
     nu = poisson_ratio(mat.youngs_modulus, mat.shear_modulus)
     E = mat.youngs_modulus
@@ -107,13 +115,22 @@ def paper_contact_forces(scene, draw, dt: float, restitution=None) -> np.ndarray
 INSIDE_MARGIN = 1.0 - 1e-9   # |e|^2 below this times size^2: no penetration despite rounding
 
 
-def _inside(e_r, e_C, e_B, size) -> bool:
-    """Whether every output step's eccentricity (T + 2 pad, 6, 3) per family, m, lies clearly inside
-    its clearance ``size`` (18,) m: then no force can act (eq. 17), and the force history is zero.
-    A cheap test (squared lengths) with a margin that rounding cannot cross."""
+def _inside(draw, w, size) -> bool:
+    """Whether every output step's eccentricity of a :func:`paper_draw` (the revolute's radial part
+    off its axis w (6, 3)) lies clearly inside its clearance ``size`` (18,) m: then no force can
+    act (eq. 17), and the force history is zero.  A cheap test (squared lengths, formed component
+    by component from strided views) with a margin that rounding cannot cross."""
     inner = slice(CENTRAL_PAD, -CENTRAL_PAD)
-    squared = np.concatenate([np.einsum("tli,tli->tl", e[inner], e[inner]) for e in (e_r, e_C, e_B)], -1)
-    return bool((squared < INSIDE_MARGIN * size ** 2).all())
+    x, y, z = (draw.e_A[inner, :, k] for k in range(3))
+    along = x * w[:, 0] + y * w[:, 1] + z * w[:, 2]
+    radial = [x - along * w[:, 0], y - along * w[:, 1], z - along * w[:, 2]]
+    squared = np.concatenate([_squared(*radial), _squared(*(draw.e_C[inner, :, k] for k in range(3))),
+                              _squared(*(draw.e_B[inner, :, k] for k in range(3)))], -1)
+    return bool((squared < INSIDE_MARGIN * size ** 2).all())   # a NaN fails it
+
+
+def _squared(x, y, z) -> np.ndarray:
+    return x * x + y * y + z * z
 
 
 def paper_draw(scene, seed: int, realization: int, steps: int, uniforms=None) -> ClearanceDraw:

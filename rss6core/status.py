@@ -37,7 +37,10 @@ def check_history(d: np.ndarray, t: np.ndarray, quantity: str,
                   limit: float = DIVERGENCE_LIMIT) -> tuple[str, str, int]:
     """(status, message, steps) of a history d (T, ...) on the grid t: failed at the first sample
     that is not finite or reaches ``limit``; steps counts the sound steps before it."""
-    size = np.abs(d).reshape(len(t), -1).max(-1)
+    magnitude = np.abs(d)
+    if magnitude.max(initial=0.0) < limit:           # the usual case in one contiguous pass (NaN fails it)
+        return FINISHED, "", len(t) - 1
+    size = magnitude.reshape(len(t), -1).max(-1)
     bad = ~(size < limit)                            # nan compares false: bad
     if not bad.any():
         return FINISHED, "", len(t) - 1

@@ -9,10 +9,10 @@ from pipeline.files.reading import load_netcdf
 from pipeline.files.records import chunk_dataset, window_masks, window_reductions
 from pipeline.files.writing import write_netcdf
 from rss6core import SimulationResult
-from rss6core.clearance import _combine, draw_clearances, realization_rng, sphere_directions
+from rss6core.clearance import _combine, _uniform, draw_clearances, realization_rng, sphere_directions
 from rss6core.contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
-from rss6core.paper_method import paper_contact_forces, paper_draw
-from rss6core.quasi_static import CENTRAL_PAD
+from rss6core.paper_method import PaperClosure, _inside, paper_contact_forces, paper_draw
+from rss6core.quasi_static import CENTRAL_PAD, time_derivatives
 
 
 def test_draws_equal_the_broadcast_formulas_bit_for_bit():
@@ -31,6 +31,29 @@ def test_draws_equal_the_broadcast_formulas_bit_for_bit():
     u, v, w = rng.normal(size=(3, 6, 3))
     broadcast = a[..., None] * u + b[..., None] * v + c[..., None] * w
     assert _combine(a, u, b, v, c, w).tobytes() == broadcast.tobytes()
+
+
+@pytest.mark.parametrize("low, high", [(0.0, 1.0), (0.0, 2.0 * np.pi), (0.3e-3, 0.7e-3), (-1e-4, 1e-4)])
+def test_a_generators_uniforms_are_those_of_generator_uniform_bit_for_bit(low, high):
+    """_uniform takes a Generator's doubles from random() and scales them itself: the values and
+    the stream after them are those of Generator.uniform(low, high) (docs/performance.md section 29)."""
+    ours, theirs = realization_rng(3, 9), realization_rng(3, 9)
+    got = _uniform(ours, "A_radial_angle", low, high, size=(2001, 6))
+    assert got.tobytes() == theirs.uniform(low, high, size=(2001, 6)).tobytes()
+    assert ours.uniform(size=5).tobytes() == theirs.uniform(size=5).tobytes()
+
+
+def test_spherical_eccentricities_equal_the_broadcast_product_bit_for_bit(paper):
+    """e_C and e_B of a per-step draw, scaled one component at a time, are (k_s delta_s)[..., None]
+    times the sphere directions of the same uniforms, bit for bit (docs/performance.md section 29)."""
+    steps = 37
+    draw = draw_clearances(paper, 0, 5, steps=steps)
+    rng = realization_rng(0, 5)
+    rng.uniform(size=24 + 3 * 6 * steps)             # the sizes, then radial, angle and axial of A
+    for joint, got, size in (("C", draw.e_C, draw.size_C), ("B", draw.e_B, draw.size_B)):
+        magnitude = rng.uniform(size=(steps, 6)) * size
+        direction = sphere_directions(rng, 6 * steps, paper.sampling.direction, joint).reshape(steps, 6, 3)
+        assert got.tobytes() == (magnitude[..., None] * direction).tobytes(), joint
 
 
 def _eq17(scene, draw, dt):
@@ -74,6 +97,67 @@ def test_window_reductions_of_scattered_samples_are_those_of_the_samples():
     for k, mask in enumerate(masks):
         np.testing.assert_array_equal(peak[k], np.abs(err[:, mask]).max(axis=1))
         np.testing.assert_allclose(mean[k], np.abs(err[:, mask]).mean(axis=1), rtol=1e-15)
+
+
+@pytest.mark.parametrize("scale", [1.0 - 1e-12, 1.0, 1.02])
+def test_paper_contact_forces_see_a_revolute_pushed_radially_onto_its_wall(paper, scale):
+    """The revolute's radial part (off its axis w) pushed to within rounding of the radial clearance,
+    onto it and 2 % beyond, its axial part kept, one leg at a time: the forces are eq. 17's (the inside test forms the
+    radial part from strided components, docs/performance.md section 29)."""
+    draw = paper_draw(paper, 0, 3, 400)
+    w = paper.geometry.w
+    axial = np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
+    radial = draw.e_A - axial
+    unit = radial / np.linalg.norm(radial, axis=-1, keepdims=True)
+    for leg in range(6):   # one leg at a time: the inside test must see that leg alone
+        e_A = draw.e_A.copy()
+        e_A[:, leg] = unit[:, leg] * scale * draw.radial_size[leg] + axial[:, leg]
+        pushed = dataclasses.replace(draw, e_A=e_A)
+        got, want = paper_contact_forces(paper, pushed, 1e-3), _eq17(paper, pushed, 1e-3)
+        np.testing.assert_array_equal(got, want)
+        assert (want[:, leg] > 0).all() == (scale > 1.0) and not want[:, 6:].any()
+        size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
+        assert not _inside(pushed, w, size)            # within the margin, on the wall or beyond it
+        e_A[:, leg] = unit[:, leg] * 0.999 * draw.radial_size[leg] + axial[:, leg]
+        assert _inside(dataclasses.replace(draw, e_A=e_A), w, size)   # clearly inside: the shortcut
+
+
+def _nan_aware_reductions(err, masks):
+    """The window maxima and means of |err| written out with NaN masking (the general path)."""
+    e = [np.abs(err)[:, mask] for mask in masks]
+    return (np.stack([np.max(np.where(np.isfinite(x), x, -np.inf), axis=1) for x in e]),
+            np.stack([np.nanmean(x, axis=1) for x in e]))
+
+
+@pytest.mark.parametrize("steps", [9, 2001])
+def test_window_reductions_of_finite_histories_equal_the_nan_aware_ones_bit_for_bit(steps):
+    """A finished run's history (no NaN) takes the short path: its maxima and means are those of
+    the NaN-aware reductions bit for bit, over the windows of window_masks (docs/performance.md
+    section 29); a history with a NaN keeps the general path's answer."""
+    t = np.arange(steps) / (steps - 1)
+    masks = window_masks(t, 0.1, 0.5)
+    err = np.random.default_rng(steps).normal(size=(3, steps, 6)) * np.logspace(-9, 3, 6)
+    peak, mean = window_reductions(err, masks)
+    want_peak, want_mean = _nan_aware_reductions(err, masks)
+    assert peak.tobytes() == want_peak.tobytes() and mean.tobytes() == want_mean.tobytes()
+    err[1, steps // 2, 3] = np.nan
+    peak, mean = window_reductions(err, masks)
+    want_peak, want_mean = _nan_aware_reductions(err, masks)
+    np.testing.assert_array_equal(peak, want_peak)
+    np.testing.assert_array_equal(mean, want_mean)
+
+
+def test_the_paper_closure_map_is_the_leg_closure_solved_step_by_step(paper):
+    """PaperClosure.error's precomputed map G^-1 [(n . x_c) x_c, -x_r] applied to a draw equals the
+    linearised closure G dp = (n . x_c) dl_ac - dl_cb solved at every step (eq. 33), to round-off."""
+    t = paper.times[:300]
+    closure = PaperClosure(paper, t)
+    draw = paper_draw(paper, 1, 4, len(t))
+    dl_ac, dl_cb = closure.virtual_lengths(draw)
+    solved = np.linalg.solve(closure.G, (closure.n_dot_xc * dl_ac - dl_cb)[..., None])[..., 0]
+    for got, want in zip(closure.error(draw), time_derivatives(solved, closure.t, CENTRAL_PAD)):
+        assert np.abs(got - want).max() < 1e-14 * np.abs(want).max()
+        assert np.abs(want).max() > 0
 
 
 def _result(t, seed, peak=None):

@@ -89,3 +89,16 @@ def test_contact_level_divergence_and_newton_failure_in_the_common_format(smoke,
         what, t, step, h = _parts(m)
         assert what == "Newton on the contact forces did not converge in 0 iterations"
         assert (t, step, h) == (1e-4, 1, 1e-4)
+
+
+@pytest.mark.parametrize("value, step", [(1.0 - 1e-16, None), (1.0, 3), (np.inf, 3), (np.nan, 3), (-1.0, 3)])
+def test_check_history_fails_at_the_first_sample_that_reaches_the_limit_or_is_not_finite(value, step):
+    """One sample of a small history set to ``value`` against the 1 m limit: just below it the run
+    is finished in every step; on the limit, beyond it, infinite or NaN it fails there (the
+    contiguous shortcut for finished histories, docs/performance.md section 29, decides as the
+    per-sample test)."""
+    t = np.arange(8) * 1e-3
+    d = np.full((8, 6), 1e-6)
+    d[4, 2] = value
+    status, _, steps = check_history(d, t, "test", limit=1.0)
+    assert (status, steps) == ((FINISHED, 7) if step is None else (FAILED, step))
