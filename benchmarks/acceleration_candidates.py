@@ -42,9 +42,8 @@ import numpy as np
 
 from rss6core.assembly import join, split
 from rss6core.clearance import draw_clearances
-from rss6core.contact_dynamics import StepSolution, _internal, _joint_nodes, _relative, simulate_contact
-from rss6core.contact_numpy import NumpyStepper, _extrapolated
-from rss6core.integrators import correct, predict
+from rss6core.contact_dynamics import _joint_nodes, _relative, simulate_contact
+from rss6core.contact_numpy import NumpyStepper
 from rss6core.kinematics import rigid_motion
 from rss6core.models import prepare_level
 from rss6core.scene import load_scene
@@ -167,30 +166,12 @@ class Switched(NumpyStepper):
             ch.omega[k1, :, 1] += spin
             ch.omega[k1, :, 2] += spin
 
-    def _candidate(self, idx, ch, k0, k1, sz):
-        """NumpyStepper._candidate with the friction moments in the right-hand side."""
-        su, ws = self.setup, self.ws
-        d, v, a = ws.d[idx], ws.v[idx], ws.a[idx]
-        w = sz.weights
-        dp, vp = predict(d, v, a, w.h, w.d_pred, w.v_pred)
-        af, am = su.integrator.alpha_f, su.integrator.alpha_m
-        loads = ch.F[k1] + self._friction_moments(idx, ch, k1)
-        r = (1.0 - af) * (loads - _internal(su.jm, ch.Mp[k1], dp, vp))
-        if su.weighted:
-            r += af * ws.balance[idx] - am * ws.Ma[idx]
+    def _step_loads(self, idx, ch, k1, h):
+        """The rigid-body loads plus the friction moments; first, as switched on, the sliding velocity's
+        rotations of this attempt (:meth:`_sliding_rotation`), which its Newton iteration then reads."""
         if self.rates or self.spin:
-            self._sliding_rotation(idx, ch, k1, w.h)
-        guess = _extrapolated(w.h, a, ws.a_past[idx], ws.h_past[idx])
-        sol = self._newton(idx, ch, k1, sz.cond, sz.coef_p, r, dp, vp, guess, w.d_corr, w.v_corr, 1.0 - af)
-        ws.iters[idx] += sol.iterations
-        again = ~sol.converged & (ws.h_past[idx, 0] > 0.0)
-        if again.any():
-            retry = self._newton(idx[again], ch, k1, sz.cond, sz.coef_p, r[again], dp[again], vp[again],
-                                 a[again], w.d_corr, w.v_corr, 1.0 - af)
-            ws.iters[idx[again]] += retry.iterations
-            for name in StepSolution._fields:
-                getattr(sol, name)[again] = getattr(retry, name)
-        return sol, *correct(dp, vp, sol.a, w.d_corr, w.v_corr)
+            self._sliding_rotation(idx, ch, k1, h)
+        return ch.F[k1] + self._friction_moments(idx, ch, k1)
 
     def _keep(self, kept, ch, k1, h, a, d, v, f, delta, rate, used):
         super()._keep(kept, ch, k1, h, a, d, v, f, delta, rate, used)

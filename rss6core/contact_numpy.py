@@ -144,7 +144,7 @@ class NumpyStepper(ContactStepper):
         w = sz.weights
         dp, vp = predict(d, v, a, w.h, w.d_pred, w.v_pred)
         af, am = su.integrator.alpha_f, su.integrator.alpha_m
-        r = (1.0 - af) * (ch.F[k1] - _internal(su.jm, ch.Mp[k1], dp, vp))
+        r = (1.0 - af) * (self._step_loads(idx, ch, k1, w.h) - _internal(su.jm, ch.Mp[k1], dp, vp))
         if su.weighted:
             r += af * ws.balance[idx] - am * ws.Ma[idx]
         guess = _extrapolated(w.h, a, ws.a_past[idx], ws.h_past[idx])
@@ -159,6 +159,11 @@ class NumpyStepper(ContactStepper):
                 getattr(sol, name)[again] = getattr(retry, name)
         d_new, v_new = correct(dp, vp, sol.a, w.d_corr, w.v_corr)
         return sol, d_new, v_new
+
+    def _step_loads(self, idx, ch, k1, h):
+        """The applied loads (R or 1, N) of an attempt of h (s) to fine instant k1: the chunk's rigid-body
+        loads; a subclass may add its own (benchmarks/acceleration_candidates.py)."""
+        return ch.F[k1]
 
     def _keep(self, kept, ch, k1, h, a, d, v, f, delta, rate, used):
         """Make an accepted step of h (s) to fine instant k1 the state of realisations ``kept``."""
