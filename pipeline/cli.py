@@ -5,17 +5,23 @@ parser, and every user mistake (a bad option, file, scene or spec: :class:`UserE
 from __future__ import annotations
 
 import argparse
+import atexit
 import sys
 
-from rss6core import SceneError, __version__
+from .ensemble.cluster import start_worker_server, stop_worker_server
 
-from .commands import (allocate, budget, check, map, multifidelity, plot, reliability, report, run, sensitivity,
-                       simulate, stability, stats, tradeoff, warm)
-from .scenes.catalogue import scene_names
-from .vocabulary import UserError
+# the commands that run ensembles on a local cluster unless given --scheduler (those with --workers)
+LOCAL_CLUSTER_COMMANDS = frozenset({"run", "report", "multifidelity", "sensitivity", "reliability", "budget",
+                                    "allocate"})
 
-COMMANDS = (check, simulate, warm, run, report, stats, multifidelity, sensitivity, reliability, budget, allocate, plot,
-            tradeoff, stability, map)   # in the order ``rss6 -h`` lists them
+
+def commands() -> tuple:
+    """The command modules, in the order ``rss6 -h`` lists them (imported here, not at the top: see
+    :func:`main`)."""
+    from .commands import (allocate, budget, check, map, multifidelity, plot, reliability, report, run, sensitivity,
+                           simulate, stability, stats, tradeoff, warm)
+    return (check, simulate, warm, run, report, stats, multifidelity, sensitivity, reliability, budget, allocate,
+            plot, tradeoff, stability, map)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -27,18 +33,27 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from rss6core import __version__
+
+    from .scenes.catalogue import scene_names
     parser = _Parser(
         prog="rss6", description="Joint clearance and link elasticity errors of a 6-RSS robot.",
         epilog="shipped scenes (a CONFIG argument takes one of these names or a TOML file): "
                + ", ".join(scene_names()))
     parser.add_argument("--version", action="version", version=f"rss6 {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    for command in COMMANDS:
+    for command in commands():
         command.add_parser(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The ``rss6`` command (``argv`` None: this process's own arguments)."""
+    if argv is None:
+        _start_workers_ahead(sys.argv[1:])
+    from rss6core import SceneError
+
+    from .vocabulary import UserError
     args = build_parser().parse_args(argv)
     try:
         return args.main(args)
@@ -50,6 +65,18 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # Python's final flush must not fail again
         return 141
+
+
+def _start_workers_ahead(argv: list[str]) -> None:
+    """A command that will start a local cluster starts its workers' fork server first, so that the
+    server's imports and this process's (1.3-1.7 s each) run side by side: docs/performance.md
+    section 30. The server is stopped at exit, whether the command used it or stopped early."""
+    if not argv or argv[0] not in LOCAL_CLUSTER_COMMANDS:
+        return
+    if any(a.startswith("--scheduler") or a in ("-h", "--help") for a in argv):
+        return
+    start_worker_server()
+    atexit.register(stop_worker_server)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy import stats
 from scipy.special import ndtr, ndtri
 
 from .clearance import CLEARANCE_RADII
@@ -122,7 +121,9 @@ class UncertainInput:
     @cached_property
     def distribution(self):
         """The scipy.stats law of the deviation (TOML unit) or, for lognormal, of the factor; None
-        for a point law (std or sigma 0)."""
+        for a point law (std or sigma 0). scipy.stats is imported here, at the first law: a scene
+        without uncertain inputs (and every rss6 process that reads one) does without its 0.4 s."""
+        from scipy import stats
         p = dict(self.parameters)
         if self.law == "normal":
             return stats.norm(p["mean"], p["std"]) if p["std"] > 0 else None

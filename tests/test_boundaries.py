@@ -41,9 +41,12 @@ def _core_modules_imported(node) -> set[str]:
 
 # the imports inside functions, for import time and not to dodge a cycle: the contact level's
 # compiled kernel (numba, 0.3 s per process) loads only when a contact level runs or its kernels
-# are asked about or compiled (rss6 warm; kernels.compile_kernel runs a level with stand-in kernels)
+# are asked about or compiled (rss6 warm; kernels.compile_kernel runs a level with stand-in kernels);
+# scipy.stats and scipy.interpolate (0.4 s and 0.15 s per process) load at a scene's first uncertain law
+# or spline, not in every rss6 process (docs/performance.md section 30)
 LAZY = {("models", "contact_dynamics"), ("models", "contact_start"), ("kernels", "contact_kernel"),
-        ("kernels", "models"), ("kernels", "contact_dynamics")}
+        ("kernels", "models"), ("kernels", "contact_dynamics"), ("uncertain", "<not core: scipy>"),
+        ("trajectory_kinds", "<not core: scipy.interpolate>")}
 # the modules that run a level: none of them is the scene's business
 LADDER = {"models", "assembly", "elastic", "quasi_static", "paper_method", "contact_dynamics", "contact_kernel",
           "contact_numpy", "contact_start"}

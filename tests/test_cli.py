@@ -162,3 +162,32 @@ def test_contact_ensemble_stores_contact_force_peaks(configs, tmp_path):
         assert peaks.attrs["units"] == "N" and peaks.shape == (3, 18)
         assert np.all(peaks.values > 0)
         assert list(ds["status"].values) == ["finished"] * 3
+
+
+@pytest.mark.parametrize("argv, ahead", [
+    (["run", "paper", "-n", "4"], True),
+    (["reliability", "paper", "--workers", "1"], True),
+    (["run", "paper", "--scheduler", "tcp://127.0.0.1:8786"], False),   # its workers are not ours
+    (["run", "paper", "--scheduler=tcp://127.0.0.1:8786"], False),
+    (["run", "-h"], False),
+    (["stats", "x.nc"], False),                                          # no cluster at all
+    ([], False),
+])
+def test_the_rss6_command_starts_its_workers_server_before_its_imports_only_for_a_local_cluster(
+        monkeypatch, argv, ahead):
+    """`rss6 CMD ...` (main without argv) starts the local workers' fork server before it imports
+    the commands, so both import side by side, and stops it at exit; main(argv) from Python does not."""
+    import pipeline.cli as cli
+    started, stopping = [], []
+    monkeypatch.setattr(cli, "start_worker_server", lambda: started.append(True))
+    monkeypatch.setattr(cli.atexit, "register", stopping.append)
+    monkeypatch.setattr(sys, "argv", ["rss6", *argv])
+    monkeypatch.setattr(cli, "build_parser", lambda: (_ for _ in ()).throw(SystemExit(0)))
+    with pytest.raises(SystemExit):
+        cli.main()
+    assert started == ([True] if ahead else [])
+    assert stopping == ([cli.stop_worker_server] if ahead else [])
+    started.clear()
+    with pytest.raises(SystemExit):
+        cli.main(argv)
+    assert started == []

@@ -240,6 +240,30 @@ def test_local_workers_keep_glibc_malloc_and_writes_take_no_cluster_lock(referen
                           error_summaries(ref))
 
 
+_HASHES = """
+import os
+from pipeline.ensemble.cluster import dask_client, start_worker_server
+if __name__ == "__main__":
+    start_worker_server()   # as the rss6 command does, before dask's nanny sets the workers' environment
+    with dask_client(1) as client:
+        (seed, value), = client.run(lambda: (os.environ["PYTHONHASHSEED"], hash("rss6"))).values()
+        print(seed, value)
+"""
+
+
+def test_workers_forked_from_a_server_started_ahead_hash_strings_with_the_nannys_seed(tmp_path):
+    """A fork server started before the cluster (rss6's command line does so) gives its workers the
+    hash seed dask's nanny gives them: a worker hashes a string as a fresh interpreter does with the
+    PYTHONHASHSEED the nanny set in its environment (without it, each run's workers drew their own)."""
+    script = tmp_path / "hashes.py"
+    script.write_text(_HASHES)
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, check=True).stdout
+    seed, worker_hash = out.split()
+    fresh = subprocess.run([sys.executable, "-c", "print(hash('rss6'))"], capture_output=True, text=True,
+                           check=True, env={**os.environ, "PYTHONHASHSEED": seed}).stdout
+    assert int(worker_hash) == int(fresh)
+
+
 def test_a_second_local_cluster_starts_without_a_port_warning():
     """Two rss6 runs at once: the second cluster's scheduler finds dask's default HTTP port 8787
     taken (held here by a socket, or by whatever holds it already) and starts without the

@@ -100,11 +100,21 @@ def test_modules_and_functions_have_a_readable_size():
 
 
 def test_every_command_has_its_own_module_with_a_main():
-    from pipeline.cli import COMMANDS, build_parser
+    from pipeline.cli import build_parser, commands
     sub = next(a for a in build_parser()._actions if a.dest == "command")
     modules = {name: sub.choices[name].get_default("main").__module__ for name in sub.choices}
     assert modules == {name: f"pipeline.commands.{name}" for name in sub.choices}
-    assert len(COMMANDS) == len(sub.choices)
+    assert len(commands()) == len(sub.choices)
+
+
+def test_the_commands_that_start_their_workers_ahead_are_those_with_a_local_cluster():
+    """pipeline.cli starts the fork server before it imports the commands, from their names alone:
+    the names must be those of the commands that take --workers (a local cluster)."""
+    from pipeline.cli import LOCAL_CLUSTER_COMMANDS, build_parser
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    with_workers = {name for name, p in sub.choices.items()
+                    if any("--workers" in a.option_strings for a in p._actions)}
+    assert LOCAL_CLUSTER_COMMANDS == with_workers
 
 
 def _defined_names(tree: ast.Module) -> set[str]:

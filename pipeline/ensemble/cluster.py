@@ -15,8 +15,9 @@ import signal
 import threading
 import time
 
-__all__ = ["local_cluster", "dask_client", "BLAS_ENV", "QUIET_CLUSTER", "WORKER_IMPORTS", "SchedulerUnavailable",
-           "CONNECT_TIMEOUT_S", "WORKER_TIMEOUT_S", "POLL_S"]
+__all__ = ["local_cluster", "dask_client", "start_worker_server", "stop_worker_server", "BLAS_ENV", "QUIET_CLUSTER",
+           "NANNY_HASH_SEED", "WORKER_IMPORTS", "SchedulerUnavailable", "CONNECT_TIMEOUT_S", "WORKER_TIMEOUT_S",
+           "POLL_S"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -33,7 +34,7 @@ def local_cluster(workers: int):
     traceback although nothing failed; rss6 reports every task's failure itself.
 
     The workers are forked from a server process that imports rss6 and its libraries once
-    (:func:`_preload_worker_imports`), not started afresh: each fresh worker spent seconds importing
+    (:func:`start_worker_server`), not started afresh: each fresh worker spent seconds importing
     them, and closing the cluster took seconds more. The cluster has no dashboard, so what only
     feeds one is off or slowed (QUIET_CLUSTER). Its scheduler still serves dask's health routes
     over HTTP, on a free local port: by default it takes 8787 and warns "Port 8787 is already in
@@ -41,11 +42,10 @@ def local_cluster(workers: int):
     """
     import dask
     from dask.distributed import LocalCluster
-    os.environ.update(BLAS_ENV)  # inherited by the worker processes
     settings = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
                 "distributed.worker.multiprocessing-method": "forkserver", **QUIET_CLUSTER}
+    start_worker_server()
     with dask.config.set(settings), _workers_ignore_ctrl_c():
-        _preload_worker_imports()
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                             dashboard_address=None, host="127.0.0.1", silence_logs=logging.CRITICAL,
                             scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
@@ -65,13 +65,36 @@ QUIET_CLUSTER = {"distributed.worker.profile.enabled": False,
 WORKER_IMPORTS = ["distributed", "pipeline.ensemble.run", "dask.array", "pipeline.ensemble.sampler"]
 
 
-def _preload_worker_imports() -> None:
-    """Make the fork server that starts the workers import WORKER_IMPORTS first (effective until it
-    starts, at the first worker: it then lives as long as this process and forks every worker).
+# the hash seed dask's nanny gives its workers (distributed/nanny.py, dask/distributed#8400): a
+# worker's string hashes, hence the order of any set of strings, are the same in every run
+NANNY_HASH_SEED = "6640"
 
-    It starts in the environment of that moment (one BLAS thread, SIGINT ignored: see the caller)."""
-    from distributed.utils import get_mp_context
-    get_mp_context().set_forkserver_preload(WORKER_IMPORTS)   # after dask's own, which it replaces
+
+def start_worker_server() -> None:
+    """Start the fork server that forks the local cluster's workers, if it is not running: it imports
+    WORKER_IMPORTS once, in the environment of this moment (one BLAS thread, the nanny's hash seed,
+    SIGINT ignored), and then lives as long as this process. Started before this process's own
+    imports (the ``rss6`` command does so, :func:`pipeline.cli.main`), the two import side by side.
+
+    Every worker inherits the server's environment as it was at its start: what a nanny sets just
+    before it starts a worker (PYTHONHASHSEED among it) reaches the workers only if set here too."""
+    import multiprocessing
+    from multiprocessing import forkserver
+    os.environ.update(BLAS_ENV)
+    os.environ["PYTHONHASHSEED"] = NANNY_HASH_SEED   # the nanny sets it in this process too, later
+    multiprocessing.get_context("forkserver").set_forkserver_preload(WORKER_IMPORTS)  # replaces dask's own
+    with _workers_ignore_ctrl_c():
+        forkserver.ensure_running()
+
+
+def stop_worker_server() -> None:
+    """Stop this process's fork server (at exit: a server started ahead of a command that then
+    stopped early would otherwise finish importing, seconds of CPU, before it noticed)."""
+    from multiprocessing import forkserver
+    pid = getattr(forkserver._forkserver, "_forkserver_pid", None)
+    if pid is not None:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGTERM)
 
 
 @contextlib.contextmanager
