@@ -16,7 +16,6 @@ argument: the tangential part of de + R omega x n, omega the ideal relative rota
 """
 import argparse
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 
