@@ -149,3 +149,41 @@ def test_a_failed_row_keeps_the_finished_chunks(configs, tmp_path, monkeypatch, 
     assert sorted(p.name for p in _parts(out).glob("*.nc")) == [
         "families-0000000-0000095.nc", "families-0000192-0000287.nc", "families-0000288-0000383.nc"]
     assert not out.exists()
+
+
+def test_ctrl_c_on_dask_is_raised_between_waits_after_the_finished_chunks_are_kept(monkeypatch, tmp_path):
+    """On a dask client a Ctrl-C arriving while rss6 waits for the workers is held and raised by
+    pipeline.ensemble.cluster._finished before its next wait (never inside dask's client, as for
+    `rss6 run`); the chunk that had finished is stored first."""
+    import os
+    import signal
+
+    import pipeline.ensemble.cluster as cluster
+    from pipeline.files.outputs import PartsManifest
+
+    class Client:   # stands for a dask client: each chunk is computed at once, its "future" a number
+        results = []
+
+        def submit(self, function, *args, pure):
+            self.results.append(function(*args))
+            return len(self.results) - 1
+
+        def nthreads(self):
+            return {"worker": 1}
+    waits = []
+
+    def wait_in_dask(client, pending):   # stands for cluster._gathered: the first chunk, then Ctrl-C
+        waits.append(1)
+        assert len(waits) < 3, "the held Ctrl-C was not acted on"
+        os.kill(os.getpid(), signal.SIGINT)
+        first = min(pending)
+        pending.remove(first)
+        return [client.results[first]]
+    monkeypatch.setattr(cluster, "_gathered", wait_in_dask)
+    monkeypatch.setattr(sens, "_evaluate_chunk", lambda spec, inputs, u, window: (np.zeros((len(u), 2, 3, 6)),
+                                                                                  [""] * len(u)))
+    parts = sens.RowParts(PartsManifest(tmp_path / "p", {}, index="row", items="rows"), "families")
+    with pytest.raises(KeyboardInterrupt) as caught:
+        sens.evaluate_statistics(None, None, np.zeros((8, 3)), Client(), chunk=4, parts=parts)
+    assert len(waits) == 1 and caught.traceback[-1].name == "_finished"
+    assert [p.name for p in parts.manifest.parts()] == ["families-0000000-0000003.nc"]

@@ -29,11 +29,12 @@ from rss6core import (__version__, FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clea
                       inputs_from_uniforms, MODELS, model_level, models_with, prepare_level, realised_clearances,
                       size_band)
 
-from ..ensemble.cluster import dask_client
+from ..ensemble.cluster import WORKER_TIMEOUT_S, _finished, dask_client
 from ..files.records import check_window, window_label, window_summaries
 from ..files.outputs import PartsManifest
 from ..files.reading import load_netcdf
 from ..files.schema import JOINTS, MIXED_UNITS, _provenance, _unit_table, command_line, settings_attrs
+from ..files.writing import sigint_deferred
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, UserError, WINDOWS
 
 __all__ = ["JOINT_FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
@@ -251,15 +252,20 @@ def evaluate_statistics(spec, inputs: ClearanceInputs, u: np.ndarray, client=Non
 
 
 def _run_chunks(spec, inputs, u, parts, client, window):
-    """(slice, chunk result) pairs as they finish."""
+    """(slice, chunk result) pairs as they finish; on dask, a Ctrl-C is raised between waits, as
+    ``rss6 run``'s (pipeline.ensemble.cluster._finished), never inside dask's client."""
     if client is None:
         for part in parts:
             yield part, _evaluate_chunk(spec, inputs, u[part], window)
         return
-    from dask.distributed import as_completed
-    futures = {client.submit(_evaluate_chunk, spec, inputs, u[p], window, pure=False): p for p in parts}
-    for future in as_completed(futures):
-        yield futures[future], future.result()
+    futures = [client.submit(_evaluate_rows, spec, inputs, u[p], p, window, pure=False) for p in parts]
+    with sigint_deferred() as interrupted:
+        yield from _finished(client, futures, None, WORKER_TIMEOUT_S, interrupted)
+
+
+def _evaluate_rows(spec, inputs, u, rows: slice, window):
+    """(rows, :func:`_evaluate_chunk`) of a dask task."""
+    return rows, _evaluate_chunk(spec, inputs, u, window)
 
 
 @contextlib.contextmanager
