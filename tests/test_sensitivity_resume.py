@@ -74,7 +74,7 @@ def _same_indices(a: Path, b: Path) -> None:
 
 @pytest.mark.parametrize("workers", ["1", "2"])
 def test_a_rerun_evaluates_only_the_missing_rows_and_gives_the_uninterrupted_indices(
-        interrupted, whole, configs, monkeypatch, workers):
+        interrupted, whole, configs, monkeypatch, capsys, workers):
     """Five chunks were stored (4 x 96 family rows, 256 joint rows): the rerun evaluates the other 1024
     rows (in this process, or on two dask workers in other chunks) and writes the uninterrupted run's
     indices; the parts folder is then gone."""
@@ -89,6 +89,9 @@ def test_a_rerun_evaluates_only_the_missing_rows_and_gives_the_uninterrupted_ind
     if workers == "1":   # on dask the chunks are evaluated in the workers, out of sight of the wrapper
         assert sum(calls) == 64 * 20 - JOINT_CHUNK and len(calls) == 4
     assert not parts.exists()
+    err = capsys.readouterr().err
+    assert f"families: 384 evaluations of the quasi-static level (4 groups, N = 64) on {workers} worker(s); 384 " \
+           f"stored in {parts}\n" in err and "joints: 1280 evaluations" in err and f"; 256 stored in {parts}\n" in err
     _same_indices(out, whole)
 
 

@@ -183,6 +183,11 @@ class RowParts:
                 out.append((rows, np.stack([ds[name].values for name in SUMMARIES], axis=1)))
         return out
 
+    def count(self) -> int:
+        """How many of the design's rows are stored."""
+        return sum(len(self.manifest.entries[p.name]["rows"]) for p in self.manifest.parts() if p.name.startswith(
+            f"{self.design}-"))
+
     def keep(self, rows: slice, stats: np.ndarray) -> None:
         """Store the statistics of ``rows`` at once (PartsManifest.write: all or nothing)."""
         self.manifest.write(_part_dataset(self.design, rows, stats),
@@ -191,10 +196,9 @@ class RowParts:
 
 def _part_dataset(design: str, rows: slice, stats: np.ndarray) -> xr.Dataset:
     """A stored chunk: the statistics (rows, 2, 3, 6) SI of ``rows`` of the ``design``'s sample."""
-    what = dict(zip(SUMMARIES, ("maximum", "mean")))
-    data = {name: (("row", "quantity", "direction"), stats[:, s],
-                   {"long_name": f"{what[name]} over time of |platform pose error| of the row", "units": MIXED_UNITS})
-            for s, name in enumerate(SUMMARIES)}
+    data = {name: (("row", "quantity", "direction"), stats[:, s], {"long_name": f"{what} over time of |platform "
+                                                                   "pose error| of the row", "units": MIXED_UNITS})
+            for s, (name, what) in enumerate(zip(SUMMARIES, ("maximum", "mean")))}
     coords = {"row": ("row", np.arange(rows.start, rows.stop), {"long_name": f"row of the {design} design's sample"}),
               "quantity": ("quantity", list(QUANTITIES)), "direction": ("direction", list(DIRECTIONS)),
               "unit": (("quantity", "direction"), _unit_table(), {"long_name": "SI unit of the statistic"})}
@@ -263,8 +267,7 @@ def _run_chunks(spec, inputs, u, parts, client, window):
         yield from _finished(client, futures, None, WORKER_TIMEOUT_S, interrupted)
 
 
-def _evaluate_rows(spec, inputs, u, rows: slice, window):
-    """(rows, :func:`_evaluate_chunk`) of a dask task."""
+def _evaluate_rows(spec, inputs, u, rows: slice, window):   # a dask task: (rows, _evaluate_chunk)
     return rows, _evaluate_chunk(spec, inputs, u, window)
 
 
@@ -417,11 +420,12 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFI
     with _client(workers) as client:
         for design in designs(inputs, per_joint):
             u = sample_design(design, n, spec.seed)
+            rows = RowParts(manifest, design.name) if manifest else None
             if announce:
+                kept = f"; {rows.count()} stored in {parts}" if rows and rows.count() else ""
                 announce(f"{design.name}: {len(u)} evaluations of the {spec.model} level "
-                         f"({len(design.groups)} groups, N = {n}) on {workers} worker(s)")
-            stats = evaluate_statistics(spec, inputs, u, client, window=window,
-                                        parts=RowParts(manifest, design.name) if manifest else None)
+                         f"({len(design.groups)} groups, N = {n}) on {workers} worker(s){kept}")
+            stats = evaluate_statistics(spec, inputs, u, client, window=window, parts=rows)
             results.append(sobol_indices(design, _outputs(stats), confidence, spec.seed))
     return sensitivity_dataset(scene, spec, inputs, results, n, confidence,
                                time.perf_counter() - start, window)
