@@ -17,7 +17,9 @@ from .options import (add_confidence, add_model, add_parents, add_scene, add_see
 def add_parser(sub) -> None:
     from ..studies.sensitivity import MIN_N
     p = sub.add_parser("sensitivity", help="Sobol' indices of the error statistics by joint family "
-                                           "(and joint), with bootstrap intervals (SALib)")
+                                           "(and joint), with bootstrap intervals (SALib); keeps its "
+                                           "finished evaluations in OUTPUT.parts, so a rerun of the same "
+                                           "command resumes")
     add_scene(p)
     add_model(p, "model level (default quasi-static; contact costs about 0.4 s per evaluation on the paper "
                  "scene)", choices=models_with("function_of_one_draw"), default="quasi-static")
@@ -25,7 +27,9 @@ def add_parser(sub) -> None:
                    help=f"base sample N, a power of 2 of at least {MIN_N}; the level is evaluated "
                         "N (G + 2) times for G groups: 6 N for the 4 families, 20 N more for the "
                         "18 joints (default 1024)")
-    p.add_argument("-o", "--output", help="netCDF file of the indices (default: SCENE_MODEL_sobol.nc)")
+    p.add_argument("-o", "--output", help="netCDF file of the indices (default: SCENE_MODEL_sobol.nc); "
+                                          "finished evaluations are kept in OUTPUT.parts until it is "
+                                          "written, and the same command resumes from them")
     add_parents(p)
     p.add_argument("--plots", help="folder of the bar charts (default: OUTPUT's name + _plots)")
     p.add_argument("--no-plots", action="store_true", help="write no bar charts")
@@ -39,7 +43,9 @@ def add_parser(sub) -> None:
 
 
 def main(args) -> int:
+    import shutil
     from ..analysis.sensitivity_plots import plot_sensitivity
+    from ..ensemble.run import parts_dir
     from ..files.outputs import OutputLock, check_new_output
     from ..files.reading import load_netcdf
     from ..files.writing import write_netcdf
@@ -49,15 +55,17 @@ def main(args) -> int:
     output = check_new_output(args.output or f"{level.scene.name}_{level.model}_sobol.nc", "rss6 sensitivity",
                               args.parents)
     warn_oversubscription(cluster.workers, None)
-    start = time.perf_counter()
+    start, parts = time.perf_counter(), parts_dir(output)
     with OutputLock(output):
         try:
             ds = sensitivity(level.ensemble_spec(args.seed), args.n, args.per_joint, args.confidence,
-                             cluster.workers, window=args.window,
+                             cluster.workers, window=args.window, parts=parts,
                              announce=lambda line: print(f"rss6 sensitivity: {line}", file=sys.stderr))
         except KeyboardInterrupt:
-            return interrupted(None)
+            return interrupted(f"finished chunks are kept in {parts}")
         write_netcdf(ds, output)
+        if parts.exists():
+            shutil.rmtree(parts)
     plots = Path(args.plots or output.with_name(output.stem + "_plots"))
     paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
     print(f"wrote {output} in {time.perf_counter() - start:.1f} s" + (f"; bar charts in {plots}/" if paths else ""))

@@ -153,11 +153,16 @@ class PartsManifest:
     """``OUT.nc.parts/manifest.json``: checksum, realisations and provenance of every stored part.
 
     A part is recorded in the manifest before it is renamed into place, so a crash leaves at worst
-    an entry without a part (ignored), never a part without an entry.
+    an entry without a part (ignored), never a part without an entry. By default the parts of an
+    ensemble (``rss6 run``); another command names its parts' ``index`` coordinate (listed as
+    ``index + "s"`` in the manifest), what its items are called and the ``settings`` its provenance
+    holds (e.g. ``rss6 sensitivity``: "row", "rows").
     """
 
-    def __init__(self, folder: Path, provenance: dict):
+    def __init__(self, folder: Path, provenance: dict, index: str = "realization", items: str = "realisations",
+                 settings: str = "scene, model, integrator, step, mesh, seed or store"):
         self.folder, self.provenance = Path(folder), provenance
+        self.index, self.items, self.settings = index, items, settings
         self.path = self.folder / "manifest.json"
         self.entries = self._read()
 
@@ -169,11 +174,10 @@ class PartsManifest:
             entries = data["parts"]
         except (OSError, ValueError, KeyError, TypeError):
             raise EnsembleFileError(f"{self.path}: unreadable manifest; delete {self.folder} to "
-                                    "recompute its realisations") from None
+                                    f"recompute its {self.items}") from None
         if data.get("provenance") != self.provenance:
             raise EnsembleFileError(f"{self.path}: the parts were made with different settings "
-                                    "(scene, model, integrator, step, mesh, seed or store); "
-                                    "choose another output file or the same settings")
+                                    f"({self.settings}); choose another output file or the same settings")
         return entries
 
     def _save(self) -> None:
@@ -187,8 +191,7 @@ class PartsManifest:
         final, incoming = self.folder / name, self.folder / (name + ".incoming")
         with sigint_deferred():   # part, manifest entry and rename: all or nothing on Ctrl-C
             write_netcdf(ds, incoming)
-            realizations = [int(r) for r in ds["realization"].values]
-            self.entries[name] = {"sha256": sha256(incoming), "realizations": realizations}
+            self.entries[name] = {"sha256": sha256(incoming), self.index + "s": [int(r) for r in ds[self.index].values]}
             self._save()
             os.replace(incoming, final)
         return final
@@ -201,8 +204,8 @@ class PartsManifest:
             return (f"not listed in {self.path.name}" if self.path.exists()
                     else f"no {self.path.name} vouches for it")
         if sha256(path) != entry["sha256"]:
-            r = entry["realizations"]
-            return f"changed since it was written (checksum differs; realisations {r[0]}-{r[-1]})"
+            r = entry[self.index + "s"]
+            return f"changed since it was written (checksum differs; {self.items} {r[0]}-{r[-1]})"
         return None
 
     def verify(self, path: Path) -> None:
@@ -223,7 +226,7 @@ class PartsManifest:
         listed = "; ".join(f"{p.name}: {why}" for p, why in bad.items())
         raise EnsembleFileError(f"{self.folder}: {len(bad)} of {len(self.parts())} stored parts cannot "
                                 f"be used ({listed}); recover with `{remove}` and rerun the same command "
-                                "(it computes their realisations again)")
+                                f"(it computes their {self.items} again)")
 
     def parts(self) -> list[Path]:
         return sorted(self.folder.glob("*.nc"))

@@ -13,6 +13,8 @@ inputs_from_uniforms), grouped by input in the family design and as one group
 every row (dask workers, or in this process), and SALib's estimators give the
 first-order (Saltelli 2010) and total (Jansen 1999) indices of each statistic
 with bootstrap intervals: estimate +- z sd of the indices over resampled rows.
+Each finished chunk of rows is kept at once in OUT.parts (:class:`RowParts`), so
+a rerun of the same command evaluates only the rows still missing.
 """
 from __future__ import annotations
 
@@ -23,18 +25,22 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms, inputs_from_uniforms,
-                      MODELS, model_level, models_with, prepare_level, realised_clearances, size_band)
+from rss6core import (__version__, FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms,
+                      inputs_from_uniforms, MODELS, model_level, models_with, prepare_level, realised_clearances,
+                      size_band)
 
-from ..ensemble.cluster import dask_client
+from ..ensemble.cluster import WORKER_TIMEOUT_S, _finished, dask_client
 from ..files.records import check_window, window_label, window_summaries
-from ..files.schema import JOINTS, _provenance, _unit_table, command_line
+from ..files.outputs import PartsManifest
+from ..files.reading import load_netcdf
+from ..files.schema import JOINTS, MIXED_UNITS, _provenance, _unit_table, command_line, settings_attrs
+from ..files.writing import sigint_deferred
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, UserError, WINDOWS
 
 __all__ = ["JOINT_FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
            "clearance_draws_from_uniforms", "Design", "designs", "sample_design",
            "evaluate_statistics", "SobolIndices", "sobol_indices", "sensitivity", "sensitivity_dataset",
-           "format_sensitivity", "format_joints", "SensitivityError"]
+           "format_sensitivity", "format_joints", "SensitivityError", "RowParts", "parts_manifest"]
 
 JOINT_FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
 LEVELS = models_with("function_of_one_draw")   # the levels whose error is a function of one draw
@@ -143,6 +149,63 @@ def sample_design(design: Design, n: int, seed: int) -> np.ndarray:
                         seed=_salib_seed(seed, design.name, "sample"))
 
 
+# --- the finished chunks kept in OUT.parts ----------------------------------------------------
+
+PART_SETTINGS = "scene, model, integrator, step, mesh, seed, -n, --per-joint or --window"
+
+
+def parts_manifest(spec, n: int, per_joint: bool, window: str, folder) -> PartsManifest:
+    """The manifest of ``folder`` (OUT.parts), whose provenance names all the stored rows depend on;
+    EnsembleFileError (before any work) for parts of other settings or changed since written."""
+    provenance = {"scene_toml": spec.scene_text, **settings_attrs(model=spec.model, integrator=spec.integrator,
+                                                                   dt=float(spec.dt), elements=int(spec.elements)),
+                  "seed": int(spec.seed), "n_base_samples": n, "per_joint": per_joint, "window": window,
+                  "designs": ["families"] + (["joints"] if per_joint else []), "rss6_version": __version__}
+    manifest = PartsManifest(folder, provenance, index="row", items="rows", settings=PART_SETTINGS)
+    manifest.refuse({path: manifest.problem(path) for path in manifest.parts()})
+    return manifest
+
+
+@dataclass(frozen=True)
+class RowParts:
+    """The stored chunks of one design: ``DESIGN-FIRST-LAST.nc`` in the manifest's folder, holding
+    the statistics (rows, 2, 3, 6) SI of the design's rows FIRST..LAST."""
+    manifest: PartsManifest
+    design: str
+
+    def stored(self) -> list[tuple[slice, np.ndarray]]:
+        """(rows, their statistics) of every stored chunk of the design (verified by :func:`parts_manifest`)."""
+        out = []
+        for path in self.manifest.parts():
+            if path.name.startswith(f"{self.design}-"):
+                ds = load_netcdf(path, verify=False)
+                rows = slice(int(ds["row"][0]), int(ds["row"][-1]) + 1)
+                out.append((rows, np.stack([ds[name].values for name in SUMMARIES], axis=1)))
+        return out
+
+    def count(self) -> int:
+        """How many of the design's rows are stored."""
+        return sum(len(self.manifest.entries[p.name]["rows"]) for p in self.manifest.parts() if p.name.startswith(
+            f"{self.design}-"))
+
+    def keep(self, rows: slice, stats: np.ndarray) -> None:
+        """Store the statistics of ``rows`` at once (PartsManifest.write: all or nothing)."""
+        self.manifest.write(_part_dataset(self.design, rows, stats),
+                            f"{self.design}-{rows.start:07d}-{rows.stop - 1:07d}.nc")
+
+
+def _part_dataset(design: str, rows: slice, stats: np.ndarray) -> xr.Dataset:
+    """A stored chunk: the statistics (rows, 2, 3, 6) SI of ``rows`` of the ``design``'s sample."""
+    data = {name: (("row", "quantity", "direction"), stats[:, s], {"long_name": f"{what} over time of |platform "
+                                                                   "pose error| of the row", "units": MIXED_UNITS})
+            for s, (name, what) in enumerate(zip(SUMMARIES, ("maximum", "mean")))}
+    coords = {"row": ("row", np.arange(rows.start, rows.stop), {"long_name": f"row of the {design} design's sample"}),
+              "quantity": ("quantity", list(QUANTITIES)), "direction": ("direction", list(DIRECTIONS)),
+              "unit": (("quantity", "direction"), _unit_table(), {"long_name": "SI unit of the statistic"})}
+    return xr.Dataset(data, coords=coords, attrs={"title": f"rss6 sensitivity: finished rows of the {design} design",
+                                                  "design": design})
+
+
 # --- evaluation ------------------------------------------------------------------------------
 
 def _evaluate_chunk(spec, inputs: ClearanceInputs, u: np.ndarray, window: str = "whole"):
@@ -161,21 +224,31 @@ def _evaluate_chunk(spec, inputs: ClearanceInputs, u: np.ndarray, window: str = 
     return stats, [r.message or r.status if r.status != FINISHED else "" for r in results]
 
 
-def _chunks(rows: int, chunk: int) -> list[slice]:
-    return [slice(i, min(i + chunk, rows)) for i in range(0, rows, chunk)]
+def _chunks(todo: np.ndarray, chunk: int) -> list[slice]:
+    """The rows ``todo`` (sorted indices) as slices of at most ``chunk`` rows within their runs of
+    consecutive rows (all rows: 0..chunk-1, chunk..2 chunk-1, ...)."""
+    runs = np.split(todo, np.flatnonzero(np.diff(todo) != 1) + 1) if len(todo) else []
+    ends = [(int(run[0]), int(run[-1]) + 1) for run in runs]
+    return [slice(i, min(i + chunk, stop)) for first, stop in ends for i in range(first, stop, chunk)]
 
 
 def evaluate_statistics(spec, inputs: ClearanceInputs, u: np.ndarray, client=None,
-                        chunk: int | None = None, window: str = "whole") -> np.ndarray:
+                        chunk: int | None = None, window: str = "whole", parts: RowParts | None = None) -> np.ndarray:
     """Per-row statistics (R, 2, 3, 6) of the level for uniforms u (R, D) over the analysis
     ``window``, in chunks (default: four per worker, at most 256 rows) on a dask ``client`` (None:
-    in this process); SensitivityError if any row failed."""
+    in this process); with ``parts``, the rows stored there are read, not evaluated, and every
+    chunk that finishes without a failed row is stored at once. SensitivityError if any row failed."""
     workers = max(1, len(client.nthreads())) if client is not None else 1
     chunk = chunk or max(1, min(256, -(-len(u) // (4 * workers))))
     out, failures = np.empty((len(u), len(SUMMARIES), len(QUANTITIES), len(DIRECTIONS))), []
-    for part, (stats, messages) in _run_chunks(spec, inputs, u, _chunks(len(u), chunk), client, window):
+    done = np.zeros(len(u), bool)
+    for rows, stats in parts.stored() if parts else []:
+        out[rows], done[rows] = stats, True
+    for part, (stats, messages) in _run_chunks(spec, inputs, u, _chunks(np.flatnonzero(~done), chunk), client, window):
         out[part] = stats
         failures += [m for m in messages if m]
+        if parts and not any(messages):   # a failed row is evaluated (and reported) again by a rerun
+            parts.keep(part, stats)
     if failures:
         raise SensitivityError(f"{len(failures)} of {len(u)} evaluations of the {spec.model} level "
                                f"failed (first: {failures[0]}); Sobol' indices need every row")
@@ -183,15 +256,19 @@ def evaluate_statistics(spec, inputs: ClearanceInputs, u: np.ndarray, client=Non
 
 
 def _run_chunks(spec, inputs, u, parts, client, window):
-    """(slice, chunk result) pairs as they finish."""
+    """(slice, chunk result) pairs as they finish; on dask, a Ctrl-C is raised between waits, as
+    ``rss6 run``'s (pipeline.ensemble.cluster._finished), never inside dask's client."""
     if client is None:
         for part in parts:
             yield part, _evaluate_chunk(spec, inputs, u[part], window)
         return
-    from dask.distributed import as_completed
-    futures = {client.submit(_evaluate_chunk, spec, inputs, u[p], window, pure=False): p for p in parts}
-    for future in as_completed(futures):
-        yield futures[future], future.result()
+    futures = [client.submit(_evaluate_rows, spec, inputs, u[p], p, window, pure=False) for p in parts]
+    with sigint_deferred() as interrupted:
+        yield from _finished(client, futures, None, WORKER_TIMEOUT_S, interrupted)
+
+
+def _evaluate_rows(spec, inputs, u, rows: slice, window):   # a dask task: (rows, _evaluate_chunk)
+    return rows, _evaluate_chunk(spec, inputs, u, window)
 
 
 @contextlib.contextmanager
@@ -317,9 +394,10 @@ def _check_level(model: str) -> None:
 
 
 def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFIDENCE, workers: int = 2,
-                announce=None, window: str = "whole") -> xr.Dataset:
+                announce=None, window: str = "whole", parts=None) -> xr.Dataset:
     """Sobol' indices of the level ``spec.model`` with N base rows per design (a power of 2), of the
-    statistics over the analysis ``window`` (WINDOWS: whole run, startup or steady)."""
+    statistics over the analysis ``window`` (WINDOWS: whole run, startup or steady); with a ``parts``
+    folder (OUT.parts), the finished chunks are kept there and the rows stored there are not evaluated."""
     import time
     _check_level(spec.model)
     if n < MIN_N or n & (n - 1):
@@ -337,14 +415,17 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFI
         raise SensitivityError(f"{spec.source}: every [clearance] size is 0, so no input varies and no "
                                "Sobol' index is defined")
     inputs = clearance_inputs(scene)
+    manifest = parts_manifest(spec, n, per_joint, window, parts) if parts else None
     results = []
     with _client(workers) as client:
         for design in designs(inputs, per_joint):
             u = sample_design(design, n, spec.seed)
+            rows = RowParts(manifest, design.name) if manifest else None
             if announce:
+                kept = f"; {rows.count()} stored in {parts}" if rows and rows.count() else ""
                 announce(f"{design.name}: {len(u)} evaluations of the {spec.model} level "
-                         f"({len(design.groups)} groups, N = {n}) on {workers} worker(s)")
-            stats = evaluate_statistics(spec, inputs, u, client, window=window)
+                         f"({len(design.groups)} groups, N = {n}) on {workers} worker(s){kept}")
+            stats = evaluate_statistics(spec, inputs, u, client, window=window, parts=rows)
             results.append(sobol_indices(design, _outputs(stats), confidence, spec.seed))
     return sensitivity_dataset(scene, spec, inputs, results, n, confidence,
                                time.perf_counter() - start, window)
