@@ -25,7 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr, ndtri
+from scipy.special import ndtr
 
 RELATIVE_BAND_REACH = 2.0   # a [sampling] size_tolerance draws sizes up to this multiple of the nominal
 # each [clearance] size and the [contact] radius of the joint it belongs to
