@@ -243,9 +243,10 @@ def _draw(scene, rng, steps: int | None) -> ClearanceDraw:
     u = scene.geometry.base_angles
     # the plane normal to w_i is spanned by the horizontal radial direction and Z
     plane_x = np.stack([np.cos(u), np.sin(u), 0 * u], -1)
-    plane_y = np.array(np.broadcast_to([0.0, 0.0, 1.0], (6, 3)))
+    plane_y = np.tile([0.0, 0.0, 1.0], (6, 1))
+    # fresh writable C-ordered copies: the argument types of the one compiled overload (draw_kernel._load)
     revolute = kernel.Revolute(radial, radial_u, angle_u, axial, axial_u, plane_x, plane_y,
-                               np.ascontiguousarray(scene.geometry.w, float))
+                               np.array(scene.geometry.w, float, order="C"))
     C, B = (_sphere(rng, joint, size, shape, law.direction) for joint, size in (("C", dC), ("B", dB)))
     e_A, e_C, e_B = (np.empty(shape + (3,)) for _ in range(3))
     kernel.eccentricities_into(revolute, C, B, e_A, e_C, e_B)

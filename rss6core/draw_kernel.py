@@ -19,6 +19,7 @@ import math
 from collections import namedtuple
 
 import llvmlite.binding as llvm
+import numpy as np
 from numba import njit, types
 from numba.extending import get_cython_function_address
 
@@ -112,3 +113,18 @@ def eccentricities_into(rev, C, B, e_A, e_C, e_B):
                 e_A[j, leg, k] = (rc * rev.plane_x[leg, k] + rs * rev.plane_y[leg, k]) + a * rev.w[leg, k]
     _spherical(C, e_C)
     _spherical(B, e_B)
+
+
+def _load() -> None:
+    """Compile, or load from numba's cache, the one overload of each draw kernel every draw calls
+    (the argument types :mod:`.clearance` passes), at import: a fork server that preloads this
+    module hands them to every worker it forks, which then neither compiles nor loads them."""
+    legs = np.zeros(6)
+    law = TruncatedNormal(False, legs, legs, legs, legs, legs, legs)
+    u, vectors, out = np.zeros((1, 6)), np.zeros((6, 3)), np.zeros((1, 6, 3))
+    truncated_normals(law, u, np.zeros((1, 6)))
+    sphere = Sphere(legs, u, u, u)
+    eccentricities_into(Revolute(law, u, u, law, u, vectors, vectors, vectors), sphere, sphere, out, out, out)
+
+
+_load()

@@ -126,3 +126,16 @@ def test_truncated_normal_equals_numpys_arithmetic_bit_for_bit():
     expected = _normal(realization_rng(1, 2).random((50, 6)), mean, std, low, high)
     assert got.tobytes() == expected.tobytes()
     assert got.min() >= low and np.all(got <= high)
+
+
+def test_every_draw_calls_the_one_overload_compiled_at_import(configs):
+    """Draws of every shipped scene and path reuse the overloads draw_kernel compiles (or loads) at its
+    import, so a fork server that preloads the module leaves its workers nothing to compile or load."""
+    from rss6core import draw_kernel
+    for name in SCENES:
+        for scene in _variants(configs, name):
+            draw_clearances(scene, 0, 1)
+            paper_draw(scene, 0, 1, 5)
+            clearances_from_named_uniforms(scene, {b: np.full(6, 0.5) for b in UNIFORM_BLOCKS})
+    assert len(draw_kernel.eccentricities_into.signatures) == 1
+    assert len(draw_kernel.truncated_normals.signatures) == 1
