@@ -201,22 +201,24 @@ def uniform_dimension(steps: int | None = None, scene=None) -> int:
 
 
 def draw_clearances(scene, seed: int, realization: int, steps: int | None = None,
-                    uniforms=None) -> ClearanceDraw:
+                    uniforms=None, out: dict | None = None) -> ClearanceDraw:
     """Draw realisation ``realization`` of the scene's clearance laws.
 
     From its own stream, or with ``uniforms(realization, dimension) -> ndarray`` (e.g. a
     quasi-Monte Carlo design) from the uniforms it returns.  With ``steps`` the sizes are
     drawn once and the eccentricities ``steps`` times (leading axis), as the paper level
-    redraws them every time step (sec. 2).
+    redraws them every time step (sec. 2).  ``out``: per-step eccentricity arrays {"e_A", "e_C", "e_B"}
+    (steps, 6, 3), C-ordered, to fill in place (the paper level's padded history) instead of new ones.
     """
     if uniforms is not None:
-        return clearances_from_uniforms(scene, uniforms(realization, uniform_dimension(steps, scene)), steps)
-    return _draw(scene, realization_rng(seed, realization), steps)
+        return clearances_from_uniforms(scene, uniforms(realization, uniform_dimension(steps, scene)), steps, out)
+    return _draw(scene, realization_rng(seed, realization), steps, out)
 
 
-def clearances_from_uniforms(scene, u, steps: int | None = None) -> ClearanceDraw:
-    """The draw as a function of a vector of at most ``uniform_dimension(steps)`` uniforms in [0, 1)."""
-    return _draw(scene, UniformVector(u), steps)
+def clearances_from_uniforms(scene, u, steps: int | None = None, out: dict | None = None) -> ClearanceDraw:
+    """The draw as a function of a vector of at most ``uniform_dimension(steps)`` uniforms in [0, 1)
+    (``out`` as for :func:`draw_clearances`)."""
+    return _draw(scene, UniformVector(u), steps, out)
 
 
 def clearances_from_named_uniforms(scene, blocks: dict) -> ClearanceDraw:
@@ -226,7 +228,7 @@ def clearances_from_named_uniforms(scene, blocks: dict) -> ClearanceDraw:
     return _draw(scene, NamedUniforms(blocks), None)
 
 
-def _draw(scene, rng, steps: int | None) -> ClearanceDraw:
+def _draw(scene, rng, steps: int | None, out: dict | None = None) -> ClearanceDraw:
     """The draw from ``rng`` (a Generator, a :class:`UniformVector` or :class:`NamedUniforms`),
     uniforms taken in a fixed order (:data:`UNIFORM_BLOCKS`), turned into eccentricities by the
     compiled kernel (:func:`.draw_kernel.eccentricities_into`)."""
@@ -248,7 +250,8 @@ def _draw(scene, rng, steps: int | None) -> ClearanceDraw:
     revolute = kernel.Revolute(radial, radial_u, angle_u, axial, axial_u, plane_x, plane_y,
                                np.array(scene.geometry.w, float, order="C"))
     C, B = (_sphere(rng, joint, size, shape, law.direction) for joint, size in (("C", dC), ("B", dB)))
-    e_A, e_C, e_B = (np.empty(shape + (3,)) for _ in range(3))
+    e_A, e_C, e_B = ((np.empty(shape + (3,)) for _ in range(3)) if out is None else
+                     (out["e_A"], out["e_C"], out["e_B"]))
     kernel.eccentricities_into(revolute, C, B, e_A, e_C, e_B)
     if steps is None:
         e_A, e_C, e_B = e_A[0], e_C[0], e_B[0]
