@@ -25,7 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr, ndtri
+from scipy.special import ndtr
 
 RELATIVE_BAND_REACH = 2.0   # a [sampling] size_tolerance draws sizes up to this multiple of the nominal
 # each [clearance] size and the [contact] radius of the joint it belongs to
@@ -73,6 +73,13 @@ class NamedUniforms:
         return low + (high - low) * u.reshape(tuple(np.atleast_1d(size)))
 
 
+def _unit(low, high) -> bool:
+    """Whether [low, high) is [0, 1) (a quick answer for Python floats, the common case)."""
+    if isinstance(low, float) and isinstance(high, float):
+        return low == 0.0 and high == 1.0
+    return np.array_equal(low, 0.0) and np.array_equal(high, 1.0)
+
+
 def _uniform(rng, name: str, low=0.0, high=1.0, size=None):
     """Uniforms on [low, high) of the block ``name`` from a Generator, a :class:`UniformVector` (in
     order; the name unused) or a :class:`NamedUniforms` (by name)."""
@@ -80,38 +87,54 @@ def _uniform(rng, name: str, low=0.0, high=1.0, size=None):
         return rng.take(name, low, high, size)
     if isinstance(rng, np.random.Generator):   # Generator.uniform's doubles and arithmetic, without its
         u = rng.random(size)                   # per-value call (a third of the time for 12 000 values)
-        return u if np.array_equal(low, 0.0) and np.array_equal(high, 1.0) else low + (high - low) * u
+        return u if _unit(low, high) else low + (high - low) * u
     return rng.uniform(low, high, size)
 
 
-def truncated_normal(rng: np.random.Generator, mean, std, low, high, size, name: str = "") -> np.ndarray:
-    """Normal(mean, std) truncated to [low, high], by inverting the CDF (one uniform per draw, of the
-    block ``name``; none when a std is not positive: then the law is the point mean)."""
+def _kernel():
+    """:mod:`.draw_kernel`, imported at the first draw: only a process that draws pays numba's import
+    (0.3 s; the paper workers' fork server preloads it)."""
+    from . import draw_kernel
+    return draw_kernel
+
+
+def _normal_law(mean, std, low, high, legs: int):
+    """Normal(mean, std) truncated to [low, high], each broadcast to ``legs`` values, as the compiled
+    kernel reads it (:class:`.draw_kernel.TruncatedNormal`): a point law where a std is not positive."""
     mean, std = np.asarray(mean, float), np.asarray(std, float)
-    if np.any(std <= 0):
-        return np.clip(np.broadcast_to(mean, size), low, high).astype(float)
-    lo, hi = ndtr((np.asarray(low) - mean) / std), ndtr((np.asarray(high) - mean) / std)
-    u = _uniform(rng, name, size=size)
-    return np.clip(mean + std * ndtri(lo + u * (hi - lo)), low, high)
+    point = bool(np.any(std <= 0))
+    lo, hi = (0.0, 0.0) if point else (ndtr((np.asarray(low) - mean) / std), ndtr((np.asarray(high) - mean) / std))
+    return _kernel().TruncatedNormal(point, *(np.full(legs, x, float) for x in (mean, std, lo, hi, low, high)))
+
+
+def _law_uniforms(rng, name: str, law, shape: tuple) -> np.ndarray:
+    """The uniforms of a truncated normal's block ``name`` (none, an empty array, for a point law)."""
+    return np.empty((0, shape[-1])) if law.point else _uniform(rng, name, size=shape)
+
+
+def truncated_normal(rng: np.random.Generator, mean, std, low, high, size, name: str = "") -> np.ndarray:
+    """Normal(mean, std) truncated to [low, high] (parameters per last axis of ``size``), by inverting
+    the CDF (one uniform per draw, of the block ``name``; none when a std is not positive: then the law
+    is the point mean)."""
+    shape = tuple(int(n) for n in np.atleast_1d(size))
+    law = _normal_law(mean, std, low, high, shape[-1])
+    u, out = _law_uniforms(rng, name, law, shape), np.empty(shape)
+    _kernel().truncated_normals(law, u.reshape(-1, shape[-1]), out.reshape(-1, shape[-1]))
+    return out
+
+
+def _polar_angles(u, law: str) -> np.ndarray:
+    """The polar angles eta_1 of the directions of polar uniforms u: arccos(1 - 2 u), uniform on the
+    sphere (numpy's arccos, not glibc's: the bits of the draw), or the paper's pi u."""
+    return np.arccos(1.0 - 2.0 * u) if law == "uniform" else np.pi * u
 
 
 def sphere_directions(rng: np.random.Generator, size: int, law: str = "uniform", joint: str = "") -> np.ndarray:
     """Unit vectors (size, 3): uniform on the sphere, or the paper's eta_d1 = pi u variant (polar
     then azimuth uniforms, blocks ``<joint>_polar`` and ``<joint>_azimuth``)."""
-    return _sphere_components(rng, size, law, joint).T
-
-
-def _sphere_components(rng, size: int, law: str, joint: str) -> np.ndarray:
-    """:func:`sphere_directions` component by component (3, size), each row contiguous: the draw
-    scales them one component at a time with long inner loops (a (size, 3) array makes numpy loop
-    three elements at a time)."""
     u1, u2 = _uniform(rng, f"{joint}_polar", size=size), _uniform(rng, f"{joint}_azimuth", size=size)
-    eta1 = np.arccos(1.0 - 2.0 * u1) if law == "uniform" else np.pi * u1
-    eta2 = 2.0 * np.pi * u2
-    sin1, out = np.sin(eta1), np.empty((3, size))   # filled in place: no temporaries to stack
-    np.multiply(sin1, np.cos(eta2), out=out[0])
-    np.multiply(sin1, np.sin(eta2), out=out[1])
-    np.cos(eta1, out=out[2])
+    out = np.empty((size, 3))
+    _kernel().sphere_directions_into(_polar_angles(u1, law), u2, out)
     return out
 
 
@@ -178,22 +201,24 @@ def uniform_dimension(steps: int | None = None, scene=None) -> int:
 
 
 def draw_clearances(scene, seed: int, realization: int, steps: int | None = None,
-                    uniforms=None) -> ClearanceDraw:
+                    uniforms=None, out: dict | None = None) -> ClearanceDraw:
     """Draw realisation ``realization`` of the scene's clearance laws.
 
     From its own stream, or with ``uniforms(realization, dimension) -> ndarray`` (e.g. a
     quasi-Monte Carlo design) from the uniforms it returns.  With ``steps`` the sizes are
     drawn once and the eccentricities ``steps`` times (leading axis), as the paper level
-    redraws them every time step (sec. 2).
+    redraws them every time step (sec. 2).  ``out``: per-step eccentricity arrays {"e_A", "e_C", "e_B"}
+    (steps, 6, 3), C-ordered, to fill in place (the paper level's padded history) instead of new ones.
     """
     if uniforms is not None:
-        return clearances_from_uniforms(scene, uniforms(realization, uniform_dimension(steps, scene)), steps)
-    return _draw(scene, realization_rng(seed, realization), steps)
+        return clearances_from_uniforms(scene, uniforms(realization, uniform_dimension(steps, scene)), steps, out)
+    return _draw(scene, realization_rng(seed, realization), steps, out)
 
 
-def clearances_from_uniforms(scene, u, steps: int | None = None) -> ClearanceDraw:
-    """The draw as a function of a vector of at most ``uniform_dimension(steps)`` uniforms in [0, 1)."""
-    return _draw(scene, UniformVector(u), steps)
+def clearances_from_uniforms(scene, u, steps: int | None = None, out: dict | None = None) -> ClearanceDraw:
+    """The draw as a function of a vector of at most ``uniform_dimension(steps)`` uniforms in [0, 1)
+    (``out`` as for :func:`draw_clearances`)."""
+    return _draw(scene, UniformVector(u), steps, out)
 
 
 def clearances_from_named_uniforms(scene, blocks: dict) -> ClearanceDraw:
@@ -203,42 +228,40 @@ def clearances_from_named_uniforms(scene, blocks: dict) -> ClearanceDraw:
     return _draw(scene, NamedUniforms(blocks), None)
 
 
-def _combine(a, u, b, v, c, w) -> np.ndarray:
-    """a u + b v + c w (..., 6, 3) for coefficients (..., 6) and leg vectors (6, 3), one component at
-    a time (the same operations in the same order as broadcasting, without its 3-long inner loops)."""
-    out = np.empty(a.shape + (3,))
-    for k in range(3):
-        np.add(a * u[:, k] + b * v[:, k], c * w[:, k], out=out[..., k])
-    return out
-
-
-def _draw(scene, rng, steps: int | None) -> ClearanceDraw:
+def _draw(scene, rng, steps: int | None, out: dict | None = None) -> ClearanceDraw:
     """The draw from ``rng`` (a Generator, a :class:`UniformVector` or :class:`NamedUniforms`),
-    uniforms taken in a fixed order (:data:`UNIFORM_BLOCKS`)."""
+    uniforms taken in a fixed order (:data:`UNIFORM_BLOCKS`), turned into eccentricities by the
+    compiled kernel (:func:`.draw_kernel.eccentricities_into`)."""
     cl, law = scene.clearance, scene.sampling
     dr, da, dC, dB = (_sizes(rng, name, getattr(cl, f), size_band(scene, f))
                       for f, name in zip(FAMILIES, SIZE_BLOCKS))
-    shape = (6,) if steps is None else (steps, 6)
-    radial = truncated_normal(rng, law.radial_mean * dr, law.radial_std * dr, 0.0, dr, shape, "A_radial_magnitude")
-    theta = _uniform(rng, "A_radial_angle", 0.0, 2.0 * np.pi, size=shape)
-    axial = truncated_normal(rng, law.axial_mean * da, law.axial_std * da, -da, da, shape, "A_axial")
+    shape = (1 if steps is None else steps, 6)
+    kernel = _kernel()
+    radial = _normal_law(law.radial_mean * dr, law.radial_std * dr, 0.0, dr, 6)
+    radial_u = _law_uniforms(rng, "A_radial_magnitude", radial, shape)
+    angle_u = _uniform(rng, "A_radial_angle", size=shape)
+    axial = _normal_law(law.axial_mean * da, law.axial_std * da, -da, da, 6)
+    axial_u = _law_uniforms(rng, "A_axial", axial, shape)
     u = scene.geometry.base_angles
     # the plane normal to w_i is spanned by the horizontal radial direction and Z
     plane_x = np.stack([np.cos(u), np.sin(u), 0 * u], -1)
-    plane_y = np.broadcast_to([0.0, 0.0, 1.0], (6, 3))
-    e_A = _combine(radial * np.cos(theta), plane_x, radial * np.sin(theta), plane_y, axial,
-                   scene.geometry.w)
-    e_C = _spherical(rng, "C", dC, shape, law.direction)
-    e_B = _spherical(rng, "B", dB, shape, law.direction)
+    plane_y = np.tile([0.0, 0.0, 1.0], (6, 1))
+    # fresh writable C-ordered copies: the argument types of the one compiled overload (draw_kernel._load)
+    revolute = kernel.Revolute(radial, radial_u, angle_u, axial, axial_u, plane_x, plane_y,
+                               np.array(scene.geometry.w, float, order="C"))
+    C, B = (_sphere(rng, joint, size, shape, law.direction) for joint, size in (("C", dC), ("B", dB)))
+    e_A, e_C, e_B = ((np.empty(shape + (3,)) for _ in range(3)) if out is None else
+                     (out["e_A"], out["e_C"], out["e_B"]))
+    kernel.eccentricities_into(revolute, C, B, e_A, e_C, e_B)
+    if steps is None:
+        e_A, e_C, e_B = e_A[0], e_C[0], e_B[0]
     return ClearanceDraw(dr, da, dC, dB, e_A, e_C, e_B)
 
 
-def _spherical(rng, joint: str, size: np.ndarray, shape: tuple, law: str) -> np.ndarray:
-    """A spherical joint's eccentricities (shape + (3,)): magnitude k_s delta_s times a direction,
-    one component at a time (the products of ``(k_s delta_s)[..., None] * direction``, bit for bit)."""
-    magnitude = _uniform(rng, f"{joint}_magnitude", size=shape) * size
-    direction = _sphere_components(rng, magnitude.size, law, joint)
-    out = np.empty(shape + (3,))
-    for k in range(3):
-        np.multiply(magnitude, direction[k].reshape(shape), out=out[..., k])
-    return out
+def _sphere(rng, joint: str, size: np.ndarray, shape: tuple, law: str):
+    """A spherical joint's sizes and uniforms as the kernel reads them (:class:`.draw_kernel.Sphere`):
+    magnitude k_s, then polar, then azimuth uniforms."""
+    magnitude_u = _uniform(rng, f"{joint}_magnitude", size=shape)
+    polar = _polar_angles(_uniform(rng, f"{joint}_polar", size=shape), law)
+    azimuth_u = _uniform(rng, f"{joint}_azimuth", size=shape)
+    return _kernel().Sphere(np.array(size, float), magnitude_u, polar, azimuth_u)

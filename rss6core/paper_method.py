@@ -142,18 +142,20 @@ def paper_draw(scene, seed: int, realization: int, steps: int, uniforms=None) ->
     SeedSequence([seed, realization, END_TAG]) with the same sizes (the first SIZE_UNIFORMS
     uniforms set them), so neither chunking nor workers change them.
     """
+    padded = {e: np.empty((steps + 2 * CENTRAL_PAD, 6, 3)) for e in ("e_A", "e_C", "e_B")}
+    inside = {e: a[CENTRAL_PAD:CENTRAL_PAD + steps] for e, a in padded.items()}   # drawn in place
     if uniforms is None:
-        inner = draw_clearances(scene, seed, realization, steps=steps)
+        inner = draw_clearances(scene, seed, realization, steps=steps, out=inside)
         size_uniforms = realization_rng(seed, realization).uniform(size=SIZE_UNIFORMS)
     else:
         u = uniforms(realization, uniform_dimension(steps, scene))
-        inner, size_uniforms = clearances_from_uniforms(scene, u, steps), u[:SIZE_UNIFORMS]
+        inner, size_uniforms = clearances_from_uniforms(scene, u, steps, inside), u[:SIZE_UNIFORMS]
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(realization), END_TAG]))
     fresh = rng.uniform(size=uniform_dimension(2 * CENTRAL_PAD) - SIZE_UNIFORMS)
     ends = clearances_from_uniforms(scene, np.concatenate([size_uniforms, fresh]), 2 * CENTRAL_PAD)
-    pad = {e: np.concatenate([getattr(ends, e)[:CENTRAL_PAD], getattr(inner, e), getattr(ends, e)[CENTRAL_PAD:]])
-           for e in ("e_A", "e_C", "e_B")}
-    return dataclasses.replace(inner, **pad)
+    for e, a in padded.items():
+        a[:CENTRAL_PAD], a[CENTRAL_PAD + steps:] = getattr(ends, e)[:CENTRAL_PAD], getattr(ends, e)[CENTRAL_PAD:]
+    return dataclasses.replace(inner, **padded)
 
 
 def output_step(draw: ClearanceDraw, step: int = 0) -> ClearanceDraw:

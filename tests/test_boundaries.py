@@ -42,11 +42,12 @@ def _core_modules_imported(node) -> set[str]:
 # the imports inside functions, for import time and not to dodge a cycle: the contact level's
 # compiled kernel (numba, 0.3 s per process) loads only when a contact level runs or its kernels
 # are asked about or compiled (rss6 warm; kernels.compile_kernel runs a level with stand-in kernels);
+# the clearance laws' compiled arithmetic (draw_kernel, numba too) loads at a process's first draw;
 # scipy.stats and scipy.interpolate (0.4 s and 0.15 s per process) load at a scene's first uncertain law
-# or spline, not in every rss6 process (docs/performance.md section 30)
+# or spline, not in every rss6 process (docs/performance.md section 31)
 LAZY = {("models", "contact_dynamics"), ("models", "contact_start"), ("kernels", "contact_kernel"),
-        ("kernels", "models"), ("kernels", "contact_dynamics"), ("uncertain", "<not core: scipy>"),
-        ("trajectory_kinds", "<not core: scipy.interpolate>")}
+        ("kernels", "models"), ("kernels", "contact_dynamics"), ("clearance", "draw_kernel"),
+        ("uncertain", "<not core: scipy>"), ("trajectory_kinds", "<not core: scipy.interpolate>")}
 # the modules that run a level: none of them is the scene's business
 LADDER = {"models", "assembly", "elastic", "quasi_static", "paper_method", "contact_dynamics", "contact_kernel",
           "contact_numpy", "contact_start"}
@@ -83,14 +84,18 @@ def _reach(graph: dict[str, set[str]], start: str) -> set[str]:
 
 
 def test_reading_a_scene_and_the_paper_level_do_not_load_the_contact_kernel(paper):
-    """Reading a scene, the facade and the pipeline's run module leave numba unloaded (it costs a
-    paper-level run 0.3 s of import in its main process and in the workers' fork server)."""
+    """Reading a scene, the facade and the pipeline's run module leave numba unloaded (it costs 0.3 s
+    of import in a paper-level run's main process); the paper level's draw loads numba and the draw
+    kernel (in the workers, preloaded by their fork server), never the contact kernel."""
+    watched = ('numba', 'rss6core.contact_kernel', 'rss6core.draw_kernel')
+    modules = f"print(sorted(m for m in {watched!r} if m in sys.modules))"
     code = ("import sys, pipeline.ensemble.run, rss6core\n"
             f"s = rss6core.load_scene({str(paper.source_path)!r})\n"
+            f"{modules}\n"
             "assert rss6core.simulate_batch(s, 'paper', realizations=[0])[0].status == 'finished'\n"
-            "print(sorted(m for m in ('numba', 'rss6core.contact_kernel') if m in sys.modules))")
+            f"{modules}\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "[]"
+    assert out.stdout.split("\n")[:2] == ["[]", "['numba', 'rss6core.draw_kernel']"]
 
 
 def test_cycle_finder_finds_a_cycle(find_cycle):

@@ -61,8 +61,10 @@ QUIET_CLUSTER = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.system-monitor.interval": "2s",
                  "distributed.worker.memory.monitor-interval": "1s"}
 # what a worker needs: rss6core, numpy, xarray, ... through pipeline.ensemble.run; xarray imports dask.array
-# at its first Dataset, the level's design pipeline.ensemble.sampler (0.2-0.3 s per worker in its first task)
-WORKER_IMPORTS = ["distributed", "pipeline.ensemble.run", "dask.array", "pipeline.ensemble.sampler"]
+# at its first Dataset, the level's design pipeline.ensemble.sampler (0.2-0.3 s per worker in its first task),
+# the draws' compiled arithmetic rss6core.draw_kernel (numba, loaded or compiled once in the server)
+WORKER_IMPORTS = ["distributed", "pipeline.ensemble.run", "dask.array", "pipeline.ensemble.sampler",
+                  "rss6core.draw_kernel"]
 
 
 # the hash seed dask's nanny gives its workers (distributed/nanny.py, dask/distributed#8400): a

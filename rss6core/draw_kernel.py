@@ -1,0 +1,130 @@
+"""Compiled arithmetic of the clearance laws (docs/model.md section 4): uniforms in, eccentricities out.
+
+:mod:`.clearance` takes the uniforms from the realisation's stream (or a design) in their fixed
+order and hands them here; these kernels apply the laws' inverse CDFs and the vector products in one
+pass over the joint-steps, without numpy's temporaries (a per-step draw of the paper level is 12 030
+joint-steps).  The bits are those of the numpy expressions they replace (tests/test_draw_kernel.py):
+no fastmath (numba's ``math.sin``/``math.cos`` call glibc's, as numpy's float64 sin and cos do here),
+the same operations in the same order, scipy's own ``ndtri`` (its Cython export, called by symbol
+name so the kernels stay cacheable); the arccosine of the uniform sphere law stays numpy's (its own
+SIMD code, which may differ from glibc's in the last bit) and is taken by the caller.
+
+Everything a kernel reads is a named structure read by name (:class:`TruncatedNormal`,
+:class:`Revolute`, :class:`Sphere`).  numba is imported here only: a process that draws nothing
+does without its 0.3 s import.
+"""
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import llvmlite.binding as llvm
+import numpy as np
+from numba import njit, types
+from numba.extending import get_cython_function_address
+
+__all__ = ["TruncatedNormal", "Revolute", "Sphere", "truncated_normals", "sphere_directions_into",
+           "eccentricities_into"]
+
+TWO_PI = 2.0 * math.pi   # Python's product, as numpy's ``2.0 * np.pi * u`` forms it first
+
+# scipy.special.ndtri's Cython export: double ndtri(double x, int skip_dispatch)
+llvm.add_symbol("rss6_ndtri", get_cython_function_address("scipy.special.cython_special", "ndtri"))
+_ndtri = types.ExternalFunction("rss6_ndtri", types.float64(types.float64, types.intc))
+
+# Normal(mean, std) truncated to [low, high] per leg (arrays (legs,)), inverted from CDF values lo, hi
+# of its ends (ndtr's, taken once per draw by the caller); ``point``: a std is not positive, the law
+# is the point mean clipped to [low, high] and takes no uniforms
+TruncatedNormal = namedtuple("TruncatedNormal", "point mean std lo hi low high")
+# the revolute's draw: radial magnitude and axial offset (TruncatedNormal each) and their uniforms
+# (steps, legs; empty for a point law), the radial angle's uniforms, the plane of the radial part
+# spanned by plane_x, plane_y (legs, 3), the axis w (legs, 3)
+Revolute = namedtuple("Revolute", "radial radial_u angle_u axial axial_u plane_x plane_y w")
+# a spherical joint's draw: sizes (legs,) m, magnitude uniforms, polar angles eta_1 (numpy's) and
+# azimuth uniforms (steps, legs)
+Sphere = namedtuple("Sphere", "size magnitude_u eta1 azimuth_u")
+
+
+@njit(cache=True)
+def _clip(x, low, high):
+    """numpy's clip of a float: max then min, NaN kept."""
+    if math.isnan(x):
+        return x
+    x = x if x > low else low
+    return x if x < high else high
+
+
+@njit(cache=True)
+def _truncated(law, u, leg):
+    """One draw of leg ``leg``'s truncated normal from the uniform u (unused for a point law)."""
+    if law.point:
+        return _clip(law.mean[leg], law.low[leg], law.high[leg])
+    x = law.mean[leg] + law.std[leg] * _ndtri(law.lo[leg] + u * (law.hi[leg] - law.lo[leg]), 0)
+    return _clip(x, law.low[leg], law.high[leg])
+
+
+@njit(cache=True)
+def truncated_normals(law, u, out):
+    """out[j, l] = leg l's truncated normal of the uniform u[j, l] (a point law reads no u)."""
+    for j in range(out.shape[0]):
+        for leg in range(out.shape[1]):
+            out[j, leg] = _truncated(law, u[j, leg] if not law.point else 0.0, leg)
+
+
+@njit(cache=True)
+def _direction(eta1, u2):
+    """The unit vector of polar angle eta1 and azimuth 2 pi u2 (sin eta1 cos eta2, sin eta1 sin eta2,
+    cos eta1)."""
+    eta2 = TWO_PI * u2
+    sin1 = math.sin(eta1)
+    return sin1 * math.cos(eta2), sin1 * math.sin(eta2), math.cos(eta1)
+
+
+@njit(cache=True)
+def sphere_directions_into(eta1, u2, out):
+    """out[j] = the unit vector of polar angle eta1[j] and azimuth uniform u2[j] (out (n, 3))."""
+    for j in range(out.shape[0]):
+        out[j, 0], out[j, 1], out[j, 2] = _direction(eta1[j], u2[j])
+
+
+@njit(cache=True)
+def _spherical(sphere, out):
+    """out[j, l] = k_s delta_s times the direction, (magnitude_u[j, l] size[l]) times each component."""
+    for j in range(out.shape[0]):
+        for leg in range(out.shape[1]):
+            magnitude = sphere.magnitude_u[j, leg] * sphere.size[leg]
+            x, y, z = _direction(sphere.eta1[j, leg], sphere.azimuth_u[j, leg])
+            out[j, leg, 0], out[j, leg, 1], out[j, leg, 2] = magnitude * x, magnitude * y, magnitude * z
+
+
+@njit(cache=True)
+def eccentricities_into(rev, C, B, e_A, e_C, e_B):
+    """e_A, e_C, e_B (steps, legs, 3) of a draw from its uniforms (steps, legs): the revolute's
+    radial (truncated normal) magnitude r at angle theta = 2 pi u plus the axial offset a,
+    e_A = r cos(theta) plane_x + r sin(theta) plane_y + a w, and each sphere's k_s delta_s times a
+    direction (:class:`Revolute`, :class:`Sphere`)."""
+    for j in range(e_A.shape[0]):
+        for leg in range(e_A.shape[1]):
+            r = _truncated(rev.radial, rev.radial_u[j, leg] if not rev.radial.point else 0.0, leg)
+            theta = 0.0 + (TWO_PI - 0.0) * rev.angle_u[j, leg]   # Generator.uniform(0, 2 pi)'s arithmetic
+            a = _truncated(rev.axial, rev.axial_u[j, leg] if not rev.axial.point else 0.0, leg)
+            rc, rs = r * math.cos(theta), r * math.sin(theta)
+            for k in range(3):
+                e_A[j, leg, k] = (rc * rev.plane_x[leg, k] + rs * rev.plane_y[leg, k]) + a * rev.w[leg, k]
+    _spherical(C, e_C)
+    _spherical(B, e_B)
+
+
+def _load() -> None:
+    """Compile, or load from numba's cache, the one overload of each draw kernel every draw calls
+    (the argument types :mod:`.clearance` passes), at import: a fork server that preloads this
+    module hands them to every worker it forks, which then neither compiles nor loads them."""
+    legs = np.zeros(6)
+    law = TruncatedNormal(False, legs, legs, legs, legs, legs, legs)
+    u, vectors, out = np.zeros((1, 6)), np.zeros((6, 3)), np.zeros((1, 6, 3))
+    truncated_normals(law, u, np.zeros((1, 6)))
+    sphere = Sphere(legs, u, u, u)
+    eccentricities_into(Revolute(law, u, u, law, u, vectors, vectors, vectors), sphere, sphere, out, out, out)
+
+
+_load()
