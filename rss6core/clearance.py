@@ -253,8 +253,8 @@ def _draw(scene, rng, steps: int | None, out: dict | None = None) -> ClearanceDr
     e_A, e_C, e_B = ((np.empty(shape + (3,)) for _ in range(3)) if out is None else
                      (out["e_A"], out["e_C"], out["e_B"]))
     kernel.eccentricities_into(revolute, C, B, e_A, e_C, e_B)
-    if steps is None:
-        e_A, e_C, e_B = e_A[0], e_C[0], e_B[0]
+    if steps is None:   # own copies, not views that would keep their buffer alive with the draw
+        e_A, e_C, e_B = e_A[0].copy(), e_C[0].copy(), e_B[0].copy()
     return ClearanceDraw(dr, da, dC, dB, e_A, e_C, e_B)
 
 
