@@ -206,7 +206,9 @@ def _peak_rss(config, n, tmp, model="paper"):
     cmd = [sys.executable, "-m", "pipeline.cli", "run", str(config), "-n", str(n), "--model", model,
            "--store", "summary", "--workers", "2", "-o", str(Path(tmp) / f"{model}-{n}.nc")]
     peak, start = 0, time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    # cwd: ``-m`` puts the working directory first on sys.path, before PYTHONPATH: run from a checkout's
+    # root, a baseline's run would import this checkout's pipeline
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=tmp)
     stop = threading.Event()
 
     def sample():
