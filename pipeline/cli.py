@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _start_workers_ahead(argv: list[str]) -> None:
     """A command that will start a local cluster starts its workers' fork server first, so that the
-    server's imports and this process's (1.3-1.7 s each) run side by side: docs/performance.md
+    server's imports and this process's run side by side: docs/performance.md
     section 31. The server is stopped at exit, whether the command used it or stopped early."""
     if not argv or argv[0] not in LOCAL_CLUSTER_COMMANDS:
         return

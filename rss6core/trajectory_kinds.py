@@ -72,7 +72,7 @@ class ViaPoints:
     @cached_property
     def _stretches(self) -> list[tuple[float, float, object]]:
         """(departure, arrival, quintic spline) per motion between consecutive rest points."""
-        from scipy.interpolate import make_interp_spline   # here: 0.15 s of every process's import
+        from scipy.interpolate import make_interp_spline   # here, not in every process's import
         rest = [0] + [i for i in range(1, len(self.times) - 1) if self.dwell[i] > 0] + [len(self.times) - 1]
         out = []
         for a, b in zip(rest[:-1], rest[1:]):

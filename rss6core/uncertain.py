@@ -121,8 +121,8 @@ class UncertainInput:
     @cached_property
     def distribution(self):
         """The scipy.stats law of the deviation (TOML unit) or, for lognormal, of the factor; None
-        for a point law (std or sigma 0). scipy.stats is imported here, at the first law: a scene
-        without uncertain inputs (and every rss6 process that reads one) does without its 0.4 s."""
+        for a point law (std or sigma 0). scipy.stats is imported here, at the first law, not by
+        every process that imports rss6core (docs/performance.md section 31)."""
         from scipy import stats
         p = dict(self.parameters)
         if self.law == "normal":

@@ -43,7 +43,7 @@ def _core_modules_imported(node) -> set[str]:
 # compiled kernel (numba, 0.3 s per process) loads only when a contact level runs or its kernels
 # are asked about or compiled (rss6 warm; kernels.compile_kernel runs a level with stand-in kernels);
 # the clearance laws' compiled arithmetic (draw_kernel, numba too) loads at a process's first draw;
-# scipy.stats and scipy.interpolate (0.4 s and 0.15 s per process) load at a scene's first uncertain law
+# scipy.stats and scipy.interpolate load at a scene's first uncertain law
 # or spline, not in every rss6 process (docs/performance.md section 31)
 LAZY = {("models", "contact_dynamics"), ("models", "contact_start"), ("kernels", "contact_kernel"),
         ("kernels", "models"), ("kernels", "contact_dynamics"), ("clearance", "draw_kernel"),
