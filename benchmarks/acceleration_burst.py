@@ -121,9 +121,9 @@ def _spectrum_peaks(b, k: int, count: int = 3) -> list[float]:
     return [float(f) for f in freq[np.argsort(power[1:])[::-1][:count] + 1]]
 
 
-def _robot_frequencies(scene, t: float, count: int = 8) -> np.ndarray:
+def _robot_frequencies(scene, elements: int, t: float, count: int = 8) -> np.ndarray:
     """The elastic robot's lowest natural frequencies (Hz) at time t, joints rigid (eq. 32's M, K)."""
-    model = build_elastic_model(scene, prepare_level(scene, "contact").elements)
+    model = build_elastic_model(scene, elements)
     maps, _ = system_at(model, rigid_motion(scene, np.array([t])), scene)
     M, K = dense_matrices(model, maps[0])
     w2 = np.sort(np.linalg.eigvals(np.linalg.solve(M, K)).real)
@@ -155,7 +155,7 @@ def main(argv=None):
         print(f"{DIRECTIONS[k]} acceleration error, 0.9-1.1 s, strongest frequencies: "
               + ", ".join(f"{f:.0f} Hz" for f in _spectrum_peaks(b, k)))
     print("elastic robot at t = 1 s, joints rigid, lowest frequencies: "
-          + ", ".join(f"{f:.0f}" for f in _robot_frequencies(scene, 1.0)) + " Hz")
+          + ", ".join(f"{f:.0f}" for f in _robot_frequencies(scene, level.elements, 1.0)) + " Hz")
 
 
 if __name__ == "__main__":

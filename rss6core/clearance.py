@@ -93,7 +93,7 @@ def _uniform(rng, name: str, low=0.0, high=1.0, size=None):
 
 def _kernel():
     """:mod:`.draw_kernel`, imported at the first draw: only a process that draws pays numba's import
-    (0.3 s; the paper workers' fork server preloads it)."""
+    (the local workers' fork server preloads it; docs/performance.md section 30)."""
     from . import draw_kernel
     return draw_kernel
 
