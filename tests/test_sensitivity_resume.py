@@ -156,7 +156,7 @@ def test_a_failed_row_keeps_the_finished_chunks(configs, tmp_path, monkeypatch, 
 
 def test_ctrl_c_on_dask_is_raised_between_waits_after_the_finished_chunks_are_kept(monkeypatch, tmp_path):
     """On a dask client a Ctrl-C arriving while rss6 waits for the workers is held and raised by
-    pipeline.ensemble.cluster._finished before its next wait (never inside dask's client, as for
+    pipeline.ensemble.cluster.results_as_finished before its next wait (never inside dask's client, as for
     `rss6 run`); the chunk that had finished is stored first."""
     import os
     import signal
@@ -188,5 +188,5 @@ def test_ctrl_c_on_dask_is_raised_between_waits_after_the_finished_chunks_are_ke
     parts = sens.RowParts(PartsManifest(tmp_path / "p", {}, index="row", items="rows"), "families")
     with pytest.raises(KeyboardInterrupt) as caught:
         sens.evaluate_statistics(None, None, np.zeros((8, 3)), Client(), chunk=4, parts=parts)
-    assert len(waits) == 1 and caught.traceback[-1].name == "_finished"
+    assert len(waits) == 1 and caught.traceback[-1].name == "results_as_finished"
     assert [p.name for p in parts.manifest.parts()] == ["families-0000000-0000003.nc"]

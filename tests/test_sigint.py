@@ -50,7 +50,7 @@ def test_sigint_to_a_run_exits_130_and_keeps_the_finished_chunks(tmp_path):
 
 def test_ctrl_c_while_waiting_for_dask_is_raised_by_rss6_not_inside_dask(monkeypatch):
     """A Ctrl-C that arrives while the main thread waits in dask's client is held and raised by
-    _finished before its next wait: never inside dask's locks (where it could hang the shutdown)."""
+    results_as_finished before its next wait: never inside dask's locks (where it could hang the shutdown)."""
     import pipeline.ensemble.cluster as cluster
     from pipeline.files.writing import sigint_deferred
     waits = []
@@ -64,5 +64,5 @@ def test_ctrl_c_while_waiting_for_dask_is_raised_by_rss6_not_inside_dask(monkeyp
     monkeypatch.setattr(cluster, "_gathered", wait_in_dask)
     with pytest.raises(KeyboardInterrupt) as caught:
         with sigint_deferred() as interrupted:
-            list(cluster._finished(None, ["future"], None, 60.0, interrupted))
-    assert len(waits) == 1 and caught.traceback[-1].name == "_finished"
+            list(cluster.results_as_finished(None, ["future"], None, 60.0, interrupted))
+    assert len(waits) == 1 and caught.traceback[-1].name == "results_as_finished"

@@ -3,7 +3,7 @@
 :func:`dask_client` is the one way the pipeline gets a dask client: on a new local cluster
 (:func:`local_cluster`: single-threaded workers with one BLAS thread, forked from a server that
 imported rss6 once, quiet, deaf to a terminal's Ctrl-C) or on an external scheduler.
-:func:`_finished` yields the chunk results as they finish, acting on a Ctrl-C between waits and
+:func:`results_as_finished` yields the chunk results as they finish, acting on a Ctrl-C between waits and
 giving up on an external scheduler that has had no workers for too long (SchedulerUnavailable).
 """
 from __future__ import annotations
@@ -15,9 +15,9 @@ import signal
 import threading
 import time
 
-__all__ = ["local_cluster", "dask_client", "start_worker_server", "stop_worker_server", "BLAS_ENV", "QUIET_CLUSTER",
-           "NANNY_HASH_SEED", "WORKER_IMPORTS", "SchedulerUnavailable", "CONNECT_TIMEOUT_S", "WORKER_TIMEOUT_S",
-           "POLL_S"]
+__all__ = ["local_cluster", "dask_client", "start_worker_server", "stop_worker_server", "results_as_finished",
+           "BLAS_ENV", "QUIET_CLUSTER", "NANNY_HASH_SEED", "WORKER_IMPORTS", "SchedulerUnavailable",
+           "CONNECT_TIMEOUT_S", "WORKER_TIMEOUT_S", "POLL_S"]
 
 BLAS_ENV = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
@@ -158,7 +158,7 @@ def _client(workers: int, scheduler: str | None):
     return Client(cluster), cluster
 
 
-def _finished(client, futures: list, scheduler: str | None, worker_timeout: float,
+def results_as_finished(client, futures: list, scheduler: str | None, worker_timeout: float,
               interrupted: list):
     """The chunk results as they finish, waiting at most POLL_S at a time: KeyboardInterrupt is
     raised here, between waits, once ``interrupted`` holds a Ctrl-C (never inside dask's client,

@@ -36,7 +36,7 @@ from ..files.reading import SUMMARY_BLOCK, load_netcdf
 from ..files.records import finish_ensemble, chunk_dataset
 from ..files.schema import EnsembleFileError, ensemble_identity, identity
 from ..files.writing import sigint_deferred, write_netcdf
-from .cluster import WORKER_TIMEOUT_S, _finished, dask_client
+from .cluster import WORKER_TIMEOUT_S, dask_client, results_as_finished
 from .progress import _kernels_to_compile, _Progress, compile_apart
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
@@ -356,8 +356,8 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
             compile_apart(client, kernels, scheduler, interrupted)
         futures = [client.submit(run_chunk, spec, c, pure=False, retries=2) for c in chunks]
         try:
-            with sigint_deferred() as interrupted:   # Ctrl-C is acted on in _finished
-                for ds in _finished(client, futures, scheduler, worker_timeout, interrupted):
+            with sigint_deferred() as interrupted:   # Ctrl-C is acted on in results_as_finished
+                for ds in results_as_finished(client, futures, scheduler, worker_timeout, interrupted):
                     first, last = int(ds.realization[0]), int(ds.realization[-1])
                     path = manifest.write(ds, f"chunk-{first:07d}-{last:07d}.nc")
                     if "time" in ds.dims:

@@ -29,7 +29,7 @@ from rss6core import (__version__, FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clea
                       inputs_from_uniforms, MODELS, model_level, models_with, prepare_level, realised_clearances,
                       size_band)
 
-from ..ensemble.cluster import WORKER_TIMEOUT_S, _finished, dask_client
+from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client, results_as_finished
 from ..files.records import check_window, window_label, window_summaries
 from ..files.outputs import PartsManifest
 from ..files.reading import load_netcdf
@@ -257,14 +257,14 @@ def evaluate_statistics(spec, inputs: ClearanceInputs, u: np.ndarray, client=Non
 
 def _run_chunks(spec, inputs, u, parts, client, window):
     """(slice, chunk result) pairs as they finish; on dask, a Ctrl-C is raised between waits, as
-    ``rss6 run``'s (pipeline.ensemble.cluster._finished), never inside dask's client."""
+    ``rss6 run``'s (pipeline.ensemble.cluster.results_as_finished), never inside dask's client."""
     if client is None:
         for part in parts:
             yield part, _evaluate_chunk(spec, inputs, u[part], window)
         return
     futures = [client.submit(_evaluate_rows, spec, inputs, u[p], p, window, pure=False) for p in parts]
     with sigint_deferred() as interrupted:
-        yield from _finished(client, futures, None, WORKER_TIMEOUT_S, interrupted)
+        yield from results_as_finished(client, futures, None, WORKER_TIMEOUT_S, interrupted)
 
 
 def _evaluate_rows(spec, inputs, u, rows: slice, window):   # a dask task: (rows, _evaluate_chunk)
