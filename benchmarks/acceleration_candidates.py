@@ -31,12 +31,17 @@ compliant motor of stiffness K N m/rad (:func:`rss6core.contact_dynamics.build_j
 ``motor_stiffness``: node 0's rotation about the motor axis a DOF on a torsional spring K, plus the rigid
 robot's feed-forward torque); its row also prints the rigid crank's frequency on that spring,
 sqrt(K / J_A) / 2 pi.  ``--numpy`` runs it on the numpy stepper instead (the kernel's check).
+``motor-friction=K`` (numpy stepper): the same motor with the actuated joint's friction moment about
+the motor axis, w . (R n x f_t) (:func:`journal_friction_torque`; R the journal radius, n the radial
+normal, f_t the friction on the journal), applied lagged to the released rotation, which the clamped
+crank's rotation absorbs.
 
     python benchmarks/acceleration_candidates.py [--half-step] [--realization K] [--contact FIELD=VALUE]
         [--scale] [SWITCH ...]
 
 SWITCH in: plain (the compiled kernel), zero (the moments at scale 0: must print plain's numbers),
-moments, rates, both, C, B, spin, spin-moments, spin-inertia, spin-inertia-moments, all, motor=K.  Each numpy
+moments, rates, both, C, B, spin, spin-moments, spin-inertia, spin-inertia-moments, all, motor=K,
+motor-friction=K.  Each numpy
 run takes 20-220 s on the shared 2-core machine (about twice that with --half-step).
 """
 import argparse
@@ -91,6 +96,14 @@ def friction_moment(radius, normal, force):
     return radius * np.cross(normal, tangential)
 
 
+def journal_friction_torque(radius, normal, force, axis):
+    """w . (R n x f) (...) N m: the moment about the motor ``axis`` w (..., 3) of the actuated joint's
+    force ``force`` (..., 3) N on the journal, at its contact point R n (``radius`` R, m; ``normal`` n,
+    the radial normal, unit, normal to w).  Only the friction has one: the radial normal force is
+    along n and the axial faces' force along w, both with no moment about w."""
+    return (friction_moment(radius, normal, force) * axis).sum(-1)
+
+
 def spin_step(contact, last, h, inertia, normal, force, de, omega, axis, radius):
     """The rods' spin rates (6,) rad/s after a step of h (s) from ``last``: J (s - last) / h = the axial
     friction moments a . (R n x f) of each rod's two spherical joints (backward Euler; ``inertia`` J
@@ -112,7 +125,24 @@ def spin_step(contact, last, h, inertia, normal, force, de, omega, axis, radius)
 
 class Switched(NumpyStepper):
     """The numpy stepper with issue 43's lagged switches (class attributes, set by :func:`stepper`)."""
-    moments, rates, spin, inertia, scale, joints = False, False, False, False, 1.0, (1, 2)
+    moments, rates, spin, inertia, scale, joints, journal = False, False, False, False, 1.0, (1, 2), False
+
+    def _journal_friction(self, idx, ch, k1):
+        """Generalised forces (R, N) of the actuated joints' friction moments about the motor axes on the
+        released crank rotations (:func:`journal_friction_torque`), at the last accepted state."""
+        jm, ws = self.setup.jm, self.ws
+        out = np.zeros((len(idx), ws.d.shape[-1]))
+        if not self.journal or not hasattr(ws, "f_last"):
+            return out
+        if jm.motor_dof is None:
+            raise ValueError("the journal friction switch needs a crank on a motor (motor_stiffness)")
+        w = self.setup.scene.geometry.w                                   # (6, 3) crank-frame y, base frame
+        e = _relative(ch, k1, *_joint_nodes(jm, ws.d[idx]))[:, :, 0]        # (R, 6, 3) e_A
+        radial = e - (e * w).sum(-1, keepdims=True) * w
+        normal = radial / np.maximum(np.linalg.norm(radial, axis=-1, keepdims=True), 1e-300)
+        radius = float(np.asarray(ch.radius).reshape(-1)[0])
+        split(jm, out)[0][..., jm.motor_dof] = journal_friction_torque(radius, normal, ws.f_last[idx][:, :, 0], w)
+        return out
 
     def _rod_spin(self, idx, ch, k1, h):
         """The rods' spin rates (6,) over a step of h (s) from the last accepted state (:func:`spin_step`;
@@ -179,7 +209,7 @@ class Switched(NumpyStepper):
         rotations of this attempt (:meth:`_sliding_rotation`), which its Newton iteration then reads."""
         if self.rates or self.spin:
             self._sliding_rotation(idx, ch, k1, h)
-        return ch.F[k1] + self._friction_moments(idx, ch, k1)
+        return ch.F[k1] + self._friction_moments(idx, ch, k1) + self._journal_friction(idx, ch, k1)
 
     def _keep(self, kept, ch, k1, h, a, d, v, f, delta, rate, used):
         super()._keep(kept, ch, k1, h, a, d, v, f, delta, rate, used)
@@ -207,12 +237,12 @@ def stepper(name):
 def motor_stiffness(name):
     """K (N m/rad) of switch ``motor=K``, or None for any other switch."""
     head, _, value = name.partition("=")
-    if head != "motor":
+    if head not in ("motor", "motor-friction"):
         return None
     try:
         k = float(value)
     except ValueError:
-        raise ValueError(f"switch {name!r}: motor=K needs a stiffness K in N m/rad, e.g. motor=1e4") from None
+        raise ValueError(f"switch {name!r}: {head}=K needs a stiffness K in N m/rad, e.g. {head}=1e4") from None
     if not k > 0.0:
         raise ValueError(f"switch {name!r}: the motor stiffness must be > 0 N m/rad")
     return k
@@ -227,6 +257,8 @@ def run(scene, name, realization=0, numpy=False):
     k_m = motor_stiffness(name)
     model = None if k_m is None else build_joint_model(scene, level.elements, motor_stiffness=k_m)
     steps = (NumpyStepper if numpy else None) if k_m is not None else stepper(name)
+    if name.startswith("motor-friction="):
+        steps = type("motor-friction", (Switched,), dict(journal=True))
     start = time.perf_counter()
     b = simulate_contact(scene, [draw_clearances(scene, 0, realization)], level.elements, level.integrator,
                          level.dt, model=model, stepper=steps)
@@ -267,9 +299,9 @@ def main(argv=None):
     p.add_argument("--scale", action="store_true", help="print candidate 1's size (linearisation) first")
     p.add_argument("--numpy", action="store_true", help="run the motor=K switches on the numpy stepper")
     args = p.parse_args(argv)
-    unknown = sorted(n for n in set(args.switches) - set(SWITCHES) if not n.startswith("motor="))
+    unknown = sorted(n for n in set(args.switches) - set(SWITCHES) if not n.startswith(("motor=", "motor-friction=")))
     if unknown:
-        p.error(f"unknown switch {unknown[0]!r}; choose from {', '.join(SWITCHES)}, motor=K")
+        p.error(f"unknown switch {unknown[0]!r}; choose from {', '.join(SWITCHES)}, motor=K, motor-friction=K")
     try:
         [motor_stiffness(n) for n in args.switches]
     except ValueError as error:
