@@ -62,6 +62,7 @@ __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactSteppe
            "Progress", "JointSolution", "StepSolution", "StartState", "drawn_start"]
 
 MAX_ITERATIONS = 60
+MOTOR_DOF = 3   # crank index of node 0's rotation about the motor axis, when a motor releases it
 
 
 @dataclass(frozen=True)
@@ -93,7 +94,7 @@ class JointModel(LegLayout):
     @property
     def motor_dof(self) -> int | None:
         """The crank index of node 0's rotation about the motor axis (crank-frame y), or None (clamped)."""
-        return None if self.motor_stiffness is None else 3
+        return None if self.motor_stiffness is None else MOTOR_DOF
 
     @property
     def rod_dofs(self) -> int:
@@ -125,7 +126,7 @@ def build_joint_model(scene, elements: int, motor_stiffness: float | None = None
     boundary = np.r_[0:3, n6 + node0 - 6:n6 + node0 - 3]   # node 0 translations; node n translations
     K = Kc[..., keep[:, None], keep]
     if motor_stiffness is not None:
-        K[..., 3, 3] += motor_stiffness
+        K[..., MOTOR_DOF, MOTOR_DOF] += motor_stiffness
     jm = JointModel(elements, K, Mc[..., keep[:, None], keep], boundary,
                     em.rod_K, em.rod_M, em.platform_mass, em.platform_inertia, em.mass_damping,
                     em.stiffness_damping, em, motor_stiffness=motor_stiffness)
