@@ -26,11 +26,22 @@ reference), as a measurement, not yet a formulation of the product:
 ``--contact FIELD=VALUE`` changes one of the scene's contact-law parameters (the compiled kernel's
 ``plain`` run measures the law's own sensitivity).
 
+``motor=K`` (candidate 3): the compiled kernel on the contact level whose cranks are driven through a
+compliant motor of stiffness K N m/rad (:func:`rss6core.contact_dynamics.build_joint_model`'s
+``motor_stiffness``: node 0's rotation about the motor axis a DOF on a torsional spring K, plus the rigid
+robot's feed-forward torque); its row also prints the rigid crank's frequency on that spring,
+sqrt(K / J_A) / 2 pi.  ``--numpy`` runs it on the numpy stepper instead (the kernel's check).
+``motor-friction=K`` (numpy stepper): the same motor with the actuated joint's friction moment about
+the motor axis, w . (R n x f_t) (:func:`journal_friction_torque`; R the journal radius, n the radial
+normal, f_t the friction on the journal), applied lagged to the released rotation, which the clamped
+crank's rotation absorbs.
+
     python benchmarks/acceleration_candidates.py [--half-step] [--realization K] [--contact FIELD=VALUE]
         [--scale] [SWITCH ...]
 
 SWITCH in: plain (the compiled kernel), zero (the moments at scale 0: must print plain's numbers),
-moments, rates, both, C, B, spin, spin-moments, spin-inertia, spin-inertia-moments, all.  Each numpy
+moments, rates, both, C, B, spin, spin-moments, spin-inertia, spin-inertia-moments, all, motor=K,
+motor-friction=K.  Each numpy
 run takes 20-220 s on the shared 2-core machine (about twice that with --half-step).
 """
 import argparse
@@ -42,11 +53,12 @@ import numpy as np
 
 from rss6core.assembly import join, split
 from rss6core.clearance import draw_clearances
-from rss6core.contact_dynamics import _joint_nodes, _relative, simulate_contact
+from rss6core.contact_dynamics import _joint_nodes, _relative, build_joint_model, simulate_contact
 from rss6core.contact_numpy import NumpyStepper
 from rss6core.kinematics import rigid_motion
 from rss6core.models import prepare_level
 from rss6core.scene import load_scene
+from rss6core.sections import crank_inertia
 
 SCENE = Path(__file__).resolve().parents[1] / "configs" / "paper.toml"
 SETTLE = 0.3   # s, issue 43's window start
@@ -84,6 +96,14 @@ def friction_moment(radius, normal, force):
     return radius * np.cross(normal, tangential)
 
 
+def journal_friction_torque(radius, normal, force, axis):
+    """w . (R n x f) (...) N m: the moment about the motor ``axis`` w (..., 3) of the actuated joint's
+    force ``force`` (..., 3) N on the journal, at its contact point R n (``radius`` R, m; ``normal`` n,
+    the radial normal, unit, normal to w).  Only the friction has one: the radial normal force is
+    along n and the axial faces' force along w, both with no moment about w."""
+    return (friction_moment(radius, normal, force) * axis).sum(-1)
+
+
 def spin_step(contact, last, h, inertia, normal, force, de, omega, axis, radius):
     """The rods' spin rates (6,) rad/s after a step of h (s) from ``last``: J (s - last) / h = the axial
     friction moments a . (R n x f) of each rod's two spherical joints (backward Euler; ``inertia`` J
@@ -105,7 +125,24 @@ def spin_step(contact, last, h, inertia, normal, force, de, omega, axis, radius)
 
 class Switched(NumpyStepper):
     """The numpy stepper with issue 43's lagged switches (class attributes, set by :func:`stepper`)."""
-    moments, rates, spin, inertia, scale, joints = False, False, False, False, 1.0, (1, 2)
+    moments, rates, spin, inertia, scale, joints, journal = False, False, False, False, 1.0, (1, 2), False
+
+    def _journal_friction(self, idx, ch, k1):
+        """Generalised forces (R, N) of the actuated joints' friction moments about the motor axes on the
+        released crank rotations (:func:`journal_friction_torque`), at the last accepted state."""
+        jm, ws = self.setup.jm, self.ws
+        out = np.zeros((len(idx), ws.d.shape[-1]))
+        if not self.journal or not hasattr(ws, "f_last"):
+            return out
+        if jm.motor_dof is None:
+            raise ValueError("the journal friction switch needs a crank on a motor (motor_stiffness)")
+        w = self.setup.scene.geometry.w                                   # (6, 3) crank-frame y, base frame
+        e = _relative(ch, k1, *_joint_nodes(jm, ws.d[idx]))[:, :, 0]        # (R, 6, 3) e_A
+        radial = e - (e * w).sum(-1, keepdims=True) * w
+        normal = radial / np.maximum(np.linalg.norm(radial, axis=-1, keepdims=True), 1e-300)
+        radius = float(np.asarray(ch.radius).reshape(-1)[0])
+        split(jm, out)[0][..., jm.motor_dof] = journal_friction_torque(radius, normal, ws.f_last[idx][:, :, 0], w)
+        return out
 
     def _rod_spin(self, idx, ch, k1, h):
         """The rods' spin rates (6,) over a step of h (s) from the last accepted state (:func:`spin_step`;
@@ -134,14 +171,14 @@ class Switched(NumpyStepper):
             return out
         e = _relative(ch, k1, *_joint_nodes(jm, ws.d[idx]))
         c, r, p = split(jm, out)
-        n, radius = jm.elements, np.asarray(ch.radius).reshape(-1)
+        n, radius, tip = jm.elements, np.asarray(ch.radius).reshape(-1), jm.crank_boundary[-1] + 1
         for j in self.joints:
             normal = e[:, :, j] / np.maximum(np.linalg.norm(e[:, :, j], axis=-1, keepdims=True), 1e-300)
             m = self.scale * friction_moment(radius[j], normal, ws.f_last[idx][:, :, j])
             rod = _to_local(ch.Rr[k1], m)[..., 1:3]          # bending rotations only
             if j == 1:
                 r[..., 0:2] += rod
-                c[..., 6 * n:6 * n + 3] -= _to_local(ch.Rc[k1], m)
+                c[..., tip:tip + 3] -= _to_local(ch.Rc[k1], m)       # the tip node's rotations
             else:
                 r[..., 5 * n - 3:5 * n - 1] += rod
                 p[..., 3:] -= m.sum(1)
@@ -158,7 +195,8 @@ class Switched(NumpyStepper):
         if self.rates:
             c, r, p = split(self.setup.jm, self.ws.v[idx[0]])
             n, Rc, Rr = self.setup.jm.elements, ch.Rc[k1], ch.Rr[k1]
-            tip = np.einsum("lab,lb->la", Rc, c[:, 6 * n:6 * n + 3])
+            t0 = self.setup.jm.crank_boundary[-1] + 1
+            tip = np.einsum("lab,lb->la", Rc, c[:, t0:t0 + 3])
             ch.omega[k1, :, 1] += np.einsum("lab,lb->la", Rr[:, :, 1:3], r[:, 0:2]) - tip
             ch.omega[k1, :, 2] += np.einsum("lab,lb->la", Rr[:, :, 1:3], r[:, 5 * n - 3:5 * n - 1]) - p[None, 3:]
         if self.spin:
@@ -171,7 +209,7 @@ class Switched(NumpyStepper):
         rotations of this attempt (:meth:`_sliding_rotation`), which its Newton iteration then reads."""
         if self.rates or self.spin:
             self._sliding_rotation(idx, ch, k1, h)
-        return ch.F[k1] + self._friction_moments(idx, ch, k1)
+        return ch.F[k1] + self._friction_moments(idx, ch, k1) + self._journal_friction(idx, ch, k1)
 
     def _keep(self, kept, ch, k1, h, a, d, v, f, delta, rate, used):
         super()._keep(kept, ch, k1, h, a, d, v, f, delta, rate, used)
@@ -196,14 +234,34 @@ def stepper(name):
     return None if SWITCHES[name] is None else type(name, (Switched,), SWITCHES[name])
 
 
-def run(scene, name, realization=0):
-    """The case under switch ``name``: maxima and means over t >= SETTLE, and the wall time."""
+def motor_stiffness(name):
+    """K (N m/rad) of switch ``motor=K``, or None for any other switch."""
+    head, _, value = name.partition("=")
+    if head not in ("motor", "motor-friction"):
+        return None
+    try:
+        k = float(value)
+    except ValueError:
+        raise ValueError(f"switch {name!r}: {head}=K needs a stiffness K in N m/rad, e.g. {head}=1e4") from None
+    if not k > 0.0:
+        raise ValueError(f"switch {name!r}: the motor stiffness must be > 0 N m/rad")
+    return k
+
+
+def run(scene, name, realization=0, numpy=False):
+    """The case under switch ``name`` (``numpy``: a motor=K switch on the numpy stepper): maxima and means
+    over t >= SETTLE, and the wall time."""
     if scene.beam.link_modes:
         raise ValueError("the switches address nodal DOFs: run them on the full mesh ([beam] link_modes = 0)")
     level = prepare_level(scene, "contact")
+    k_m = motor_stiffness(name)
+    model = None if k_m is None else build_joint_model(scene, level.elements, motor_stiffness=k_m)
+    steps = (NumpyStepper if numpy else None) if k_m is not None else stepper(name)
+    if name.startswith("motor-friction="):
+        steps = type("motor-friction", (Switched,), dict(journal=True))
     start = time.perf_counter()
     b = simulate_contact(scene, [draw_clearances(scene, 0, realization)], level.elements, level.integrator,
-                         level.dt, stepper=stepper(name))
+                         level.dt, model=model, stepper=steps)
     inside = b.t >= SETTLE - 1e-12
     return dict(acceleration=np.abs(b.acceleration[0, inside]).max(0),
                 displacement=np.abs(b.displacement[0, inside]).max(0),
@@ -239,10 +297,15 @@ def main(argv=None):
                    help="a [contact] law field (rss6core ContactLaw name, e.g. slip_velocity=1e-3), repeatable")
     p.add_argument("--realization", type=int, default=0, help="realisation of seed 0 (default 0, the case's)")
     p.add_argument("--scale", action="store_true", help="print candidate 1's size (linearisation) first")
+    p.add_argument("--numpy", action="store_true", help="run the motor=K switches on the numpy stepper")
     args = p.parse_args(argv)
-    unknown = sorted(set(args.switches) - set(SWITCHES))
+    unknown = sorted(n for n in set(args.switches) - set(SWITCHES) if not n.startswith(("motor=", "motor-friction=")))
     if unknown:
-        p.error(f"unknown switch {unknown[0]!r}; choose from {', '.join(SWITCHES)}")
+        p.error(f"unknown switch {unknown[0]!r}; choose from {', '.join(SWITCHES)}, motor=K, motor-friction=K")
+    try:
+        [motor_stiffness(n) for n in args.switches]
+    except ValueError as error:
+        p.error(str(error))
     scene = load_scene(SCENE)
     sim = dataclasses.replace(scene.simulation, settle_time=SETTLE,
                               contact_time_step=scene.simulation.contact_time_step * (0.5 if args.half_step else 1))
@@ -258,11 +321,16 @@ def main(argv=None):
           f"rx ry rz rad/s^2 | max |displacement| x y z mm | mean |velocity| x y z mm/s, rx ry rz mrad/s")
     if args.scale:
         linearisation_scale(scene)
+    J_A = crank_inertia(scene).inertia[1]
+    if any(motor_stiffness(n) for n in args.switches):
+        print(f"crank J_A {J_A:.4g} kg m^2; a position loop of 50-200 Hz on it: k_m = (2 pi f)^2 J_A = "
+              f"{(2 * np.pi * 50) ** 2 * J_A:.3g}-{(2 * np.pi * 200) ** 2 * J_A:.3g} N m/rad")
     for name in args.switches or list(SWITCHES):
-        r = run(scene, name, args.realization)
+        r, k_m = run(scene, name, args.realization, args.numpy), motor_stiffness(name)
         print(f"{name:8s} " + " ".join(f"{x:.4g}" for x in r["acceleration"])
               + " | " + " ".join(f"{1e3 * x:.4g}" for x in r["displacement"][:3])
               + " | " + " ".join(f"{1e3 * x:.3g}" for x in r["velocity"])
+              + ("" if k_m is None else f" | sqrt(k_m / J_A) / 2 pi = {np.sqrt(k_m / J_A) / (2 * np.pi):.4g} Hz")
               + f" | {r['status']}, {r['wall']:.0f} s", flush=True)
 
 

@@ -5,7 +5,10 @@ elastic level (:mod:`.assembly`), but the joints are no longer ideal: every
 link is a free body held only by contact forces.
 - crank i: nodes 0..n in its own frame; node 0 (the journal at A_i) may
   translate (its rotations stay clamped: the motor holds alpha_i, and the
-  journal does not tilt in its bearing, as in the paper's sec. 2.3);
+  journal does not tilt in its bearing, as in the paper's sec. 2.3); with a
+  ``motor_stiffness`` k_m (:func:`build_joint_model`) its rotation about the motor
+  axis (crank-frame y) is a DOF too, held by a torsional spring k_m about the
+  commanded angle plus the rigid robot's feed-forward torque;
 - rod i: all nodes, both ends free (its own frame, torsion dropped as in L2);
 - platform: rigid, 6 DOFs, base frame.
 The relative displacements of the joint elements are the clearance state
@@ -46,7 +49,7 @@ from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Re
                              Out, advance_chunk, fast_inlining, make_scratch, make_work, newton_step)
 from .contact_options import MAX_CONTACT_REFINEMENTS, TOL_DISPLACEMENT, TOL_VELOCITY
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
-from .dynamics import platform_inertia_world, rod_angular_motion
+from .dynamics import inverse_dynamics, platform_inertia_world, rod_angular_motion
 from .elastic import quasi_static_state
 from .results import PEAK_WINDOWS, ContactBatch, time_grid
 from .integrators import Integrator, StepWeights, make_integrator
@@ -59,13 +62,14 @@ __all__ = ["JointModel", "build_joint_model", "simulate_contact", "ContactSteppe
            "Progress", "JointSolution", "StepSolution", "StartState", "drawn_start"]
 
 MAX_ITERATIONS = 60
+MOTOR_DOF = 3   # crank index of node 0's rotation about the motor axis, when a motor releases it
 
 
 @dataclass(frozen=True)
 class JointModel(LegLayout):
     """Constant link matrices of the contact level: every link free, joint nodes as boundaries."""
     elements: int
-    crank_K: np.ndarray       # (6n+3): node 0 translations, then nodes 1..n
+    crank_K: np.ndarray       # (6n+3): node 0 translations, then nodes 1..n (6n+4 with a motor: node 0 r_y 4th)
     crank_M: np.ndarray
     crank_boundary: np.ndarray  # crank indices of node 0 (3) and tip (3) translations
     rod_K: np.ndarray         # (5n+5) [own, C end, B end], as in the elastic model
@@ -76,26 +80,56 @@ class JointModel(LegLayout):
     stiffness_damping: float
     elastic: object           # the ElasticModel it shares loads and rod layout with
     crank_basis: np.ndarray | None = None   # Craig-Bampton T (6n+3, m+9) of the crank: [node 0 (3), modes, tip (6)]
+    motor_stiffness: float | None = None    # N m/rad, k_m of the crank's motor; None: node 0's rotations clamped
 
     @property
     def crank_dofs(self) -> int:
         return self.crank_K.shape[0]
 
     @property
+    def crank_keep(self) -> np.ndarray:
+        """The crank's full nodal indices (of 6(n+1)) that are its DOFs, in order."""
+        return _crank_keep(self.elements, self.motor_stiffness is not None)
+
+    @property
+    def motor_dof(self) -> int | None:
+        """The crank index of node 0's rotation about the motor axis (crank-frame y), or None (clamped)."""
+        return None if self.motor_stiffness is None else MOTOR_DOF
+
+    @property
     def rod_dofs(self) -> int:
         return self.rod_K.shape[0]
 
 
-def build_joint_model(scene, elements: int) -> JointModel:
-    """Link matrices with free journals and free rod ends for ``elements`` elements per link."""
+def _crank_keep(elements: int, motor: bool) -> np.ndarray:
+    """Full nodal indices kept as crank DOFs: node 0's translations (and, with a motor, its rotation
+    about the motor axis, index 4), then nodes 1..n."""
+    return np.r_[0:3, [4] if motor else [], 6:6 * (elements + 1)].astype(np.int64)
+
+
+def build_joint_model(scene, elements: int, motor_stiffness: float | None = None) -> JointModel:
+    """Link matrices with free journals and free rod ends for ``elements`` elements per link.
+
+    ``motor_stiffness`` k_m (N m/rad): the crank is driven through a compliant motor, node 0's
+    rotation about the motor axis (crank-frame y = w_i) kept as a DOF grounded by k_m (the servo's
+    position-loop stiffness about the commanded angle; the Rayleigh damping lambda_2 K applies to it
+    too); the tilts stay clamped.  None: clamped, as in the paper."""
     em = build_elastic_model(scene, elements)
+    if motor_stiffness is not None:
+        if not motor_stiffness > 0.0:
+            raise ValueError(f"motor stiffness must be > 0 N m/rad, got {motor_stiffness!r}")
+        if em.crank_basis is not None:
+            raise ValueError("a compliant motor (motor_stiffness) needs the full mesh: [beam] link_modes = 0")
     Kc, Mc = scene_link_matrices(scene, "crank", elements)
-    keep = np.r_[0:3, 6:6 * (elements + 1)]
-    n6 = 6 * elements
-    boundary = np.r_[0:3, n6 - 3:n6]   # node 0 translations; node n translations (offset by the 3 kept)
-    jm = JointModel(elements, Kc[np.ix_(keep, keep)], Mc[np.ix_(keep, keep)], boundary,
+    keep = _crank_keep(elements, motor_stiffness is not None)
+    n6, node0 = 6 * elements, len(keep) - 6 * elements
+    boundary = np.r_[0:3, n6 + node0 - 6:n6 + node0 - 3]   # node 0 translations; node n translations
+    K = Kc[..., keep[:, None], keep]
+    if motor_stiffness is not None:
+        K[..., MOTOR_DOF, MOTOR_DOF] += motor_stiffness
+    jm = JointModel(elements, K, Mc[..., keep[:, None], keep], boundary,
                     em.rod_K, em.rod_M, em.platform_mass, em.platform_inertia, em.mass_damping,
-                    em.stiffness_damping, em)
+                    em.stiffness_damping, em, motor_stiffness=motor_stiffness)
     return _reduced_crank(jm, em.crank_dofs - 6) if em.crank_basis is not None else jm
 
 
@@ -313,7 +347,9 @@ class _Chunk:
         F = np.empty((len(rows), jm.dofs))               # join(crank, rod, platform), one copy less
         legs = F[:, :-6].reshape(len(rows), 6, jm.leg_dofs)   # a view: the legs' part of each row
         if jm.crank_basis is None:
-            legs[..., :3], legs[..., 3:jm.crank_dofs], legs[..., jm.crank_dofs:] = fc[..., :3], fc[..., 6:], fr
+            legs[..., :jm.crank_dofs], legs[..., jm.crank_dofs:] = fc[..., jm.crank_keep], fr
+            if jm.motor_dof is not None:
+                legs[..., jm.motor_dof] += self._feed_forward(motion)
         else:
             kept = np.concatenate([fc[..., :3], fc[..., 6:]], -1)      # node 0 translations, nodes 1..n
             legs[..., :jm.crank_dofs] = to_link_coordinates(jm.crank_basis, kept)
@@ -326,6 +362,13 @@ class _Chunk:
         w_rod = rod_angular_motion(motion)[1]
         self.omega[rows] = np.stack([w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :]], -2)
         self.offset[rows] = at.error
+
+    def _feed_forward(self, motion) -> np.ndarray:
+        """The motor's feed-forward torque about crank-frame y (..., 6), N m: the rigid robot's actuator
+        torque (:func:`.dynamics.inverse_dynamics`, conjugate to alpha_i about e_i = -w_i, hence the sign)."""
+        geometry = self.reference.geometry
+        scene = self.scene if geometry is None else dataclasses.replace(self.scene, geometry=geometry)
+        return -inverse_dynamics(scene, motion).torque
 
     @functools.cached_property
     def G(self) -> np.ndarray:
@@ -444,7 +487,7 @@ def _lift(jm: JointModel, maps, x: np.ndarray) -> np.ndarray:
     c, f, p = split(jm.elastic, x)
     e_C = (maps.Q @ c[..., jm.elastic.tip, None])[..., 0]
     e_B = (maps.H @ p[..., None, :, None])[..., 0]
-    crank = np.concatenate([np.zeros(c.shape[:-1] + (3,)), c], -1)
+    crank = np.concatenate([np.zeros(c.shape[:-1] + (jm.crank_dofs - c.shape[-1],)), c], -1)
     return join(crank, np.concatenate([f, e_C, e_B], -1), p)
 
 
@@ -472,7 +515,7 @@ def initial_state(scene, jm: JointModel, joints: _Joints, t0: float = 0.0, refer
     crank = np.zeros((R, 6, jm.crank_dofs))
     local_A = np.einsum("lji,rlj->rli", Rc, joints.e_A)
     if jm.crank_basis is None:
-        trans = np.r_[0:3, np.concatenate([3 + 6 * k + np.arange(3) for k in range(jm.elements)])]
+        trans = np.flatnonzero(jm.crank_keep % 6 < 3)      # every node's translations
         crank[..., trans] = np.tile(local_A, jm.elements + 1)
     else:   # a rigid translation is a sum of constraint modes: the boundary's translations, no modes
         crank[..., jm.crank_boundary] = np.tile(local_A, 2)

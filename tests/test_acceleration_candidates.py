@@ -74,3 +74,19 @@ def test_without_inertia_a_rod_turns_with_the_joint_that_holds_it_harder(candida
     v0, v1 = contact.stick_velocity, contact.slip_velocity
     expected = -w_c + (v0 + (v1 - v0) * F_b / F_c) / radius   # B's friction (w_B < 0) pushes the rod along +axis
     assert np.allclose(s, expected, rtol=1e-9)
+
+
+def test_the_journal_friction_torque_is_mu_f_r_against_the_turn(candidates, contact):
+    """A journal turning at s w in its bearing (radial normal n normal to w, sliding at R s w x n, past
+    eq. 18's ramp) with normal force F and an axial face force along w: the moment about w is
+    -mu F R sign(s), the friction's power s w . m = f_t . (R s w x n), and the normal and axial forces
+    add nothing."""
+    rng = np.random.default_rng(5)
+    w = _unit(rng.normal(size=(40, 3)))
+    n = _unit(np.cross(w, rng.normal(size=(40, 3))))
+    s, force, radius = rng.choice([-1, 1], 40) * rng.uniform(2.0, 5.0, 40), rng.uniform(1.0, 20.0, 40), 0.01
+    f_t = candidates.friction(contact, n, force, np.zeros((40, 3)), s[:, None] * w, radius)
+    pair = f_t - force[:, None] * n + rng.normal(size=(40, 1)) * w
+    torque = candidates.journal_friction_torque(radius, n, pair, w)
+    np.testing.assert_allclose(torque, -contact.friction_coefficient * force * radius * np.sign(s), rtol=1e-12)
+    np.testing.assert_allclose(torque * s, (f_t * np.cross(radius * s[:, None] * w, n)).sum(-1), rtol=1e-12)
