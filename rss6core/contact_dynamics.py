@@ -113,7 +113,10 @@ def build_joint_model(scene, elements: int, motor_stiffness: float | None = None
     ``motor_stiffness`` k_m (N m/rad): the crank is driven through a compliant motor, node 0's
     rotation about the motor axis (crank-frame y = w_i) kept as a DOF grounded by k_m (the servo's
     position-loop stiffness about the commanded angle; the Rayleigh damping lambda_2 K applies to it
-    too); the tilts stay clamped.  None: clamped, as in the paper."""
+    too); the tilts stay clamped.  None: the scene's ``[actuator]`` (a prescribed drive: clamped, as in
+    the paper)."""
+    if motor_stiffness is None:
+        motor_stiffness = scene.actuator.motor_stiffness
     em = build_elastic_model(scene, elements)
     if motor_stiffness is not None:
         if not motor_stiffness > 0.0:

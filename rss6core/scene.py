@@ -32,7 +32,7 @@ from .trajectory_kinds import TRAJECTORY_KINDS, SampledPoses, Sinusoid, Trajecto
 
 __all__ = [
     "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping",
-    "Clearances", "ContactLaw", "Tolerances",
+    "Clearances", "ContactLaw", "Tolerances", "Actuator", "DRIVES",
     "load_scene", "parse_scene",
 ]
 
@@ -169,6 +169,23 @@ class Simulation:
     contact_start: str = "drawn"     # contact level's initial state: 'drawn' offset or 'equilibrium'
 
 
+DRIVES = ("prescribed", "servo")   # [actuator] drive
+
+
+@dataclass(frozen=True)
+class Actuator:
+    """How each motor drives its crank at the contact level: ``prescribed`` (the crank's angle at its
+    journal is the commanded one, as in the paper's sec. 2.3) or ``servo`` (a position loop of stiffness
+    ``servo_stiffness`` about the commanded angle, the rigid robot's torque fed forward; docs/model.md)."""
+    drive: str = "prescribed"
+    servo_stiffness: float = 0.0   # N m/rad, positive with a servo drive
+
+    @property
+    def motor_stiffness(self) -> float | None:
+        """k_m of the contact level's crank on its motor (N m/rad), None for a prescribed crank."""
+        return self.servo_stiffness if self.drive == "servo" else None
+
+
 @dataclass(frozen=True)
 class Sampling:
     """Clearance sampling laws (docs/model.md section 4); means and stds as fractions of the size."""
@@ -206,6 +223,7 @@ class Scene:
     sampling: Sampling
     contact: ContactLaw
     beam: BeamTheory = BeamTheory()   # [beam]: the links' beam theory (default Euler-Bernoulli)
+    actuator: Actuator = Actuator()   # [actuator]: how the motors drive the cranks (contact level)
     tolerance: Tolerances = Tolerances()
     uncertain: UncertainInputs = UncertainInputs()   # [uncertain.*], [correlation.*] (rss6core/uncertain.py)
     source_text: str = field(default="", repr=False, compare=False)
@@ -303,6 +321,8 @@ _SCHEMA: dict = {
              "rotary_inertia": _Key(bool, default=False),
              "mass": _Key(str, default="consistent", choices=MASS_MODELS),
              "link_modes": _Key(int, default=0, check=_NONNEG)},   # Craig-Bampton modes per link, 0: full mesh
+    "actuator": {"drive": _Key(str, default="prescribed", choices=DRIVES),
+                 "servo_stiffness_N_m_per_rad": _Key(float, default=0.0, check=_NONNEG)},
     "damping": {"mass_coefficient_per_s": _Key(float, check=_NONNEG),
                 "stiffness_coefficient_s": _Key(float, check=_NONNEG)},
     "clearance": {"revolute_radial_m": _Key(float, check=_NONNEG),
@@ -449,6 +469,20 @@ def _read_table(table: dict, schema: dict, path: tuple[str, ...] = ()) -> dict:
     return out
 
 
+def _check_actuator(actuator: dict, link_modes: int) -> None:
+    """[actuator]: a servo drive has a positive stiffness, a prescribed one none, and a servo needs the
+    full mesh (the journal's rotation is not a boundary DOF of the Craig-Bampton crank)."""
+    stiffness = actuator["servo_stiffness_N_m_per_rad"]
+    if actuator["drive"] == "servo" and stiffness == 0.0:
+        raise SceneError("[actuator] servo_stiffness_N_m_per_rad: a servo drive needs a positive stiffness "
+                         "(N m/rad, the position loop's), got 0.0")
+    if actuator["drive"] == "prescribed" and stiffness > 0.0:
+        raise SceneError("[actuator] servo_stiffness_N_m_per_rad: only with drive = 'servo' (a prescribed "
+                         f"crank holds the commanded angle exactly), got {stiffness!r}")
+    if actuator["drive"] == "servo" and link_modes:
+        raise SceneError(f"[actuator] drive: 'servo' needs the full mesh, [beam] link_modes = 0 (got {link_modes})")
+
+
 def _below_radius(where: str, size: float, radius: str, contact: dict) -> None:
     """A clearance is a small gap between pin and bore: a ``size`` (m) not below the joint's [contact]
     ``radius`` is refused (typically a value in mm written in an _m key)."""
@@ -498,6 +532,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
         raise SceneError("[beam] mass: 'lumped' puts the sections' rotary inertia on the nodes' "
                          "rotations; set [beam] rotary_inertia = true")
     _check_link_modes(v["beam"]["link_modes"], v["simulation"]["elements_per_link"])
+    _check_actuator(v["actuator"], v["beam"]["link_modes"])
     _check_clearances(v["clearance"], ct)
     if any(g["actuator_offsets_deg"]):
         raise SceneError("[geometry] actuator_offsets_deg: the nominal offsets are 0 (the controller's zero); "
@@ -542,6 +577,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
                            ct["slip_velocity_m_s"], ct["impact_speed_floor_m_s"],
                            ct["stiffness_scale"]),
         beam=BeamTheory(v["beam"]["theory"], v["beam"]["rotary_inertia"], v["beam"]["mass"], v["beam"]["link_modes"]),
+        actuator=Actuator(v["actuator"]["drive"], v["actuator"]["servo_stiffness_N_m_per_rad"]),
         tolerance=_tolerances(v.get("tolerance", {}), v["clearance"], v["sampling"]["size_tolerance"], ct),
         uncertain=_uncertain(v),
         source_text=text, source_path=source)

@@ -2,6 +2,7 @@
 candidate 3): the option off changes nothing; on, the crank's root spring against the Euler-Bernoulli closed
 form, its stiff limit against the clamped crank, and the feed-forward torque against the rigid robot's."""
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -134,3 +135,67 @@ def test_a_motor_on_a_craig_bampton_crank_is_refused(paper):
         build_joint_model(scene, 4, motor_stiffness=1e4)
     with pytest.raises(ValueError, match="> 0"):
         build_joint_model(paper, 4, motor_stiffness=0.0)
+
+
+SERVO = '\n[actuator]\ndrive = "servo"\nservo_stiffness_N_m_per_rad = 1.0e4\n'
+
+
+@pytest.mark.parametrize("table, key", [
+    ('[actuator]\ndrive = "servo"\n', "servo_stiffness_N_m_per_rad: a servo drive needs a positive"),
+    ("[actuator]\nservo_stiffness_N_m_per_rad = 1.0e4\n", "servo_stiffness_N_m_per_rad: only with drive = 'servo'"),
+    ('[actuator]\ndrive = "sevro"\n', "drive: 'sevro' is not one of"),
+    ("[actuator]\nservo_stifness_N_m_per_rad = 1.0\n", "did you mean 'servo_stiffness_N_m_per_rad'"),
+    (SERVO + "[beam]\nlink_modes = 4\n", "drive: 'servo' needs the full mesh"),
+])
+def test_an_actuator_table_mistake_is_one_line_naming_the_key(paper_text, table, key):
+    from rss6core import SceneError, parse_scene
+    with pytest.raises(SceneError, match=re.escape(key)) as caught:
+        parse_scene(paper_text + "\n" + table)
+    assert "[actuator]" in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_a_servo_scene_runs_the_compliant_motor_at_the_contact_level(smoke, configs):
+    """`[actuator] drive = "servo"` gives the contact level exactly build_joint_model's motor option
+    (the product's path: prepare_level, the scene's start), and differs from the prescribed crank;
+    the paper's scenes (no [actuator] table) keep the prescribed one."""
+    from rss6core import parse_scene, prepare_level
+    from rss6core.clearance import draw_clearances
+    from rss6core.contact_dynamics import simulate_contact
+    from rss6core.contact_start import contact_initial_state
+    servo = parse_scene((configs / "smoke.toml").read_text() + SERVO)
+    assert smoke.actuator.motor_stiffness is None and servo.actuator.motor_stiffness == 1.0e4
+    level = prepare_level(servo, "contact")
+    got = level.simulate(0, [0], None)[0]
+    draws = [draw_clearances(smoke, 0, 0)]
+    explicit = simulate_contact(smoke, draws, level.elements, level.integrator, level.dt, tolerance=level.tolerance,
+                                refinements=level.refinements, initial=contact_initial_state,
+                                model=build_joint_model(smoke, level.elements, motor_stiffness=1.0e4)).result(0)
+    np.testing.assert_array_equal(got.acceleration, explicit.acceleration)
+    prescribed = prepare_level(smoke, "contact").simulate(0, [0], None)[0]
+    assert not np.allclose(got.acceleration, prescribed.acceleration, rtol=1e-3, atol=0)
+
+
+def test_tradeoff_leaves_out_the_reduced_link_rows_of_a_servo_scene(configs):
+    """`rss6 tradeoff`'s Craig-Bampton rows need the clamped journal; a servo scene gets none (its
+    contact level would refuse the reduced crank), the prescribed scene gets them."""
+    from pipeline.studies.tradeoff import _reduced_settings
+    from rss6core import parse_scene
+    text = (configs / "paper.toml").read_text()
+    row = lambda model, **kw: (model, kw)   # noqa: E731
+    assert _reduced_settings(parse_scene(text), row, 1e-8, 4)
+    assert _reduced_settings(parse_scene(text + SERVO), row, 1e-8, 4) == []
+
+
+def test_rss6_check_names_the_drive_and_the_crank_on_its_motor(configs, capsys):
+    """`rss6 check` says how the cranks are driven; for a servo, the rigid crank's frequency on it,
+    sqrt(k_m / J_A) / 2 pi with J_A = m (L^2 / 3 + h^2 / 12) about the motor axis at A."""
+    from pipeline.cli import main
+    from rss6core import parse_scene
+    scene = parse_scene((configs / "paper.toml").read_text() + SERVO)
+    c, L = scene.crank_section, scene.geometry.crank_length
+    m = scene.material.density * c.axial_width * c.height * L
+    f = np.sqrt(1.0e4 / (m * (L ** 2 / 3 + c.height ** 2 / 12))) / (2 * np.pi)
+    assert main(["check", str(configs / "paper.toml")]) == 0
+    assert "actuator: prescribed" in capsys.readouterr().out
+    from pipeline.analysis.summary import actuator_summary
+    assert actuator_summary(scene)["crank_on_motor_Hz"] == pytest.approx(f, rel=1e-12)

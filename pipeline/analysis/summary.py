@@ -61,8 +61,19 @@ def clearance_summary(scene) -> dict:
                         "time_step_s": scene.simulation.contact_time_step,
                         "integrator": scene.simulation.contact_integrator,
                         "start": scene.simulation.contact_start},
+            "actuator": actuator_summary(scene),
             "uncertain_inputs": uncertain_summary(scene),
             "run_default_level": run_default_level(scene)}
+
+
+def actuator_summary(scene) -> dict:
+    """How the motors drive the cranks at the contact level; for a servo its stiffness (N m/rad) and the
+    frequency of the rigid crank on it, sqrt(k_m / J_A) / 2 pi (Hz, J_A the crank's inertia about A)."""
+    k_m = scene.actuator.motor_stiffness
+    if k_m is None:
+        return {"drive": "prescribed"}
+    return {"drive": "servo", "stiffness_N_m_per_rad": k_m,
+            "crank_on_motor_Hz": float(np.sqrt(k_m / crank_inertia(scene).inertia[1]) / (2 * np.pi))}
 
 
 def uncertain_summary(scene) -> dict:
@@ -119,10 +130,18 @@ def _clearance_lines(s: dict) -> list[str]:
             "clearance sizes drawn per joint [mm]: " + (bands or "none (every joint at its nominal size)"),
             "sampling (fractions of the clearance): " + join(s["sampling"]),
             "contact (SI): " + join(s["contact"]),
+            _actuator_line(s["actuator"]),
             *_uncertain_lines(s["uncertain_inputs"]),
             f"rss6 run default level: {level}" if level else
             f"rss6 run default level: none (the scene's {s['model']!r} has no clearances; "
             "rss6 run asks for --model)"]
+
+
+def _actuator_line(a: dict) -> str:
+    if a["drive"] == "prescribed":
+        return "actuator: prescribed (each crank at its commanded angle)"
+    return (f"actuator: servo, {a['stiffness_N_m_per_rad']:g} N m/rad about the commanded angle at the contact "
+            f"level (the rigid crank on it: {a['crank_on_motor_Hz']:.1f} Hz; the lower levels prescribe the angle)")
 
 
 def _uncertain_lines(u: dict) -> list[str]:

@@ -63,8 +63,9 @@ LINK_MODES = (2, 4, 8)   # Craig-Bampton modes per link of the reduced rows
 
 def _reduced_settings(scene, default, tol: float, levels: int) -> list[Setting]:
     """The elastic, paper and (adaptive) contact rows with each link reduced to LINK_MODES
-    Craig-Bampton modes on the scene's mesh (a scene that reduces its links already gets none)."""
-    if scene.beam.link_modes:
+    Craig-Bampton modes on the scene's mesh (a scene that reduces its links already gets none, nor
+    does one whose cranks are servo-driven: the reduced crank has no journal rotation)."""
+    if scene.beam.link_modes or scene.actuator.motor_stiffness is not None:
         return []
     modes = [m for m in LINK_MODES if m < max_link_modes(scene.simulation.elements_per_link)]
     return ([default("elastic", link_modes=m) for m in modes] + [default("paper", link_modes=m) for m in modes]
