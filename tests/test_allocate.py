@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import shlex
 from dataclasses import replace
 
 import numpy as np
@@ -83,6 +84,13 @@ def test_command_verifies_and_writes(configs, tmp_path, capsys):
     with xr.open_dataset(tmp_path / "a" / "allocation.nc") as ds:
         assert list(ds["fit_class"].values) == [c["class"] for c in out["classes"]]
         assert set(ds["verdict_outcome"].values) == {"pass"}
+    # the verification re-simulated the search's draws; the command printed for fresh draws runs the
+    # answer's scene on the next seed and judges the spec there (pass 0, fail 1 or undecided 3: a verdict)
+    cmd = shlex.split(out["fresh_check"])
+    assert cmd[0] == "rss6" and cmd[cmd.index("--seed") + 1] == "1" and SPEC in cmd
+    assert main(cmd[1:]) in (0, 1, 3)
+    with xr.open_dataset(cmd[cmd.index("-o") + 1]) as ds, xr.open_dataset(out["verification_file"]) as searched:
+        assert ds.attrs["seed"] == 1 and searched.attrs["seed"] == 0
 
 
 def _refused(args, capsys, *words):

@@ -61,7 +61,8 @@ def main(args) -> int:
     from ..studies.allocation import allocate, check_request, class_options
     from ..studies.allocation_greedy import greedy_allocate
     from ..studies.allocation_joints import allocate_per_joint
-    from ..studies.allocation_output import COST_NOTE, allocation_dataset, allocation_json, format_allocation
+    from ..studies.allocation_output import (COST_NOTE, allocation_dataset, allocation_json, format_allocation,
+                                             fresh_check_command)
     specs = _specs(args.spec)
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
@@ -90,9 +91,11 @@ def main(args) -> int:
         f"--spec '{s}'" for s in args.spec)
     ds = allocation_dataset(a, level.scene, level.model, level.integrator, level.dt, level.elements, opts, note)
     write_netcdf(ds, folder / "allocation.nc")
+    fresh = fresh_check_command(a, level.model, args.n, args.seed, args.spec)
     if args.json:
-        print(json.dumps(allocation_json(a) | {"file": str(folder / "allocation.nc")}, indent=2, allow_nan=False))
+        print(json.dumps(allocation_json(a) | {"file": str(folder / "allocation.nc"), "fresh_check": fresh},
+                         indent=2, allow_nan=False))
     else:
-        print(format_allocation(a, level.scene.name, level.model, args.n, note))
+        print(format_allocation(a, level.scene.name, level.model, args.n, note, fresh))
         print(f"allocation file: {folder / 'allocation.nc'}")
     return EXIT_CODES[overall(list(a.verdicts))]

@@ -10,7 +10,8 @@ from ..files.schema import _provenance, command_line
 from .allocation import Allocation
 from .fits import COST_LAW
 
-__all__ = ["format_allocation", "allocation_dataset", "allocation_json", "COST_NOTE"]
+__all__ = ["format_allocation", "allocation_dataset", "allocation_json", "COST_NOTE", "SELECTION_NOTE",
+           "fresh_check_command"]
 
 COST_NOTE = (f"relative units per joint: ISO 286 fit cost C(T_hole) + C(T_shaft), C(T) = {COST_LAW.a:g} + "
              f"{COST_LAW.b:g} ({COST_LAW.reference * 1e6:g} um / T)^{COST_LAW.k:g} (reciprocal-power law, "
@@ -31,8 +32,10 @@ def _rows(a: Allocation) -> list[str]:
     return [f"{j} {c.family}" for j, c in zip(a.joints, a.classes)] if a.joints else [c.family for c in a.classes]
 
 
-def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_note: str) -> str:
-    """The answer as lines: the class table, total against uniform, the verification's verdicts."""
+def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_note: str,
+                      fresh_check: str | None = None) -> str:
+    """The answer as lines: the class table, total against uniform, the verification's verdicts, what
+    they can say (:data:`SELECTION_NOTE`) and ``fresh_check``, the command that judges fresh draws."""
     width = 21 if a.joints else 18
     lines = [f"fit allocation: scene {scene_name}, {model} level, n = {n} realisations, "
              f"{a.combinations} class combinations judged ({a.method})",
@@ -49,7 +52,24 @@ def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_n
     lines.append(f"scene at the answer: {a.scene_path or 'none (per-joint bands; a scene has one band a family)'}")
     lines.append(f"verification ensemble {a.ensemble_path}: {overall(list(a.verdicts))}")
     lines.append(format_verdicts(list(a.verdicts)))
+    lines.append(SELECTION_NOTE + (f"; a fresh check: {fresh_check}" if fresh_check else
+                                   "; per-joint bands fit no scene, so rss6 run cannot recheck them"))
     return "\n".join(lines)
+
+
+# the verification ensemble re-simulates the search's own draws (the seed's realisations 0..n-1): it
+# checks the search (its prediction, the greedy's ensembles), not the choice made on those draws
+SELECTION_NOTE = ("the verification uses the draws that chose the answer (same seed, realisations 0..n-1), so "
+                  "its bounds are optimistic for the answer")
+
+
+def fresh_check_command(a: Allocation, model: str, n: int, seed: int, specs: list[str]) -> str | None:
+    """The `rss6 run` that judges the answer's scene on draws the search did not see (the next seed), or
+    None for per-joint bands (no scene holds them)."""
+    if a.scene_path is None:
+        return None
+    return (f"rss6 run {a.scene_path} --model {model} -n {n} --seed {seed + 1} -o {a.scene_path.with_suffix('')}"
+            f"_seed{seed + 1}.nc " + " ".join(f"--require '{s}'" for s in specs))
 
 
 def allocation_dataset(a: Allocation, scene, model: str, integrator: str, dt: float, elements: int,
@@ -97,5 +117,6 @@ def allocation_json(a: Allocation) -> dict:
             "total_cost": a.cost, "uniform_class": a.uniform[0].name if a.uniform else None,
             "uniform_cost": a.uniform_cost, "combinations_judged": a.combinations, "method": a.method,
             "predicted_upper": a.predicted, "verification": overall(list(a.verdicts)),
-            "verification_file": str(a.ensemble_path), "scene": a.scene_path and str(a.scene_path),
+            "verification_file": str(a.ensemble_path), "verification_draws": "the search's own (optimistic)",
+            "scene": a.scene_path and str(a.scene_path),
             "verdicts": verdicts_json(list(a.verdicts))}
