@@ -37,6 +37,8 @@ def _bad_values(action) -> list[str]:
         return []
     if action.choices:
         return ["no-such-choice"]
+    if action.type is not None and action.dest == "seed":
+        return ["x", "-1", str(2 ** 64)]   # above 2^63 - 1 the file's int64 attribute would fail at the end
     if action.type is not None:
         return ["x", "-1"] if action.type is not str else []
     bad = BAD_TEXT.get(action.dest, "?")

@@ -58,6 +58,16 @@ def int_at_least(minimum: int):
 
 positive_int = int_at_least(1)
 nonnegative_int = int_at_least(0)
+MAX_SEED = 2 ** 63 - 1   # a file's seed attribute is a netCDF int64
+
+
+def seed_int(text: str) -> int:
+    """An argparse type: a seed, 0 to MAX_SEED (refused before any work, not when the file is written)."""
+    value = nonnegative_int(text)
+    if value > MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be at most 2^63 - 1 = {MAX_SEED} (the files store it as a 64-bit "
+                                         f"integer), got {text}")
+    return value
 
 LEVELS_HELP = "Levels, cheapest first: " + ", ".join(f"{m.name} ({m.description})" for m in MODEL_LEVELS.values())
 INTEGRATOR_HELP = ("time integrator: newmark, hht, generalized-alpha or central-difference (explicit, "
@@ -81,7 +91,7 @@ def add_scene(p) -> None:
 
 
 def add_seed(p, what: str = "random seed") -> None:
-    p.add_argument("--seed", type=nonnegative_int, default=0, help=f"{what}, 0 or more (default 0)")
+    p.add_argument("--seed", type=seed_int, default=0, help=f"{what}, 0 to 2^63 - 1 (default 0)")
 
 
 def add_parents(p) -> None:
