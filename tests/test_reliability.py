@@ -75,6 +75,20 @@ def test_bad_input_is_one_line_exit_2_before_any_work(tmp_path, capsys, extra, t
     assert not (tmp_path / "x.nc").exists()
 
 
+def test_a_stalled_subset_run_is_one_line_exit_2_and_keeps_its_evaluations(tmp_path, capsys):
+    """Too few chains per level for this event (a new user's review: -n 20 on the paper scene): the
+    thresholds stop rising, there is no estimate; not "P = nan" with exit 0."""
+    out = tmp_path / "s.nc"
+    capsys.readouterr()
+    assert main(["reliability", "paper", "--model", "quasi-static", "--event", "displacement:z>0.285mm", "-n", "20",
+                 "--workers", "1", "-o", str(out)]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert len(err.splitlines()) == 1 and "no estimate of P(displacement:z>0.285mm) (stalled" in err, err
+    assert "nan" not in captured.out and str(out) in err
+    assert load_netcdf(out)["max_abs_error"].sizes["evaluation"] > 20
+
+
 @pytest.mark.slow
 def test_the_same_seed_gives_the_same_file_on_two_workers_as_in_this_process(tmp_path, capsys):
     """Batches of 300 rows are cut into chunks on 2 dask workers, or evaluated here: same bits."""

@@ -242,7 +242,7 @@ def subset_simulation(response, dimension: int, threshold: float = 0.0,
                            f"{level + 1} levels", settings)
         if not b > previous:
             return _finish(levels, float("nan"), records, "stalled",
-                           f"level {level}: the threshold {b:g} does not rise; the response may be flat "
+                           f"level {level}: the threshold {b:g} (SI units) does not rise; the response may be flat "
                            "or discontinuous here", settings)
         levels.append(_level_record(r, b, level, evaluations, acceptance, scale))
         pf, previous = pf * levels[-1].probability, b

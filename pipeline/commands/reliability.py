@@ -3,6 +3,8 @@ simulation or plain Monte Carlo, with every evaluation in a netCDF file."""
 from __future__ import annotations
 
 import json
+import math
+import sys
 import time
 
 from ..ensemble.settings import resolve_cluster, resolve_level
@@ -99,6 +101,11 @@ def main(args) -> int:
             return interrupted(kept if checkpoint.batches else None)
         write_netcdf(reliability_dataset(est, event, spec, time.perf_counter() - start, options), output)
         checkpoint.remove()
+    if not math.isfinite(est.pf):     # stalled, or no convergence within the levels: no estimate to report
+        print(f"rss6 reliability: error: no estimate of P({event.text}) ({est.status}: {est.message}); the "
+              f"{est.level.size} evaluations are in {output}; a larger -n or another --p0 may get one",
+              file=sys.stderr)
+        return 2
     _report(args, est, event, level, output, figure)
     return 0
 
