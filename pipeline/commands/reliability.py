@@ -138,6 +138,7 @@ def _strict(summary: dict) -> dict:
 def _text(est, event, output) -> str:
     """The estimate in a few lines."""
     levels = ", ".join(f"{e}" for e in est.evaluations_per_level)
-    return (f"wrote {output}\nP({event.text}) = {est.pf:.4g} by {est.method}, CoV {est.cov:.3g}; "
-            f"{100 * est.confidence:g} % interval [{est.lower:.4g}, {est.upper:.4g}] ({est.interval})\n"
+    interval = (f"{100 * est.confidence:g} % interval [{est.lower:.4g}, {est.upper:.4g}] ({est.interval})"
+                if math.isfinite(est.lower) else f"no {100 * est.confidence:g} % interval: {est.interval}")
+    return (f"wrote {output}\nP({event.text}) = {est.pf:.4g} by {est.method}, CoV {est.cov:.3g}; {interval}\n"
             f"{est.level.size} evaluations (per level: {levels}); {est.message}")

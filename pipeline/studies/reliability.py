@@ -303,6 +303,7 @@ def reliability_dataset(est: Estimate, event: Event, spec, elapsed: float, optio
     """The CF netCDF content: every evaluation's inputs, level and maxima, and the estimate in attributes."""
     import json
 
+    from ..analysis.stats import json_number
     from ..files.schema import MIXED_UNITS, _unit_table, command_line
     scene = spec.scene()
     history = command_line("reliability", scene, model=spec.model, integrator=spec.integrator, dt=spec.dt,
@@ -310,8 +311,8 @@ def reliability_dataset(est: Estimate, event: Event, spec, elapsed: float, optio
     attrs = {"Conventions": "CF-1.10", "title": f"rss6 reliability of {event.text} at the {spec.model} level, "
              f"scene {scene.name!r}", "history": history, "event": event.text, "event_limit": event.limit,
              "event_window": event.window, "seed": spec.seed, "elapsed_s": elapsed,
-             "estimate": json.dumps(est.summary(), allow_nan=False)
-             if np.isfinite([est.pf, est.cov]).all() else json.dumps({"status": est.status})}
+             "estimate": json.dumps({k: json_number(v) if isinstance(v, float) else v
+                                     for k, v in est.summary().items()}, allow_nan=False)}
     data = {"z": (("evaluation", "input"), est.z, {"long_name": "standard normal input, Phi^-1 of the "
                                                    "realisation's uniform", "units": "1"}),
             "level": ("evaluation", est.level.astype(np.int32), {"long_name": "subset level of the evaluation "
