@@ -90,6 +90,18 @@ class _Failed:
     outcome = "fail"
 
 
+class _Undecided:
+    outcome = "undecided"
+
+
+def test_the_limiting_scale_says_whether_it_fails_or_is_undecided():
+    """A scale that does not pass either fails or is undecided at this n (a new user's review: an
+    undecided scale was printed as one that 'does not' pass)."""
+    from pipeline.studies.budget import _not_passing
+    assert _not_passing(Trial(1.0, None, (_Undecided(), _Failed()))) == "fails"
+    assert _not_passing(Trial(1.0, None, (_Undecided(),))) == "is undecided at this n"
+
+
 @pytest.mark.parametrize("threshold", [0.3137, 1.0, 5.5])
 def test_sweep_brackets_the_largest_passing_scale(threshold):
     calls = []

@@ -180,6 +180,12 @@ def _sweep(run, tolerance: float) -> list[Trial]:
     return trials
 
 
+def _not_passing(t: Trial) -> str:
+    """How a trial that does not pass ended: it fails (a spec's bound violates its limit) or it is
+    undecided at this n (no spec fails, one's interval straddles its limit)."""
+    return "fails" if any(v.outcome == "fail" for v in t.verdicts) else "is undecided at this n"
+
+
 def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float = CONFIDENCE,
            workers: int = 2, tolerance: float = 0.05) -> Budget:
     """The largest common clearance scale factor for which every spec passes (module doc)."""
@@ -210,8 +216,8 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
     else:
         trials = tuple(_sweep(run, tolerance))
         scale = max(t.scale for t in trials if t.passed)
-        above = min(t.scale for t in trials if not t.passed and t.scale > scale)
-        limiting = f"scale {scale:.{DIGITS}g} passes, {above:.{DIGITS}g} does not"
+        above = min((t for t in trials if not t.passed and t.scale > scale), key=lambda t: t.scale)
+        limiting = f"scale {scale:.{DIGITS}g} passes, {above.scale:.{DIGITS}g} {_not_passing(above)}"
         method = f"measured sweep (doubling, then bisection to {100 * tolerance:g} % in the scale)"
     text, sizes = scaled_scene(spec, scale)
     scene_path = folder / f"{spec.scene().name}_budget.toml"
