@@ -56,7 +56,7 @@ def test_a_run_interrupted_between_batches_resumes_to_the_uninterrupted_result(t
     seen = _interrupt_at(monkeypatch, batch)
     assert main(_argv(out)) == 130
     assert len(seen) == batch and not out.exists()
-    assert "r.nc.checkpoint.nc (add --resume)" in capsys.readouterr().err
+    assert "r.nc.checkpoint.nc; rerun the same command with --resume to continue" in capsys.readouterr().err
     monkeypatch.undo()
     computed = _interrupt_at(monkeypatch, 10 ** 6)   # only counts what the resumed run computes
     assert main(_argv(out, "--resume")) == 0

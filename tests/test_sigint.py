@@ -66,3 +66,19 @@ def test_ctrl_c_while_waiting_for_dask_is_raised_by_rss6_not_inside_dask(monkeyp
         with sigint_deferred() as interrupted:
             list(cluster.results_as_finished(None, ["future"], None, 60.0, interrupted))
     assert len(waits) == 1 and caught.traceback[-1].name == "results_as_finished"
+
+
+def test_a_run_stopped_before_any_chunk_finished_says_nothing_is_kept(tmp_path, monkeypatch, capsys):
+    """Ctrl-C before the first chunk is stored: no parts folder exists, and the line says so instead of
+    naming one (a new user's review)."""
+    import pipeline.commands.run as run_command
+    from pipeline.cli import main
+
+    def stop(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(run_command, "_compute", stop)
+    out = tmp_path / "k.nc"
+    assert main(["run", "smoke", "-n", "4", "--model", "quasi-static", "-o", str(out)]) == 130
+    err = capsys.readouterr().err.strip()
+    assert err == "rss6: interrupted; nothing had finished, so nothing is kept", err
+    assert not (tmp_path / "k.nc.parts").exists()

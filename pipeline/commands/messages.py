@@ -5,16 +5,19 @@ from __future__ import annotations
 import sys
 
 
-def continue_line(kept: str) -> str:
-    """What a stopped command kept (e.g. "finished chunks are kept in X.parts") and that the same
-    command continues from it: one wording for Ctrl-C and a lost scheduler alike."""
-    return f"{kept}; rerun the same command to continue"
+AGAIN = "rerun the same command to continue"
 
 
-def interrupted(kept: str | None) -> int:
-    """Exit code 130 after Ctrl-C, with one line: :func:`continue_line` of what is kept, or, for a
-    command that does not resume (``kept`` None), that nothing was written."""
-    what = continue_line(kept) if kept else "nothing written (this command does not resume)"
+def continue_line(kept: str, again: str = AGAIN) -> str:
+    """What a stopped command kept (e.g. "finished chunks are kept in X.parts") and how it continues
+    from it (``again``): one wording for Ctrl-C and a lost scheduler alike."""
+    return f"{kept}; {again}"
+
+
+def interrupted(kept: str | None, again: str = AGAIN) -> int:
+    """Exit code 130 after Ctrl-C, with one line: :func:`continue_line` of what is kept, or, when
+    nothing had finished (``kept`` None), that nothing is kept."""
+    what = continue_line(kept, again) if kept else "nothing had finished, so nothing is kept"
     print(f"rss6: interrupted; {what}", file=sys.stderr)
     return 130
 

@@ -97,8 +97,8 @@ def main(args) -> int:
             est = reliability(spec, event, args.method, args.n, args.p0, args.confidence, cluster.workers,
                               checkpoint, args.cov, args.budget)
         except KeyboardInterrupt:
-            kept = f"the evaluations so far are kept in {checkpoint.path} (add --resume)"
-            return interrupted(kept if checkpoint.batches else None)
+            kept = f"the evaluations so far are kept in {checkpoint.path}"
+            return interrupted(kept if checkpoint.batches else None, "rerun the same command with --resume to continue")
         write_netcdf(reliability_dataset(est, event, spec, time.perf_counter() - start, options), output)
         checkpoint.remove()
     if not math.isfinite(est.pf):     # stalled, or no convergence within the levels: no estimate to report

@@ -62,7 +62,7 @@ def main(args) -> int:
                              cluster.workers, window=args.window, parts=parts,
                              announce=lambda line: print(f"rss6 sensitivity: {line}", file=sys.stderr))
         except KeyboardInterrupt:
-            return interrupted(f"finished chunks are kept in {parts}")
+            return interrupted(f"finished chunks are kept in {parts}" if parts.exists() else None)
         write_netcdf(ds, output)
         if parts.exists():
             shutil.rmtree(parts)
