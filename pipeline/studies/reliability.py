@@ -24,8 +24,9 @@ from rss6core import (FINISHED, SIZE_UNIFORMS, UNIFORM_BLOCKS, clearances_from_n
 
 from ..analysis.exceedance import Event, clopper_pearson
 from ..analysis.subset import SubsetSettings, subset_simulation
-from ..ensemble.cluster import dask_client
+from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client, results_as_finished
 from ..files.records import window_summaries
+from ..files.writing import sigint_deferred
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
 
 __all__ = ["ReliabilityError", "Estimate", "input_dimension", "input_labels", "physical_inputs", "what_fails",
@@ -185,9 +186,19 @@ def evaluate(spec, window: str, z: np.ndarray, client=None) -> np.ndarray:
     workers = max(1, len(client.nthreads()))
     chunk = -(-len(z) // workers) if dear else max(IN_PROCESS_ROWS // 4, -(-len(z) // (4 * workers)))
     parts = [slice(i, min(i + chunk, len(z))) for i in range(0, len(z), chunk)]
-    scattered = client.scatter([z[p] for p in parts])   # the rows as data, not in the task graph
-    futures = [client.submit(_evaluate_rows, spec, window, rows, pure=False) for rows in scattered]
-    return np.concatenate(client.gather(futures))
+    with sigint_deferred() as interrupted:   # Ctrl-C acted on between waits, never inside dask's client
+        # the rows go with each task (not scattered: a worker stopped by Ctrl-C would lose scattered data
+        # and cancel the tasks that need it; a task of its own is simply run again)
+        futures = [client.submit(_evaluate_part, spec, window, z[p], k, pure=False) for k, p in enumerate(parts)]
+        got = {part["index"]: part["maxima"]
+               for part in results_as_finished(client, futures, None, WORKER_TIMEOUT_S, interrupted)}
+    return np.concatenate([got[k] for k in range(len(parts))])
+
+
+def _evaluate_part(spec, window: str, rows: np.ndarray, index: int) -> dict:
+    """One task of :func:`evaluate`: the maxima of its rows, with the part's index (results come back in
+    the order they finish)."""
+    return {"index": index, "maxima": _evaluate_rows(spec, window, rows)}
 
 
 def _response(event: Event, maxima: np.ndarray) -> np.ndarray:
