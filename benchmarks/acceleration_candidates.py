@@ -51,17 +51,19 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core.assembly import join, split
+from rss6core.assembly import frame_inertia_load, join, link_frames, split
+from rss6core.beam import geometric_stiffness
 from rss6core.clearance import draw_clearances
 from rss6core.contact_dynamics import _joint_nodes, _relative, build_joint_model, simulate_contact
 from rss6core.contact_numpy import NumpyStepper
 from rss6core.kinematics import rigid_motion
 from rss6core.models import prepare_level
 from rss6core.scene import load_scene
-from rss6core.sections import crank_inertia
+from rss6core.sections import crank_inertia, section_properties
 
 SCENE = Path(__file__).resolve().parents[1] / "configs" / "paper.toml"
 SETTLE = 0.3   # s, issue 43's window start
+FRAME_STEP = 1e-4   # s, the central differences of the link frames' rates (error ~ (4 rad/s FRAME_STEP)^2)
 
 
 def _to_local(R, m):
@@ -123,9 +125,77 @@ def spin_step(contact, last, h, inertia, normal, force, de, omega, axis, radius)
     return np.where((force <= 0).all(-1), last, 0.5 * (low + high))
 
 
+def frame_rates(reference, geometry, t):
+    """Om = R^T R' (1/s) and its rate Om' = R'^T R' + R^T R'' (1/s^2), (2, 6, 3, 3) each, crank then rod, of the
+    link frames (:func:`rss6core.assembly.link_frames`) of ``reference``'s motion at t (s): central
+    differences over FRAME_STEP."""
+    R_minus, R, R_plus = (np.stack(link_frames(reference.at(np.array([t + s])).motion, geometry))[:, 0]
+                          for s in (-FRAME_STEP, 0.0, FRAME_STEP))
+    rate = (R_plus - R_minus) / (2 * FRAME_STEP)
+    curvature = (R_plus - 2 * R + R_minus) / FRAME_STEP ** 2
+    T = np.swapaxes
+    return T(R, -1, -2) @ rate, T(rate, -1, -2) @ rate + T(R, -1, -2) @ curvature
+
+
+def axial_forces(q, axial_stiffness, length):
+    """N = EA (u_{e+1} - u_e) / l (..., n) N of each element from a link's full nodal vector q (..., 6(n+1))
+    (local axes; tension > 0); ``axial_stiffness`` EA (N), ``length`` the element's l (m)."""
+    return axial_stiffness * np.diff(q[..., 0::6], axis=-1) / length
+
+
+def geometric_load(q, N, length, props):
+    """-K_G(N) q (..., 6(n+1)): each element's geometric stiffness (:func:`rss6core.beam.geometric_stiffness`,
+    elements of ``length`` l, m) under its axial force N (..., n) N on a link's full nodal vector q, as a load
+    (N, N m)."""
+    g = geometric_stiffness(props, length)
+    out = np.zeros(q.shape)
+    for e in range(N.shape[-1]):
+        out[..., 6 * e:6 * e + 12] -= N[..., e, None] * (q[..., 6 * e:6 * e + 12] @ g)
+    return out
+
+
 class Switched(NumpyStepper):
     """The numpy stepper with issue 43's lagged switches (class attributes, set by :func:`stepper`)."""
     moments, rates, spin, inertia, scale, joints, journal = False, False, False, False, 1.0, (1, 2), False
+    frame, stiffening, geometric_scale = False, False, 1.0
+
+    def _links_full(self, x):
+        """Crank and rod full nodal vectors (R, 6, 6(n+1)), link frames, of system vectors x (R, N)."""
+        jm = self.setup.jm
+        c, r, _ = split(jm, x)
+        full = np.zeros((2,) + r.shape[:-1] + (6 * jm.elements + 6,))
+        full[0][..., jm.crank_keep] = c
+        full[1][..., jm.elastic.rod_order] = r
+        return full
+
+    def _geometric(self, idx, ch, k1):
+        """Generalised forces (R, N) of the geometrically nonlinear terms switched on (``frame``: the frame-motion
+        inertia of the elastic motion, :func:`rss6core.assembly.frame_inertia_load`; ``stiffening``: -K_G(N) q,
+        :func:`geometric_load`), on cranks and rods, from the last accepted state."""
+        jm, ws, scene = self.setup.jm, self.ws, self.setup.scene
+        out = np.zeros((len(idx), ws.d.shape[-1]))
+        if not (self.frame or self.stiffening):
+            return out
+        if jm.crank_basis is not None:
+            raise ValueError("the geometric switches address nodal DOFs: run them on the full mesh")
+        q, q_dot = self._links_full(ws.d[idx]), self._links_full(ws.v[idx])
+        em, load = jm.elastic, np.zeros(q.shape)
+        if self.frame:
+            cache = ch.__dict__.setdefault("frame_rates", {})
+            if k1 not in cache:
+                cache[k1] = frame_rates(ch.reference, scene.geometry, ch.t[k1])
+            Om, Om_dot = cache[k1]
+            for link, M in enumerate((em.crank_M_full, em.rod_M_full)):
+                load[link] += frame_inertia_load(M, q[link], q_dot[link], Om[link], Om_dot[link])
+        if self.stiffening:
+            E, n = scene.material.youngs_modulus, jm.elements
+            for link, (section, length) in enumerate(((scene.crank_section, scene.geometry.crank_length),
+                                                      (scene.rod_section, scene.geometry.rod_length))):
+                props = section_properties(section)
+                N = axial_forces(q[link], E * props.area, length / n)
+                load[link] += geometric_load(q[link], N, length / n, props)
+        load *= self.geometric_scale
+        return join(load[0][..., jm.crank_keep], load[1][..., em.rod_order], out[..., -6:])
 
     def _journal_friction(self, idx, ch, k1):
         """Generalised forces (R, N) of the actuated joints' friction moments about the motor axes on the
@@ -209,7 +279,8 @@ class Switched(NumpyStepper):
         rotations of this attempt (:meth:`_sliding_rotation`), which its Newton iteration then reads."""
         if self.rates or self.spin:
             self._sliding_rotation(idx, ch, k1, h)
-        return ch.F[k1] + self._friction_moments(idx, ch, k1) + self._journal_friction(idx, ch, k1)
+        return (ch.F[k1] + self._friction_moments(idx, ch, k1) + self._journal_friction(idx, ch, k1)
+                + self._geometric(idx, ch, k1))
 
     def _keep(self, kept, ch, k1, h, a, d, v, f, delta, rate, used):
         super()._keep(kept, ch, k1, h, a, d, v, f, delta, rate, used)
@@ -226,7 +297,12 @@ SWITCHES = {"plain": None, "zero": dict(moments=True, scale=0.0), "moments": dic
             "spin": dict(spin=True), "spin-moments": dict(spin=True, moments=True),
             "spin-inertia": dict(spin=True, inertia=True),
             "spin-inertia-moments": dict(spin=True, inertia=True, moments=True),
-            "all": dict(spin=True, inertia=True, moments=True, rates=True)}
+            "all": dict(spin=True, inertia=True, moments=True, rates=True),
+            "frame": dict(frame=True), "stiffening": dict(stiffening=True),
+            "nonlinear": dict(frame=True, stiffening=True),
+            "nonlinear-zero": dict(frame=True, stiffening=True, geometric_scale=0.0),
+            "nonlinear-1e-3": dict(frame=True, stiffening=True, geometric_scale=1e-3),
+            "nonlinear-1e3": dict(frame=True, stiffening=True, geometric_scale=1e3)}
 
 
 def stepper(name):
