@@ -141,3 +141,41 @@ def test_without_geometric_stiffness_the_in_plane_beam_softens_and_buckles_at_om
     assert abs(spinning_frequencies(harness, omega_0, IN_PLANE, stiffening=False)[0]) < 0.01 * omega_0 ** 2
     assert spinning_frequencies(harness, 1.2 * omega_0, IN_PLANE, stiffening=False)[0] < 0.0
     assert spinning_frequencies(harness, 1.2 * omega_0, IN_PLANE)[0] > omega_0 ** 2
+
+
+def test_the_frame_load_of_point_masses_is_the_rotating_frame_inertia():
+    """frame_inertia_load with a lumped mass m on each translation and J on each rotation: each node's load is
+    -m (2 w x q' + w' x q + w x (w x q)) on its translation (Coriolis, Euler, centrifugal), and the same with J
+    on its rotation triple, for random w, w', q, q' (closed form)."""
+    rng = np.random.default_rng(7)
+    m, J, nodes = 2.5, 0.3, 3
+    M = np.diag(np.tile([m] * 3 + [J] * 3, nodes))
+    w, w_dot = rng.normal(size=3), rng.normal(size=3)
+    q, q_dot = rng.normal(size=(4, 6 * nodes)), rng.normal(size=(4, 6 * nodes))
+    load = frame_inertia_load(M, q, q_dot, _skew(w), _skew(w_dot))
+    q3, v3 = q.reshape(4, -1, 3), q_dot.reshape(4, -1, 3)
+    acc = 2 * np.cross(w, v3) + np.cross(w_dot, q3) + np.cross(w, np.cross(w, q3))
+    expected = -acc * np.tile([m, J], nodes)[:, None]
+    np.testing.assert_allclose(load, expected.reshape(4, -1), rtol=1e-12, atol=1e-12)
+
+
+def _skew(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+@pytest.mark.parametrize("plane", [IN_PLANE, FLAP])
+def test_the_geometric_stiffness_buckles_a_pinned_column_at_the_euler_load(plane):
+    """K + P K_G of a pinned-pinned column (both ends' translations held) singular at the Euler load
+    P = -pi^2 E I / L^2 in either bending plane: the smallest eigenvalue mu = -P of K x = mu K_G x on 8 elements
+    within 0.1 % of pi^2 (E = I = L = 1; the cubic element converges from above at fourth order)."""
+    from rss6core.beam import geometric_stiffness
+
+    n = 8
+    K, _ = link_matrices(UNIT, 1.0, 0.4, 1.0, 1.0, n)
+    KG = np.zeros_like(K)
+    for e in range(n):
+        KG[6 * e:6 * e + 12, 6 * e:6 * e + 12] += geometric_stiffness(UNIT, 1.0 / n)
+    dofs = np.arange(K.shape[0])
+    keep = dofs[np.isin(dofs % 6, plane) & ~np.isin(dofs, [plane[0], 6 * n + plane[0]])]
+    P = eigh(K[np.ix_(keep, keep)], KG[np.ix_(keep, keep)], eigvals_only=True)
+    assert P[0] == pytest.approx(np.pi ** 2, rel=1e-3)
