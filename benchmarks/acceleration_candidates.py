@@ -154,10 +154,22 @@ def geometric_load(q, N, length, props):
     return out
 
 
+def chord_load(q, N, length):
+    """The part of -K_G(N) q (:func:`geometric_load`) that an element's rigid chord rotation phi = (v2 - v1) / l
+    gives (..., 6(n+1)): +N phi on its first node's transverse translation, -N phi on its second, in both
+    bending planes (the axial force turned with the chord, to first order; the rest is the bending stiffening)."""
+    out = np.zeros(q.shape)
+    for transverse in (1, 2):
+        force = N * np.diff(q[..., transverse::6], axis=-1) / length
+        out[..., transverse:-6:6] += force
+        out[..., 6 + transverse::6] -= force
+    return out
+
+
 class Switched(NumpyStepper):
     """The numpy stepper with issue 43's lagged switches (class attributes, set by :func:`stepper`)."""
     moments, rates, spin, inertia, scale, joints, journal = False, False, False, False, 1.0, (1, 2), False
-    frame, stiffening, geometric_scale = False, False, 1.0
+    frame, stiffening, geometric_scale, part = False, False, 1.0, "all"
 
     def _links_full(self, x):
         """Crank and rod full nodal vectors (R, 6, 6(n+1)), link frames, of system vectors x (R, N)."""
@@ -193,7 +205,9 @@ class Switched(NumpyStepper):
                                                       (scene.rod_section, scene.geometry.rod_length))):
                 props = section_properties(section)
                 N = axial_forces(q[link], E * props.area, length / n)
-                load[link] += geometric_load(q[link], N, length / n, props)
+                turning = chord_load(q[link], N, length / n)
+                load[link] += {"all": geometric_load(q[link], N, length / n, props), "chord": turning,
+                               "bending": geometric_load(q[link], N, length / n, props) - turning}[self.part]
         load *= self.geometric_scale
         return join(load[0][..., jm.crank_keep], load[1][..., em.rod_order], out[..., -6:])
 
@@ -302,7 +316,8 @@ SWITCHES = {"plain": None, "zero": dict(moments=True, scale=0.0), "moments": dic
             "nonlinear": dict(frame=True, stiffening=True),
             "nonlinear-zero": dict(frame=True, stiffening=True, geometric_scale=0.0),
             "nonlinear-1e-3": dict(frame=True, stiffening=True, geometric_scale=1e-3),
-            "nonlinear-1e3": dict(frame=True, stiffening=True, geometric_scale=1e3)}
+            "nonlinear-0.1": dict(frame=True, stiffening=True, geometric_scale=0.1),
+            "chord": dict(stiffening=True, part="chord"), "bending": dict(stiffening=True, part="bending")}
 
 
 def stepper(name):

@@ -179,3 +179,20 @@ def test_the_geometric_stiffness_buckles_a_pinned_column_at_the_euler_load(plane
     keep = dofs[np.isin(dofs % 6, plane) & ~np.isin(dofs, [plane[0], 6 * n + plane[0]])]
     P = eigh(K[np.ix_(keep, keep)], KG[np.ix_(keep, keep)], eigvals_only=True)
     assert P[0] == pytest.approx(np.pi ** 2, rel=1e-3)
+
+
+def test_the_chord_part_of_the_geometric_load_is_the_axial_force_turned_with_the_chord(harness):
+    """-K_G(N) q of an element turned rigidly by phi in either bending plane is +N phi, -N phi on its end nodes'
+    transverse translations (the axial force turned with the chord) and nothing on the rotations: the harness's
+    chord_load gives exactly that, and geometric_load - chord_load (the bending stiffening) vanishes on it."""
+    n, phi, N = 4, 1e-3, np.array([3.0, -2.0, 5.0, 7.0])
+    x = np.linspace(0.0, 1.0, n + 1)
+    for transverse, rotation, sign in ((1, 5, 1.0), (2, 4, -1.0)):
+        q = np.zeros(6 * n + 6)
+        q[transverse::6], q[rotation::6] = phi * x, sign * phi
+        full = harness.geometric_load(q, N, 1.0 / n, UNIT)
+        expected = np.zeros(6 * n + 6)
+        expected[transverse:-6:6] += N * phi
+        expected[6 + transverse::6] -= N * phi
+        np.testing.assert_allclose(full, expected, atol=1e-15)
+        np.testing.assert_allclose(harness.chord_load(q, N, 1.0 / n), expected, atol=1e-15)
