@@ -23,6 +23,20 @@ reference), as a measurement, not yet a formulation of the product:
   rod's polar inertia (the rates at which the two moments balance); ``spin-moments``,
   ``spin-inertia-moments`` with the friction moments; ``all``: spin with inertia, moments, rates.
 
+``frame``, ``stiffening``, ``nonlinear`` (candidate 1, the small-displacement linearisation): the terms a
+geometrically nonlinear (co-rotational, to second order) link formulation adds to the linear KED, on cranks and
+rods, lagged from the last accepted step's displacements and velocities like the others.  ``frame``: the
+frame-motion inertia of the elastic motion, -M (2 Omega~ q' + (Omega~' + Omega~^2) q) in each link frame
+(:func:`rss6core.assembly.frame_inertia_load`; Omega from the link frames by central differences,
+:func:`frame_rates`).  ``stiffening``: -K_G(N) q, each element's consistent geometric stiffness
+(:func:`rss6core.beam.geometric_stiffness`) under its axial force N = EA du / l from its current axial strain
+(:func:`axial_forces`); the centrifugal axial force of the link's rotation is already in N, since the rigid-body
+loads (centrifugal ones included) stretch the links' elastic axial DOFs.  ``nonlinear``: both.  ``chord`` and
+``bending`` split ``stiffening`` into the axial force turned with each element's chord rotation
+(:func:`chord_load`, +-N phi on its end nodes) and the rest (the bending stiffening proper).  Checks:
+``nonlinear-zero`` (scale 0, must print plain's numbers), ``nonlinear-1e-3`` and ``nonlinear-0.1`` (the loads
+scaled).  Verified on the rotating cantilever (tests/test_rotating_beam.py).
+
 ``--contact FIELD=VALUE`` changes one of the scene's contact-law parameters (the compiled kernel's
 ``plain`` run measures the law's own sensitivity).
 
@@ -40,8 +54,9 @@ crank's rotation absorbs.
         [--scale] [SWITCH ...]
 
 SWITCH in: plain (the compiled kernel), zero (the moments at scale 0: must print plain's numbers),
-moments, rates, both, C, B, spin, spin-moments, spin-inertia, spin-inertia-moments, all, motor=K,
-motor-friction=K.  Each numpy
+moments, rates, both, C, B, spin, spin-moments, spin-inertia, spin-inertia-moments, all, frame, stiffening,
+nonlinear, chord, bending, nonlinear-zero, nonlinear-1e-3, nonlinear-0.1, spin-inertia-moments-nonlinear,
+all-nonlinear (``all`` and ``spin-inertia-moments`` with ``nonlinear``), motor=K, motor-friction=K.  Each numpy
 run takes 20-220 s on the shared 2-core machine (about twice that with --half-step).
 """
 import argparse
@@ -317,7 +332,9 @@ SWITCHES = {"plain": None, "zero": dict(moments=True, scale=0.0), "moments": dic
             "nonlinear-zero": dict(frame=True, stiffening=True, geometric_scale=0.0),
             "nonlinear-1e-3": dict(frame=True, stiffening=True, geometric_scale=1e-3),
             "nonlinear-0.1": dict(frame=True, stiffening=True, geometric_scale=0.1),
-            "chord": dict(stiffening=True, part="chord"), "bending": dict(stiffening=True, part="bending")}
+            "chord": dict(stiffening=True, part="chord"), "bending": dict(stiffening=True, part="bending"),
+            "spin-inertia-moments-nonlinear": dict(spin=True, inertia=True, moments=True, frame=True, stiffening=True),
+            "all-nonlinear": dict(spin=True, inertia=True, moments=True, rates=True, frame=True, stiffening=True)}
 
 
 def stepper(name):
