@@ -397,6 +397,34 @@ def linearisation_scale(scene):
           f"{(rate / (2 * np.pi * crank_f1)) ** 2:.2g} (f1 {crank_f1:.4g} Hz)")
 
 
+class _Sizes(Switched):
+    """The numpy stepper recording candidate 1's sizes at every attempt (loads not applied): per link kind
+    [crank, rod], the largest |N| (N), |element chord rotation| (rad) and |-K_G(N) q| (N, N m)."""
+    sizes = None
+
+    def _geometric(self, idx, ch, k1):
+        jm, scene, q = self.setup.jm, self.setup.scene, self._links_full(self.ws.d[idx])
+        for link, (section, length) in enumerate(((scene.crank_section, scene.geometry.crank_length),
+                                                  (scene.rod_section, scene.geometry.rod_length))):
+            props, l = section_properties(section), length / jm.elements
+            N = axial_forces(q[link], scene.material.youngs_modulus * props.area, l)
+            chord = np.abs(np.diff(q[link][..., 1::6], axis=-1)) + np.abs(np.diff(q[link][..., 2::6], axis=-1))
+            now = [np.abs(N).max(), chord.max() / l, np.abs(geometric_load(q[link], N, l, props)).max()]
+            self.sizes[link] = np.maximum(self.sizes[link], now)
+        return np.zeros((len(idx), self.ws.d.shape[-1]))
+
+
+def geometric_sizes(scene):
+    """Print candidate 1's sizes on the case (:class:`_Sizes`, the plain run's states)."""
+    level = prepare_level(scene, "contact")
+    _Sizes.sizes = np.zeros((2, 3))
+    simulate_contact(scene, [draw_clearances(scene, 0, 0)], level.elements, level.integrator, level.dt,
+                     stepper=_Sizes)
+    for name, (N, chord, load) in zip(("crank", "rod"), _Sizes.sizes):
+        print(f"{name}: largest axial force {N:.3g} N, element chord rotation <= {chord:.2g} rad (|v| + |w| "
+              f"differences / l), largest |K_G(N) q| {load:.2g} N or N m")
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("switches", nargs="*", help=f"any of {', '.join(SWITCHES)} (default: all)")
@@ -429,6 +457,7 @@ def main(argv=None):
           f"rx ry rz rad/s^2 | max |displacement| x y z mm | mean |velocity| x y z mm/s, rx ry rz mrad/s")
     if args.scale:
         linearisation_scale(scene)
+        geometric_sizes(scene)
     J_A = crank_inertia(scene).inertia[1]
     if any(motor_stiffness(n) for n in args.switches):
         print(f"crank J_A {J_A:.4g} kg m^2; a position loop of 50-200 Hz on it: k_m = (2 pi f)^2 J_A = "
