@@ -23,6 +23,20 @@ reference), as a measurement, not yet a formulation of the product:
   rod's polar inertia (the rates at which the two moments balance); ``spin-moments``,
   ``spin-inertia-moments`` with the friction moments; ``all``: spin with inertia, moments, rates.
 
+``frame``, ``stiffening``, ``nonlinear`` (candidate 1, the small-displacement linearisation): the terms a
+geometrically nonlinear (co-rotational, to second order) link formulation adds to the linear KED, on cranks and
+rods, lagged from the last accepted step's displacements and velocities like the others.  ``frame``: the
+frame-motion inertia of the elastic motion, -M (2 Omega~ q' + (Omega~' + Omega~^2) q) in each link frame
+(:func:`rss6core.assembly.frame_inertia_load`; Omega from the link frames by central differences,
+:func:`frame_rates`).  ``stiffening``: -K_G(N) q, each element's consistent geometric stiffness
+(:func:`rss6core.beam.geometric_stiffness`) under its axial force N = EA du / l from its current axial strain
+(:func:`axial_forces`); the centrifugal axial force of the link's rotation is already in N, since the rigid-body
+loads (centrifugal ones included) stretch the links' elastic axial DOFs.  ``nonlinear``: both.  ``chord`` and
+``bending`` split ``stiffening`` into the axial force turned with each element's chord rotation
+(:func:`chord_load`, +-N phi on its end nodes) and the rest (the bending stiffening proper).  Checks:
+``nonlinear-zero`` (scale 0, must print plain's numbers), ``nonlinear-1e-3`` and ``nonlinear-0.1`` (the loads
+scaled).  Verified on the rotating cantilever (tests/test_rotating_beam.py).
+
 ``--contact FIELD=VALUE`` changes one of the scene's contact-law parameters (the compiled kernel's
 ``plain`` run measures the law's own sensitivity).
 
@@ -40,8 +54,9 @@ crank's rotation absorbs.
         [--scale] [SWITCH ...]
 
 SWITCH in: plain (the compiled kernel), zero (the moments at scale 0: must print plain's numbers),
-moments, rates, both, C, B, spin, spin-moments, spin-inertia, spin-inertia-moments, all, motor=K,
-motor-friction=K.  Each numpy
+moments, rates, both, C, B, spin, spin-moments, spin-inertia, spin-inertia-moments, all, frame, stiffening,
+nonlinear, chord, bending, nonlinear-zero, nonlinear-1e-3, nonlinear-0.1, spin-inertia-moments-nonlinear,
+all-nonlinear (``all`` and ``spin-inertia-moments`` with ``nonlinear``), motor=K, motor-friction=K.  Each numpy
 run takes 20-220 s on the shared 2-core machine (about twice that with --half-step).
 """
 import argparse
@@ -51,17 +66,19 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core.assembly import join, split
+from rss6core.assembly import frame_inertia_load, join, link_frames, split
+from rss6core.beam import geometric_stiffness
 from rss6core.clearance import draw_clearances
 from rss6core.contact_dynamics import _joint_nodes, _relative, build_joint_model, simulate_contact
 from rss6core.contact_numpy import NumpyStepper
 from rss6core.kinematics import rigid_motion
 from rss6core.models import prepare_level
 from rss6core.scene import load_scene
-from rss6core.sections import crank_inertia
+from rss6core.sections import crank_inertia, section_properties
 
 SCENE = Path(__file__).resolve().parents[1] / "configs" / "paper.toml"
 SETTLE = 0.3   # s, issue 43's window start
+FRAME_STEP = 1e-4   # s, the central differences of the link frames' rates (error ~ (4 rad/s FRAME_STEP)^2)
 
 
 def _to_local(R, m):
@@ -123,9 +140,91 @@ def spin_step(contact, last, h, inertia, normal, force, de, omega, axis, radius)
     return np.where((force <= 0).all(-1), last, 0.5 * (low + high))
 
 
+def frame_rates(reference, geometry, t):
+    """Om = R^T R' (1/s) and its rate Om' = R'^T R' + R^T R'' (1/s^2), (2, 6, 3, 3) each, crank then rod, of the
+    link frames (:func:`rss6core.assembly.link_frames`) of ``reference``'s motion at t (s): central
+    differences over FRAME_STEP."""
+    R_minus, R, R_plus = (np.stack(link_frames(reference.at(np.array([t + s])).motion, geometry))[:, 0]
+                          for s in (-FRAME_STEP, 0.0, FRAME_STEP))
+    rate = (R_plus - R_minus) / (2 * FRAME_STEP)
+    curvature = (R_plus - 2 * R + R_minus) / FRAME_STEP ** 2
+    T = np.swapaxes
+    return T(R, -1, -2) @ rate, T(rate, -1, -2) @ rate + T(R, -1, -2) @ curvature
+
+
+def axial_forces(q, axial_stiffness, length):
+    """N = EA (u_{e+1} - u_e) / l (..., n) N of each element from a link's full nodal vector q (..., 6(n+1))
+    (local axes; tension > 0); ``axial_stiffness`` EA (N), ``length`` the element's l (m)."""
+    return axial_stiffness * np.diff(q[..., 0::6], axis=-1) / length
+
+
+def geometric_load(q, N, length, props):
+    """-K_G(N) q (..., 6(n+1)): each element's geometric stiffness (:func:`rss6core.beam.geometric_stiffness`,
+    elements of ``length`` l, m) under its axial force N (..., n) N on a link's full nodal vector q, as a load
+    (N, N m)."""
+    g = geometric_stiffness(props, length)
+    out = np.zeros(q.shape)
+    for e in range(N.shape[-1]):
+        out[..., 6 * e:6 * e + 12] -= N[..., e, None] * (q[..., 6 * e:6 * e + 12] @ g)
+    return out
+
+
+def chord_load(q, N, length):
+    """The part of -K_G(N) q (:func:`geometric_load`) that an element's rigid chord rotation phi = (v2 - v1) / l
+    gives (..., 6(n+1)): +N phi on its first node's transverse translation, -N phi on its second, in both
+    bending planes (the axial force turned with the chord, to first order; the rest is the bending stiffening)."""
+    out = np.zeros(q.shape)
+    for transverse in (1, 2):
+        force = N * np.diff(q[..., transverse::6], axis=-1) / length
+        out[..., transverse:-6:6] += force
+        out[..., 6 + transverse::6] -= force
+    return out
+
+
 class Switched(NumpyStepper):
     """The numpy stepper with issue 43's lagged switches (class attributes, set by :func:`stepper`)."""
     moments, rates, spin, inertia, scale, joints, journal = False, False, False, False, 1.0, (1, 2), False
+    frame, stiffening, geometric_scale, part = False, False, 1.0, "all"
+
+    def _links_full(self, x):
+        """Crank and rod full nodal vectors (R, 6, 6(n+1)), link frames, of system vectors x (R, N)."""
+        jm = self.setup.jm
+        c, r, _ = split(jm, x)
+        full = np.zeros((2,) + r.shape[:-1] + (6 * jm.elements + 6,))
+        full[0][..., jm.crank_keep] = c
+        full[1][..., jm.elastic.rod_order] = r
+        return full
+
+    def _geometric(self, idx, ch, k1):
+        """Generalised forces (R, N) of the geometrically nonlinear terms switched on (``frame``: the frame-motion
+        inertia of the elastic motion, :func:`rss6core.assembly.frame_inertia_load`; ``stiffening``: -K_G(N) q,
+        :func:`geometric_load`), on cranks and rods, from the last accepted state."""
+        jm, ws, scene = self.setup.jm, self.ws, self.setup.scene
+        out = np.zeros((len(idx), ws.d.shape[-1]))
+        if not (self.frame or self.stiffening):
+            return out
+        if jm.crank_basis is not None:
+            raise ValueError("the geometric switches address nodal DOFs: run them on the full mesh")
+        q, q_dot = self._links_full(ws.d[idx]), self._links_full(ws.v[idx])
+        em, load = jm.elastic, np.zeros(q.shape)
+        if self.frame:
+            cache = ch.__dict__.setdefault("frame_rates", {})
+            if k1 not in cache:
+                cache[k1] = frame_rates(ch.reference, scene.geometry, ch.t[k1])
+            Om, Om_dot = cache[k1]
+            for link, M in enumerate((em.crank_M_full, em.rod_M_full)):
+                load[link] += frame_inertia_load(M, q[link], q_dot[link], Om[link], Om_dot[link])
+        if self.stiffening:
+            E, n = scene.material.youngs_modulus, jm.elements
+            for link, (section, length) in enumerate(((scene.crank_section, scene.geometry.crank_length),
+                                                      (scene.rod_section, scene.geometry.rod_length))):
+                props = section_properties(section)
+                N = axial_forces(q[link], E * props.area, length / n)
+                turning = chord_load(q[link], N, length / n)
+                load[link] += {"all": geometric_load(q[link], N, length / n, props), "chord": turning,
+                               "bending": geometric_load(q[link], N, length / n, props) - turning}[self.part]
+        load *= self.geometric_scale
+        return join(load[0][..., jm.crank_keep], load[1][..., em.rod_order], out[..., -6:])
 
     def _journal_friction(self, idx, ch, k1):
         """Generalised forces (R, N) of the actuated joints' friction moments about the motor axes on the
@@ -209,7 +308,8 @@ class Switched(NumpyStepper):
         rotations of this attempt (:meth:`_sliding_rotation`), which its Newton iteration then reads."""
         if self.rates or self.spin:
             self._sliding_rotation(idx, ch, k1, h)
-        return ch.F[k1] + self._friction_moments(idx, ch, k1) + self._journal_friction(idx, ch, k1)
+        return (ch.F[k1] + self._friction_moments(idx, ch, k1) + self._journal_friction(idx, ch, k1)
+                + self._geometric(idx, ch, k1))
 
     def _keep(self, kept, ch, k1, h, a, d, v, f, delta, rate, used):
         super()._keep(kept, ch, k1, h, a, d, v, f, delta, rate, used)
@@ -226,7 +326,15 @@ SWITCHES = {"plain": None, "zero": dict(moments=True, scale=0.0), "moments": dic
             "spin": dict(spin=True), "spin-moments": dict(spin=True, moments=True),
             "spin-inertia": dict(spin=True, inertia=True),
             "spin-inertia-moments": dict(spin=True, inertia=True, moments=True),
-            "all": dict(spin=True, inertia=True, moments=True, rates=True)}
+            "all": dict(spin=True, inertia=True, moments=True, rates=True),
+            "frame": dict(frame=True), "stiffening": dict(stiffening=True),
+            "nonlinear": dict(frame=True, stiffening=True),
+            "nonlinear-zero": dict(frame=True, stiffening=True, geometric_scale=0.0),
+            "nonlinear-1e-3": dict(frame=True, stiffening=True, geometric_scale=1e-3),
+            "nonlinear-0.1": dict(frame=True, stiffening=True, geometric_scale=0.1),
+            "chord": dict(stiffening=True, part="chord"), "bending": dict(stiffening=True, part="bending"),
+            "spin-inertia-moments-nonlinear": dict(spin=True, inertia=True, moments=True, frame=True, stiffening=True),
+            "all-nonlinear": dict(spin=True, inertia=True, moments=True, rates=True, frame=True, stiffening=True)}
 
 
 def stepper(name):
@@ -289,6 +397,34 @@ def linearisation_scale(scene):
           f"{(rate / (2 * np.pi * crank_f1)) ** 2:.2g} (f1 {crank_f1:.4g} Hz)")
 
 
+class _Sizes(Switched):
+    """The numpy stepper recording candidate 1's sizes at every attempt (loads not applied): per link kind
+    [crank, rod], the largest |N| (N), |element chord rotation| (rad) and |-K_G(N) q| (N, N m)."""
+    sizes = None
+
+    def _geometric(self, idx, ch, k1):
+        jm, scene, q = self.setup.jm, self.setup.scene, self._links_full(self.ws.d[idx])
+        for link, (section, length) in enumerate(((scene.crank_section, scene.geometry.crank_length),
+                                                  (scene.rod_section, scene.geometry.rod_length))):
+            props, l = section_properties(section), length / jm.elements
+            N = axial_forces(q[link], scene.material.youngs_modulus * props.area, l)
+            chord = np.abs(np.diff(q[link][..., 1::6], axis=-1)) + np.abs(np.diff(q[link][..., 2::6], axis=-1))
+            now = [np.abs(N).max(), chord.max() / l, np.abs(geometric_load(q[link], N, l, props)).max()]
+            self.sizes[link] = np.maximum(self.sizes[link], now)
+        return np.zeros((len(idx), self.ws.d.shape[-1]))
+
+
+def geometric_sizes(scene):
+    """Print candidate 1's sizes on the case (:class:`_Sizes`, the plain run's states)."""
+    level = prepare_level(scene, "contact")
+    _Sizes.sizes = np.zeros((2, 3))
+    simulate_contact(scene, [draw_clearances(scene, 0, 0)], level.elements, level.integrator, level.dt,
+                     stepper=_Sizes)
+    for name, (N, chord, load) in zip(("crank", "rod"), _Sizes.sizes):
+        print(f"{name}: largest axial force {N:.3g} N, element chord rotation <= {chord:.2g} rad (|v| + |w| "
+              f"differences / l), largest |K_G(N) q| {load:.2g} N or N m")
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("switches", nargs="*", help=f"any of {', '.join(SWITCHES)} (default: all)")
@@ -321,6 +457,7 @@ def main(argv=None):
           f"rx ry rz rad/s^2 | max |displacement| x y z mm | mean |velocity| x y z mm/s, rx ry rz mrad/s")
     if args.scale:
         linearisation_scale(scene)
+        geometric_sizes(scene)
     J_A = crank_inertia(scene).inertia[1]
     if any(motor_stiffness(n) for n in args.switches):
         print(f"crank J_A {J_A:.4g} kg m^2; a position loop of 50-200 Hz on it: k_m = (2 pi f)^2 J_A = "

@@ -41,7 +41,7 @@ from .sections import section_properties, shear_correction_factor
 __all__ = ["LegLayout", "ElasticModel", "build_elastic_model", "scene_link_matrices", "EndMaps", "end_maps",
            "link_frames", "frame_maps", "split", "join", "apply", "apply_pair", "internal_force", "StepSolver",
            "dense_matrices", "system_at", "rigid_loads", "link_loads", "platform_point_map",
-           "frame_coupling_forces", "to_link_coordinates", "to_nodal"]
+           "frame_coupling_forces", "frame_inertia_load", "to_link_coordinates", "to_nodal"]
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -415,6 +415,21 @@ def _to_independent(model: ElasticModel, maps: EndMaps, f_crank: np.ndarray,
     return join(f_crank, f_rod[..., :nf], platform)
 
 
+def frame_inertia_load(M: np.ndarray, q: np.ndarray, q_dot: np.ndarray, Om: np.ndarray,
+                       Om_dot: np.ndarray) -> np.ndarray:
+    """-M (2 Omega~ q' + (Omega~' + Omega~^2) q) (..., 6(n+1)), N: the frame-motion inertia of a link's
+    elastic motion, as a load (eq. 26's 2 B^T M B' U' + B^T M B'' U in the link frame).
+
+    q, q_dot (..., 6(n+1)): the link's full nodal displacements (m, rad) and rates in its own axes; Om,
+    Om_dot (..., 3, 3): R^T R' (1/s), the frame's angular velocity in its axes as a skew matrix, and its
+    rate (1/s^2); M (6(n+1), 6(n+1)): the link's full mass.  Each node's translations and rotations
+    are turned alike, as three-vectors."""
+    q3, qd3 = q.reshape(q.shape[:-1] + (-1, 3)), q_dot.reshape(q.shape[:-1] + (-1, 3))
+    acc = (2 * np.einsum("...ij,...kj->...ki", Om, qd3)
+           + np.einsum("...ij,...kj->...ki", Om_dot + Om @ Om, q3))
+    return -acc.reshape(q.shape) @ M
+
+
 def frame_coupling_forces(model: ElasticModel, motion: RigidMotion, scene,
                           d: np.ndarray) -> np.ndarray:
     """Generalised forces (T, N) of eq. 26's frame-motion terms along a computed response d (T, N).
@@ -437,10 +452,7 @@ def frame_coupling_forces(model: ElasticModel, motion: RigidMotion, scene,
 
     def extra(M, q, frames):
         Om = np.einsum("tlji,tljk->tlik", frames, np.gradient(frames, t, axis=0))
-        q3 = q.reshape(q.shape[:2] + (-1, 3))
-        acc = (2 * np.einsum("tlij,tlkj->tlki", Om, np.gradient(q3, t, axis=0))
-               + np.einsum("tlij,tlkj->tlki", np.gradient(Om, t, axis=0) + Om @ Om, q3))
-        return -acc.reshape(q.shape) @ M
+        return frame_inertia_load(M, q, np.gradient(q, t, axis=0), Om, np.gradient(Om, t, axis=0))
 
     f_crank = extra(model.crank_M_full, crank_full, crank)[..., 6:]
     f_rod = extra(model.rod_M_full, rod_full, rod)[..., model.rod_order]

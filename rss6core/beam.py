@@ -26,7 +26,7 @@ import numpy as np
 
 from .sections import SectionProperties
 
-__all__ = ["BEAM_THEORIES", "MASS_MODELS", "BeamTheory", "element_matrices", "link_matrices"]
+__all__ = ["BEAM_THEORIES", "MASS_MODELS", "BeamTheory", "element_matrices", "geometric_stiffness", "link_matrices"]
 
 BEAM_THEORIES = ("euler-bernoulli", "timoshenko")
 MASS_MODELS = ("consistent", "lumped")
@@ -132,6 +132,26 @@ def element_matrices(props: SectionProperties, E: float, G: float, rho: float, l
         K[np.ix_(dofs, dofs)] += E * I * flip @ k @ flip
         M[np.ix_(dofs, dofs)] += flip @ (rho * props.area * m + rotary_inertia * rho * I * rot) @ flip
     return K, (_lumped_mass(props, rho, l) if mass == "lumped" else M)
+
+
+def geometric_stiffness(props: SectionProperties, l: float) -> np.ndarray:
+    """Consistent geometric (initial-stress) stiffness K_G (12 x 12, local axes) of a 3-D Euler-Bernoulli
+    element of length ``l`` (m) per unit axial force N (tension > 0): multiply by N (N) for N/m, N, N m.
+
+    Bending, per plane, N / (30 l) [[36, 3l, -36, 3l], [3l, 4l^2, -3l, -l^2], [-36, -3l, 36, -3l],
+    [3l, -l^2, -3l, 4l^2]] on (v1, r_z1, v2, r_z2), the x-z plane with the rotations' sign flipped as in
+    :func:`element_matrices`; torsion N (I_y + I_z) / (A l) [[1, -1], [-1, 1]] (Wagner).  The same cubic
+    interpolation as K: Przemieniecki, Theory of Matrix Structural Analysis (1968), ch. 15 (stability);
+    McGuire, Gallagher & Ziemian, Matrix Structural Analysis, 2nd ed. (2000), ch. 9.  Axial DOFs carry none.
+    """
+    kg = np.array([[36, 3 * l, -36, 3 * l], [3 * l, 4 * l * l, -3 * l, -l * l],
+                   [-36, -3 * l, 36, -3 * l], [3 * l, -l * l, -3 * l, 4 * l * l]]) / (30.0 * l)
+    K = np.zeros((12, 12))
+    for dofs, sign in (([1, 5, 7, 11], 1.0), ([2, 4, 8, 10], -1.0)):
+        flip = np.diag([1.0, sign, 1.0, sign])
+        K[np.ix_(dofs, dofs)] += flip @ kg @ flip
+    K[np.ix_([3, 9], [3, 9])] += (props.Iy + props.Iz) / (props.area * l) * np.array([[1.0, -1.0], [-1.0, 1.0]])
+    return K
 
 
 def link_matrices(props: SectionProperties, E: float, G: float, rho: float, length: float,
