@@ -13,6 +13,8 @@ from .ensemble.cluster import start_worker_server, stop_worker_server
 # the commands that run ensembles on a local cluster unless given --scheduler (those with --workers)
 LOCAL_CLUSTER_COMMANDS = frozenset({"run", "report", "multifidelity", "sensitivity", "reliability", "budget",
                                     "allocate"})
+# those of them for which --workers 1 means this process, no cluster
+IN_PROCESS_AT_ONE_WORKER = frozenset({"reliability", "sensitivity"})
 
 
 def commands() -> tuple:
@@ -48,7 +50,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The ``rss6`` command (``argv`` None: this process's own arguments)."""
+    """The ``rss6`` command (``argv`` None: this process's own arguments). A Ctrl-C that no command
+    handled (during the imports, or in a command without its own account of what it kept) is one line
+    and exit 130, not a traceback."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print("rss6: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
     if argv is None:
         _start_workers_ahead(sys.argv[1:])
     from rss6core import SceneError
@@ -67,6 +79,11 @@ def main(argv: list[str] | None = None) -> int:
         return 141
 
 
+def _one_worker(argv: list[str]) -> bool:
+    """Whether the command line says --workers 1 (or --workers=1)."""
+    return "--workers=1" in argv or any(a == "--workers" and b == "1" for a, b in zip(argv, argv[1:]))
+
+
 def _start_workers_ahead(argv: list[str]) -> None:
     """A command that will start a local cluster starts its workers' fork server first, so that the
     server's imports and this process's run side by side: docs/performance.md
@@ -74,6 +91,8 @@ def _start_workers_ahead(argv: list[str]) -> None:
     if not argv or argv[0] not in LOCAL_CLUSTER_COMMANDS:
         return
     if any(a.startswith("--scheduler") or a in ("-h", "--help") for a in argv):
+        return
+    if argv[0] in IN_PROCESS_AT_ONE_WORKER and _one_worker(argv):
         return
     start_worker_server()
     atexit.register(stop_worker_server)

@@ -166,7 +166,10 @@ def test_contact_ensemble_stores_contact_force_peaks(configs, tmp_path):
 
 @pytest.mark.parametrize("argv, ahead", [
     (["run", "paper", "-n", "4"], True),
-    (["reliability", "paper", "--workers", "1"], True),
+    (["reliability", "paper", "--workers", "2"], True),
+    (["reliability", "paper", "--workers", "1"], False),                 # 1: in this process, no cluster
+    (["sensitivity", "paper", "--workers=1"], False),
+    (["run", "paper", "--workers", "1"], True),                          # one local worker
     (["run", "paper", "--scheduler", "tcp://127.0.0.1:8786"], False),   # its workers are not ours
     (["run", "paper", "--scheduler=tcp://127.0.0.1:8786"], False),
     (["run", "-h"], False),
@@ -191,3 +194,19 @@ def test_the_rss6_command_starts_its_workers_server_before_its_imports_only_for_
     with pytest.raises(SystemExit):
         cli.main(argv)
     assert started == []
+
+
+def test_a_ctrl_c_no_command_handles_is_one_line_and_exit_130(monkeypatch, capsys):
+    """Ctrl-C while the commands are imported (the first second or two of every command) gave a
+    KeyboardInterrupt traceback (a new user's review)."""
+    import pipeline.cli as cli
+
+    def interrupted_import():
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cli, "build_parser", interrupted_import)
+    try:
+        code = cli.main(["stats", "x.nc"])
+    except KeyboardInterrupt:
+        pytest.fail("the Ctrl-C escaped rss6's main")
+    assert code == 130
+    assert capsys.readouterr().err == "rss6: interrupted\n"
