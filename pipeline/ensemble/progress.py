@@ -28,8 +28,9 @@ class _Progress:
         self.first = done
 
     def begin(self, chunks: int, where: str) -> None:
-        self.stream.write(f"rss6 run: {self.total - self.done} realisations to compute in {chunks} "
-                          f"chunks on {where}" + (f" ({self.done} stored)" if self.done else "")
+        noun = "chunk" if chunks == 1 else "chunks"
+        self.stream.write(f"rss6 run: {self.total - self.done} realisations to compute in {chunks} {noun} "
+                          f"on {where}" + (f" ({self.done} stored)" if self.done else "")
                           + "; starting workers\n")
         self.stream.flush()
 
