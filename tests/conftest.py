@@ -10,6 +10,21 @@ from pipeline.scenes.catalogue import PACKAGE
 from rss6core import load_scene
 
 
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def load_benchmark(name: str):
+    """The module benchmarks/NAME.py of this checkout (benchmarks are scripts, not part of the package),
+    for tests that check its arithmetic."""
+    import importlib.util
+    import sys
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
 def pytest_report_header(config):
     return [f"rss6core from {Path(rss6core.__file__).parent}",
             f"pipeline from {Path(pipeline.__file__).parent}"]

@@ -1,8 +1,6 @@
 """The formulas of issue 43's candidate switches (benchmarks/acceleration_candidates.py) against closed forms:
 the friction moment's power, a rod's spin-up under one slipping joint, and its spin where two joints' moments
 balance."""
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -10,16 +8,11 @@ import pytest
 
 from rss6core import load_scene
 
-BENCHMARK = Path(__file__).resolve().parents[1] / "benchmarks" / "acceleration_candidates.py"
-
+from .conftest import load_benchmark
 
 @pytest.fixture(scope="module")
 def candidates():
-    spec = importlib.util.spec_from_file_location("acceleration_candidates", BENCHMARK)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("acceleration_candidates")
 
 
 @pytest.fixture(scope="module")

@@ -10,9 +10,6 @@ spinning beam (benchmarks/rotating_beam.py, which prints the measured values) is
 element forces EA du/l of the static stretch under the centrifugal load, minus the frame term's Omega^2 M;
 Coriolis coupling is left out, as in Southwell's form.  Nondimensional: E = rho = A = I = L = 1.
 """
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,16 +19,11 @@ from rss6core.assembly import frame_inertia_load
 from rss6core.beam import geometric_stiffness, link_matrices
 from rss6core.sections import SectionProperties
 
-BENCHMARK = Path(__file__).resolve().parents[1] / "benchmarks" / "rotating_beam.py"
-
+from .conftest import load_benchmark
 
 @pytest.fixture(scope="module")
 def beam():
-    spec = importlib.util.spec_from_file_location("rotating_beam", BENCHMARK)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("rotating_beam")
 
 
 def test_southwell_coefficients_of_the_first_two_flapwise_modes(beam):
