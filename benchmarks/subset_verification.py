@@ -4,9 +4,10 @@ Run on demand: ``python benchmarks/subset_verification.py [--reps R] [-n N]`` (d
 a few seconds).
 For linear limit states in 20 standard normal dimensions at P = 1e-3 and 1e-4 (P = Phi(-beta)) and
 the outside of a sphere in 5 dimensions at P = 1e-4 (P = chi2_5.sf(c)), R runs with seeds 0..R-1 at
-N = 1000, p0 = 0.1: mean relative bias, observed CoV of the estimates, mean reported CoV, coverage of
-the 95 % interval (the log-normal one rss6 prints from N = MIN_N_INTERVAL on, computed at any N), mean evaluations, and the coverage an interval from the
-uncorrelated CoV would have had.  tests/test_subset.py asserts the same quantities.
+N draws per level, p0 = 0.1: mean relative bias, observed CoV of the estimates, mean reported CoV,
+coverage of the 95 % interval (the log-normal one rss6 prints from N = MIN_N_INTERVAL on, computed here
+at any N), mean evaluations, and the coverage an interval from the uncorrelated CoV would have had.
+tests/test_subset.py asserts the same quantities.
 """
 from __future__ import annotations
 
