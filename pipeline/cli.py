@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import signal
 import sys
 
 from .ensemble.cluster import start_worker_server, stop_worker_server
@@ -53,11 +54,21 @@ def main(argv: list[str] | None = None) -> int:
     """The ``rss6`` command (``argv`` None: this process's own arguments). A Ctrl-C that no command
     handled (during the imports, or in a command without its own account of what it kept) is one line
     and exit 130, not a traceback."""
+    if argv is None:
+        for stop in (signal.SIGTERM, signal.SIGHUP):
+            signal.signal(stop, _stop_as_ctrl_c)
     try:
         return _main(argv)
     except KeyboardInterrupt:
         print("rss6: interrupted", file=sys.stderr)
         return 130
+
+
+def _stop_as_ctrl_c(signum, frame) -> None:
+    """SIGTERM (a batch scheduler's or ``docker stop``'s) and SIGHUP (a closed terminal) end the command
+    as Ctrl-C does: raised as SIGINT, so held where a file is written or dask is waited on, finished
+    chunks kept, the output's lock removed, one line, exit 130."""
+    signal.raise_signal(signal.SIGINT)
 
 
 def _main(argv: list[str] | None) -> int:

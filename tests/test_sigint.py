@@ -42,6 +42,15 @@ def _assert_clean_interrupt(returncode, err, out, parts):
     assert not out.exists() and len(list(parts.glob("*.nc"))) == 1
 
 
+@pytest.mark.parametrize("stop", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_or_sighup_to_a_run_ends_it_as_ctrl_c_does(tmp_path, stop):
+    """A batch scheduler's SIGTERM (or a closed terminal's SIGHUP) ended the run with no line, a stale
+    lock and nothing said (a new user's review): it is now Ctrl-C's clean stop."""
+    out = tmp_path / "cut.nc"
+    _assert_clean_interrupt(*_interrupt_a_run(tmp_path, lambda pid, _: os.kill(pid, stop)))
+    assert not Path(str(out) + ".lock").exists()
+
+
 def test_sigint_to_a_run_exits_130_and_keeps_the_finished_chunks(tmp_path):
     """`kill -INT PID` of the rss6 process while a chunk computes: one SIGINT ends the run (the
     terminal's Ctrl-C, to the whole process group, is tests/test_cli_guard.py's)."""
