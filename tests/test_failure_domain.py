@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from pipeline.analysis.failure_domain import failure_domain
+from pipeline.analysis.failure_domain import failure_domain, format_failure_domain
 from pipeline.analysis.subset import SubsetSettings, subset_simulation
 from pipeline.cli import main
 from pipeline.files.reading import load_netcdf
@@ -53,6 +53,23 @@ def test_subset_states_of_the_last_level_shift_along_the_design_point():
     assert np.linalg.norm(fd.mean - (fd.mean @ ALPHA) * ALPHA) < 0.4
     best = fd.most_probable_z
     assert beta <= np.linalg.norm(best) < beta + 0.3 and best @ ALPHA / np.linalg.norm(best) > 0.95
+
+
+def test_inputs_no_draw_uses_are_not_ranked_and_a_ranking_within_their_noise_is_said():
+    """Inputs of family 'unused' (nominal sizes: taken, not used) cannot drive a failure, so they are
+    not listed as the inputs of largest shift nor as the design point's largest |z_i| (a new user's
+    review found B_size[leg 5] at the top); when no family shifts more than they do, the text says
+    the ranking is noise."""
+    rng = np.random.default_rng(3)
+    z = rng.standard_normal((4000, 4))
+    labels, groups = ("a", "b", "B_size[leg 5]", "B_size[leg 6]"), ("first", "second", "unused", "unused")
+    driven = failure_domain(z, np.zeros(4000, int), z[:, 0] > 1.0, labels, groups)
+    text = format_failure_domain(driven)
+    listed = text.split("inputs of largest shift: ")[1].split("\n")[0]
+    assert "B_size" not in listed and "B_size" not in text.split("largest |z_i|: ")[1]
+    assert listed.startswith("a mean +1.") and "the ranking is noise" not in text
+    noise = failure_domain(z, np.zeros(4000, int), z[:, 2] > 1.0, labels, groups)   # only 'unused' drives it
+    assert "the ranking is noise at this sample" in format_failure_domain(noise)
 
 
 def test_nothing_failing_is_refused():

@@ -63,6 +63,20 @@ def failure_domain(z: np.ndarray, level: np.ndarray, failing: np.ndarray, labels
                          z[best].copy())
 
 
+UNUSED = "unused"   # the family of inputs no draw uses (pipeline.studies.reliability.input_labels)
+
+
+def _noise_note(fd: FailureDomain) -> list[str]:
+    """A line when no family's shift stands above that of the inputs no draw uses (the noise of the
+    means at this sample): then the ranking says nothing."""
+    shifts = {g: s for g, s, _ in fd.group_shifts()}
+    noise = shifts.pop(UNUSED, None)
+    if noise is None or not shifts or max(shifts.values()) > noise:
+        return []
+    return [f"  no family's shift exceeds the unused inputs' ({noise:.2f}, the noise of these means): "
+            "the ranking is noise at this sample"]
+
+
 def format_failure_domain(fd: FailureDomain, physical: list | None = None, shown: int = 8) -> str:
     """Lines: the groups by shift, the inputs of largest |mean|, the most probable failing realisation
     (its |z| and, where given, ``physical`` rows (name, values, unit) of its inputs)."""
@@ -70,10 +84,12 @@ def format_failure_domain(fd: FailureDomain, physical: list | None = None, shown
              "(mean = shift in standard deviations, std < 1 = narrowed)",
              "  families by the rms of their inputs' mean shifts: " + ", ".join(
                  f"{g} {s:.2f}" + (f" ({n})" if n > 1 else "") for g, s, n in fd.group_shifts()[:shown])]
-    order = np.argsort(-np.abs(fd.mean))[:shown]
+    lines += _noise_note(fd)
+    used = np.array([g != UNUSED for g in fd.groups])   # an input no draw uses cannot drive a failure
+    order = [i for i in np.argsort(-np.abs(fd.mean)) if used[i]][:shown]
     lines.append("  inputs of largest shift: " + ", ".join(
         f"{fd.labels[i]} mean {fd.mean[i]:+.2f} std {fd.std[i]:.2f}" for i in order))
-    near = np.argsort(-np.abs(fd.most_probable_z))[:shown]
+    near = [i for i in np.argsort(-np.abs(fd.most_probable_z)) if used[i]][:shown]
     lines.append(f"  most probable failing realisation: evaluation {fd.most_probable}, |z| = "
                  f"{np.linalg.norm(fd.most_probable_z):.3f}; largest |z_i|: " + ", ".join(
                      f"{fd.labels[i]} {fd.most_probable_z[i]:+.2f}" for i in near))
