@@ -211,3 +211,20 @@ def test_resuming_a_file_of_another_rss6_version_is_refused(good, tmp_path, caps
     assert len(err.splitlines()) == 1 and err.startswith(f"rss6: error: {old}: written by rss6 9.9.9, this is "
                                                          f"rss6 {__version__}") and "another -o" in err
     assert old.read_bytes() == before and not (tmp_path / "old.nc.parts").exists()
+
+
+def test_a_split_variables_units_edited_on_disk_are_refused(good, tmp_path, capsys):
+    """A CF reader trusts a variable's units: m edited to mm (a new user's review) would make it read
+    the values 1000x off while rss6's own numbers stayed; the edit is now named, exit 2."""
+    import shutil
+
+    import netCDF4
+    bad = tmp_path / "units.nc"
+    shutil.copy(good, bad)
+    with netCDF4.Dataset(bad, "a") as nc:
+        assert nc["max_abs_error_displacement_translation"].units == "m"
+        nc["max_abs_error_displacement_translation"].units = "mm"
+    assert main(["stats", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "max_abs_error_displacement_translation has units 'mm'" in err, err
+    assert str(bad) in err

@@ -202,6 +202,14 @@ def _join_units(ds: xr.Dataset) -> xr.Dataset:
     return out
 
 
+def _check_part_units(ds: xr.Dataset, part: str, got, want: str) -> None:
+    """A split variable's units are those rss6 wrote: a reader that trusts them (a CF tool) would
+    otherwise read the values in another unit; rss6's own numbers do not depend on them."""
+    if got != want:
+        raise EnsembleFileError(f"{ds.encoding.get('source', 'the file')}: variable {part} has units {got!r}; "
+                                f"rss6 writes {want!r} (the file was edited)")
+
+
 def _joined(ds: xr.Dataset, name: str, names: list) -> xr.Variable:
     """Variable ``name`` from its parts ``names`` (see :func:`_split_units`), its quantities and
     directions in the order of the Dataset's labels; stacked as arrays (dask ones stay lazy)."""
@@ -213,6 +221,7 @@ def _joined(ds: xr.Dataset, name: str, names: list) -> xr.Variable:
         var = ds[part].variable
         family = next(f for f in FAMILIES if f in var.dims)
         q = str(var.attrs[_PART_QUANTITY])
+        _check_part_units(ds, part, var.attrs.get("units"), UNITS[q][list(FAMILIES).index(family)])
         by_quantity.setdefault(q, []).append(var.transpose(*[family if d == "direction" else d
                                                              for d in inner]).data)
         labels.setdefault(q, []).extend(str(v) for v in ds[family].values)
