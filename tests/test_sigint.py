@@ -91,3 +91,26 @@ def test_a_run_stopped_before_any_chunk_finished_says_nothing_is_kept(tmp_path, 
     err = capsys.readouterr().err.strip()
     assert err == "rss6: interrupted; nothing had finished, so nothing is kept", err
     assert not (tmp_path / "k.nc.parts").exists()
+
+
+def test_ctrl_c_while_the_local_cluster_starts_is_held_then_raised_with_the_cluster_closed(monkeypatch):
+    """The cluster's start took Ctrl-C ignored, and a Ctrl-C in those 1-3 s was lost (a new user's
+    review: a run went on to the end). It is now held: the cluster, once up, is closed and the Ctrl-C
+    raised. A fake cluster sends the SIGINT from its constructor, so no timing is involved."""
+    import dask.distributed
+
+    import pipeline.ensemble.cluster as cluster
+    closed = []
+
+    class Starting:
+        def __init__(self, **kwargs):
+            signal.raise_signal(signal.SIGINT)   # as a Ctrl-C landing while the workers start
+            assert signal.getsignal(signal.SIGINT) is not signal.SIG_IGN
+
+        def close(self):
+            closed.append(True)
+    monkeypatch.setattr(cluster, "start_worker_server", lambda: None)
+    monkeypatch.setattr(dask.distributed, "LocalCluster", Starting)
+    with pytest.raises(KeyboardInterrupt):
+        cluster.local_cluster(2)
+    assert closed == [True]

@@ -42,13 +42,18 @@ def local_cluster(workers: int):
     """
     import dask
     from dask.distributed import LocalCluster
+
+    from ..files.writing import sigint_deferred
     settings = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
                 "distributed.worker.multiprocessing-method": "forkserver", **QUIET_CLUSTER}
-    start_worker_server()
-    with dask.config.set(settings), _workers_ignore_ctrl_c():
-        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                            dashboard_address=None, host="127.0.0.1", silence_logs=logging.CRITICAL,
-                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+    start_worker_server()   # the workers fork from it and ignore Ctrl-C as it does
+    with dask.config.set(settings), sigint_deferred() as interrupted:   # a Ctrl-C meanwhile: raised after
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, host="127.0.0.1", silence_logs=logging.CRITICAL,
+                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+        if interrupted:
+            cluster.close()
+    return cluster
 
 
 # a local cluster without a dashboard: no statistical profiler in the workers (a stack sample of
@@ -101,11 +106,12 @@ def stop_worker_server() -> None:
 
 @contextlib.contextmanager
 def _workers_ignore_ctrl_c():
-    """Worker processes started in this block inherit an ignored SIGINT: a terminal's Ctrl-C reaches
-    the whole process group, and only this process should act on it (the cluster is closed from
-    here); otherwise each worker prints its own traceback. The disposition is the process's, so a
-    Ctrl-C while the local cluster starts (1-3 s) is lost; blocking SIGINT instead does not reach
-    the workers (dask starts them from threads that do not block it)."""
+    """Processes started in this block inherit an ignored SIGINT: the fork server, and through it every
+    worker it forks. A terminal's Ctrl-C reaches the whole process group, and only this process should
+    act on it (the cluster is closed from here); otherwise each worker prints its own traceback.
+    Blocking SIGINT instead does not reach the workers (dask starts them from threads that do not
+    block it). The cluster itself then starts with this process's Ctrl-C held, not ignored
+    (:func:`local_cluster`)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
