@@ -187,8 +187,8 @@ def evaluate(spec, window: str, z: np.ndarray, client=None) -> np.ndarray:
     chunk = -(-len(z) // workers) if dear else max(IN_PROCESS_ROWS // 4, -(-len(z) // (4 * workers)))
     parts = [slice(i, min(i + chunk, len(z))) for i in range(0, len(z), chunk)]
     with sigint_deferred() as interrupted:   # Ctrl-C acted on between waits, never inside dask's client
-        # the rows go with each task (not scattered: a worker stopped by Ctrl-C would lose scattered data
-        # and cancel the tasks that need it; a task of its own is simply run again)
+        # the rows go with each task, not scattered: a worker that dies takes scattered rows with it and
+        # its dependants are cancelled, while a task that carries its rows is simply run again
         futures = [client.submit(_evaluate_part, spec, window, z[p], k, pure=False) for k, p in enumerate(parts)]
         got = {part["index"]: part["maxima"]
                for part in results_as_finished(client, futures, None, WORKER_TIMEOUT_S, interrupted)}
