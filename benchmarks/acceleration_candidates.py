@@ -74,7 +74,7 @@ from rss6core.contact_numpy import NumpyStepper
 from rss6core.kinematics import rigid_motion
 from rss6core.models import prepare_level
 from rss6core.scene import load_scene
-from rss6core.sections import crank_inertia, section_properties
+from rss6core.sections import crank_inertia, crank_on_motor_frequency, section_properties
 
 SCENE = Path(__file__).resolve().parents[1] / "configs" / "paper.toml"
 SETTLE = 0.3   # s, issue 43's window start
@@ -158,6 +158,15 @@ def axial_forces(q, axial_stiffness, length):
     return axial_stiffness * np.diff(q[..., 0::6], axis=-1) / length
 
 
+def link_axial_forces(scene, elements: int, q):
+    """Per link kind (0 crank, 1 rod, as :meth:`Switched._links_full` stacks q): its index, section
+    properties, element length l (m) and elements' axial forces N (..., n) N (:func:`axial_forces`)."""
+    for link, (section, length) in enumerate(((scene.crank_section, scene.geometry.crank_length),
+                                              (scene.rod_section, scene.geometry.rod_length))):
+        props, l = section_properties(section), length / elements
+        yield link, props, l, axial_forces(q[link], scene.material.youngs_modulus * props.area, l)
+
+
 def geometric_load(q, N, length, props):
     """-K_G(N) q (..., 6(n+1)): each element's geometric stiffness (:func:`rss6core.beam.geometric_stiffness`,
     elements of ``length`` l, m) under its axial force N (..., n) N on a link's full nodal vector q, as a load
@@ -215,14 +224,13 @@ class Switched(NumpyStepper):
             for link, M in enumerate((em.crank_M_full, em.rod_M_full)):
                 load[link] += frame_inertia_load(M, q[link], q_dot[link], Om[link], Om_dot[link])
         if self.stiffening:
-            E, n = scene.material.youngs_modulus, jm.elements
-            for link, (section, length) in enumerate(((scene.crank_section, scene.geometry.crank_length),
-                                                      (scene.rod_section, scene.geometry.rod_length))):
-                props = section_properties(section)
-                N = axial_forces(q[link], E * props.area, length / n)
-                turning = chord_load(q[link], N, length / n)
-                load[link] += {"all": geometric_load(q[link], N, length / n, props), "chord": turning,
-                               "bending": geometric_load(q[link], N, length / n, props) - turning}[self.part]
+            for link, props, l, N in link_axial_forces(scene, jm.elements, q):
+                if self.part == "chord":
+                    load[link] += chord_load(q[link], N, l)
+                    continue
+                load[link] += geometric_load(q[link], N, l, props)
+                if self.part == "bending":
+                    load[link] -= chord_load(q[link], N, l)
         load *= self.geometric_scale
         return join(load[0][..., jm.crank_keep], load[1][..., em.rod_order], out[..., -6:])
 
@@ -404,10 +412,7 @@ class _Sizes(Switched):
 
     def _geometric(self, idx, ch, k1):
         jm, scene, q = self.setup.jm, self.setup.scene, self._links_full(self.ws.d[idx])
-        for link, (section, length) in enumerate(((scene.crank_section, scene.geometry.crank_length),
-                                                  (scene.rod_section, scene.geometry.rod_length))):
-            props, l = section_properties(section), length / jm.elements
-            N = axial_forces(q[link], scene.material.youngs_modulus * props.area, l)
+        for link, props, l, N in link_axial_forces(scene, jm.elements, q):
             chord = np.abs(np.diff(q[link][..., 1::6], axis=-1)) + np.abs(np.diff(q[link][..., 2::6], axis=-1))
             now = [np.abs(N).max(), chord.max() / l, np.abs(geometric_load(q[link], N, l, props)).max()]
             self.sizes[link] = np.maximum(self.sizes[link], now)
@@ -467,7 +472,7 @@ def main(argv=None):
         print(f"{name:8s} " + " ".join(f"{x:.4g}" for x in r["acceleration"])
               + " | " + " ".join(f"{1e3 * x:.4g}" for x in r["displacement"][:3])
               + " | " + " ".join(f"{1e3 * x:.3g}" for x in r["velocity"])
-              + ("" if k_m is None else f" | sqrt(k_m / J_A) / 2 pi = {np.sqrt(k_m / J_A) / (2 * np.pi):.4g} Hz")
+              + ("" if k_m is None else f" | sqrt(k_m / J_A) / 2 pi = {crank_on_motor_frequency(scene, k_m):.4g} Hz")
               + f" | {r['status']}, {r['wall']:.0f} s", flush=True)
 
 
