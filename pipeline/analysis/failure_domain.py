@@ -66,10 +66,10 @@ def failure_domain(z: np.ndarray, level: np.ndarray, failing: np.ndarray, labels
 UNUSED = "unused"   # the family of inputs no draw uses (pipeline.studies.reliability.input_labels)
 
 
-def _noise_note(fd: FailureDomain) -> list[str]:
-    """A line when no family's shift stands above that of the inputs no draw uses (the noise of the
-    means at this sample): then the ranking says nothing."""
-    shifts = {g: s for g, s, _ in fd.group_shifts()}
+def _noise_note(group_shifts: list) -> list[str]:
+    """A line when no family's shift (:meth:`FailureDomain.group_shifts`) stands above that of the inputs
+    no draw uses (the noise of the means at this sample): then the ranking says nothing."""
+    shifts = {g: s for g, s, _ in group_shifts}
     noise = shifts.pop(UNUSED, None)
     if noise is None or not shifts or max(shifts.values()) > noise:
         return []
@@ -80,11 +80,12 @@ def _noise_note(fd: FailureDomain) -> list[str]:
 def format_failure_domain(fd: FailureDomain, physical: list | None = None, shown: int = 8) -> str:
     """Lines: the groups by shift, the inputs of largest |mean|, the most probable failing realisation
     (its |z| and, where given, ``physical`` rows (name, values, unit) of its inputs)."""
+    groups = fd.group_shifts()
     lines = [f"what fails: z of the {fd.failing} failing evaluations of level {fd.level} against N(0, 1) "
              "(mean = shift in standard deviations, std < 1 = narrowed)",
              "  families by the rms of their inputs' mean shifts: " + ", ".join(
-                 f"{g} {s:.2f}" + (f" ({n})" if n > 1 else "") for g, s, n in fd.group_shifts()[:shown])]
-    lines += _noise_note(fd)
+                 f"{g} {s:.2f}" + (f" ({n})" if n > 1 else "") for g, s, n in groups[:shown])]
+    lines += _noise_note(groups)
     used = np.array([g != UNUSED for g in fd.groups])   # an input no draw uses cannot drive a failure
     order = [i for i in np.argsort(-np.abs(fd.mean)) if used[i]][:shown]
     lines.append("  inputs of largest shift: " + ", ".join(
