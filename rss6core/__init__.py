@@ -78,7 +78,8 @@ The rigid robot
 - workspace_quality: reach, transmission index and Jacobian condition number of every pose of the trajectory.
 - TRAJECTORY_KINDS: the [trajectory] kinds by name (sinusoid, points, file).
 - inverse_dynamics: actuator torques and joint forces of the rigid motion (N m, N).
-- crank_inertia, rod_inertia: the rigid links' masses (kg) and inertias (kg m^2).
+- crank_inertia, rod_inertia, crank_on_motor_frequency: the rigid links' masses (kg) and inertias (kg m^2),
+  and the rigid crank's frequency (Hz) on a servo of a given stiffness ([actuator]).
 """
 from .elastic import quasi_static_state, simulate_elastic
 from .results import ContactBatch, SimulationResult, time_grid
@@ -103,7 +104,7 @@ from .uncertain import inputs_from_uniforms
 from .realised import realised_clearances
 from .status import FAILED, FINISHED, STATUSES
 from .trajectory_kinds import TRAJECTORY_KINDS
-from .sections import crank_inertia, rod_inertia
+from .sections import crank_inertia, crank_on_motor_frequency, rod_inertia
 from .workspace_map import (DrawnEccentricities, StaticClosure, WorstCaseSizes, ball_support, drawn_eccentricities,
                             revolute_support, sampled_errors, static_closure, worst_case_error, worst_case_sizes)
 
@@ -124,5 +125,6 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII"
            "quasi_static_state", "simulate_elastic",
            "WorstCaseSizes", "worst_case_sizes", "revolute_support", "ball_support", "StaticClosure",
            "static_closure", "worst_case_error", "DrawnEccentricities", "drawn_eccentricities", "sampled_errors",
-           "rigid_motion", "workspace_quality", "TRAJECTORY_KINDS", "inverse_dynamics", "crank_inertia", "rod_inertia",
+           "rigid_motion", "workspace_quality", "TRAJECTORY_KINDS", "inverse_dynamics", "crank_inertia",
+           "crank_on_motor_frequency", "rod_inertia",
            "__version__"]

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["RectangleSection", "TubeSection", "SectionProperties", "section_properties", "rectangle_torsion_constant",
-           "shear_correction_factor", "LinkInertia", "crank_inertia", "rod_inertia"]
+           "shear_correction_factor", "LinkInertia", "crank_inertia", "crank_on_motor_frequency",
+           "rod_inertia"]
 
 
 @dataclass(frozen=True)
@@ -95,6 +96,12 @@ def crank_inertia(scene) -> LinkInertia:
     return LinkInertia(m, np.array([m * (by ** 2 + hz ** 2) / 12.0,
                                     m * (L ** 2 / 3.0 + hz ** 2 / 12.0),
                                     m * (L ** 2 / 3.0 + by ** 2 / 12.0)]), "joint A")
+
+
+def crank_on_motor_frequency(scene, motor_stiffness: float) -> float:
+    """Hz: the rigid crank, J_A about the motor axis at A (:func:`crank_inertia`), on a torsional spring of
+    ``motor_stiffness`` k_m (N m/rad), sqrt(k_m / J_A) / 2 pi (a servo-driven crank, [actuator])."""
+    return float(np.sqrt(motor_stiffness / crank_inertia(scene).inertia[1]) / (2 * np.pi))
 
 
 def rod_inertia(scene) -> LinkInertia:

@@ -5,8 +5,8 @@ import re
 
 import numpy as np
 
-from rss6core import (crank_inertia, draws_per_realisation, inverse_dynamics, models_with, natural_frequencies,
-                      rigid_motion, rod_inertia)
+from rss6core import (crank_inertia, crank_on_motor_frequency, draws_per_realisation, inverse_dynamics,
+                      models_with, natural_frequencies, rigid_motion, rod_inertia)
 
 from ..files.schema import display_unit
 from ..vocabulary import DIRECTIONS, FINISHED
@@ -73,7 +73,7 @@ def actuator_summary(scene) -> dict:
     if k_m is None:
         return {"drive": "prescribed"}
     return {"drive": "servo", "stiffness_N_m_per_rad": k_m,
-            "crank_on_motor_Hz": float(np.sqrt(k_m / crank_inertia(scene).inertia[1]) / (2 * np.pi))}
+            "crank_on_motor_Hz": crank_on_motor_frequency(scene, k_m)}
 
 
 def uncertain_summary(scene) -> dict:
