@@ -123,18 +123,12 @@ def truncated_normal(rng: np.random.Generator, mean, std, low, high, size, name:
     return out
 
 
-def _polar_angles(u, law: str) -> np.ndarray:
-    """The polar angles eta_1 of the directions of polar uniforms u: arccos(1 - 2 u), uniform on the
-    sphere (numpy's arccos, not glibc's: the bits of the draw), or the paper's pi u."""
-    return np.arccos(1.0 - 2.0 * u) if law == "uniform" else np.pi * u
-
-
 def sphere_directions(rng: np.random.Generator, size: int, law: str = "uniform", joint: str = "") -> np.ndarray:
     """Unit vectors (size, 3): uniform on the sphere, or the paper's eta_d1 = pi u variant (polar
     then azimuth uniforms, blocks ``<joint>_polar`` and ``<joint>_azimuth``)."""
     u1, u2 = _uniform(rng, f"{joint}_polar", size=size), _uniform(rng, f"{joint}_azimuth", size=size)
     out = np.empty((size, 3))
-    _kernel().sphere_directions_into(_polar_angles(u1, law), u2, out)
+    _kernel().sphere_directions_into(u1, u2, law == "uniform", out)
     return out
 
 
@@ -262,6 +256,6 @@ def _sphere(rng, joint: str, size: np.ndarray, shape: tuple, law: str):
     """A spherical joint's sizes and uniforms as the kernel reads them (:class:`.draw_kernel.Sphere`):
     magnitude k_s, then polar, then azimuth uniforms."""
     magnitude_u = _uniform(rng, f"{joint}_magnitude", size=shape)
-    polar = _polar_angles(_uniform(rng, f"{joint}_polar", size=shape), law)
+    polar_u = _uniform(rng, f"{joint}_polar", size=shape)
     azimuth_u = _uniform(rng, f"{joint}_azimuth", size=shape)
-    return _kernel().Sphere(np.array(size, float), magnitude_u, polar, azimuth_u)
+    return _kernel().Sphere(np.array(size, float), magnitude_u, polar_u, azimuth_u, law == "uniform")

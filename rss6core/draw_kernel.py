@@ -6,8 +6,10 @@ pass over the joint-steps, without numpy's temporaries (a per-step draw of the p
 joint-steps).  The bits are those of the numpy expressions they replace (tests/test_draw_kernel.py):
 no fastmath (numba's ``math.sin``/``math.cos`` call glibc's, as numpy's float64 sin and cos do here),
 the same operations in the same order, scipy's own ``ndtri`` (its Cython export, called by symbol
-name so the kernels stay cacheable); the arccosine of the uniform sphere law stays numpy's (its own
-SIMD code, which may differ from glibc's in the last bit) and is taken by the caller.
+name so the kernels stay cacheable).  On the uniform sphere the polar angle eta_1 = arccos z,
+z = 1 - 2 u, is never formed: its cosine is z and its sine sqrt((1 - z)(1 + z)) (eta_1 lies in [0, pi]),
+to round-off of the trigonometric form and exact near the poles; the paper's law eta_1 = pi u takes
+sin and cos of eta_1.
 
 Everything a kernel reads is a named structure read by name (:class:`TruncatedNormal`,
 :class:`Revolute`, :class:`Sphere`).  numba is imported here only: a process that draws nothing
@@ -40,9 +42,9 @@ TruncatedNormal = namedtuple("TruncatedNormal", "point mean std lo hi low high")
 # (steps, legs; empty for a point law), the radial angle's uniforms, the plane of the radial part
 # spanned by plane_x, plane_y (legs, 3), the axis w (legs, 3)
 Revolute = namedtuple("Revolute", "radial radial_u angle_u axial axial_u plane_x plane_y w")
-# a spherical joint's draw: sizes (legs,) m, magnitude uniforms, polar angles eta_1 (numpy's) and
-# azimuth uniforms (steps, legs)
-Sphere = namedtuple("Sphere", "size magnitude_u eta1 azimuth_u")
+# a spherical joint's draw: sizes (legs,) m, magnitude, polar and azimuth uniforms (steps, legs), and
+# the direction law (uniform_sphere: eta_1 = arccos(1 - 2 u); else the paper's eta_1 = pi u)
+Sphere = namedtuple("Sphere", "size magnitude_u polar_u azimuth_u uniform_sphere")
 
 
 @njit(cache=True)
@@ -72,19 +74,25 @@ def truncated_normals(law, u, out):
 
 
 @njit(cache=True)
-def _direction(eta1, u2):
-    """The unit vector of polar angle eta1 and azimuth 2 pi u2 (sin eta1 cos eta2, sin eta1 sin eta2,
-    cos eta1)."""
+def _direction(u1, u2, uniform_sphere):
+    """The unit vector (sin eta1 cos eta2, sin eta1 sin eta2, cos eta1) of the polar uniform u1 and
+    azimuth eta2 = 2 pi u2: eta1 = arccos(1 - 2 u1) on the uniform sphere (its sine from the cosine
+    z as sqrt((1 - z)(1 + z))), else the paper's eta1 = pi u1."""
     eta2 = TWO_PI * u2
-    sin1 = math.sin(eta1)
-    return sin1 * math.cos(eta2), sin1 * math.sin(eta2), math.cos(eta1)
+    if uniform_sphere:
+        z = 1.0 - 2.0 * u1
+        sin1 = math.sqrt((1.0 - z) * (1.0 + z))
+    else:
+        eta1 = math.pi * u1
+        z, sin1 = math.cos(eta1), math.sin(eta1)
+    return sin1 * math.cos(eta2), sin1 * math.sin(eta2), z
 
 
 @njit(cache=True)
-def sphere_directions_into(eta1, u2, out):
-    """out[j] = the unit vector of polar angle eta1[j] and azimuth uniform u2[j] (out (n, 3))."""
+def sphere_directions_into(u1, u2, uniform_sphere, out):
+    """out[j] = the unit vector of polar uniform u1[j] and azimuth uniform u2[j] (out (n, 3))."""
     for j in range(out.shape[0]):
-        out[j, 0], out[j, 1], out[j, 2] = _direction(eta1[j], u2[j])
+        out[j, 0], out[j, 1], out[j, 2] = _direction(u1[j], u2[j], uniform_sphere)
 
 
 @njit(cache=True)
@@ -93,7 +101,7 @@ def _spherical(sphere, out):
     for j in range(out.shape[0]):
         for leg in range(out.shape[1]):
             magnitude = sphere.magnitude_u[j, leg] * sphere.size[leg]
-            x, y, z = _direction(sphere.eta1[j, leg], sphere.azimuth_u[j, leg])
+            x, y, z = _direction(sphere.polar_u[j, leg], sphere.azimuth_u[j, leg], sphere.uniform_sphere)
             out[j, leg, 0], out[j, leg, 1], out[j, leg, 2] = magnitude * x, magnitude * y, magnitude * z
 
 
@@ -123,7 +131,7 @@ def _load() -> None:
     law = TruncatedNormal(False, legs, legs, legs, legs, legs, legs)
     u, vectors, out = np.zeros((1, 6)), np.zeros((6, 3)), np.zeros((1, 6, 3))
     truncated_normals(law, u, np.zeros((1, 6)))
-    sphere = Sphere(legs, u, u, u)
+    sphere = Sphere(legs, u, u, u, True)
     eccentricities_into(Revolute(law, u, u, law, u, vectors, vectors, vectors), sphere, sphere, out, out, out)
 
 

@@ -56,6 +56,27 @@ def test_spherical_magnitude_uniform_and_direction_uniform_on_sphere(paper, draw
     assert _ks(cos_eta1, stats.uniform(-1, 2).cdf) > 1e-3
 
 
+@pytest.mark.parametrize("law", ["uniform", "paper"])
+def test_sphere_directions_are_the_polar_angle_formula_to_round_off(law):
+    """The kernel forms sin eta1 as sqrt((1 - z)(1 + z)) from z = cos eta1 (no arccosine): the
+    directions equal (sin eta1 cos eta2, sin eta1 sin eta2, cos eta1) of the law's angles to a few
+    ulp, have unit length and a non-negative sine also at the poles (u = 0 and u = 1)."""
+    rng = realization_rng(5, 2)
+    got = sphere_directions(rng, 4000, law)
+    rng = realization_rng(5, 2)
+    u1, u2 = rng.uniform(size=4000), rng.uniform(size=4000)
+    eta1 = np.arccos(1.0 - 2.0 * u1) if law == "uniform" else np.pi * u1
+    eta2 = 2.0 * np.pi * u2
+    expected = np.stack([np.sin(eta1) * np.cos(eta2), np.sin(eta1) * np.sin(eta2), np.cos(eta1)], -1)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=4e-16)
+    np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, rtol=0, atol=4e-16)
+    from rss6core.draw_kernel import sphere_directions_into
+    poles = np.empty((3, 3))
+    sphere_directions_into(np.array([0.0, 1.0, 2.0 ** -53]), np.array([0.1, 0.1, 0.0]), True, poles)
+    assert np.array_equal(poles[:2], [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    assert poles[2, 0] == pytest.approx(np.sin(np.arccos(1.0 - 2.0 ** -52)), rel=1e-15)
+
+
 def test_paper_eta_law_is_not_uniform_on_the_sphere():
     rng = realization_rng(3, 0)
     cos_eta1 = sphere_directions(rng, 9000, "paper")[:, 2]

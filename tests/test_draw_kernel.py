@@ -57,9 +57,13 @@ def _reference(scene, u, steps):
     spheres = []
     for size in (dC, dB):
         magnitude, u1, u2 = take(shape) * size, take(shape), take(shape)
-        eta1 = np.arccos(1.0 - 2.0 * u1) if law.direction == "uniform" else np.pi * u1
+        if law.direction == "uniform":   # z = cos eta1 of eta1 = arccos(1 - 2 u1), its sine from z
+            z = 1.0 - 2.0 * u1
+            sin1 = np.sqrt((1.0 - z) * (1.0 + z))
+        else:
+            z, sin1 = np.cos(np.pi * u1), np.sin(np.pi * u1)
         eta2 = 2.0 * np.pi * u2
-        direction = np.stack([np.sin(eta1) * np.cos(eta2), np.sin(eta1) * np.sin(eta2), np.cos(eta1)], -1)
+        direction = np.stack([sin1 * np.cos(eta2), sin1 * np.sin(eta2), z], -1)
         spheres.append(magnitude[..., None] * direction)
     return ClearanceDraw(dr, da, dC, dB, e_A, *spheres)
 

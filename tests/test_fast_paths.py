@@ -22,8 +22,9 @@ def test_draws_equal_the_broadcast_formulas_bit_for_bit():
     direct = sphere_directions(rng, 500)
     rng = realization_rng(0, 7)
     u1, u2 = rng.uniform(size=500), rng.uniform(size=500)
-    eta1, eta2 = np.arccos(1.0 - 2.0 * u1), 2.0 * np.pi * u2
-    broadcast = np.stack([np.sin(eta1) * np.cos(eta2), np.sin(eta1) * np.sin(eta2), np.cos(eta1)], -1)
+    z, eta2 = 1.0 - 2.0 * u1, 2.0 * np.pi * u2
+    sin1 = np.sqrt((1.0 - z) * (1.0 + z))
+    broadcast = np.stack([sin1 * np.cos(eta2), sin1 * np.sin(eta2), z], -1)
     assert direct.tobytes() == broadcast.tobytes()
 
 

@@ -153,7 +153,9 @@ def _splittable(ds: xr.Dataset, name) -> bool:
 def _split_units(ds: xr.Dataset) -> xr.Dataset:
     """Each mixed-unit variable as one variable per quantity and direction family, in its place:
     ``max_abs_error`` -> ``max_abs_error_displacement_translation`` (units m, direction x, y, z
-    along dimension ``translation``), ... ``max_abs_error_acceleration_rotation`` (rad s-2)."""
+    along dimension ``translation``), ... ``max_abs_error_acceleration_rotation`` (rad s-2).
+    The parts are taken by position from the variables (no label lookups: a chunk's write is in the
+    main process, beside the workers)."""
     mixed = [name for name in ds.data_vars if _splittable(ds, name)]
     if not mixed:
         return ds
@@ -161,23 +163,29 @@ def _split_units(ds: xr.Dataset) -> xr.Dataset:
     families = {f: [d for d in directions if d in members] for f, members in FAMILIES.items()}
     data = {}
     for name, var in ds.data_vars.items():
-        if name not in mixed:
-            data[name] = var
-            continue
-        attrs = {k: v for k, v in var.attrs.items() if k not in ("units", "long_name")}
-        for q in map(str, ds["quantity"].values):
-            for i, (family, members) in enumerate(families.items()):
-                if members:
-                    part = var.sel(quantity=q, direction=members, drop=True).rename(direction=family)
-                    data[f"{name}_{q}_{family}"] = part.assign_attrs(
-                        long_name=f"{var.attrs.get('long_name', name)}: {q}, {family}",
-                        units=UNITS[q][i], **attrs, rss6_long_name=var.attrs.get("long_name", name),
-                        **{_PART_OF: name, _PART_DIMS: " ".join(var.dims), _PART_QUANTITY: q})
+        data.update(_unit_parts(name, var, families, directions) if name in mixed else {name: var.variable})
     coords = {f: (f, members, {"long_name": f"platform pose {family_name}"})
               for f, members, family_name in (("translation", families["translation"], "translation direction"),
                                               ("rotation", families["rotation"], "rotation axis"))
               if members}
     return xr.Dataset(data, coords={**ds.coords, **coords}, attrs=ds.attrs)
+
+
+def _unit_parts(name: str, var: xr.DataArray, families: dict, directions: list) -> dict:
+    """:func:`_split_units`'s parts of one mixed-unit variable, {part name: Variable}."""
+    attrs = {k: v for k, v in var.attrs.items() if k not in ("units", "long_name")}
+    long_name = var.attrs.get("long_name", name)
+    parts = {}
+    for qi, q in enumerate(map(str, var["quantity"].values)):
+        for i, (family, members) in enumerate(families.items()):
+            if members:
+                part = var.variable.isel(quantity=qi, direction=[directions.index(d) for d in members])
+                parts[f"{name}_{q}_{family}"] = xr.Variable(
+                    tuple(family if d == "direction" else d for d in part.dims), part.data,
+                    {"long_name": f"{long_name}: {q}, {family}", "units": UNITS[q][i], **attrs,
+                     "rss6_long_name": long_name, _PART_OF: name, _PART_DIMS: " ".join(var.dims),
+                     _PART_QUANTITY: q})
+    return parts
 
 
 def _join_units(ds: xr.Dataset) -> xr.Dataset:
