@@ -14,6 +14,7 @@ import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -65,7 +66,8 @@ class Geometry:
     """Joint layout (eq. 2-3): base joints a_i, platform joints p_i (platform frame), links.
 
     A scene's lengths and radii are scalars; a realised robot (rss6core/realised.py) may hold them
-    per leg or joint as (6,) arrays (every formula broadcasts over the legs)."""
+    per leg or joint as (6,) arrays (every formula broadcasts over the legs). The joint vectors and
+    rotations below are computed once per geometry (read-only arrays; a draw reads them once per realisation)."""
     base_radius: float             # R1, m (or per joint)
     base_angles: np.ndarray        # theta_i = u_i, rad
     platform_radius: float         # R2, m (or per joint)
@@ -74,24 +76,24 @@ class Geometry:
     rod_length: float              # L_cb, m (or per leg)
     actuator_offsets: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(6)))  # rad, true - commanded
 
-    @property
+    @cached_property
     def a(self) -> np.ndarray:
         """Base joint centres a_i = R1 [cos theta_i, sin theta_i, 0] (6, 3), m."""
         th = self.base_angles
         return _frozen(_per_leg(self.base_radius) * np.stack([np.cos(th), np.sin(th), 0 * th], -1))
 
-    @property
+    @cached_property
     def p(self) -> np.ndarray:
         """Platform joint centres in the platform frame n_i* (6, 3), m."""
         be = self.platform_angles
         return _frozen(_per_leg(self.platform_radius) * np.stack([np.cos(be), np.sin(be), 0 * be], -1))
 
-    @property
+    @cached_property
     def k(self) -> np.ndarray:
         """Leg mounting rotations k_i = Rz(u_i) (6, 3, 3), eq. 2."""
         return _frozen(_rot_z(self.base_angles))
 
-    @property
+    @cached_property
     def w(self) -> np.ndarray:
         """Revolute axes w_i = [-sin u_i, cos u_i, 0] (6, 3)."""
         return _frozen(self.k[:, :, 1])
