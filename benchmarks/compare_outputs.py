@@ -133,7 +133,7 @@ VOLATILE_ATTRS = frozenset({"wall_time_s", "reference_check_seconds_per_realizat
                             "source", "rss6_version", "source_rss6_version"})
 VOLATILE_VARIABLES = frozenset({"seconds_per_realization"})
 VOLATILE_COLUMNS = frozenset({"seconds_per_realization"})
-CHECKSUM_ATTR = "rss6_sha256"   # pipeline.store.CHECKSUM: {variable: sha256} as JSON
+CHECKSUM_ATTR = "rss6_sha256"   # pipeline.files.schema.CHECKSUM: {variable: sha256, "/attributes": {...}} as JSON
 SKIPPED_SUFFIXES = (".png",)
 
 
@@ -257,7 +257,8 @@ def compare_attrs(a: dict, b: dict, where: str, volatile: frozenset = frozenset(
     for k in sorted((set(a) & set(b)) - volatile):
         x, y = a[k], b[k]
         if k == CHECKSUM_ATTR:
-            x, y = ({v: d for v, d in json.loads(s).items() if v not in VOLATILE_VARIABLES} for s in (x, y))
+            x, y = ({v: d for v, d in json.loads(s).items() if v not in VOLATILE_VARIABLES | {"/attributes"}}
+                    for s in (x, y))   # the attributes themselves are compared one by one here
             changed = sorted(v for v in x.keys() | y.keys() if x.get(v) != y.get(v))
             out += [f"{where}checksums differ for {changed}"] if changed else []
             continue
