@@ -218,6 +218,36 @@ def test_two_concurrent_runs_the_second_names_the_first(tmp_path, capsys):
     assert open_ensemble(out).sizes["realization"] == 6 and not lock.exists()
 
 
+def test_stats_of_an_output_a_run_is_still_writing_says_so(tmp_path, capsys):
+    """The run holds its lock and has stored parts (its chunks from realisation 2 on wait): reading
+    its output names the run, the lock and the parts, not a missing file; once done, it reads."""
+    out, release = tmp_path / "wip.nc", tmp_path / "release"
+    run = subprocess.Popen([sys.executable, "-m", "pipeline.cli", *QS, "-n", "4", "--chunk", "1",
+                            "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           env=_holding(2, release))
+    parts = Path(str(out) + ".parts")
+    try:
+        _wait_for(lambda: len(list(parts.glob("*.nc"))) == 2, run)
+        assert main(["stats", str(out)]) == 2
+        _one_line_error(capsys, f"{out}: not written yet: process {run.pid} ", "is still writing it",
+                        f"lock {out}.lock", f"finished parts in {parts}")
+    finally:
+        release.touch()
+    assert run.wait(120) == 0
+    assert main(["stats", str(out)]) == 0
+
+
+def test_stats_of_an_output_whose_run_stopped_names_its_parts(tmp_path, capsys):
+    out = tmp_path / "stopped.nc"
+    Path(str(out) + ".parts").mkdir()
+    assert main(["stats", str(out)]) == 2
+    _one_line_error(capsys, f"{out}: not written yet: the run writing it stopped", f"parts in {out}.parts",
+                    "rerun the command")
+    Path(str(out) + ".parts").rmdir()
+    assert main(["stats", str(out)]) == 2
+    assert capsys.readouterr().err.strip() == f"rss6: error: {out}: no such file"
+
+
 def test_lock_is_released_by_its_owner_only(tmp_path):
     lock = OutputLock(tmp_path / "x.nc")
     with lock:

@@ -30,7 +30,7 @@ import numpy as np
 from rss6core import (FAILED, MODEL_LEVELS, SimulationResult, __version__, parse_scene, prepare_level, stored_draw,
                       stored_inputs, time_grid)
 
-from ..files.outputs import OutputLock, PartsManifest
+from ..files.outputs import OutputLock, PartsManifest, parts_dir
 from ..files.opening import open_ensemble
 from ..files.reading import SUMMARY_BLOCK, load_netcdf
 from ..files.records import finish_ensemble, chunk_dataset
@@ -203,11 +203,6 @@ def _checked_parts(manifest: PartsManifest, spec: EnsembleSpec, summary_block: i
                 problems[path] = str(exc).removeprefix(f"{path}: ")
     manifest.refuse(problems)
     return parts
-
-
-def parts_dir(output: Path) -> Path:
-    """The folder OUTPUT.parts where a run keeps its finished chunks until the merged file is written."""
-    return output.with_name(output.name + ".parts")
 
 
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
