@@ -37,7 +37,7 @@ from ..files.records import finish_ensemble, chunk_dataset
 from ..files.schema import EnsembleFileError, ensemble_identity, identity
 from ..files.writing import sigint_deferred, write_netcdf
 from .cluster import WORKER_TIMEOUT_S, dask_client, results_as_finished
-from .progress import _kernels_to_compile, _Progress, compile_apart
+from .progress import _kernels_to_compile, _Progress, cluster_label, compile_apart
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
            "parts_dir", "MAX_AUTO_CHUNK", "MAX_AUTO_CHUNK_BY_MODEL", "MAX_AUTO_CHUNKS"]
@@ -271,7 +271,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
             chunks = [todo[i:i + chunk] for i in range(0, len(todo), chunk)]
             bar = _Progress(n, n - len(todo)) if progress else None
             if bar:
-                bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
+                bar.begin(len(chunks), cluster_label(workers, scheduler), starting=client is None)
             pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout, client,
                                summary_block)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all
