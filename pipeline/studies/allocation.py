@@ -24,7 +24,7 @@ import numpy as np
 from rss6core import ClearanceDraw, model_level, models_with, parse_scene, prepare_level, stored_draw
 
 from ..analysis.estimators import one_sided_bounds
-from ..analysis.gate import Verdict, allowed_exceedances, check_confidence, judge_all, upper_limit_problem
+from ..analysis.gate import Verdict, allowed_exceedances, judge_all, upper_limits_problem
 from ..analysis.spec import PF, Spec
 from ..ensemble.run import EnsembleSpec, ensemble
 from ..files.records import window_masks
@@ -337,13 +337,8 @@ def check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: flo
     if linear and scene.simulation.quasi_static_eccentricity != "drawn":
         raise AllocationError(f"{spec.source}: allocate needs [simulation] quasi_static_eccentricity = "
                               "\"drawn\" (the reaction mode's direction does not split by family)")
-    try:
-        check_confidence(confidence)
-    except ValueError as exc:
-        raise AllocationError(f"--{exc}") from None
-    for s in specs:
-        if why := upper_limit_problem(s, confidence, n, "an allocation"):
-            raise AllocationError(why)
+    if why := upper_limits_problem(specs, confidence, n, "an allocation"):
+        raise AllocationError(why)
 
 
 def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float, options: dict,
