@@ -45,7 +45,8 @@ one commit; a change may bump the version):
 - global attribute ``reference_check_seconds_per_realization`` (tradeoff): a measured cost;
 - global attributes ``source``, ``rss6_version``, ``source_rss6_version``: the rss6 version;
 - variable ``seconds_per_realization`` (tradeoff.nc) and its entry in the checksum attribute
-  ``rss6_sha256`` (the other entries are compared; the JSON is compared per variable), and CSV column
+  ``rss6_sha256`` (the other entries are compared; the JSON is compared per variable, but for its
+  ``/attributes`` entry: the attributes themselves are compared above), and CSV column
   ``seconds_per_realization`` (tradeoff.csv): measured costs.
 ``history`` is compared (rss6 writes into it only the options that fix the results, no machine's
 options), and no rss6 file carries a date.
