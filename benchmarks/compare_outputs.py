@@ -45,7 +45,8 @@ one commit; a change may bump the version):
 - global attribute ``reference_check_seconds_per_realization`` (tradeoff): a measured cost;
 - global attributes ``source``, ``rss6_version``, ``source_rss6_version``: the rss6 version;
 - variable ``seconds_per_realization`` (tradeoff.nc) and its entry in the checksum attribute
-  ``rss6_sha256`` (the other entries are compared; the JSON is compared per variable), and CSV column
+  ``rss6_sha256`` (the other entries are compared; the JSON is compared per variable, but for its
+  ``/attributes`` entry: the attributes themselves are compared above), and CSV column
   ``seconds_per_realization`` (tradeoff.csv): measured costs.
 ``history`` is compared (rss6 writes into it only the options that fix the results, no machine's
 options), and no rss6 file carries a date.
@@ -133,7 +134,7 @@ VOLATILE_ATTRS = frozenset({"wall_time_s", "reference_check_seconds_per_realizat
                             "source", "rss6_version", "source_rss6_version"})
 VOLATILE_VARIABLES = frozenset({"seconds_per_realization"})
 VOLATILE_COLUMNS = frozenset({"seconds_per_realization"})
-CHECKSUM_ATTR = "rss6_sha256"   # pipeline.store.CHECKSUM: {variable: sha256} as JSON
+CHECKSUM_ATTR = "rss6_sha256"   # pipeline.files.schema.CHECKSUM: {variable: sha256, "/attributes": {...}} as JSON
 SKIPPED_SUFFIXES = (".png",)
 
 
@@ -257,7 +258,8 @@ def compare_attrs(a: dict, b: dict, where: str, volatile: frozenset = frozenset(
     for k in sorted((set(a) & set(b)) - volatile):
         x, y = a[k], b[k]
         if k == CHECKSUM_ATTR:
-            x, y = ({v: d for v, d in json.loads(s).items() if v not in VOLATILE_VARIABLES} for s in (x, y))
+            x, y = ({v: d for v, d in json.loads(s).items() if v not in VOLATILE_VARIABLES | {"/attributes"}}
+                    for s in (x, y))   # the attributes themselves are compared one by one here
             changed = sorted(v for v in x.keys() | y.keys() if x.get(v) != y.get(v))
             out += [f"{where}checksums differ for {changed}"] if changed else []
             continue

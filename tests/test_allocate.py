@@ -155,6 +155,61 @@ def test_bad_named_classes_are_refused_in_one_line(configs, tmp_path, capsys, ex
               str(path), "-o", str(tmp_path / "o")], capsys, *words)
 
 
+def _costs_with(tmp_path, family: str, fit: str, value: str | None, extra: str = ""):
+    """A costs file for SMALL whose ``family`` costs ``fit`` at ``value`` (TOML; None: left out),
+    after ``extra`` (top-level keys, tables)."""
+    lines = [f'[{f}]\n' + "".join(f'"{g}" = {value if (f, g) == (family, fit) else 3.0 - i * 0.3}\n'
+                                   for i, g in enumerate(SMALL) if value is not None or (f, g) != (family, fit))
+             for f in ALLOCATED]
+    path = tmp_path / "costs.toml"
+    path.write_text(extra + "".join(lines))
+    return path
+
+
+@pytest.mark.parametrize("value, says", [
+    ("-1.5", "the cost must be positive and finite (per joint), got -1.5"),
+    ("0.0", "the cost must be positive and finite (per joint), got 0.0"),
+    ("nan", "the cost must be positive and finite (per joint), got nan"),
+    ("inf", "the cost must be positive and finite (per joint), got inf"),
+    ('"cheap"', "the cost must be a number (per joint), got 'cheap'"),
+    ("true", "the cost must be a number (per joint), got True"),
+    (None, "missing; give a cost per joint for every fit of --classes"),
+])
+def test_a_fit_cost_that_is_not_a_positive_number_is_named_in_one_line(configs, tmp_path, capsys, value, says):
+    """The issue's case: a negative cost was reported as missing."""
+    path = _costs_with(tmp_path, "spherical_C", "H9/d9", value)
+    _refused(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "--classes", ",".join(SMALL), "--costs",
+              str(path), "-o", str(tmp_path / "o")], capsys, f"--costs {path}: [spherical_C] 'H9/d9': {says}")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("extra, says", [
+    ("[classes.spherical_B.free]\nlow_m = 0.0\nhigh_m = 1e-5\ncost = -2.0\n",
+     "[classes.spherical_B.free]: the cost must be positive and finite (per joint), got -2.0"),
+    ("[classes]\nspherical_B = 1\n", "classes.spherical_B must be a table ([classes.spherical_B]), got 1"),
+    ('classes = "none"\n', "classes must be a table ([classes]), got 'none'"),
+])
+def test_other_costs_file_mistakes_are_named_in_one_line(configs, tmp_path, capsys, extra, says):
+    path = _costs_with(tmp_path, "spherical_C", "H9/d9", "2.0", extra)
+    _refused(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "--classes", ",".join(SMALL), "--costs",
+              str(path), "-o", str(tmp_path / "o")], capsys, says)
+
+
+def test_a_family_given_as_a_number_not_a_table_is_named(configs, tmp_path, capsys):
+    path = tmp_path / "flat.toml"
+    path.write_text("revolute_radial = 3.0\n")
+    _refused(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "--costs", str(path), "-o",
+              str(tmp_path / "o")], capsys, f"--costs {path}: revolute_radial must be a table ([revolute_radial])")
+
+
+def test_a_confidence_below_one_half_is_refused_before_any_work(configs, tmp_path, capsys):
+    """One-sided bounds below 0.5 cross: refused at once, as rss6 budget does (it ran the search and
+    the verification ensemble, then ended in a traceback)."""
+    _refused(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "--confidence", "0.4", "-o",
+              str(tmp_path / "o")], capsys, "--confidence 0.4: a requirement is decided on one-sided bounds")
+    assert not (tmp_path / "o").exists()
+
+
 def test_greedy_search_at_the_paper_level_is_locally_least_cost_and_bounded(configs, tmp_path):
     """paper level (not linear in the clearances): the answer passes, every one-step loosening of it
     that was run failed, the ensembles run stay within the budget and are the files written."""

@@ -7,7 +7,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pipeline.studies.budget import BudgetError, Trial, _sweep, round_down, scaled_scene
+from pipeline.studies.budget import BudgetError, _sweep, round_down, scaled_scene
+from pipeline.studies.trial import Trial
 from pipeline.cli import main
 from pipeline.analysis.gate import judge_all
 from pipeline.ensemble.run import EnsembleSpec, run_chunk
@@ -106,8 +107,8 @@ def test_the_limiting_scale_says_whether_it_fails_or_is_undecided():
 def test_sweep_brackets_the_largest_passing_scale(threshold):
     calls = []
     trials = _sweep(_fake_run(threshold, calls), 0.05)
-    lo = max(t.scale for t in trials if t.passed)
-    hi = min(t.scale for t in trials if not t.passed)
+    lo = max(t.candidate for t in trials if t.passed)
+    hi = min(t.candidate for t in trials if not t.passed)
     assert lo <= threshold < hi and (hi - lo) / lo <= 0.05
     assert len(calls) == len(set(calls)) < 12
 

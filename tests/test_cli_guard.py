@@ -39,6 +39,13 @@ def _holding(first: int, release: Path) -> dict:
     return dict(os.environ, **{TEST_HOLD_ENV: f"{first}:{release}"})
 
 
+def _held_run(out: Path, n: int, first: int, release: Path) -> subprocess.Popen:
+    """`rss6 run` of n realisations, a chunk each, into ``out`` in a process of its own, its chunks from
+    realisation ``first`` on waiting until ``release`` exists (:func:`_holding`)."""
+    return subprocess.Popen([sys.executable, "-m", "pipeline.cli", *QS, "-n", str(n), "--chunk", "1", "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=_holding(first, release))
+
+
 def _wait_for(state, proc) -> None:
     """Until ``state()`` holds; fails if ``proc`` ends first."""
     while not state():
@@ -204,9 +211,7 @@ def test_a_live_lock_refuses_a_second_writer_and_a_stale_one_is_taken_over(tmp_p
 def test_two_concurrent_runs_the_second_names_the_first(tmp_path, capsys):
     """The first run holds its lock while its chunks wait (TEST_HOLD_ENV) until the second is refused."""
     out, release = tmp_path / "both.nc", tmp_path / "release"
-    first = subprocess.Popen([sys.executable, "-m", "pipeline.cli", *QS, "-n", "6", "--chunk", "1",
-                              "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                             env=_holding(0, release))
+    first = _held_run(out, 6, 0, release)
     lock = Path(str(out) + ".lock")
     try:
         _wait_for(lock.exists, first)
@@ -216,6 +221,34 @@ def test_two_concurrent_runs_the_second_names_the_first(tmp_path, capsys):
         release.touch()
     assert first.wait(120) == 0
     assert open_ensemble(out).sizes["realization"] == 6 and not lock.exists()
+
+
+def test_stats_of_an_output_a_run_is_still_writing_says_so(tmp_path, capsys):
+    """The run holds its lock and has stored parts (its chunks from realisation 2 on wait): reading
+    its output names the run, the lock and the parts, not a missing file; once done, it reads."""
+    out, release = tmp_path / "wip.nc", tmp_path / "release"
+    run = _held_run(out, 4, 2, release)
+    parts = Path(str(out) + ".parts")
+    try:
+        _wait_for(lambda: len(list(parts.glob("*.nc"))) == 2, run)
+        assert main(["stats", str(out)]) == 2
+        _one_line_error(capsys, f"{out}: not written yet: process {run.pid} ", "is still writing it",
+                        f"lock {out}.lock", f"finished parts in {parts}")
+    finally:
+        release.touch()
+    assert run.wait(120) == 0
+    assert main(["stats", str(out)]) == 0
+
+
+def test_stats_of_an_output_whose_run_stopped_names_its_parts(tmp_path, capsys):
+    out = tmp_path / "stopped.nc"
+    Path(str(out) + ".parts").mkdir()
+    assert main(["stats", str(out)]) == 2
+    _one_line_error(capsys, f"{out}: not written yet: the run writing it stopped", f"parts in {out}.parts",
+                    "rerun the command")
+    Path(str(out) + ".parts").rmdir()
+    assert main(["stats", str(out)]) == 2
+    assert capsys.readouterr().err.strip() == f"rss6: error: {out}: no such file"
 
 
 def test_lock_is_released_by_its_owner_only(tmp_path):

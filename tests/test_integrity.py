@@ -248,3 +248,61 @@ def test_parts_without_their_manifest_are_all_named_and_the_folder_is_the_comman
     assert message.startswith(f"{manifest.folder}: 3 of 3 stored parts")
     assert all(f"{p.name}: no manifest.json vouches for it" in message for p in manifest.parts())
     assert f"recover with `rm -r {shlex.quote(str(manifest.folder))}`" in message
+
+
+# global attributes edited with netCDF4 after rss6 wrote the file: (attribute, edit, what the one
+# line says of it); each fixes the file's meaning (IDENTITY, PROVENANCE) or adds to it
+ATTRIBUTE_EDITS = {
+    "seed": ("seed", lambda nc: nc.setncattr("seed", 12345), "is 12345 (int64), not the value"),
+    "scene_toml": ("scene_toml", lambda nc: nc.setncattr("scene_toml", nc.scene_toml.replace("0.", "0.0", 1)),
+                   "is '# rss6 scene"),
+    "time_step_s": ("time_step_s", lambda nc: nc.setncattr("time_step_s", 2e-3), "is 0.002 (float64)"),
+    "model": ("model", lambda nc: nc.delncattr("model"), "missing, although"),
+    "sampler added": ("sampler", lambda nc: nc.setncattr("sampler", "qmc"), "was added after rss6 wrote"),
+}
+
+
+@pytest.mark.parametrize("case", list(ATTRIBUTE_EDITS))
+def test_an_edited_global_attribute_is_refused_by_stats_plot_and_resume(merged, tmp_path, capsys, case):
+    name, edit, says = ATTRIBUTE_EDITS[case]
+    bad = _copy(merged, tmp_path / "bad.nc")
+    with netCDF4.Dataset(bad, "a") as nc:
+        edit(nc)
+    assert main(["stats", str(bad)]) == 2
+    _one_line(capsys, f"{bad}: attribute {name} {says}", CHECKSUM, "altered after rss6 wrote it")
+    assert main(["plot", str(bad), "-o", str(tmp_path / "plots")]) == 2
+    _one_line(capsys, f"{bad}: attribute {name} ")
+    with pytest.raises(EnsembleFileError, match=f"{bad}: attribute {name} "):
+        ensemble(_spec(), N + 2, bad, workers=1, progress=False)
+
+
+def test_the_history_may_be_appended_to(merged, tmp_path):
+    """CF tools append their command to ``history``: the one global attribute left unchecked."""
+    noted = _copy(merged, tmp_path / "noted.nc")
+    with netCDF4.Dataset(noted, "a") as nc:
+        nc.history += "\nncatted -a comment,global,c,c,x noted.nc"
+    assert open_ensemble(noted).encoding.get("rss6_unverified") is None
+
+
+def _without_attribute_checksums(path: Path) -> None:
+    """The checksum attribute as rss6 0.3.0 wrote it before it covered the global attributes."""
+    with netCDF4.Dataset(path, "a") as nc:
+        sums = json.loads(nc.getncattr(CHECKSUM))
+        del sums["/attributes"]
+        nc.setncattr(CHECKSUM, json.dumps(sums, sort_keys=True))
+
+
+def test_a_file_written_before_the_attribute_checksums_is_read_as_before(merged, tmp_path, capsys):
+    """Its variables are verified (no note), its attributes cross-checked only; a changed value is
+    refused as ever."""
+    old = _copy(merged, tmp_path / "old.nc")
+    _without_attribute_checksums(old)
+    with netCDF4.Dataset(old, "a") as nc:
+        nc.setncattr("seed", 12345)   # not cross-checked against anything: accepted, as before
+    assert main(["stats", str(old), "--json"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)["n_finished"] == N and out.err == ""
+    assert load_netcdf(old).attrs["seed"] == 12345
+    _edit(old, "max_abs_error_displacement_translation", (0, 3, 0))
+    assert main(["stats", str(old)]) == 2
+    _one_line(capsys, f"{old}: variable max_abs_error_displacement_translation ", CHECKSUM)

@@ -190,3 +190,20 @@ def test_ctrl_c_on_dask_is_raised_between_waits_after_the_finished_chunks_are_ke
         sens.evaluate_statistics(None, None, np.zeros((8, 3)), Client(), chunk=4, parts=parts)
     assert len(waits) == 1 and caught.traceback[-1].name == "results_as_finished"
     assert [p.name for p in parts.manifest.parts()] == ["families-0000000-0000003.nc"]
+
+
+def test_a_designs_stored_rows_and_their_count_come_from_its_own_chunks(tmp_path):
+    """RowParts.count (the manifest's rows, announced on a resume) and RowParts.stored (the chunks
+    read) name the same rows of the same design, and none of the other design's."""
+    from pipeline.files.outputs import PartsManifest
+    manifest = PartsManifest(tmp_path / "p", {}, index="row", items="rows")
+    families, joints = sens.RowParts(manifest, "families"), sens.RowParts(manifest, "joints")
+    stats = np.arange(13 * 36, dtype=float).reshape(13, 2, 3, 6)
+    families.keep(slice(8, 12), stats[:4])
+    joints.keep(slice(0, 5), stats[4:9])
+    families.keep(slice(0, 4), stats[9:])
+    for parts, rows in ((families, [(0, 4), (8, 12)]), (joints, [(0, 5)])):
+        stored = parts.stored()
+        assert [(r.start, r.stop) for r, _ in stored] == rows
+        assert parts.count() == sum(r.stop - r.start for r, _ in stored)
+    assert np.array_equal(families.stored()[0][1], stats[9:]) and np.array_equal(joints.stored()[0][1], stats[4:9])

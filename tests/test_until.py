@@ -205,3 +205,22 @@ def test_every_batch_runs_on_one_client_of_one_cluster(tmp_path, monkeypatch):
     assert out.n == 93 and not out.met and checkpoints(targets, 93) == [59, 74, 93]
     assert out.ensemble.computed == 93
     assert len(clients) == 1 and len(clusters) == 1
+
+
+def test_the_workers_are_said_to_start_once_for_every_batch(tmp_path, capsys):
+    """The batches run on one cluster started once: one line says so at once, and each batch's
+    first line no longer repeats 'starting workers' (it did before every batch)."""
+    from pipeline.analysis.until import run_until
+    from pipeline.ensemble.run import EnsembleSpec
+    from pipeline.scenes.catalogue import find_scene
+    scene = find_scene("smoke")
+    spec = EnsembleSpec(scene.source_text, "smoke", "quasi-static", "newmark", scene.time_step,
+                        scene.simulation.elements_per_link, 3)
+    targets = [parse_target("displacement:x@mean<=0.0001%")]          # never met: every checkpoint runs
+    stream = io.StringIO()
+    run_until(spec, targets, 12, tmp_path / "u.nc", workers=1, stream=stream)
+    bar = capsys.readouterr().err                                      # the batches' progress lines
+    assert checkpoints(targets, 12) == [8, 10, 12] and bar.count("realisations to compute") == 3
+    assert stream.getvalue().startswith("rss6 run --until: at most 3 batches (checks at n = 8 to 12) on 1 workers; "
+                                        "starting workers\n")
+    assert (stream.getvalue() + bar).count("starting workers") == 1

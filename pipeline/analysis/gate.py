@@ -92,6 +92,17 @@ def check_confidence(confidence: float) -> None:
                          "which need a confidence above 0.5 and below 1")
 
 
+def upper_limits_problem(specs: list[Spec], confidence: float, n: int, study: str) -> str | None:
+    """Why ``specs`` cannot serve a study (``study``: "a budget", "an allocation") that bounds the error
+    from above with n realisations at ``confidence``, as a one-line message: the confidence, else the
+    first spec that cannot (:func:`upper_limit_problem`); None if they can."""
+    try:
+        check_confidence(confidence)
+    except ValueError as exc:
+        return f"--{exc}"
+    return next((why for spec in specs if (why := upper_limit_problem(spec, confidence, n, study))), None)
+
+
 def upper_limit_problem(spec: Spec, confidence: float, n: int, study: str) -> str | None:
     """Why ``spec`` cannot serve a study (``study``: "a budget", "an allocation") that bounds the error
     from above with n realisations at ``confidence``, as a one-line message; None if it can."""

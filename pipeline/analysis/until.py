@@ -223,6 +223,7 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
     """Extend ``output`` through :func:`checkpoints` until every target is met or ``cap`` is reached;
     each check's widths are printed to ``stream`` and written into the file (``until_*``)."""
     from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client
+    from ..ensemble.progress import cluster_label
     from ..ensemble.run import default_chunk, ensemble
     from .stats import ensemble_stats
     stream = stream or sys.stderr
@@ -245,6 +246,10 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
     plan = ([done] if done and all(w.met for w in found["widths"]) else []) \
         + [n for n in points if n > done]
     outcome, computed = None, 0
+    if plan and progress:   # said once: the batches' own first lines do not repeat it
+        stream.write(f"rss6 run --until: at most {len(plan)} batches (checks at n = {plan[0]} to {plan[-1]}) on "
+                     f"{cluster_label(workers, scheduler)}; starting workers\n")
+        stream.flush()
     # one cluster (or client of the scheduler) for every batch: a cluster per batch would cost its
     # start-up every check
     with dask_client(workers, scheduler) if plan else contextlib.nullcontext() as client:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 import time
 
-__all__ = ["compile_note"]
+__all__ = ["compile_note", "cluster_label"]
 
 
 _COMPILE_NOTED: list = []   # the kernels a compile note of this process named (said once per command)
@@ -15,6 +15,11 @@ def compile_note(kernels: list[str]) -> str:
     """The one line that says kernels are being compiled (rss6 run and rss6 simulate)."""
     return (f"compiling {', '.join(kernels)} first: numba's cache holds no copy for this machine and "
             "rss6 version; this takes minutes once (rss6 warm pays it up front)")
+
+
+def cluster_label(workers: int, scheduler: str | None) -> str:
+    """Where a run computes, as its progress lines say it: "2 workers" or "scheduler tcp://..."."""
+    return f"scheduler {scheduler}" if scheduler else f"{workers} workers"
 
 
 class _Progress:
@@ -27,11 +32,13 @@ class _Progress:
         self.tty, self.start, self.last = self.stream.isatty(), time.perf_counter(), 0.0
         self.first = done
 
-    def begin(self, chunks: int, where: str) -> None:
+    def begin(self, chunks: int, where: str, starting: bool = True) -> None:
+        """The first line, at once; ``starting``: the run starts its workers now (not when it runs on
+        workers started before, as the batches of --until do)."""
         noun = "chunk" if chunks == 1 else "chunks"
         self.stream.write(f"rss6 run: {self.total - self.done} realisations to compute in {chunks} {noun} "
                           f"on {where}" + (f" ({self.done} stored)" if self.done else "")
-                          + "; starting workers\n")
+                          + ("; starting workers" if starting else "") + "\n")
         self.stream.flush()
 
     def compiling(self, kernels: list[str]) -> None:

@@ -30,14 +30,14 @@ import numpy as np
 from rss6core import (FAILED, MODEL_LEVELS, SimulationResult, __version__, parse_scene, prepare_level, stored_draw,
                       stored_inputs, time_grid)
 
-from ..files.outputs import OutputLock, PartsManifest
+from ..files.outputs import OutputLock, PartsManifest, parts_dir
 from ..files.opening import open_ensemble
 from ..files.reading import SUMMARY_BLOCK, load_netcdf
 from ..files.records import finish_ensemble, chunk_dataset
 from ..files.schema import EnsembleFileError, ensemble_identity, identity
 from ..files.writing import sigint_deferred, write_netcdf
 from .cluster import WORKER_TIMEOUT_S, dask_client, results_as_finished
-from .progress import _kernels_to_compile, _Progress, compile_apart
+from .progress import _kernels_to_compile, _Progress, cluster_label, compile_apart
 
 __all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
            "parts_dir", "MAX_AUTO_CHUNK", "MAX_AUTO_CHUNK_BY_MODEL", "MAX_AUTO_CHUNKS"]
@@ -205,11 +205,6 @@ def _checked_parts(manifest: PartsManifest, spec: EnsembleSpec, summary_block: i
     return parts
 
 
-def parts_dir(output: Path) -> Path:
-    """The folder OUTPUT.parts where a run keeps its finished chunks until the merged file is written."""
-    return output.with_name(output.name + ".parts")
-
-
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
 # the contact level computes its fine-grid loads and joint maps once per batch (1.9 s CPU, as much
 # as 8 realisations' steps): twice the batch halves that share (docs/performance.md, section 14);
@@ -276,7 +271,7 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
             chunks = [todo[i:i + chunk] for i in range(0, len(todo), chunk)]
             bar = _Progress(n, n - len(todo)) if progress else None
             if bar:
-                bar.begin(len(chunks), f"scheduler {scheduler}" if scheduler else f"{workers} workers")
+                bar.begin(len(chunks), cluster_label(workers, scheduler), starting=client is None)
             pieces += _compute(spec, chunks, manifest, workers, scheduler, bar, worker_timeout, client,
                                summary_block)
         up_to_date = not todo and len(pieces) == 1 and output.exists()  # the file alone holds all

@@ -11,7 +11,7 @@ import xarray as xr
 
 from .schema import CHECKSUM, EnsembleFileError
 
-__all__ = ["file_checksums", "verify_checksums", "CHECKSUMS_SINCE"]
+__all__ = ["file_checksums", "attribute_checksums", "verify_checksums", "CHECKSUMS_SINCE", "ATTRIBUTES"]
 
 
 def _rows(array):
@@ -43,10 +43,31 @@ class _Checksum:
         return self._sha.hexdigest()
 
 
+# the entry of CHECKSUM that holds {attribute: sha256} of the global attributes (a netCDF name has
+# no "/", so no variable is called so); files of rss6 0.3.0 written before it have no such entry
+ATTRIBUTES = "/attributes"
+# global attributes the attribute checksums leave out: ``history`` (CF tools append to it; it
+# names commands, not values), ``coordinates`` (xarray's encoding, which it takes away on reading)
+_UNCHECKED = frozenset({"history", "coordinates", CHECKSUM})
+
+
+def attribute_checksums(attrs: dict) -> dict:
+    """{attribute: sha256 of its value} of a file's global attributes as netCDF4 reads them (type
+    and value: 7 as int64 and 7.0 differ), but those of _UNCHECKED."""
+    out = {}
+    for name, value in attrs.items():
+        if name not in _UNCHECKED:
+            digest = _Checksum(np.asarray(value))
+            digest.update(value)
+            out[str(name)] = digest.hexdigest()
+    return out
+
+
 def file_checksums(ds: xr.Dataset) -> dict:
     """{variable: sha256} of a Dataset as read from a file before :func:`cf_decode` (the digests
-    :class:`_InOrderWriter` records); dask-backed variables are read block by block."""
-    out = {}
+    :class:`_InOrderWriter` records), with its global attributes' under ATTRIBUTES; dask-backed
+    variables are read block by block."""
+    out = {ATTRIBUTES: attribute_checksums(ds.attrs)}
     for name, var in ds.variables.items():
         digest = _Checksum(var)
         if dask.is_dask_collection(var.data) and var.ndim:
@@ -71,30 +92,51 @@ def _writes_checksums(version) -> bool:
         return False
 
 
+_ALTERED = "the file was altered after rss6 wrote it; rerun the command that wrote it, or restore the file"
+
+
 def verify_checksums(ds: xr.Dataset, path) -> bool:
     """EnsembleFileError naming the file and the first variable whose values differ from the
-    checksum written with the file (changed since), or that was added or removed; False when the
-    file has no checksum (written by an earlier rss6 or by another program), True when it holds."""
+    checksum written with the file (changed since), or that was added or removed, then the first
+    such global attribute; False when the file has no checksum (written by an earlier rss6 or by
+    another program), True when it holds. A file without the attributes' entry (rss6 0.3.0 before
+    it) has its variables checked alone."""
     text = ds.attrs.get(CHECKSUM)
     if text is None:
         if _writes_checksums(ds.attrs.get("rss6_version")):
             raise EnsembleFileError(f"{path}: attribute {CHECKSUM} is missing, although rss6 "
-                                    f"{ds.attrs['rss6_version']} writes it: the file was altered after rss6 "
-                                    "wrote it; rerun the command that wrote it, or restore the file")
+                                    f"{ds.attrs['rss6_version']} writes it: {_ALTERED}")
         return False
     try:
         recorded = json.loads(str(text))
         assert isinstance(recorded, dict)
+        attributes = recorded.pop(ATTRIBUTES, None)
+        assert attributes is None or isinstance(attributes, dict)
     except (ValueError, AssertionError):
         raise EnsembleFileError(f"{path}: attribute {CHECKSUM} is not the JSON rss6 writes; the file "
                                 "was edited after rss6 wrote it: rerun the command that wrote it") from None
     got = file_checksums(ds)
+    got_attributes = got.pop(ATTRIBUTES)
     for name in sorted(set(recorded) | set(got)):
         if recorded.get(name) != got.get(name):
             what = ("was added to" if name not in recorded else "was removed from" if name not in got
                     else "has values that no longer match its checksum in")
-            raise EnsembleFileError(f"{path}: variable {name} {what} attribute {CHECKSUM}: the file was "
-                                    "altered after rss6 wrote it; rerun the command that wrote it, "
-                                    "or restore the file")
+            raise EnsembleFileError(f"{path}: variable {name} {what} attribute {CHECKSUM}: {_ALTERED}")
+    if attributes is not None:
+        _verify_attributes(attributes, got_attributes, ds.attrs, path)
     return True
 
+
+def _verify_attributes(recorded: dict, got: dict, attrs: dict, path) -> None:
+    """EnsembleFileError naming the first global attribute changed, removed or added since rss6
+    wrote the file (``recorded``: its digests then, ``got``: now, of ``attrs``)."""
+    for name in sorted(set(recorded) | set(got)):
+        if recorded.get(name) != got.get(name):
+            value = attrs.get(name)
+            shown = repr(value.item() if isinstance(value, np.generic) else value)
+            shown = (shown if len(shown) <= 40 else shown[:36] + " ...") + (
+                f" ({value.dtype})" if isinstance(value, np.generic) else "")
+            what = (f"missing, although {CHECKSUM} records it" if name not in got
+                    else f"was added after rss6 wrote the file ({CHECKSUM} does not record it)"
+                    if name not in recorded else f"is {shown}, not the value whose checksum {CHECKSUM} holds")
+            raise EnsembleFileError(f"{path}: attribute {name} {what}: {_ALTERED}")

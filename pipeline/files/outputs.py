@@ -16,7 +16,7 @@ from pathlib import Path
 from .schema import EnsembleFileError
 from .writing import sigint_deferred, write_netcdf
 
-__all__ = ["check_output_path", "OutputLock", "PartsManifest"]
+__all__ = ["check_output_path", "OutputLock", "PartsManifest", "parts_dir", "unfinished"]
 
 
 def check_output_path(path, create_dirs: bool = False) -> Path:
@@ -81,6 +81,17 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def _running(holder: dict) -> bool:
+    """Whether a lock's ``holder`` ({pid, host, since}) still runs: its process is alive on this
+    host, or it is on another host (which this one cannot ask)."""
+    return bool(holder) and (holder.get("host") != socket.gethostname() or _alive(holder["pid"]))
+
+
+def _who(holder: dict) -> str:
+    where = "" if holder.get("host") == socket.gethostname() else f" on host {holder.get('host')}"
+    return f"process {holder['pid']}{where} since {holder.get('since')}"
+
+
 class OutputLock:
     """``OUT.lock``: created exclusively by the one process writing OUT, removed when it is done.
 
@@ -114,13 +125,9 @@ class OutputLock:
             if self._create():
                 return
             holder = self._holder()
-            local = holder.get("host") == socket.gethostname()
-            if holder and (not local or _alive(holder["pid"])):
-                where = "" if local else f" on host {holder.get('host')}"
-                raise EnsembleFileError(
-                    f"{self.output}: already being written by process {holder['pid']}{where} "
-                    f"since {holder.get('since')} (lock {self.path}); wait for it to finish or "
-                    "choose another -o")
+            if _running(holder):
+                raise EnsembleFileError(f"{self.output}: already being written by {_who(holder)} (lock "
+                                        f"{self.path}); wait for it to finish or choose another -o")
             what = f"process {holder['pid']} is gone" if holder else "it is unreadable"
             print(f"rss6: taking over the stale lock {self.path} ({what})", file=self.stream or sys.stderr)
             try:
@@ -128,6 +135,11 @@ class OutputLock:
             except FileNotFoundError:
                 pass
         raise EnsembleFileError(f"{self.output}: could not take the lock {self.path}")
+
+    def running_holder(self) -> dict:
+        """The holder ({pid, host, since}) of the lock while its process runs, else {}."""
+        holder = self._holder()
+        return holder if _running(holder) else {}
 
     def release(self) -> None:
         if self._holder().get("pid") == os.getpid():
@@ -139,6 +151,26 @@ class OutputLock:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+def parts_dir(output: Path) -> Path:
+    """The folder OUTPUT.parts where a run keeps its finished chunks until the merged file is written."""
+    return output.with_name(output.name + ".parts")
+
+
+def unfinished(path) -> str | None:
+    """Why ``path`` does not exist yet, when a run is writing it (its lock held by a running
+    process) or stopped before it wrote it (its parts folder left), or None."""
+    path = Path(path)
+    lock, parts = OutputLock(path), parts_dir(path)
+    holder = lock.running_holder()
+    if holder:
+        kept = f", its finished parts in {parts}" if parts.exists() else ""
+        return f"not written yet: {_who(holder)} is still writing it (lock {lock.path}{kept}); wait for it to finish"
+    if parts.exists():
+        return (f"not written yet: the run writing it stopped with its finished parts in {parts}; "
+                "rerun the command that writes it, with the same options, to finish it")
+    return None
 
 
 def sha256(path) -> str:

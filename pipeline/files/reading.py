@@ -8,6 +8,7 @@ import sys
 import xarray as xr
 
 from .checksums import verify_checksums
+from .outputs import unfinished
 from .schema import _ELAPSED, CHECKSUM, EnsembleFileError, cf_decode
 
 __all__ = ["HISTORY_BLOCK", "SUMMARY_BLOCK", "load_netcdf", "note_unverified"]
@@ -21,7 +22,8 @@ SUMMARY_BLOCK = 2 ** 16
 
 
 def load_netcdf(path, lazy: bool = False, verify: bool = True, summary_block: int | None = None) -> xr.Dataset:
-    """Any netCDF file fully into memory; EnsembleFileError names the file if it is missing or unreadable.
+    """Any netCDF file fully into memory; EnsembleFileError names the file if it is missing (or not
+    written yet by a run, :func:`unfinished`) or unreadable.
 
     ``lazy``: the variables over time (histories) stay on disk as dask arrays of HISTORY_BLOCK
     realisations, read block by block when used, and so do all variables along ``realization``
@@ -33,7 +35,7 @@ def load_netcdf(path, lazy: bool = False, verify: bool = True, summary_block: in
     is marked ``encoding["rss6_unverified"]`` (see :func:`note_unverified`).
     """
     if not os.path.exists(path):
-        raise EnsembleFileError(f"{path}: no such file")
+        raise EnsembleFileError(f"{path}: {unfinished(path) or 'no such file'}")
     try:
         if lazy:
             # opened without dask: only the histories become dask arrays (loading each small

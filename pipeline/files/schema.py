@@ -122,7 +122,7 @@ _MOVED = ("units", "cell_methods", "axis", "standard_name", "long_name")
 _PART_OF = "rss6_part_of"     # a split variable: the variable it is part of, its dims, its quantity
 _PART_DIMS = "rss6_dims"
 _PART_QUANTITY = "rss6_quantity"
-CHECKSUM = "rss6_sha256"      # global attribute: {variable: sha256 of its values} as JSON
+CHECKSUM = "rss6_sha256"      # global attribute: {variable: sha256 of its values, "/attributes": {...}} as JSON
 
 
 def _cf_attrs(name: str, var: xr.DataArray) -> dict:

@@ -13,7 +13,7 @@ import dask
 import numpy as np
 import xarray as xr
 
-from .checksums import _Checksum, _rows
+from .checksums import ATTRIBUTES, _Checksum, _rows, attribute_checksums
 from .schema import CHECKSUM, EnsembleFileError, cf_encode
 
 __all__ = ["sigint_deferred", "write_netcdf", "netcdf_size", "check_free_space"]
@@ -108,12 +108,14 @@ class _InOrderWriter:
 
 def _stream_to_netcdf(ds: xr.Dataset, path, encoding: dict, interrupted: list) -> None:
     """``ds.to_netcdf(path)`` (netCDF4, NETCDF4 format) with :class:`_InOrderWriter`, and the
-    values' checksums (global attribute CHECKSUM) written last."""
+    values' checksums (global attribute CHECKSUM) written last, with those of the global attributes
+    as the file holds them."""
     from xarray.backends import NetCDF4DataStore
     store = NetCDF4DataStore.open(path, mode="w", format="NETCDF4")
     try:
         writer = _InOrderWriter(interrupted)
         ds.dump_to_store(store, writer=writer, encoding=encoding)
+        writer.digests[ATTRIBUTES] = attribute_checksums({k: store.ds.getncattr(k) for k in store.ds.ncattrs()})
         store.ds.setncattr(CHECKSUM, json.dumps(writer.digests, sort_keys=True))
     finally:
         store.close()

@@ -24,7 +24,7 @@ import numpy as np
 from rss6core import ClearanceDraw, model_level, models_with, parse_scene, prepare_level, stored_draw
 
 from ..analysis.estimators import one_sided_bounds
-from ..analysis.gate import Verdict, allowed_exceedances, judge_all, upper_limit_problem
+from ..analysis.gate import Verdict, allowed_exceedances, judge_all, upper_limits_problem
 from ..analysis.spec import PF, Spec
 from ..ensemble.run import EnsembleSpec, ensemble
 from ..files.records import window_masks
@@ -79,11 +79,27 @@ def _read_costs(path) -> dict:
         data = tomllib.loads(Path(path).read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise AllocationError(f"--costs {path}: {exc}") from None
-    unknown = sorted(set(data) - set(ALLOCATED) - {"classes"}) + sorted(set(data.get("classes", {})) - set(ALLOCATED))
+    classes = data.get("classes", {})
+    tables = {key: data[key] for key in (*ALLOCATED, "classes") if key in data}
+    tables |= {f"classes.{family}": table for family, table in classes.items()} if isinstance(classes, dict) else {}
+    for key, table in tables.items():
+        if not isinstance(table, dict):
+            raise AllocationError(f"--costs {path}: {key} must be a table ([{key}]), got {table!r}")
+    unknown = sorted(set(data) - set(ALLOCATED) - {"classes"}) + sorted(set(classes) - set(ALLOCATED))
     if unknown:
         raise AllocationError(f"--costs {path}: unknown table {unknown[0]!r}; give [<family>] costs and "
                               f"[classes.<family>.<name>] classes for the families {', '.join(ALLOCATED)}")
     return data
+
+
+def _cost(value, where: str) -> float:
+    """A cost per joint from the costs file: a finite number above 0, else AllocationError naming
+    ``where`` (a free class would make the cheapest allocation any set of free ones)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise AllocationError(f"{where}: the cost must be a number (per joint), got {value!r}")
+    if not 0 < value < float("inf"):
+        raise AllocationError(f"{where}: the cost must be positive and finite (per joint), got {value!r}")
+    return float(value)
 
 
 def _named_class(family: str, name: str, table, radius: float, where: str) -> ClassOption:
@@ -91,9 +107,9 @@ def _named_class(family: str, name: str, table, radius: float, where: str) -> Cl
     keys = {"low_m", "high_m", "cost"}
     if not isinstance(table, dict) or set(table) != keys:
         raise AllocationError(f"{where}: give exactly low_m, high_m (radial play, m) and cost (per joint)")
-    low, high, cost = table["low_m"], table["high_m"], table["cost"]
-    if not all(isinstance(x, (int, float)) for x in (low, high, cost)) or not 0 <= low < high or cost < 0:
-        raise AllocationError(f"{where}: need 0 <= low_m < high_m and cost >= 0, got {low!r}, {high!r}, {cost!r}")
+    low, high, cost = table["low_m"], table["high_m"], _cost(table["cost"], where)
+    if not all(isinstance(x, (int, float)) for x in (low, high)) or not 0 <= low < high:
+        raise AllocationError(f"{where}: need 0 <= low_m < high_m, got {low!r}, {high!r}")
     if high >= radius:
         raise AllocationError(f"{where}: high_m = {high:g} m reaches the {family} joint's "
                               f"{RADII[family]}_m = {radius:g} m")
@@ -111,10 +127,10 @@ def _fit_class(family: str, name: str, radius: float, costs, costs_file) -> Clas
                               f"not below the {family} joint's {RADII[family]}_m = {radius * 1e3:g} mm")
     cost = COST_LAW.fit(lim)
     if costs is not None:
-        cost = costs.get(family, {}).get(name)
-        if not isinstance(cost, (int, float)) or cost < 0:
-            raise AllocationError(f"--costs {costs_file}: [{family}] {name!r}: missing or not a "
-                                  f"cost >= 0 (got {cost!r})")
+        where = f"--costs {costs_file}: [{family}] {name!r}"
+        if name not in costs.get(family, {}):
+            raise AllocationError(f"{where}: missing; give a cost per joint for every fit of --classes")
+        cost = _cost(costs[family][name], where)
     return ClassOption(family, name, lim.radial_low, lim.radial_high, float(cost))
 
 
@@ -321,9 +337,8 @@ def check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: flo
     if linear and scene.simulation.quasi_static_eccentricity != "drawn":
         raise AllocationError(f"{spec.source}: allocate needs [simulation] quasi_static_eccentricity = "
                               "\"drawn\" (the reaction mode's direction does not split by family)")
-    for s in specs:
-        if why := upper_limit_problem(s, confidence, n, "an allocation"):
-            raise AllocationError(why)
+    if why := upper_limits_problem(specs, confidence, n, "an allocation"):
+        raise AllocationError(why)
 
 
 def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: float, options: dict,

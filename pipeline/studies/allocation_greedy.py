@@ -15,27 +15,14 @@ answer is its verification.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
 from pathlib import Path
 
-from ..analysis.gate import Verdict, judge_all
 from ..analysis.spec import Spec
-from ..ensemble.run import EnsembleSpec, ensemble
+from ..ensemble.run import EnsembleSpec
 from .allocation import ALLOCATED, Allocation, AllocationError, allocated_scene, check_request, cost_of
+from .trial import Trial, run_trial
 
-__all__ = ["Trial", "greedy_allocate"]
-
-
-@dataclass(frozen=True)
-class Trial:
-    """One ensemble of the search: its classes, file and the specs' verdicts there."""
-    combo: tuple
-    path: Path
-    verdicts: tuple[Verdict, ...]
-
-    @property
-    def passed(self) -> bool:
-        return all(v.outcome == "pass" for v in self.verdicts)
+__all__ = ["greedy_allocate"]
 
 
 class _Runner:
@@ -57,8 +44,8 @@ class _Runner:
             text = allocated_scene(self.spec.scene_text, self.spec.source, combo)
             name = "_".join(k.replace("/", "") for k in key)
             path = self.folder / f"{self.spec.scene().name}_{self.spec.model}_{name}.nc"
-            out = ensemble(replace(self.spec, scene_text=text), self.n, path, workers=self.workers, progress=False)
-            self.trials[key] = Trial(combo, path, tuple(judge_all(self.specs, out.dataset, self.confidence)))
+            self.trials[key] = run_trial(self.spec, text, combo, self.specs, self.n, path, self.confidence,
+                                         self.workers)
         return self.trials[key]
 
 
@@ -77,14 +64,14 @@ def _descend(run: _Runner, start: Trial, ranked: dict) -> Trial:
     """Greedy loosening from ``start`` while the budget lasts, freezing a family once its loosening fails."""
     best, frozen = start, set()
     while run.left > 0:
-        for candidate in _loosenings(best.combo, ranked, frozenset(frozen)):
+        for candidate in _loosenings(best.candidate, ranked, frozenset(frozen)):
             if run.left <= 0:
                 break
             trial = run(candidate)
             if trial.passed:
                 best = trial
                 break
-            frozen.add(ALLOCATED[next(k for k, c in enumerate(candidate) if c != best.combo[k])])
+            frozen.add(ALLOCATED[next(k for k, c in enumerate(candidate) if c != best.candidate[k])])
         else:
             break
     return best
@@ -136,14 +123,14 @@ def greedy_allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confi
         _out_of_reach(spec, start)
     uniforms = uniform_combos(options)
     uniform = _bisect_uniform(run, uniforms) if uniforms else None
-    cheapest = min((t for t in run.trials.values() if t.passed), key=lambda t: cost_of(t.combo))
+    cheapest = min((t for t in run.trials.values() if t.passed), key=lambda t: cost_of(t.candidate))
     best = _descend(run, uniform or cheapest, ranked)
     scene_path = folder / f"{spec.scene().name}_allocated.toml"
-    scene_path.write_text(allocated_scene(spec.scene_text, spec.source, best.combo))
+    scene_path.write_text(allocated_scene(spec.scene_text, spec.source, best.candidate))
     predicted = {s.text: max((v.upper for v in best.verdicts if v.spec == s.text and v.upper is not None),
                              default=float("nan")) for s in specs}
-    uniform = None if uniform is None else uniform.combo
-    return Allocation(best.combo, cost_of(best.combo), uniform, None if uniform is None else cost_of(uniform),
+    uniform = None if uniform is None else uniform.candidate
+    return Allocation(best.candidate, cost_of(best.candidate), uniform, None if uniform is None else cost_of(uniform),
                       len(run.trials), best.verdicts, predicted, best.path, scene_path,
                       method=f"greedy loosening, {len(run.trials)} of at most {max_ensembles} ensembles "
                              "(not proven least-cost)")

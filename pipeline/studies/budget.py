@@ -26,18 +26,19 @@ limit / upper up to rounding could land a hair above it).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 from rss6core import model_level, models_with
 
-from ..analysis.gate import Verdict, check_confidence, judge_all, upper_limit_problem
-from ..ensemble.run import EnsembleSpec, ensemble
+from ..analysis.gate import Verdict, upper_limits_problem
+from ..ensemble.run import EnsembleSpec
 from ..scenes.variant import scene_variant
 from ..analysis.spec import PF, Spec
 from ..vocabulary import CONFIDENCE, UserError
+from .trial import Trial, run_trial
 
-__all__ = ["FAMILY_KEYS", "Trial", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
+__all__ = ["FAMILY_KEYS", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
            "BudgetError"]
 
 FAMILY_KEYS = ("revolute_radial_m", "revolute_axial_m", "spherical_C_m", "spherical_B_m")
@@ -47,18 +48,6 @@ MAX_DOUBLINGS = 12    # the sweep looks for a passing and a failing scale within
 
 class BudgetError(UserError):
     """A budget that cannot be computed (a lower-limit spec, no interval at this n, zero error)."""
-
-
-@dataclass(frozen=True)
-class Trial:
-    """One ensemble of the sweep: its scale, output file and the verdicts of the specs there."""
-    scale: float
-    path: Path
-    verdicts: tuple[Verdict, ...]
-
-    @property
-    def passed(self) -> bool:
-        return all(v.outcome == "pass" for v in self.verdicts)
 
 
 @dataclass(frozen=True)
@@ -122,23 +111,16 @@ def _check_request(model: str, specs: list[Spec], n: int, confidence: float) -> 
         *others, last = models_with("draws_clearances")
         raise BudgetError(f"--model {model}: this level has no clearances, so no clearance budget; "
                           f"use {', '.join(others)} or {last}")
-    try:
-        check_confidence(confidence)
-    except ValueError as exc:
-        raise BudgetError(f"--{exc}") from None
-    for s in specs:
-        if why := upper_limit_problem(s, confidence, n, "a budget"):
-            raise BudgetError(why)
+    if why := upper_limits_problem(specs, confidence, n, "a budget"):
+        raise BudgetError(why)
 
 
 def _trial(spec: EnsembleSpec, specs, scale: float, n: int, folder: Path, confidence: float,
            workers: int) -> Trial:
-    """Run (or resume) the ensemble at ``scale`` and judge the specs on it."""
+    """Run (or resume) the ensemble at ``scale`` and judge the specs on it (the trial's candidate: ``scale``)."""
     text, _ = scaled_scene(spec, scale)
-    scene = spec.scene()
-    path = folder / f"{scene.name}_{spec.model}_scale{scale:.6g}.nc"
-    outcome = ensemble(replace(spec, scene_text=text), n, path, workers=workers, progress=False)
-    return Trial(scale, path, tuple(judge_all(specs, outcome.dataset, confidence)))
+    path = folder / f"{spec.scene().name}_{spec.model}_scale{scale:.6g}.nc"
+    return run_trial(spec, text, scale, specs, n, path, confidence, workers)
 
 
 def exact_scale(verdicts: list[Verdict]) -> tuple[float, str]:
@@ -166,17 +148,17 @@ def _sweep(run, tolerance: float) -> list[Trial]:
     while all(t.passed for t in trials) or not any(t.passed for t in trials):
         if len(trials) > MAX_DOUBLINGS:
             kind = "passes" if trials[0].passed else "fails"
-            raise BudgetError(f"the spec still {kind} at clearance scale {trials[-1].scale:g}; "
+            raise BudgetError(f"the spec still {kind} at clearance scale {trials[-1].candidate:g}; "
                               "no budget in 2^-12..2^12" + ("" if trials[0].passed else
                                                             " (an error no clearance scale removes, such as a "
                                                             "realised robot's geometric error, exceeds it)"))
-        trials.append(run(trials[-1].scale * factor))
-    lo = max(t.scale for t in trials if t.passed)
-    hi = min(t.scale for t in trials if not t.passed and t.scale > lo)
+        trials.append(run(trials[-1].candidate * factor))
+    lo = max(t.candidate for t in trials if t.passed)
+    hi = min(t.candidate for t in trials if not t.passed and t.candidate > lo)
     while (hi - lo) / lo > tolerance:
         t = run(round_down(math.sqrt(lo * hi)))
         trials.append(t)
-        lo, hi = (t.scale, hi) if t.passed else (lo, t.scale)
+        lo, hi = (t.candidate, hi) if t.passed else (lo, t.candidate)
     return trials
 
 
@@ -215,9 +197,9 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
                   "clearance; checked by an ensemble at the answer")
     else:
         trials = tuple(_sweep(run, tolerance))
-        scale = max(t.scale for t in trials if t.passed)
-        above = min((t for t in trials if not t.passed and t.scale > scale), key=lambda t: t.scale)
-        limiting = f"scale {scale:.{DIGITS}g} passes, {above.scale:.{DIGITS}g} {_not_passing(above)}"
+        scale = max(t.candidate for t in trials if t.passed)
+        above = min((t for t in trials if not t.passed and t.candidate > scale), key=lambda t: t.candidate)
+        limiting = f"scale {scale:.{DIGITS}g} passes, {above.candidate:.{DIGITS}g} {_not_passing(above)}"
         method = f"measured sweep (doubling, then bisection to {100 * tolerance:g} % in the scale)"
     text, sizes = scaled_scene(spec, scale)
     scene_path = folder / f"{spec.scene().name}_budget.toml"
@@ -239,5 +221,5 @@ def format_budget(b: Budget, scene_name: str, model: str) -> str:
     for t in b.trials:
         worst = "pass" if t.passed else ("fail" if any(v.outcome == "fail" for v in t.verdicts)
                                          else "undecided")
-        lines.append(f"  {t.scale:.{DIGITS}g}: {worst}, {t.path}")
+        lines.append(f"  {t.candidate:.{DIGITS}g}: {worst}, {t.path}")
     return "\n".join(lines)

@@ -173,20 +173,18 @@ class RowParts:
     manifest: PartsManifest
     design: str
 
+    def parts(self) -> list:
+        """The design's stored chunks (verified by :func:`parts_manifest`)."""
+        return [path for path in self.manifest.parts() if path.name.startswith(f"{self.design}-")]
+
     def stored(self) -> list[tuple[slice, np.ndarray]]:
-        """(rows, their statistics) of every stored chunk of the design (verified by :func:`parts_manifest`)."""
-        out = []
-        for path in self.manifest.parts():
-            if path.name.startswith(f"{self.design}-"):
-                ds = load_netcdf(path, verify=False)
-                rows = slice(int(ds["row"][0]), int(ds["row"][-1]) + 1)
-                out.append((rows, np.stack([ds[name].values for name in SUMMARIES], axis=1)))
-        return out
+        """(rows, their statistics) of every stored chunk of the design."""
+        return [(slice(int(ds["row"][0]), int(ds["row"][-1]) + 1), np.stack([ds[k].values for k in SUMMARIES], axis=1))
+                for ds in (load_netcdf(path, verify=False) for path in self.parts())]
 
     def count(self) -> int:
-        """How many of the design's rows are stored."""
-        return sum(len(self.manifest.entries[p.name]["rows"]) for p in self.manifest.parts() if p.name.startswith(
-            f"{self.design}-"))
+        """How many of the design's rows are stored (as the manifest lists them, without reading the chunks)."""
+        return sum(len(self.manifest.entries[path.name]["rows"]) for path in self.parts())
 
     def keep(self, rows: slice, stats: np.ndarray) -> None:
         """Store the statistics of ``rows`` at once (PartsManifest.write: all or nothing)."""
@@ -422,7 +420,7 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFI
             u = sample_design(design, n, spec.seed)
             rows = RowParts(manifest, design.name) if manifest else None
             if announce:
-                kept = f"; {rows.count()} stored in {parts}" if rows and rows.count() else ""
+                kept = f"; {stored} stored in {parts}" if rows and (stored := rows.count()) else ""
                 announce(f"{design.name}: {len(u)} evaluations of the {spec.model} level "
                          f"({len(design.groups)} groups, N = {n}) on {workers} worker(s){kept}")
             stats = evaluate_statistics(spec, inputs, u, client, window=window, parts=rows)
