@@ -15,6 +15,7 @@ from pipeline.cli import main
 from pipeline.files.outputs import PartsManifest
 from pipeline.ensemble.run import EnsembleSpec, ensemble, parts_dir, run_chunk
 from pipeline.scenes.catalogue import PACKAGE
+from rss6core import __version__
 from pipeline.files.checksums import file_checksums
 from pipeline.files.opening import open_ensemble
 from pipeline.files.reading import load_netcdf
@@ -284,12 +285,22 @@ def test_the_history_may_be_appended_to(merged, tmp_path):
     assert open_ensemble(noted).encoding.get("rss6_unverified") is None
 
 
-def _without_attribute_checksums(path: Path) -> None:
-    """The checksum attribute as rss6 0.3.0 wrote it before it covered the global attributes."""
+def _without_attribute_checksums(path: Path, version: str = "0.3.0") -> None:
+    """The checksum attribute without its global attributes' entry, as rss6 0.3.0 wrote it (the
+    file's rss6_version set to ``version``)."""
     with netCDF4.Dataset(path, "a") as nc:
         sums = json.loads(nc.getncattr(CHECKSUM))
         del sums["/attributes"]
         nc.setncattr(CHECKSUM, json.dumps(sums, sort_keys=True))
+        nc.setncattr("rss6_version", version)
+
+
+def test_a_file_of_a_version_that_writes_the_attribute_checksums_is_refused_without_them(merged, tmp_path, capsys):
+    """From rss6 0.3.1 on, a file without the entry had it removed."""
+    bad = _copy(merged, tmp_path / "bad.nc")
+    _without_attribute_checksums(bad, version=__version__)
+    assert main(["stats", str(bad)]) == 2
+    _one_line(capsys, f"{bad}: attribute {CHECKSUM} lacks its /attributes entry, although rss6 {__version__} writes it")
 
 
 def test_a_file_written_before_the_attribute_checksums_is_read_as_before(merged, tmp_path, capsys):

@@ -81,13 +81,15 @@ def file_checksums(ds: xr.Dataset) -> dict:
 
 
 CHECKSUMS_SINCE = (0, 3)   # the first rss6 version whose files carry CHECKSUM
+ATTRIBUTE_CHECKSUMS_SINCE = (0, 3, 1)   # ... and the first whose CHECKSUM holds the ATTRIBUTES entry
 
 
-def _writes_checksums(version) -> bool:
-    """Whether rss6 ``version`` (a file's ``rss6_version``) writes checksums: a file of such a
-    version without them was altered; one of an earlier rss6 (or of no rss6) is read with a note."""
+def _writes_checksums(version, since: tuple = CHECKSUMS_SINCE) -> bool:
+    """Whether rss6 ``version`` (a file's ``rss6_version``) is ``since`` or later: a file of such a
+    version without what it writes was altered; one of an earlier rss6 (or of no rss6) is read as
+    that version wrote it (without checksums: with a note)."""
     try:
-        return tuple(int(p) for p in str(version).split(".")[:2]) >= CHECKSUMS_SINCE
+        return tuple(int(p) for p in str(version).split(".")[:len(since)]) >= since
     except ValueError:
         return False
 
@@ -99,8 +101,8 @@ def verify_checksums(ds: xr.Dataset, path) -> bool:
     """EnsembleFileError naming the file and the first variable whose values differ from the
     checksum written with the file (changed since), or that was added or removed, then the first
     such global attribute; False when the file has no checksum (written by an earlier rss6 or by
-    another program), True when it holds. A file without the attributes' entry (rss6 0.3.0 before
-    it) has its variables checked alone."""
+    another program), True when it holds. A file without the attributes' entry has its variables
+    checked alone if an rss6 before ATTRIBUTE_CHECKSUMS_SINCE wrote it, and is refused otherwise."""
     text = ds.attrs.get(CHECKSUM)
     if text is None:
         if _writes_checksums(ds.attrs.get("rss6_version")):
@@ -124,6 +126,9 @@ def verify_checksums(ds: xr.Dataset, path) -> bool:
             raise EnsembleFileError(f"{path}: variable {name} {what} attribute {CHECKSUM}: {_ALTERED}")
     if attributes is not None:
         _verify_attributes(attributes, got_attributes, ds.attrs, path)
+    elif _writes_checksums(ds.attrs.get("rss6_version"), ATTRIBUTE_CHECKSUMS_SINCE):
+        raise EnsembleFileError(f"{path}: attribute {CHECKSUM} lacks its {ATTRIBUTES} entry, although rss6 "
+                                f"{ds.attrs['rss6_version']} writes it: {_ALTERED}")
     return True
 
 
