@@ -320,9 +320,14 @@ def _commit(checkout: Path) -> str:
 
 def _baseline(checkout: Path, argv: list[str]) -> dict:
     """This benchmark's figures for another checkout: this script in a fresh process whose
-    ``rss6core`` and ``pipeline`` (and those of its workers and subprocesses) are the checkout's."""
+    ``rss6core`` and ``pipeline`` (and those of its workers and subprocesses) are the checkout's.
+
+    It runs in the checkout's folder: the workers' fork server of an rss6 before 0.3.1 imports
+    rss6 from its working folder first (docs/performance.md section 32), so that started in this
+    checkout's folder the baseline's workers computed with this checkout's code."""
     env = dict(os.environ, PYTHONPATH=str(checkout))
-    proc = subprocess.run([sys.executable, __file__, *argv, "--json"], env=env, capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, __file__, *argv, "--json"], env=env, capture_output=True, text=True,
+                          cwd=checkout)
     if proc.returncode != 0:
         raise SystemExit(f"ensemble.py for the baseline {checkout} failed ({proc.returncode}):\n{proc.stderr}")
     return json.loads(proc.stdout)

@@ -21,6 +21,12 @@ realisation's stream (9 per joint-step), the 6 sines and cosines of the three az
 numpy's float64 sin and cos are), the 2 inverse normal CDFs (scipy's ndtri) and the 2 square roots of
 the uniform sphere's polar sines per joint-step, each over the 12 030 joint-steps of
 configs/paper.toml (median of 7 repeats).
+
+``python benchmarks/paper_run.py cluster [-n N]`` starts a local cluster of two workers, then runs
+the paper level's N realisations on it three times (``run_ensemble``, fresh files; the first run's
+workers prepare the level, the later ones have it) and prints, per run, the wall time and the CPU
+seconds of this process (the client, the scheduler's thread and the chunks' writes) and of each
+worker: where a 2-core machine's 2 x wall CPU seconds go.
 """
 from __future__ import annotations
 
@@ -204,9 +210,39 @@ def floor() -> dict:
     return out
 
 
+def _on_cluster(client, address: str, n: int, folder: str, k: int) -> dict:
+    """One run of N paper realisations on the started cluster: wall s, CPU s here and per worker."""
+    from pipeline.ensemble.run import EnsembleSpec, default_chunk, run_ensemble
+    from rss6core import load_scene
+    from rss6core.models import default_integrator, default_time_step
+    scene = load_scene(CONFIG)
+    spec = EnsembleSpec(scene.source_text, str(CONFIG), "paper", default_integrator(scene, "paper"),
+                        default_time_step(scene, "paper"), scene.simulation.elements_per_link, 0)
+    workers = client.run(os.getpid)
+    before = {w: process_cpu(pid) for w, pid in workers.items()}
+    own, start = time.process_time(), time.perf_counter()
+    run_ensemble(spec, n, Path(folder) / f"p{k}.nc", scheduler=address, chunk=default_chunk(n, 2, "paper"),
+                 progress=False)
+    wall, own = time.perf_counter() - start, time.process_time() - own
+    return {"run": k, "wall_s": round(wall, 3), "this_process_cpu_s": round(own, 3),
+            "workers_cpu_s": [round(process_cpu(pid) - before[w], 3) for w, pid in workers.items()],
+            "load": round(os.getloadavg()[0], 2)}
+
+
+def on_cluster(n: int) -> list:
+    """:func:`_on_cluster` three times on one local cluster of two workers."""
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    from dask.distributed import Client
+
+    from pipeline.ensemble.cluster import local_cluster
+    with tempfile.TemporaryDirectory() as tmp, local_cluster(2) as cluster, Client(cluster) as client:
+        client.run(lambda: __import__("pipeline.ensemble.run"))     # imports off the clock
+        return [_on_cluster(client, cluster.scheduler_address, n, tmp, k) for k in range(3)]
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("what", choices=("run", "phases", "parts", "floor"))
+    parser.add_argument("what", choices=("run", "phases", "parts", "floor", "cluster"))
     parser.add_argument("--rss6", default=str(Path(sys.executable).with_name("rss6")),
                         help="the rss6 executable to time (default: this interpreter's)")
     parser.add_argument("-n", type=int, default=1000)
@@ -215,6 +251,8 @@ def main(argv=None) -> None:
         print(json.dumps(phases(args.n)))
     elif args.what == "floor":
         print(json.dumps(floor()))
+    elif args.what == "cluster":
+        print("\n".join(json.dumps(r) for r in on_cluster(args.n)))
     else:
         print(json.dumps(whole_run(args.rss6, args.n) if args.what == "run" else parts()))
 

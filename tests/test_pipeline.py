@@ -264,6 +264,24 @@ def test_workers_forked_from_a_server_started_ahead_hash_strings_with_the_nannys
     assert int(worker_hash) == int(fresh)
 
 
+def test_workers_import_the_installed_rss6_not_a_package_of_the_same_name_in_the_working_folder(tmp_path):
+    """A run started from a folder holding packages named ``pipeline`` and ``rss6core`` (another
+    checkout, or a user's own package) computes with the installed rss6: the workers' fork server
+    imported the folder's (its ``python -c`` puts the folder first), and the decoys here would
+    have marked themselves and failed the run."""
+    import shutil
+    for name in ("pipeline", "rss6core"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "__init__.py").write_text(
+            f"open({str(tmp_path / (name + '.imported'))!r}, 'w').close()\nraise RuntimeError('decoy {name}')\n")
+    exe = shutil.which("rss6")
+    assert exe, "the rss6 console script (pip install -e .) runs without the working folder on its path"
+    out = subprocess.run([exe, "run", "smoke", "-n", "2", "--model", "quasi-static", "--workers", "1", "-o", "s.nc"],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert not list(tmp_path.glob("*.imported"))
+
+
 def test_a_second_local_cluster_starts_without_a_port_warning():
     """Two rss6 runs at once: the second cluster's scheduler finds dask's default HTTP port 8787
     taken (held here by a socket, or by whatever holds it already) and starts without the

@@ -84,14 +84,27 @@ def start_worker_server() -> None:
     imports (the ``rss6`` command does so, :func:`pipeline.cli.main`), the two import side by side.
 
     Every worker inherits the server's environment as it was at its start: what a nanny sets just
-    before it starts a worker (PYTHONHASHSEED among it) reaches the workers only if set here too."""
+    before it starts a worker (PYTHONHASHSEED among it) reaches the workers only if set here too.
+
+    The server is a ``python -c`` process, which puts the working directory first on its module path
+    (Python 3.11's server ignores the path it is handed): started from a folder holding a
+    ``pipeline`` or ``rss6core`` (another checkout of rss6, or a user's own package of that name),
+    the workers imported that. PYTHONSAFEPATH, set for the server only, keeps the folder out."""
     import multiprocessing
     from multiprocessing import forkserver
     os.environ.update(BLAS_ENV)
     os.environ["PYTHONHASHSEED"] = NANNY_HASH_SEED   # the nanny sets it in this process too, later
     multiprocessing.get_context("forkserver").set_forkserver_preload(WORKER_IMPORTS)  # replaces dask's own
-    with _workers_ignore_ctrl_c():
-        forkserver.ensure_running()
+    safe_path = os.environ.get("PYTHONSAFEPATH")
+    os.environ["PYTHONSAFEPATH"] = "1"
+    try:
+        with _workers_ignore_ctrl_c():
+            forkserver.ensure_running()
+    finally:
+        if safe_path is None:
+            del os.environ["PYTHONSAFEPATH"]
+        else:
+            os.environ["PYTHONSAFEPATH"] = safe_path
 
 
 def stop_worker_server() -> None:
