@@ -7,7 +7,7 @@ from pathlib import Path
 import pipeline.files
 
 FILES = Path(pipeline.files.__file__).parent
-ORDER = ("schema", "records", "checksums", "writing", "reading", "check", "opening", "outputs", "error_map")
+ORDER = ("schema", "records", "checksums", "writing", "outputs", "reading", "check", "opening", "error_map")
 BELOW = {"vocabulary", "scenes"}   # the parts of pipeline/ below files/
 
 
