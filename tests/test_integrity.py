@@ -277,6 +277,21 @@ def test_an_edited_global_attribute_is_refused_by_stats_plot_and_resume(merged, 
         ensemble(_spec(), N + 2, bad, workers=1, progress=False)
 
 
+@pytest.mark.parametrize("attribute, value", [("rss6_part_of", "mean_abs_error"), ("rss6_part_of", None),
+                                              ("rss6_dims", "window direction"), ("rss6_quantity", "velocity")])
+def test_an_edited_split_variable_attribute_is_named_as_an_alteration(merged, tmp_path, capsys, attribute, value):
+    """A split variable's own rss6 attributes (which join it back) edited after rss6 wrote the file:
+    one line saying so, not the joining's internal error (a new user's review)."""
+    bad = _copy(merged, tmp_path / "bad.nc")
+    with netCDF4.Dataset(bad, "a") as nc:
+        var = nc["max_abs_error_displacement_translation"]
+        var.delncattr(attribute) if value is None else var.setncattr(attribute, value)
+    for command in (["stats", str(bad)], ["plot", str(bad), "-o", str(tmp_path / "plots")]):
+        assert main(command) == 2
+        err = _one_line(capsys, str(bad), "altered after rss6 wrote it")
+        assert "Error" not in err, err
+
+
 def test_the_history_may_be_appended_to(merged, tmp_path):
     """CF tools append their command to ``history``: the one global attribute left unchecked."""
     noted = _copy(merged, tmp_path / "noted.nc")

@@ -9,7 +9,7 @@ import dask
 import numpy as np
 import xarray as xr
 
-from .schema import CHECKSUM, EnsembleFileError
+from .schema import ALTERED, CHECKSUM, EnsembleFileError
 
 __all__ = ["file_checksums", "attribute_checksums", "verify_checksums", "CHECKSUMS_SINCE", "ATTRIBUTES"]
 
@@ -94,9 +94,6 @@ def _writes_checksums(version, since: tuple = CHECKSUMS_SINCE) -> bool:
         return False
 
 
-_ALTERED = "the file was altered after rss6 wrote it; rerun the command that wrote it, or restore the file"
-
-
 def verify_checksums(ds: xr.Dataset, path) -> bool:
     """EnsembleFileError naming the file and the first variable whose values differ from the
     checksum written with the file (changed since), or that was added or removed, then the first
@@ -107,7 +104,7 @@ def verify_checksums(ds: xr.Dataset, path) -> bool:
     if text is None:
         if _writes_checksums(ds.attrs.get("rss6_version")):
             raise EnsembleFileError(f"{path}: attribute {CHECKSUM} is missing, although rss6 "
-                                    f"{ds.attrs['rss6_version']} writes it: {_ALTERED}")
+                                    f"{ds.attrs['rss6_version']} writes it: {ALTERED}")
         return False
     try:
         recorded = json.loads(str(text))
@@ -115,20 +112,19 @@ def verify_checksums(ds: xr.Dataset, path) -> bool:
         attributes = recorded.pop(ATTRIBUTES, None)
         assert attributes is None or isinstance(attributes, dict)
     except (ValueError, AssertionError):
-        raise EnsembleFileError(f"{path}: attribute {CHECKSUM} is not the JSON rss6 writes; the file "
-                                "was edited after rss6 wrote it: rerun the command that wrote it") from None
+        raise EnsembleFileError(f"{path}: attribute {CHECKSUM} is not the JSON rss6 writes: {ALTERED}") from None
     got = file_checksums(ds)
     got_attributes = got.pop(ATTRIBUTES)
     for name in sorted(set(recorded) | set(got)):
         if recorded.get(name) != got.get(name):
             what = ("was added to" if name not in recorded else "was removed from" if name not in got
                     else "has values that no longer match its checksum in")
-            raise EnsembleFileError(f"{path}: variable {name} {what} attribute {CHECKSUM}: {_ALTERED}")
+            raise EnsembleFileError(f"{path}: variable {name} {what} attribute {CHECKSUM}: {ALTERED}")
     if attributes is not None:
         _verify_attributes(attributes, got_attributes, ds.attrs, path)
     elif _writes_checksums(ds.attrs.get("rss6_version"), ATTRIBUTE_CHECKSUMS_SINCE):
         raise EnsembleFileError(f"{path}: attribute {CHECKSUM} lacks its {ATTRIBUTES} entry, although rss6 "
-                                f"{ds.attrs['rss6_version']} writes it: {_ALTERED}")
+                                f"{ds.attrs['rss6_version']} writes it: {ALTERED}")
     return True
 
 
@@ -144,4 +140,4 @@ def _verify_attributes(recorded: dict, got: dict, attrs: dict, path) -> None:
             what = (f"missing, although {CHECKSUM} records it" if name not in got
                     else f"was added after rss6 wrote the file ({CHECKSUM} does not record it)"
                     if name not in recorded else f"is {shown}, not the value whose checksum {CHECKSUM} holds")
-            raise EnsembleFileError(f"{path}: attribute {name} {what}: {_ALTERED}")
+            raise EnsembleFileError(f"{path}: attribute {name} {what}: {ALTERED}")

@@ -9,7 +9,7 @@ import xarray as xr
 
 from .checksums import verify_checksums
 from .outputs import unfinished
-from .schema import _ELAPSED, CHECKSUM, EnsembleFileError, cf_decode
+from .schema import _ELAPSED, _PART_DIMS, _PART_OF, _PART_QUANTITY, ALTERED, CHECKSUM, EnsembleFileError, cf_decode
 
 __all__ = ["HISTORY_BLOCK", "SUMMARY_BLOCK", "load_netcdf", "note_unverified"]
 
@@ -54,7 +54,12 @@ def load_netcdf(path, lazy: bool = False, verify: bool = True, summary_block: in
     verified = verify and verify_checksums(ds, path)
     try:
         out = _forget_string_widths(cf_decode(ds))
-    except Exception as exc:  # a foreign file whose variables look like rss6's split ones
+    except EnsembleFileError:
+        raise
+    except Exception as exc:  # split variables whose own attributes no longer join them
+        if verified:          # rss6 wrote the values: their variables' attributes were edited since
+            raise EnsembleFileError(f"{path}: the split variables' attributes ({_PART_OF}, {_PART_DIMS}, "
+                                    f"{_PART_QUANTITY}) no longer join them ({exc}): {ALTERED}") from None
         raise EnsembleFileError(f"{path}: not a file rss6 reads: {type(exc).__name__}: {exc}") from None
     if verify and not verified:
         out.encoding["rss6_unverified"] = True

@@ -19,7 +19,7 @@ from ..vocabulary import DIRECTIONS, FAMILIES, QUANTITIES, UserError
 
 __all__ = ["UNITS", "MIXED_UNITS", "display_unit", "SETTINGS", "settings_attrs", "PROVENANCE", "ENSEMBLE_ATTRS",
            "IDENTITY", "ensemble_identity", "identity", "command_line", "derived_history", "JOINTS",
-           "EnsembleFileError", "CHECKSUM", "cf_encode", "cf_decode", "labelled"]
+           "EnsembleFileError", "CHECKSUM", "ALTERED", "cf_encode", "cf_decode", "labelled"]
 
 UNITS = {"displacement": ("m", "rad"), "velocity": ("m s-1", "rad s-1"),
          "acceleration": ("m s-2", "rad s-2")}
@@ -122,6 +122,8 @@ _MOVED = ("units", "cell_methods", "axis", "standard_name", "long_name")
 _PART_OF = "rss6_part_of"     # a split variable: the variable it is part of, its dims, its quantity
 _PART_DIMS = "rss6_dims"
 _PART_QUANTITY = "rss6_quantity"
+# what a reader says of a file whose values or attributes changed after rss6 wrote it
+ALTERED = "the file was altered after rss6 wrote it; rerun the command that wrote it, or restore the file"
 CHECKSUM = "rss6_sha256"      # global attribute: {variable: sha256 of its values, "/attributes": {...}} as JSON
 
 
@@ -210,12 +212,12 @@ def _join_units(ds: xr.Dataset) -> xr.Dataset:
     return out
 
 
-def _check_part_units(ds: xr.Dataset, part: str, got, want: str) -> None:
+def _check_part_units(ds: xr.Dataset, part: str, quantity: str, got, want: str) -> None:
     """A split variable's units are those rss6 wrote: a reader that trusts them (a CF tool) would
     otherwise read the values in another unit; rss6's own numbers do not depend on them."""
     if got != want:
-        raise EnsembleFileError(f"{ds.encoding.get('source', 'the file')}: variable {part} has units {got!r}; "
-                                f"rss6 writes {want!r} (the file was edited)")
+        raise EnsembleFileError(f"{ds.encoding.get('source', 'the file')}: variable {part} has units {got!r}, "
+                                f"but rss6 writes {want!r} for its {_PART_QUANTITY} {quantity!r}: {ALTERED}")
 
 
 def _joined(ds: xr.Dataset, name: str, names: list) -> xr.Variable:
@@ -229,7 +231,7 @@ def _joined(ds: xr.Dataset, name: str, names: list) -> xr.Variable:
         var = ds[part].variable
         family = next(f for f in FAMILIES if f in var.dims)
         q = str(var.attrs[_PART_QUANTITY])
-        _check_part_units(ds, part, var.attrs.get("units"), UNITS[q][list(FAMILIES).index(family)])
+        _check_part_units(ds, part, q, var.attrs.get("units"), UNITS[q][list(FAMILIES).index(family)])
         by_quantity.setdefault(q, []).append(var.transpose(*[family if d == "direction" else d
                                                              for d in inner]).data)
         labels.setdefault(q, []).extend(str(v) for v in ds[family].values)
