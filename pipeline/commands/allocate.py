@@ -40,7 +40,7 @@ def add_parser(sub) -> None:
                                           "(default: allocate_SCENE_MODEL); rerunning resumes the ensemble")
     add_parents(p)
     add_seed(p)
-    add_confidence(p, "confidence of the one-sided bounds the specs are judged on, above 0.5")
+    add_confidence(p, "confidence of the one-sided bounds the specs are judged on, above 0.5", above=0.5)
     add_json(p)
     add_workers(p, what="local dask workers of the verification ensemble")
     p.set_defaults(main=main)

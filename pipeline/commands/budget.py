@@ -25,7 +25,7 @@ def add_parser(sub) -> None:
                                           "(default: budget_SCENE_MODEL); rerunning resumes")
     add_parents(p)
     add_seed(p)
-    add_confidence(p, "confidence of the one-sided bounds the specs are judged on, above 0.5")
+    add_confidence(p, "confidence of the one-sided bounds the specs are judged on, above 0.5", above=0.5)
     p.add_argument("--tolerance", type=positive_float, default=0.05,
                    help="sweep levels: relative width in the scale at which bisection stops (default 0.05)")
     add_workers(p, what="local dask workers")

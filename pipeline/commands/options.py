@@ -32,14 +32,18 @@ def scheduler_address(text: str) -> str:
     return text
 
 
-def fraction(text: str) -> float:
-    """An argparse type: a number strictly between 0 and 1."""
+def _number(text: str) -> float:
     try:
-        value = float(text)
+        return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+
+
+def fraction(text: str) -> float:
+    """An argparse type: a number strictly between 0 and 1."""
+    value = _number(text)
     if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"must lie strictly between 0 and 1, got {text}")
+        raise argparse.ArgumentTypeError(f"must lie above 0 and below 1, got {text}")
     return value
 
 
@@ -102,8 +106,20 @@ def add_json(p, what: str = "print one strict JSON object (SI units; null where 
     p.add_argument("--json", action="store_true", help=what)
 
 
-def add_confidence(p, what: str) -> None:
-    p.add_argument("--confidence", type=fraction, default=CONFIDENCE, help=f"{what} (default {CONFIDENCE})")
+def _fraction_above(low: float):
+    """An argparse type: a number above ``low`` and below 1."""
+    def parse(text: str) -> float:
+        value = _number(text)
+        if not low < value < 1:
+            raise argparse.ArgumentTypeError(f"must lie above {low:g} and below 1, got {text}")
+        return value
+    return parse
+
+
+def add_confidence(p, what: str, above: float = 0.0) -> None:
+    """--confidence, a number in (above, 1): one-sided bounds need above = 0.5 (rss6 budget, allocate)."""
+    p.add_argument("--confidence", type=_fraction_above(above) if above else fraction, default=CONFIDENCE,
+                   help=f"{what} (default {CONFIDENCE})")
 
 
 def add_window_choice(p, what: str) -> None:
