@@ -43,7 +43,7 @@ def fraction(text: str) -> float:
     """An argparse type: a number strictly between 0 and 1."""
     value = _number(text)
     if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"must lie above 0 and below 1, got {text}")
+        raise argparse.ArgumentTypeError(f"must lie strictly between 0 and 1, got {text}")
     return value
 
 
