@@ -211,7 +211,7 @@ def test_a_confidence_below_one_half_is_refused_before_any_work(configs, tmp_pat
                   str(tmp_path / "o")])
         err = capsys.readouterr().err.strip()
         assert exc.value.code == 2 and len(err.splitlines()) == 1, err
-        assert f"--confidence: must lie above 0.5 and below 1, got {value}" in err, err
+        assert f"--confidence: must lie strictly between 0.5 and 1, got {value}" in err, err
     assert not (tmp_path / "o").exists()
 
 

@@ -32,19 +32,20 @@ def scheduler_address(text: str) -> str:
     return text
 
 
-def _number(text: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+def fraction_above(low: float = 0.0):
+    """An argparse type: a number strictly between ``low`` and 1."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not low < value < 1:
+            raise argparse.ArgumentTypeError(f"must lie strictly between {low:g} and 1, got {text}")
+        return value
+    return parse
 
 
-def fraction(text: str) -> float:
-    """An argparse type: a number strictly between 0 and 1."""
-    value = _number(text)
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"must lie strictly between 0 and 1, got {text}")
-    return value
+fraction = fraction_above()   # an argparse type: a number strictly between 0 and 1
 
 
 def int_at_least(minimum: int):
@@ -106,19 +107,9 @@ def add_json(p, what: str = "print one strict JSON object (SI units; null where 
     p.add_argument("--json", action="store_true", help=what)
 
 
-def _fraction_above(low: float):
-    """An argparse type: a number above ``low`` and below 1."""
-    def parse(text: str) -> float:
-        value = _number(text)
-        if not low < value < 1:
-            raise argparse.ArgumentTypeError(f"must lie above {low:g} and below 1, got {text}")
-        return value
-    return parse
-
-
 def add_confidence(p, what: str, above: float = 0.0) -> None:
     """--confidence, a number in (above, 1): one-sided bounds need above = 0.5 (rss6 budget, allocate)."""
-    p.add_argument("--confidence", type=_fraction_above(above) if above else fraction, default=CONFIDENCE,
+    p.add_argument("--confidence", type=fraction_above(above), default=CONFIDENCE,
                    help=f"{what} (default {CONFIDENCE})")
 
 
