@@ -108,7 +108,7 @@ from .sections import crank_inertia, crank_on_motor_frequency, rod_inertia
 from .workspace_map import (DrawnEccentricities, StaticClosure, WorstCaseSizes, ball_support, drawn_eccentricities,
                             revolute_support, sampled_errors, static_closure, worst_case_error, worst_case_sizes)
 
-__version__ = "0.3.1"
+__version__ = "0.3.2"
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII", "RELATIVE_BAND_REACH",
            "MODELS", "MODEL_LEVELS", "ModelLevel", "model_level", "models_with", "INTEGRATORS", "CONTACT_STARTS",
            "TOL_DISPLACEMENT", "TOL_VELOCITY", "closure_matrix",

@@ -3,13 +3,15 @@
 :mod:`.clearance` takes the uniforms from the realisation's stream (or a design) in their fixed
 order and hands them here; these kernels apply the laws' inverse CDFs and the vector products in one
 pass over the joint-steps, without numpy's temporaries (a per-step draw of the paper level is 12 030
-joint-steps).  The bits are those of the numpy expressions they replace (tests/test_draw_kernel.py):
-no fastmath (numba's ``math.sin``/``math.cos`` call glibc's, as numpy's float64 sin and cos do here),
-the same operations in the same order, scipy's own ``ndtri`` (its Cython export, called by symbol
-name so the kernels stay cacheable).  On the uniform sphere the polar angle eta_1 = arccos z,
-z = 1 - 2 u, is never formed: its cosine is z and its sine sqrt((1 - z)(1 + z)) (eta_1 lies in [0, pi]),
-to round-off of the trigonometric form and exact near the poles; the paper's law eta_1 = pi u takes
-sin and cos of eta_1.
+joint-steps).  No fastmath; scipy's own ``ndtri`` (its Cython export, called by symbol name so the
+kernels stay cacheable).  The angles are uniform in turns (theta = 2 pi u), and their cosine and sine
+come from :func:`_turn`: the quadrant from 4 u, exactly, then fdlibm's polynomials on [-pi/4, pi/4],
+branch-free and without a library call.  That is within 2e-16 of the exact values (numpy's float64
+``sin(2 pi u)`` is within 7e-16: the product 2 pi u is rounded before the sine reduces it), and
+about 15x cheaper than glibc's sin and cos, which were half of the paper level's per-step draw
+(docs/performance.md section 33).  On the uniform sphere the polar angle eta_1 = arccos z,
+z = 1 - 2 u, is never formed: its cosine is z and its sine sqrt((1 - z)(1 + z)) (eta_1 lies in
+[0, pi]); the paper's law eta_1 = pi u is half a turn of u.
 
 Everything a kernel reads is a named structure read by name (:class:`TruncatedNormal`,
 :class:`Revolute`, :class:`Sphere`).  numba is imported here only: a process that draws nothing
@@ -26,9 +28,14 @@ from numba import njit, types
 from numba.extending import get_cython_function_address
 
 __all__ = ["TruncatedNormal", "Revolute", "Sphere", "truncated_normals", "sphere_directions_into",
-           "eccentricities_into"]
+           "eccentricities_into", "turn"]
 
-TWO_PI = 2.0 * math.pi   # Python's product, as numpy's ``2.0 * np.pi * u`` forms it first
+TWO_PI = 2.0 * math.pi
+# fdlibm's minimax polynomials of sin and cos on [-pi/4, pi/4] (k_sin.c, k_cos.c; error < 1 ulp)
+_S = (-1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04,
+      2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10)
+_C = (4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05,
+      -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11)
 
 # scipy.special.ndtri's Cython export: double ndtri(double x, int skip_dispatch)
 llvm.add_symbol("rss6_ndtri", get_cython_function_address("scipy.special.cython_special", "ndtri"))
@@ -57,6 +64,22 @@ def _clip(x, low, high):
 
 
 @njit(cache=True)
+def turn(u):
+    """(cos 2 pi u, sin 2 pi u) of a fraction u of a turn, u in [0, 1]: the nearest quarter turn q = 4 u
+    rounded (u - q / 4 is exact), fdlibm's polynomials of the rest, x = 2 pi (u - q / 4) in
+    [-pi/4, pi/4], turned by q quarters; selects, no branches, so that a loop of it vectorises."""
+    q = math.floor(4.0 * u + 0.5)
+    x = TWO_PI * (u - 0.25 * q)
+    z = x * x
+    s = x + (z * x) * (_S[0] + z * (_S[1] + z * (_S[2] + z * (_S[3] + z * (_S[4] + z * _S[5])))))
+    c = 1.0 - (0.5 * z - z * (z * (_C[0] + z * (_C[1] + z * (_C[2] + z * (_C[3] + z * (_C[4] + z * _C[5])))))))
+    k = int(q) & 3
+    odd = (k & 1) == 1
+    cos_part, sin_part = (s if odd else c), (c if odd else s)
+    return (-cos_part if k == 1 or k == 2 else cos_part), (-sin_part if k >= 2 else sin_part)
+
+
+@njit(cache=True)
 def _truncated(law, u, leg):
     """One draw of leg ``leg``'s truncated normal from the uniform u (unused for a point law)."""
     if law.point:
@@ -77,15 +100,14 @@ def truncated_normals(law, u, out):
 def _direction(u1, u2, uniform_sphere):
     """The unit vector (sin eta1 cos eta2, sin eta1 sin eta2, cos eta1) of the polar uniform u1 and
     azimuth eta2 = 2 pi u2: eta1 = arccos(1 - 2 u1) on the uniform sphere (its sine from the cosine
-    z as sqrt((1 - z)(1 + z))), else the paper's eta1 = pi u1."""
-    eta2 = TWO_PI * u2
+    z as sqrt((1 - z)(1 + z))), else the paper's eta1 = pi u1 (half a turn of u1)."""
     if uniform_sphere:
         z = 1.0 - 2.0 * u1
         sin1 = math.sqrt((1.0 - z) * (1.0 + z))
     else:
-        eta1 = math.pi * u1
-        z, sin1 = math.cos(eta1), math.sin(eta1)
-    return sin1 * math.cos(eta2), sin1 * math.sin(eta2), z
+        z, sin1 = turn(0.5 * u1)
+    cos2, sin2 = turn(u2)
+    return sin1 * cos2, sin1 * sin2, z
 
 
 @njit(cache=True)
@@ -108,15 +130,15 @@ def _spherical(sphere, out):
 @njit(cache=True)
 def eccentricities_into(rev, C, B, e_A, e_C, e_B):
     """e_A, e_C, e_B (steps, legs, 3) of a draw from its uniforms (steps, legs): the revolute's
-    radial (truncated normal) magnitude r at angle theta = 2 pi u plus the axial offset a,
+    radial (truncated normal) magnitude r at angle theta = 2 pi u (:func:`turn`) plus the axial offset a,
     e_A = r cos(theta) plane_x + r sin(theta) plane_y + a w, and each sphere's k_s delta_s times a
     direction (:class:`Revolute`, :class:`Sphere`)."""
     for j in range(e_A.shape[0]):
         for leg in range(e_A.shape[1]):
             r = _truncated(rev.radial, rev.radial_u[j, leg] if not rev.radial.point else 0.0, leg)
-            theta = 0.0 + (TWO_PI - 0.0) * rev.angle_u[j, leg]   # Generator.uniform(0, 2 pi)'s arithmetic
+            cos_theta, sin_theta = turn(rev.angle_u[j, leg])   # theta = 2 pi u
             a = _truncated(rev.axial, rev.axial_u[j, leg] if not rev.axial.point else 0.0, leg)
-            rc, rs = r * math.cos(theta), r * math.sin(theta)
+            rc, rs = r * cos_theta, r * sin_theta
             for k in range(3):
                 e_A[j, leg, k] = (rc * rev.plane_x[leg, k] + rs * rev.plane_y[leg, k]) + a * rev.w[leg, k]
     _spherical(C, e_C)

@@ -59,16 +59,17 @@ def test_spherical_magnitude_uniform_and_direction_uniform_on_sphere(paper, draw
 @pytest.mark.parametrize("law", ["uniform", "paper"])
 def test_sphere_directions_are_the_polar_angle_formula_to_round_off(law):
     """The kernel forms sin eta1 as sqrt((1 - z)(1 + z)) from z = cos eta1 (no arccosine): the
-    directions equal (sin eta1 cos eta2, sin eta1 sin eta2, cos eta1) of the law's angles to a few
-    ulp, have unit length and a non-negative sine also at the poles (u = 0 and u = 1)."""
+    directions equal (sin eta1 cos eta2, sin eta1 sin eta2, cos eta1) of the law's angles (long
+    double) to a few ulp, have unit length and a non-negative sine also at the poles (u = 0 and u = 1)."""
     rng = realization_rng(5, 2)
     got = sphere_directions(rng, 4000, law)
     rng = realization_rng(5, 2)
-    u1, u2 = rng.uniform(size=4000), rng.uniform(size=4000)
-    eta1 = np.arccos(1.0 - 2.0 * u1) if law == "uniform" else np.pi * u1
-    eta2 = 2.0 * np.pi * u2
+    u1, u2 = (rng.uniform(size=4000).astype(np.longdouble) for _ in range(2))   # exact values in long double
+    pi = np.longdouble("3.141592653589793238462643383279502884")
+    eta1 = np.arccos(1 - 2 * u1) if law == "uniform" else pi * u1
+    eta2 = 2 * pi * u2
     expected = np.stack([np.sin(eta1) * np.cos(eta2), np.sin(eta1) * np.sin(eta2), np.cos(eta1)], -1)
-    np.testing.assert_allclose(got, expected, rtol=0, atol=4e-16)
+    np.testing.assert_allclose(got, expected.astype(float), rtol=0, atol=4e-16)
     np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, rtol=0, atol=4e-16)
     from rss6core.draw_kernel import sphere_directions_into
     poles = np.empty((3, 3))

@@ -1,6 +1,7 @@
 """The compiled clearance draw (rss6core/draw_kernel.py) against the numpy arithmetic it replaced,
-kept here as an independent reference: the same uniforms in the same order give the same bits
-(docs/performance.md section 30)."""
+kept here as an independent reference: the same uniforms in the same order give the same sizes, bit
+for bit, and the same eccentricities to round-off (the kernel's sines and cosines of a turn are not
+glibc's: docs/performance.md sections 30 and 33); the turn's sine and cosine against long double."""
 import dataclasses
 
 import numpy as np
@@ -68,10 +69,20 @@ def _reference(scene, u, steps):
     return ClearanceDraw(dr, da, dC, dB, e_A, *spheres)
 
 
+# |kernel - numpy| of an eccentricity, per metre of its largest: numpy's float64 sin(2 pi u) is within
+# 7e-16 of the exact value (2 pi u is rounded first), the kernel's within 2e-16 (test_turn_...)
+ROUND_OFF = 1e-15
+
+
 def _same_bits(got, expected):
+    """Sizes bit for bit, eccentricities to round-off of the sines and cosines."""
     for field in dataclasses.fields(ClearanceDraw):
         a, b = getattr(got, field.name), getattr(expected, field.name)
-        assert a.shape == b.shape and a.tobytes() == b.tobytes(), field.name
+        assert a.shape == b.shape, field.name
+        if field.name.startswith("e_"):
+            assert np.abs(a - b).max(initial=0.0) <= ROUND_OFF * np.abs(b).max(initial=0.0), field.name
+        else:
+            assert a.tobytes() == b.tobytes(), field.name
 
 
 def _variants(configs, name):
@@ -84,9 +95,9 @@ def _variants(configs, name):
 
 @pytest.mark.parametrize("name", SCENES)
 @pytest.mark.parametrize("steps", [None, 7])
-def test_the_compiled_draw_equals_numpys_arithmetic_bit_for_bit(configs, name, steps):
+def test_the_compiled_draw_equals_numpys_arithmetic(configs, name, steps):
     """From a realisation's stream and from a vector of uniforms, one draw and per step: the kernel's
-    sizes and eccentricities are the numpy reference's, bit for bit."""
+    sizes are the numpy reference's bit for bit, its eccentricities to round-off."""
     for scene in _variants(configs, name):
         for r in range(3):
             stream = realization_rng(5, r).random(uniform_dimension(steps))
@@ -96,7 +107,7 @@ def test_the_compiled_draw_equals_numpys_arithmetic_bit_for_bit(configs, name, s
 
 
 @pytest.mark.parametrize("name", SCENES)
-def test_the_compiled_draw_by_named_uniforms_equals_numpys_arithmetic_bit_for_bit(configs, name):
+def test_the_compiled_draw_by_named_uniforms_equals_numpys_arithmetic(configs, name):
     """A Sobol' design's draw (uniforms by block name) is the reference's of the blocks in stream order."""
     for scene in _variants(configs, name):
         law, rng = scene.sampling, np.random.default_rng(11)
@@ -110,7 +121,7 @@ def test_the_compiled_draw_by_named_uniforms_equals_numpys_arithmetic_bit_for_bi
 
 def test_the_paper_draw_is_the_reference_with_its_pads(paper):
     """The paper level's per-step draw: the output steps from the realisation's stream, the pads
-    from their own (sizes from the first uniforms), each the reference's, bit for bit."""
+    from their own (sizes from the first uniforms), each the reference's to round-off."""
     steps, seed, r = 2001, 3, 4
     got = paper_draw(paper, seed, r, steps)
     inner = _reference(paper, realization_rng(seed, r).random(uniform_dimension(steps)), steps)
@@ -120,7 +131,7 @@ def test_the_paper_draw_is_the_reference_with_its_pads(paper):
     ends = _reference(paper, np.concatenate([size_u, fresh]), 2 * CENTRAL_PAD)
     for e in ("e_A", "e_C", "e_B"):
         expected = np.concatenate([getattr(ends, e)[:CENTRAL_PAD], getattr(inner, e), getattr(ends, e)[CENTRAL_PAD:]])
-        assert getattr(got, e).tobytes() == expected.tobytes(), e
+        assert np.abs(getattr(got, e) - expected).max() <= ROUND_OFF * np.abs(expected).max(), e
 
 
 def test_truncated_normal_equals_numpys_arithmetic_bit_for_bit():
@@ -130,6 +141,23 @@ def test_truncated_normal_equals_numpys_arithmetic_bit_for_bit():
     expected = _normal(realization_rng(1, 2).random((50, 6)), mean, std, low, high)
     assert got.tobytes() == expected.tobytes()
     assert got.min() >= low and np.all(got <= high)
+
+
+def test_turn_gives_the_cosine_and_sine_of_a_turn_to_a_quarter_of_a_unit_in_the_last_place():
+    """turn(u) = (cos 2 pi u, sin 2 pi u) against long double (64-bit mantissa) trigonometry of the
+    exact product, over a million uniforms and the quarter and eighth turns and their neighbours:
+    within 2.5e-16 (fdlibm's polynomials; numpy's float64 sin(2 pi u) is 7e-16 off here)."""
+    from rss6core.draw_kernel import sphere_directions_into, turn
+    eighths = np.arange(9) / 8.0
+    u = np.concatenate([np.random.default_rng(0).random(1_000_000), eighths, np.nextafter(eighths, 2.0)[:-1],
+                        np.nextafter(eighths, -1.0)[1:]])
+    got = np.empty((u.size, 3))   # the equator of the uniform sphere (u1 = 1/2): (cos, sin, 0) of the turn u
+    sphere_directions_into(np.full(u.size, 0.5), u, True, got)
+    exact = 2 * np.longdouble("3.141592653589793238462643383279502884") * u.astype(np.longdouble)
+    assert np.abs(got[:, 0] - np.cos(exact)).max() <= 2.5e-16
+    assert np.abs(got[:, 1] - np.sin(exact)).max() <= 2.5e-16
+    assert all(turn(x) == tuple(got[k, :2]) for k, x in enumerate(u[-20:], u.size - 20))
+    assert turn(0.0) == (1.0, 0.0) and turn(0.5)[0] == -1.0 and turn(0.25)[1] == 1.0
 
 
 def test_every_draw_calls_the_one_overload_compiled_at_import(configs):

@@ -15,9 +15,10 @@ from rss6core.paper_method import PaperClosure, _inside, paper_contact_forces, p
 from rss6core.quasi_static import CENTRAL_PAD, time_derivatives
 
 
-def test_draws_equal_the_broadcast_formulas_bit_for_bit():
+def test_draws_equal_the_broadcast_formulas():
     """The sphere directions (compiled, rss6core/draw_kernel.py) equal the broadcast expressions
-    they replace bit for bit (e_A: tests/test_draw_kernel.py)."""
+    they replace: the polar cosine bit for bit, the azimuth's cosine and sine to round-off (the
+    kernel's are not glibc's; e_A: tests/test_draw_kernel.py)."""
     rng = realization_rng(0, 7)
     direct = sphere_directions(rng, 500)
     rng = realization_rng(0, 7)
@@ -25,7 +26,8 @@ def test_draws_equal_the_broadcast_formulas_bit_for_bit():
     z, eta2 = 1.0 - 2.0 * u1, 2.0 * np.pi * u2
     sin1 = np.sqrt((1.0 - z) * (1.0 + z))
     broadcast = np.stack([sin1 * np.cos(eta2), sin1 * np.sin(eta2), z], -1)
-    assert direct.tobytes() == broadcast.tobytes()
+    assert direct[:, 2].tobytes() == broadcast[:, 2].tobytes()
+    assert np.abs(direct - broadcast).max() <= 1e-15
 
 
 @pytest.mark.parametrize("low, high", [(0.0, 1.0), (0.0, 2.0 * np.pi), (0.3e-3, 0.7e-3), (-1e-4, 1e-4)])
