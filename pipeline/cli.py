@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import json
 import signal
 import sys
 
+from .commands.prepare_ahead import PREPARE_ENV
 from .ensemble.cluster import start_worker_server, stop_worker_server
 
 # the commands that run ensembles on a local cluster unless given --scheduler (those with --workers)
@@ -105,7 +107,10 @@ def _start_workers_ahead(argv: list[str]) -> None:
         return
     if argv[0] in IN_PROCESS_AT_ONE_WORKER and _one_worker(argv):
         return
-    start_worker_server()
+    if argv[0] == "run":   # the server also prepares the run's level (pipeline/commands/prepare_ahead.py)
+        start_worker_server(("pipeline.commands.prepare_ahead",), {PREPARE_ENV: json.dumps(argv[1:])})
+    else:
+        start_worker_server()
     atexit.register(stop_worker_server)
 
 

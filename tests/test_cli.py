@@ -182,7 +182,7 @@ def test_the_rss6_command_starts_its_workers_server_before_its_imports_only_for_
     the commands, so both import side by side, and stops it at exit; main(argv) from Python does not."""
     import pipeline.cli as cli
     started, stopping = [], []
-    monkeypatch.setattr(cli, "start_worker_server", lambda: started.append(True))
+    monkeypatch.setattr(cli, "start_worker_server", lambda *preload: started.append(True))
     monkeypatch.setattr(cli.atexit, "register", stopping.append)
     monkeypatch.setattr(sys, "argv", ["rss6", *argv])
     monkeypatch.setattr(cli, "build_parser", lambda: (_ for _ in ()).throw(SystemExit(0)))

@@ -73,8 +73,7 @@ def main(args) -> int:
     targets = parse_targets(args.until)
     known_windows(specs + targets)
     cluster = resolve_cluster(args.workers, args.scheduler, args.worker_timeout)
-    level = resolve_level(find_scene(args.config), args.config, model=args.model, integrator=args.integrator,
-                          dt=args.dt, elements=args.elements, start=args.start)
+    level = level_settings(args)
     _refuse_clearance_free_default(args, level)
     replicates = resolve_replicates(args.sampler, args.replicates, args.n, level)
     check_cap(targets, args.n, replicates)
@@ -90,6 +89,22 @@ def main(args) -> int:
     except KeyboardInterrupt:
         return interrupted(kept if parts_dir(output).exists() else None)
     return _report(args, level, outcome, until, output, specs, verdicts)
+
+
+def level_settings(args):
+    """The run's level resolved against its scene (:func:`.settings.resolve_level`)."""
+    return resolve_level(find_scene(args.config), args.config, model=args.model, integrator=args.integrator,
+                         dt=args.dt, elements=args.elements, start=args.start)
+
+
+def ensemble_spec_of(argv: list[str]):
+    """The ensemble that ``rss6 run`` with ``argv`` (the words after ``run``) computes, resolved as
+    :func:`main` resolves it (its level and seed; the fork server's head start, :mod:`.prepare_ahead`)."""
+    import argparse
+    parser = argparse.ArgumentParser(prog="rss6")
+    add_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["run", *argv])
+    return level_settings(args).ensemble_spec(args.seed, args.store)
 
 
 def _compute(args, spec, targets: list, output, cluster, annotate):

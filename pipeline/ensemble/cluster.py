@@ -77,11 +77,12 @@ WORKER_IMPORTS = ["distributed", "pipeline.ensemble.run", "dask.array", "pipelin
 NANNY_HASH_SEED = "6640"
 
 
-def start_worker_server() -> None:
+def start_worker_server(then_import: tuple = (), environment: dict | None = None) -> None:
     """Start the fork server that forks the local cluster's workers, if it is not running: it imports
-    WORKER_IMPORTS once, in the environment of this moment (one BLAS thread, the nanny's hash seed,
-    SIGINT ignored), and then lives as long as this process. Started before this process's own
-    imports (the ``rss6`` command does so, :func:`pipeline.cli.main`), the two import side by side.
+    WORKER_IMPORTS and then ``then_import`` once, in the environment of this moment (one BLAS
+    thread, the nanny's hash seed, SIGINT ignored, and ``environment``, set for the server only),
+    and then lives as long as this process. Started before this process's own imports (the
+    ``rss6`` command does so, :func:`pipeline.cli.main`), the two import side by side.
 
     Every worker inherits the server's environment as it was at its start: what a nanny sets just
     before it starts a worker (PYTHONHASHSEED among it) reaches the workers only if set here too.
@@ -94,17 +95,26 @@ def start_worker_server() -> None:
     from multiprocessing import forkserver
     os.environ.update(BLAS_ENV)
     os.environ["PYTHONHASHSEED"] = NANNY_HASH_SEED   # the nanny sets it in this process too, later
-    multiprocessing.get_context("forkserver").set_forkserver_preload(WORKER_IMPORTS)  # replaces dask's own
-    safe_path = os.environ.get("PYTHONSAFEPATH")
-    os.environ["PYTHONSAFEPATH"] = "1"
+    preload = WORKER_IMPORTS + list(then_import)
+    multiprocessing.get_context("forkserver").set_forkserver_preload(preload)  # replaces dask's own
+    with _environment({"PYTHONSAFEPATH": "1", **(environment or {})}), _workers_ignore_ctrl_c():
+        forkserver.ensure_running()
+
+
+@contextlib.contextmanager
+def _environment(values: dict):
+    """``values`` set in this process's environment inside the block only (a child started there
+    inherits them), each variable restored or removed after."""
+    before = {name: os.environ.get(name) for name in values}
+    os.environ.update(values)
     try:
-        with _workers_ignore_ctrl_c():
-            forkserver.ensure_running()
+        yield
     finally:
-        if safe_path is None:
-            del os.environ["PYTHONSAFEPATH"]
-        else:
-            os.environ["PYTHONSAFEPATH"] = safe_path
+        for name, value in before.items():
+            if value is None:
+                del os.environ[name]
+            else:
+                os.environ[name] = value
 
 
 def stop_worker_server() -> None:

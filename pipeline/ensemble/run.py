@@ -39,7 +39,7 @@ from ..files.writing import sigint_deferred, write_netcdf
 from .cluster import WORKER_TIMEOUT_S, dask_client, results_as_finished
 from .progress import _kernels_to_compile, _Progress, cluster_label, compile_apart
 
-__all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk",
+__all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk", "prepare_ahead",
            "parts_dir", "MAX_AUTO_CHUNK", "MAX_AUTO_CHUNK_BY_MODEL", "MAX_AUTO_CHUNKS"]
 
 
@@ -128,6 +128,12 @@ def _level(scene_text: str, source: str, model: str, integrator: str, dt: float,
     """The level every chunk of an ensemble shares, prepared once per worker process (the paper
     level's elastic run took a third of each chunk's time when every chunk computed it)."""
     return prepare_level(parse_scene(scene_text, source), model, integrator, dt, elements)
+
+
+def prepare_ahead(spec: EnsembleSpec) -> None:
+    """Prepare the spec's level in this process's cache (:func:`_level`): the fork server does so
+    before it forks the workers, which then inherit it (pipeline/commands/prepare_ahead.py)."""
+    _level(spec.scene_text, spec.source, spec.model, spec.integrator, spec.dt, spec.elements)
 
 
 def _alone(scene, spec: EnsembleSpec, realization: int):
