@@ -4,7 +4,7 @@ import pytest
 from scipy.stats import binom
 
 from rss6core.models import prepare_level
-from rss6core.quasi_static import CENTRAL_PAD, padded_grid, time_derivatives
+from rss6core.quasi_static import CENTRAL_PAD, padded_grid, time_derivatives, uniform_step
 
 REALIZATIONS = 200
 
@@ -22,6 +22,22 @@ def test_padded_central_differences_match_closed_form_derivatives_at_every_sampl
     _, v0, a0 = time_derivatives(np.sin(w * t), t)
     assert np.max(np.abs(v0 - w * np.cos(w * t))) < h ** 2 * w ** 3
     assert np.max(np.abs(a0 + w ** 2 * np.sin(w * t))) < 4 * h * w ** 3
+
+
+def test_a_uniform_grid_takes_its_step_and_an_uneven_one_its_own_spacing():
+    """On the levels' uniform grids the differences take the scalar step (numpy's cheaper path),
+    equal to the differences from the times to their rounding; an uneven grid keeps its spacing,
+    for which the second-order differences are exact on a quadratic."""
+    t = padded_grid(np.arange(2001) * 1e-3, CENTRAL_PAD)
+    assert uniform_step(t) == pytest.approx(1e-3, rel=1e-12)
+    d = np.sin(7.0 * t)[:, None] * np.arange(1.0, 4.0)
+    for ours, from_times in zip(time_derivatives(d, t), (d, np.gradient(d, t, axis=0, edge_order=2), None)):
+        if from_times is not None:
+            assert np.abs(ours - from_times).max() <= 1e-12 * np.abs(from_times).max()
+    uneven = np.cumsum(np.linspace(1e-3, 3e-3, 50))
+    assert uniform_step(uneven) is None and uniform_step(t[:1]) is None
+    _, v, a = time_derivatives(3.0 * uneven ** 2 - uneven, uneven)
+    assert np.allclose(v, 6.0 * uneven - 1.0, rtol=0, atol=1e-9) and np.allclose(a, 6.0, rtol=0, atol=1e-6)
 
 
 @pytest.fixture(scope="module")
