@@ -51,7 +51,7 @@ def test_default_chunks_are_equal_and_a_multiple_of_the_workers(n, workers, mode
     assert n - (chunks - 1) * size > size - chunks     # the short last chunk
     assert default_chunk(400, 2) == 50 and default_chunk(1000, 2) == 63 and default_chunk(128, 2) == 64
     assert default_chunk(1000, 2, "contact") == 125 and default_chunk(256, 2, "contact") == 128
-    assert default_chunk(1000, 2, "paper") == 125 and default_chunk(1000, 2, "elastic") == 63
+    assert default_chunk(1000, 2, "paper") == 250 and default_chunk(1000, 2, "elastic") == 63
 
 
 @pytest.fixture(scope="module")

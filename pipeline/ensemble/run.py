@@ -214,15 +214,17 @@ def _checked_parts(manifest: PartsManifest, spec: EnsembleSpec, summary_block: i
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
 # the contact level computes its fine-grid loads and joint maps once per batch (1.9 s CPU, as much
 # as 8 realisations' steps): twice the batch halves that share (docs/performance.md, section 14);
-# a paper-level chunk of 128 is about 1 s of work, and the main process's work per chunk (writing
-# its part, 15-20 ms CPU, and dask's messages), taken from the workers' cores, is then half as
-# often paid (section 18)
+# the main process's work per chunk (writing its part and dask's messages), taken from the
+# workers' cores, is paid less often with larger chunks (section 18); a paper-level chunk of 256,
+# which redraws its clearances every step, is about 1 s of work (section 33)
 MAX_AUTO_CHUNK_INTEGRATED = 128
+MAX_AUTO_CHUNK_REDRAWN = 256
 # a larger run has larger chunks: every chunk is a part file that the merge opens (section 26)
 MAX_AUTO_CHUNKS = 1024
 # the cap of the levels that integrate the flexible links for every clearance draw, by name, the
 # dearest first (as the --chunk help names them)
-MAX_AUTO_CHUNK_BY_MODEL = {name: MAX_AUTO_CHUNK_INTEGRATED for name, level in reversed(MODEL_LEVELS.items())
+MAX_AUTO_CHUNK_BY_MODEL = {name: MAX_AUTO_CHUNK_REDRAWN if level.redraws_every_step else MAX_AUTO_CHUNK_INTEGRATED
+                           for name, level in reversed(MODEL_LEVELS.items())
                            if level.elastic_links and level.draws_clearances}
 
 
