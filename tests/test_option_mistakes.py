@@ -40,7 +40,7 @@ def _bad_values(action) -> list[str]:
     if action.type is not None and action.dest == "seed":
         return ["x", "-1", str(2 ** 64)]   # above 2^63 - 1 the file's int64 attribute would fail at the end
     if action.type is not None:
-        return ["x", "-1"] if action.type is not str else []
+        return ["x", "-1", "inf", "nan"] if action.type is not str else []
     bad = BAD_TEXT.get(action.dest, "?")
     assert bad != "?", f"no bad value known for {action.option_strings or action.dest}: add it to BAD_TEXT"
     return [] if bad is None else [bad]
