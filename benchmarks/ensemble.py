@@ -62,9 +62,10 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 # counts per model: loop (one at a time), batched (one batch), workers (per throughput run). The
 # batch is the one `rss6 run -n 1000` makes on 2 workers (default_chunk: 250 for paper, 125 for
 # contact; a baseline checkout uses its own); paper's throughput is that of the 1000-realisation
-# ensemble its time target names (4 chunks of 250): a run's fixed costs (the first task's start, the final merge) are then amortised as in real
-# runs; contact's is that of two tasks of the same 125 (one per worker with 2), as its 1000 run
-# computes them (that run on 1 worker would take about 3 minutes per repeat)
+# ensemble its time target names (4 chunks of 250): a run's fixed costs (the first task's start,
+# the final merge) are then amortised as in real runs; contact's is that of two tasks of the same
+# 125 (one per worker with 2), as its 1000 run computes them (that run on 1 worker would take
+# about 3 minutes per repeat)
 BATCH = default_chunk(1000, 2, "paper"), default_chunk(1000, 2, "contact")
 FULL = {"config": "paper.toml", "paper": (10, BATCH[0], 1000), "contact": (2, BATCH[1], 2 * BATCH[1]),
         "memory": (100, 1000), "reference": 6000, "contact_run": 1000}
