@@ -15,7 +15,7 @@ import xarray as xr
 from pipeline.analysis.estimators import min_n_for_quantile
 from pipeline.analysis.stats import ensemble_stats
 from pipeline.files.opening import open_ensemble
-from pipeline.analysis.until import GROWTH, UntilError, checkpoints, parse_target, widths
+from pipeline.analysis.until import GROWTH, UntilError, Width, checkpoints, format_widths, parse_target, widths
 
 
 def test_a_relative_target_over_every_direction():
@@ -46,6 +46,17 @@ def test_a_malformed_target_is_one_line_naming_the_token(text, token):
     with pytest.raises(UntilError, match="^--until .*" + token.replace("(", r"\(")) as err:
         parse_target(text)
     assert "\n" not in str(err.value) and "--require" not in str(err.value)
+
+
+def test_the_check_line_says_which_half_widths_are_not_met_yet_in_words():
+    """Each check's line names the half-width per direction and, for one above its target, says so
+    (it showed a bare '*' that nothing explained)."""
+    relative, absolute = parse_target("displacement:x,y@q95<=5%"), parse_target("velocity:z@mean<=0.5mm/s")
+    found = [Width(relative.text, "x", 2.0, 0.08, 0.04, True), Width(relative.text, "y", 1.0, 0.2, 0.2, False),
+             Width(absolute.text, "z", 1e-3, 4e-4, 0.4, True)]
+    assert format_widths([relative, absolute], found, 40) == (
+        "n = 40: displacement q95 half-width <= 5 %: x 4 %, y 20 % (not yet); "
+        "velocity mean half-width <= 0.5 mm/s: z 0.4 mm/s")
 
 
 def test_checkpoints_start_at_the_statistics_minimum_n_and_grow_to_the_cap():

@@ -167,11 +167,11 @@ def _width_text(t: Target, w: Width) -> str:
         return f"{w.direction} no interval"
     value = (f"{100 * w.relative:.3g} %" if t.relative is not None and w.relative is not None
              else f"{w.half_width / t.factor:.3g} {t.unit}")
-    return f"{w.direction} {value}{'' if w.met else ' *'}"
+    return f"{w.direction} {value}{'' if w.met else ' (not yet)'}"
 
 
 def format_widths(targets: list[Target], found: list[Width], n: int) -> str:
-    """One line: the half-widths reached at n against each target ('*': not yet met)."""
+    """One line: the half-widths reached at n against each target, each one not met yet saying so."""
     parts = []
     for t in targets:
         mine = [w for w in found if w.target == t.text]
