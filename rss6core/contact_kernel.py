@@ -922,7 +922,8 @@ def _recover(level, lv, layout, work):
     """The link vectors from the joint nodes' new accelerations x_b: the interiors x_i = y - x_b P^T
     (y from the condensation; :meth:`.contact_dynamics._Condensed.recover`; a loop over P, where a
     product with the whole recovery map [y, x_b] -> x multiplied its identity blocks too), then the
-    corrector: the candidate a_new, d_new, v_new in work."""
+    corrector: the candidate a_new, d_new, v_new in work.  Returns the candidate's largest |d_new| (m), inf
+    if any entry is inf or nan (in the corrector's pass: one pass over N less)."""
     N = work.a_new.shape[0]
     step = (N - 6) // 6
     nc, cb, ci = layout.crank_dofs, layout.crank_boundary, layout.crank_interior
@@ -946,8 +947,14 @@ def _recover(level, lv, layout, work):
     for b in range(6):
         work.a_new[N - 6 + b] = work.ap[b]
     d_corr, v_corr = lv.d_corr[level], lv.v_corr[level]
+    big = 0.0
     for n in range(N):
-        work.d_new[n], work.v_new[n] = correct_one(work.dp[n], work.vp[n], work.a_new[n], d_corr, v_corr)
+        d, work.v_new[n] = correct_one(work.dp[n], work.vp[n], work.a_new[n], d_corr, v_corr)
+        work.d_new[n] = d
+        big = max(big, abs(d))
+        if not np.isfinite(d):
+            big = np.inf
+    return big
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -955,7 +962,7 @@ def _attempt(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, jt, st, work, s
     """One step of realisation r from instant k0 to k1 with level ``level``'s step: predictor,
     right-hand side, condensation, Newton (from the extrapolated accelerations or the last ones),
     recovery, corrector.  Leaves the candidate state in work and returns (converged, Newton
-    iterations)."""
+    iterations, the candidate's largest |d| in m, inf if not finite)."""
     _prepare(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, st, work)
     N = st.d.shape[1]
     fr = Frame(ch.Rc[k1], ch.J[k1], ch.Rr[k1], ch.omega[k1])
@@ -964,8 +971,7 @@ def _attempt(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, jt, st, work, s
     out = Out(work.f, work.gl, work.gp, work.delta, work.rate)
     ok, count = newton_one(fr, jt, r, sy, work.ab, work.ap, lv.d_corr[level], lv.v_corr[level],
                            1.0 - cfg.alpha_f, cfg, out, scratch)
-    _recover(level, lv, layout, work)
-    return ok, count
+    return ok, count, _recover(level, lv, layout, work)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -1049,17 +1055,6 @@ def coarsest_next(level, estimate, tolerance):
     return coarsest
 
 
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _largest(x):
-    """Largest |x|; inf if any entry is inf or nan."""
-    big = 0.0
-    for n in range(x.shape[0]):
-        big = max(big, abs(x[n]))
-        if not np.isfinite(x[n]):
-            big = np.inf
-    return big
-
-
 STEP_DONE, STEP_FAILED, STEP_NEEDS_FINE = 0, 1, 2   # what :func:`_base_step` returns
 
 
@@ -1083,11 +1078,10 @@ def _base_step(r, k_start, lv, layout, cfg, ch, jt, st, rec, work, scratch):
         for start in range(2):     # one call site: _attempt is inlined once
             # extrapolation can mislead Newton across an impact: where it fails from there, retry
             # from the last accepted accelerations (the predictor-free start) before refining
-            ok, count = _attempt(r, level, k, k1, start == 0, lv, layout, cfg, ch, jt, st, work, scratch)
+            ok, count, big = _attempt(r, level, k, k1, start == 0, lv, layout, cfg, ch, jt, st, work, scratch)
             rec.iters[r] += count
             if ok or st.h_past[r, 0] <= 0.0:
                 break
-        big = _largest(work.d_new)
         sound = ok and big < cfg.divergence_limit
         estimate = 0.0
         if sound and cfg.tolerance > 0.0:
