@@ -230,13 +230,19 @@ def _normal_law(delta, rate, impact, k, exponent, restitution):
     if delta <= 0.0:
         return 0.0, 0.0, 0.0
     # Hertz's 3/2 (the scene default) as delta sqrt(delta): pow was a twentieth of the run
-    spring = k * delta * np.sqrt(delta) if exponent == 1.5 else k * delta ** exponent
+    if exponent == 1.5:
+        root = np.sqrt(delta)
+        slope = k * root                # spring / delta without a division
+        spring = slope * delta
+    else:
+        spring = k * delta ** exponent
+        slope = spring / delta
     c = 0.75 * (1.0 - restitution * restitution) / impact
     factor = 1.0 + c * rate
     force = spring * factor
     if force <= 0.0:
         return 0.0, 0.0, 0.0
-    return force, exponent * spring / delta * factor, spring * c
+    return force, exponent * slope * factor, spring * c
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -252,20 +258,24 @@ def _pair(e0, e1, e2, d0, d1, d2, size, k, impact, exponent, restitution, mu, v0
     array argument costs two atomic reference-count updates, more than the arithmetic here.
     """
     rho = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-    safe = max(rho, 1e-300)
-    n0, n1, n2 = e0 / safe, e1 / safe, e2 / safe
+    inv = 1.0 / max(rho, 1e-300)        # one division; the normal and F / rho by products
+    n0, n1, n2 = e0 * inv, e1 * inv, e2 * inv
     n = (n0, n1, n2)
     delta = rho - size
     rate = n0 * d0 + n1 * d1 + n2 * d2
     F, dF, dFr = _normal_law(delta, rate, impact, k, exponent, restitution)
-    Fs = F / safe
+    if F == 0.0:                        # apart (or pulling): no force, no Jacobian
+        for a in range(21):
+            out[a] = 0.0
+        return delta, rate
+    Fs = F * inv
     for a in range(3):
         out[a] = -F * n[a]
         for b in range(3):
             nn = n[a] * n[b]
             out[3 + 3 * a + b] = -dF * nn - Fs * ((1.0 if a == b else 0.0) - nn)
             out[12 + 3 * a + b] = -dFr * nn
-    if mu > 0.0 and F > 0.0:     # F = 0: no friction and no friction Jacobian
+    if mu > 0.0 and F > 0.0:     # F nan (a diverging step): no friction, as before
         # sliding velocity: relative velocity plus the ideal rotation's sliding, tangential part
         w0 = d0 + radius * (o1 * n2 - o2 * n1)
         w1 = d1 + radius * (o2 * n0 - o0 * n2)
@@ -273,13 +283,13 @@ def _pair(e0, e1, e2, d0, d1, d2, size, k, impact, exponent, restitution, mu, v0
         vn = n0 * w0 + n1 * w1 + n2 * w2
         s0, s1, s2 = w0 - vn * n0, w1 - vn * n1, w2 - vn * n2
         speed = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-        ramp = (speed - v0) / (v1 - v0)
-        cd = min(max(ramp, 0.0), 1.0)
-        dcd = 1.0 / (v1 - v0) if (speed >= v0 and speed <= v1) else 0.0
-        ss = max(speed, 1e-300)
-        t = (s0 / ss, s1 / ss, s2 / ss)
+        ramp_slope = 1.0 / (v1 - v0)
+        cd = min(max((speed - v0) * ramp_slope, 0.0), 1.0)
+        dcd = ramp_slope if (speed >= v0 and speed <= v1) else 0.0
+        iss = 1.0 / max(speed, 1e-300)
+        t = (s0 * iss, s1 * iss, s2 * iss)
         scale = -mu * F
-        slope = scale * cd / ss
+        slope = scale * cd * iss
         turn = scale * dcd
         tn = t[0] * n0 + t[1] * n1 + t[2] * n2
         for a in range(3):
