@@ -82,6 +82,9 @@ def main(argv=None) -> int:
           f"{os.getloadavg()[0]:.1f}; per kernel (s): {json.dumps(per_kernel)}")
     for name in ("newton_step", "advance_chunk"):
         k = result[name]
+        if not k["overloads"]:   # compiled in a process of its own (compile_kernels, docs/performance.md 28)
+            print(f"  {name}: compiled in a process of its own; its passes and hashes are not in this one")
+            continue
         print(f"  {name}: {k['overloads']} overload(s), LLVM IR {k['llvm_ir_sha']}, asm {k['asm_sha']}")
         print(f"    numba passes (s, wall): {json.dumps(k['passes_s'])}")
         if "llvm_s" in k:
