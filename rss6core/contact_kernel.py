@@ -74,9 +74,6 @@ GROWTH = 8.0    # a local error estimate's growth when the step doubles (h^3: :f
 # non-zero 3x3 blocks of a leg's joint map G: relative displacement j <- joint-node block c; block q
 # is Rc, -Rc, Rr, Rr (:func:`_gmap`)
 _PATTERN = np.array([[0, 0], [1, 1], [1, 2], [2, 3]], np.int64)
-# a contact pair's numbers in Scratch.pair (:func:`_pair`): force (3), kind, n (3), dF, F / rho, dFr,
-# t (3), slope, turn, -mu cd, t.n
-PAIR = 17
 # BLAS's dgemm (SciPy's, as np.dot in numba uses) called by its symbol name, so the kernel stays
 # cacheable; np.dot's three-argument form needs numba's reference counting, which the entry
 # points leave out.  Arguments: addresses of Fortran's character, integer (int32) and double arguments.
@@ -188,7 +185,7 @@ Out.__doc__ = """Newton's results at the accepted iterate: contact forces (6, 3,
 the joint nodes (6, 12) and the platform (6,), penetrations and rates (6, 4)."""
 Work = namedtuple("Work", "Zc Zr Ic Ir Ac Ar Yc Yr dp vp rhs tmp a_new d_new v_new rb db vb ab dpp vpp ap "
                   "impact Sp f gl gp delta rate e jb jp dims scale op")
-Scratch = namedtuple("Scratch", "e de De Dv D pair axial xb ub xp up res_l res_p dl dp base_l base_p A Ainv Up "
+Scratch = namedtuple("Scratch", "e de De Dv D pair xb ub xp up res_l res_p dl dp base_l base_p A Ainv Up "
                      "rhat M top top0 X z schur ypiv y E RD EJ v DG")
 
 
@@ -208,8 +205,7 @@ def make_scratch() -> Scratch:
     """Work arrays of one realisation's Newton iteration (see :func:`newton_one`), each named."""
     e = np.empty
     return Scratch(e=e((6, 3, 3)), de=e((6, 3, 3)), De=e((6, 3, 3, 3)), Dv=e((6, 3, 3, 3)), D=e((6, 3, 3, 3)),
-                   pair=e((6, 3, PAIR)), axial=e((6, 2)), xb=e((6, 12)),
-                   ub=e((6, 12)), xp=e(6), up=e(6), res_l=e((6, 12)), res_p=e(6),
+                   pair=e(21), xb=e((6, 12)), ub=e((6, 12)), xp=e(6), up=e(6), res_l=e((6, 12)), res_p=e(6),
                    dl=e((6, 12)), dp=e(6), base_l=e((6, 12)), base_p=e(6), A=e((4, 3, 3)), Ainv=e((6, 4, 3, 3)),
                    Up=e((6, 3, 3, 3)), rhat=e((6, 4, 3)), M=e((3, 3)), top=e((3, 3)), top0=e((6, 3)),
                    X=e((6, 3, 3)), z=e(3), schur=e((6, 6)), ypiv=e(6, np.int64), y=e(6), E=e((3, 3)),
@@ -234,50 +230,42 @@ def _normal_law(delta, rate, impact, k, exponent, restitution):
     if delta <= 0.0:
         return 0.0, 0.0, 0.0
     # Hertz's 3/2 (the scene default) as delta sqrt(delta): pow was a twentieth of the run
-    if exponent == 1.5:
-        root = np.sqrt(delta)
-        slope = k * root                # spring / delta without a division
-        spring = slope * delta
-    else:
-        spring = k * delta ** exponent
-        slope = spring / delta
+    spring = k * delta * np.sqrt(delta) if exponent == 1.5 else k * delta ** exponent
     c = 0.75 * (1.0 - restitution * restitution) / impact
     factor = 1.0 + c * rate
     force = spring * factor
     if force <= 0.0:
         return 0.0, 0.0, 0.0
-    return force, exponent * slope * factor, spring * c
+    return force, exponent * spring / delta * factor, spring * c
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _pair(e0, e1, e2, d0, d1, d2, size, k, impact, exponent, restitution, mu, v0, v1, o0, o1, o2, radius,
-          out, leg, j):
+          out):
     """Ball-in-socket pair (journal in bearing) with relative displacement e and velocity d (base
-    frame): the force on the ball side into out[0:3] and what :func:`_pair_jacobian` needs for its
-    Jacobians into out[3:PAIR] (out[leg, j, 3]: 0 apart, 1 normal force only, 2 with friction); returns
-    (penetration m, its rate m/s).
+    frame): out = [force on the ball side (3), d force/d e (3x3), d force/d d (3x3)] (21,);
+    returns (penetration m, its rate m/s).
 
     Lankarani-Nikravesh (eq. 17) with exponent, restitution; modified Coulomb friction (eq. 18)
     with mu_d, v0, v1 opposing the sliding of the relative velocity plus omega x R n (omega the
     ideal relative angular velocity, rad/s; R = radius, m).  Scalars in, one array out: every
     array argument costs two atomic reference-count updates, more than the arithmetic here.
-    The Jacobians are a separate pass because Newton's last evaluation of a step needs none.
     """
     rho = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-    inv = 1.0 / max(rho, 1e-300)        # one division; the normal and F / rho by products
-    n0, n1, n2 = e0 * inv, e1 * inv, e2 * inv
+    safe = max(rho, 1e-300)
+    n0, n1, n2 = e0 / safe, e1 / safe, e2 / safe
     n = (n0, n1, n2)
     delta = rho - size
     rate = n0 * d0 + n1 * d1 + n2 * d2
     F, dF, dFr = _normal_law(delta, rate, impact, k, exponent, restitution)
-    if F == 0.0:                        # apart (or pulling): no force, no Jacobian
-        out[leg, j, 0], out[leg, j, 1], out[leg, j, 2], out[leg, j, 3] = 0.0, 0.0, 0.0, 0.0
-        return delta, rate
-    out[leg, j, 3], out[leg, j, 4], out[leg, j, 5], out[leg, j, 6] = 1.0, n0, n1, n2
-    out[leg, j, 7], out[leg, j, 8], out[leg, j, 9] = dF, F * inv, dFr
+    Fs = F / safe
     for a in range(3):
-        out[leg, j, a] = -F * n[a]
-    if mu > 0.0 and F > 0.0:     # F nan (a diverging step): no friction, as before
+        out[a] = -F * n[a]
+        for b in range(3):
+            nn = n[a] * n[b]
+            out[3 + 3 * a + b] = -dF * nn - Fs * ((1.0 if a == b else 0.0) - nn)
+            out[12 + 3 * a + b] = -dFr * nn
+    if mu > 0.0 and F > 0.0:     # F = 0: no friction and no friction Jacobian
         # sliding velocity: relative velocity plus the ideal rotation's sliding, tangential part
         w0 = d0 + radius * (o1 * n2 - o2 * n1)
         w1 = d1 + radius * (o2 * n0 - o0 * n2)
@@ -285,66 +273,49 @@ def _pair(e0, e1, e2, d0, d1, d2, size, k, impact, exponent, restitution, mu, v0
         vn = n0 * w0 + n1 * w1 + n2 * w2
         s0, s1, s2 = w0 - vn * n0, w1 - vn * n1, w2 - vn * n2
         speed = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-        ramp_slope = 1.0 / (v1 - v0)
-        cd = min(max((speed - v0) * ramp_slope, 0.0), 1.0)
-        dcd = ramp_slope if (speed >= v0 and speed <= v1) else 0.0
-        iss = 1.0 / max(speed, 1e-300)
-        t = (s0 * iss, s1 * iss, s2 * iss)
+        ramp = (speed - v0) / (v1 - v0)
+        cd = min(max(ramp, 0.0), 1.0)
+        dcd = 1.0 / (v1 - v0) if (speed >= v0 and speed <= v1) else 0.0
+        ss = max(speed, 1e-300)
+        t = (s0 / ss, s1 / ss, s2 / ss)
         scale = -mu * F
+        slope = scale * cd / ss
+        turn = scale * dcd
+        tn = t[0] * n0 + t[1] * n1 + t[2] * n2
         for a in range(3):
-            out[leg, j, a] += scale * cd * t[a]
-        out[leg, j, 3], out[leg, j, 10], out[leg, j, 11], out[leg, j, 12] = 2.0, t[0], t[1], t[2]
-        out[leg, j, 13], out[leg, j, 14], out[leg, j, 15] = scale * cd * iss, scale * dcd, -mu * cd
-        out[leg, j, 16] = t[0] * n0 + t[1] * n1 + t[2] * n2
+            out[a] += scale * cd * t[a]
+            # jac = dF_t/dv_t = scale (cd/|v_t| (I - t t^T) + dcd t t^T), taken times (I - n n^T)
+            # (friction turns with the tangential part of de only): jac - (jac n) n^T
+            jn = slope * (n[a] - t[a] * tn) + turn * t[a] * tn
+            dft = -mu * cd * t[a]
+            for b in range(3):
+                tt = t[a] * t[b]
+                jab = slope * ((1.0 if a == b else 0.0) - tt) + turn * tt
+                out[3 + 3 * a + b] += dft * dF * n[b]
+                out[12 + 3 * a + b] += jab - jn * n[b] + dft * dFr * n[b]
     return delta, rate
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _pair_jacobian(p, leg, j, De, Dv):
-    """A pair's d force/d e into De[leg, j] and d force/d d into Dv[leg, j] (3x3) from its numbers p[leg, j]
-    (PAIR,) of :func:`_pair`."""
-    kind = p[leg, j, 3]
-    if kind == 0.0:
-        for a in range(3):
-            for b in range(3):
-                De[leg, j, a, b] = 0.0
-                Dv[leg, j, a, b] = 0.0
-        return
-    n = (p[leg, j, 4], p[leg, j, 5], p[leg, j, 6])
-    dF, Fs, dFr = p[leg, j, 7], p[leg, j, 8], p[leg, j, 9]
+def _store(out, f, De, Dv, leg, j):
+    """Scatter a pair's out (see :func:`_pair`) into f[leg, j], De[leg, j], Dv[leg, j]."""
     for a in range(3):
+        f[leg, j, a] = out[a]
         for b in range(3):
-            nn = n[a] * n[b]
-            De[leg, j, a, b] = -dF * nn - Fs * ((1.0 if a == b else 0.0) - nn)
-            Dv[leg, j, a, b] = -dFr * nn
-    if kind == 2.0:
-        t = (p[leg, j, 10], p[leg, j, 11], p[leg, j, 12])
-        slope, turn, mucd, tn = p[leg, j, 13], p[leg, j, 14], p[leg, j, 15], p[leg, j, 16]
-        for a in range(3):
-            # jac = dF_t/dv_t = scale (cd/|v_t| (I - t t^T) + dcd t t^T), taken times (I - n n^T)
-            # (friction turns with the tangential part of de only): jac - (jac n) n^T
-            jn = slope * (n[a] - t[a] * tn) + turn * t[a] * tn
-            dft = mucd * t[a]
-            for b in range(3):
-                tt = t[a] * t[b]
-                jab = slope * ((1.0 if a == b else 0.0) - tt) + turn * tt
-                De[leg, j, a, b] += dft * dF * n[b]
-                Dv[leg, j, a, b] += jab - jn * n[b] + dft * dFr * n[b]
+            De[leg, j, a, b] = out[3 + 3 * a + b]
+            Dv[leg, j, a, b] = out[12 + 3 * a + b]
 
 
 @njit(cache=True, fastmath=_FAST)
 def ball(e, de, size, k, impact, law, mu, restitution, omega, radius, f, De, Dv):
-    """:func:`_pair` and :func:`_pair_jacobian` on (3,) arrays e, de, omega: force into f, d f/d e
-    into De, d f/d de into Dv (3, 3); law a :class:`Law`, mu and restitution the pair's.  Returns
-    (penetration m, its rate m/s)."""
-    out = np.empty((1, 1, PAIR))
+    """:func:`_pair` on (3,) arrays e, de, omega: force into f, d f/d e into De, d f/d de into Dv
+    (3, 3); law a :class:`Law`, mu and restitution the pair's.  Returns (penetration m, its rate m/s)."""
+    out = np.empty(21)
     delta, rate = _pair(e[0], e[1], e[2], de[0], de[1], de[2], size, k, impact, law.exponent, restitution,
-                        mu, law.v0, law.v1, omega[0], omega[1], omega[2], radius, out, 0, 0)
-    f[:] = out[0, 0, :3]
-    De4, Dv4 = np.empty((1, 1, 3, 3)), np.empty((1, 1, 3, 3))
-    _pair_jacobian(out, 0, 0, De4, Dv4)
-    De[:, :] = De4[0, 0]
-    Dv[:, :] = Dv4[0, 0]
+                        mu, law.v0, law.v1, omega[0], omega[1], omega[2], radius, out)
+    f[:] = out[:3]
+    De[:, :] = out[3:12].reshape((3, 3))
+    Dv[:, :] = out[12:].reshape((3, 3))
     return delta, rate
 
 
@@ -384,9 +355,9 @@ def relative(Rc, Rr, J, xb, xp, e):
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _evaluate(fr, jt, r, impact, xb, xp, ub, up, s, out):
-    """Contact forces, penetrations and generalised forces (into out) of realisation r at joint-node
-    displacements xb, xp and velocities ub, up; what the Jacobians need (:func:`_jacobians`) into s."""
-    e, de, f, delta, rate = s.e, s.de, out.f, out.delta, out.rate
+    """Contact forces, Jacobians (into s), penetrations and generalised forces (into out) of
+    realisation r at joint-node displacements xb, xp and velocities ub, up."""
+    e, de, De, Dv, f, delta, rate = s.e, s.de, s.De, s.Dv, out.f, out.delta, out.rate
     Rc, Rr, J, w, omega, radius = fr.Rc, fr.Rr, fr.J, jt.w, fr.omega, jt.radius
     relative(Rc, Rr, J, xb, xp, e)
     relative(Rc, Rr, J, ub, up, de)
@@ -400,17 +371,26 @@ def _evaluate(fr, jt, r, impact, xb, xp, ub, up, s, out):
                       de[leg, 0, 0], de[leg, 0, 1], de[leg, 0, 2], jt.size[r, leg, 0], kA,
                       impact[leg, 0], exponent, jt.restitution[r, leg, 0], jt.mu[r, leg, 0], v0, v1,
                       omega[leg, 0, 0], omega[leg, 0, 1],
-                      omega[leg, 0, 2], radius[0], s.pair, leg, 0)
+                      omega[leg, 0, 2], radius[0], s.pair)
+        _store(s.pair, f, De, Dv, leg, 0)
         delta[leg, 0], rate[leg, 0] = d, rt
+        for a in range(3):     # De @ Pw, Pw = I - w w^T
+            q = De[leg, 0, a, 0] * w0 + De[leg, 0, a, 1] * w1 + De[leg, 0, a, 2] * w2
+            De[leg, 0, a, 0] -= q * w0
+            De[leg, 0, a, 1] -= q * w1
+            De[leg, 0, a, 2] -= q * w2
         # A axial: the journal's faces, along +-w, radial stiffness, no friction
         sign = 1.0 if sA >= 0.0 else -1.0
         da = abs(sA) - jt.axial[r, leg]
         ra = sign * (w0 * de[leg, 0, 0] + w1 * de[leg, 0, 1] + w2 * de[leg, 0, 2])
-        Fa, s.axial[leg, 0], s.axial[leg, 1] = _normal_law(da, ra, impact[leg, 1], kA, exponent,
-                                                           jt.restitution[r, leg, 0])
+        Fa, dFa, dFra = _normal_law(da, ra, impact[leg, 1], kA, exponent, jt.restitution[r, leg, 0])
         wl = (w0, w1, w2)
         for a in range(3):
-            f[leg, 0, a] = s.pair[leg, 0, a] - Fa * sign * wl[a]
+            f[leg, 0, a] -= Fa * sign * wl[a]
+            for b in range(3):
+                ww = wl[a] * wl[b]
+                De[leg, 0, a, b] -= dFa * ww
+                Dv[leg, 0, a, b] -= dFra * ww
         delta[leg, 1], rate[leg, 1] = da, ra
         # spherical C and B
         for j in (1, 2):
@@ -418,34 +398,10 @@ def _evaluate(fr, jt, r, impact, xb, xp, ub, up, s, out):
                           de[leg, j, 2], jt.size[r, leg, j], jt.stiffness[r, leg, j], impact[leg, 1 + j],
                           exponent, jt.restitution[r, leg, j], jt.mu[r, leg, j], v0, v1, omega[leg, j, 0],
                           omega[leg, j, 1],
-                          omega[leg, j, 2], radius[j], s.pair, leg, j)
-            for a in range(3):
-                f[leg, j, a] = s.pair[leg, j, a]
+                          omega[leg, j, 2], radius[j], s.pair)
+            _store(s.pair, f, De, Dv, leg, j)
             delta[leg, 1 + j], rate[leg, 1 + j] = d, rt
     _generalized(Rc, Rr, J, f, out.gl, out.gp)
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _jacobians(w, s):
-    """The contact Jacobians d f/d e into s.De and d f/d de into s.Dv (6, 3, 3, 3) from the last
-    :func:`_evaluate`: only where Newton takes an update (its last evaluation of a step needs none)."""
-    De, Dv = s.De, s.Dv
-    for leg in range(6):
-        w0, w1, w2 = w[leg, 0], w[leg, 1], w[leg, 2]
-        _pair_jacobian(s.pair, leg, 0, De, Dv)
-        for a in range(3):     # De @ Pw, Pw = I - w w^T
-            q = De[leg, 0, a, 0] * w0 + De[leg, 0, a, 1] * w1 + De[leg, 0, a, 2] * w2
-            De[leg, 0, a, 0] -= q * w0
-            De[leg, 0, a, 1] -= q * w1
-            De[leg, 0, a, 2] -= q * w2
-        wl = (w0, w1, w2)    # A axial
-        for a in range(3):
-            for b in range(3):
-                ww = wl[a] * wl[b]
-                De[leg, 0, a, b] -= s.axial[leg, 0] * ww
-                Dv[leg, 0, a, b] -= s.axial[leg, 1] * ww
-        for j in (1, 2):
-            _pair_jacobian(s.pair, leg, j, De, Dv)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -700,7 +656,6 @@ def newton_one(fr, jt, r, sy, a_l, a_p, bh2, gh, wf, cfg, out, s):
             n_it += 1
             continue
         last = norm
-        _jacobians(jt.w, s)
         for leg in range(6):
             for j in range(3):
                 for a in range(3):
@@ -967,8 +922,7 @@ def _recover(level, lv, layout, work):
     """The link vectors from the joint nodes' new accelerations x_b: the interiors x_i = y - x_b P^T
     (y from the condensation; :meth:`.contact_dynamics._Condensed.recover`; a loop over P, where a
     product with the whole recovery map [y, x_b] -> x multiplied its identity blocks too), then the
-    corrector: the candidate a_new, d_new, v_new in work.  Returns the candidate's largest |d_new| (m), inf
-    if any entry is inf or nan (in the corrector's pass: one pass over N less)."""
+    corrector: the candidate a_new, d_new, v_new in work."""
     N = work.a_new.shape[0]
     step = (N - 6) // 6
     nc, cb, ci = layout.crank_dofs, layout.crank_boundary, layout.crank_interior
@@ -992,14 +946,8 @@ def _recover(level, lv, layout, work):
     for b in range(6):
         work.a_new[N - 6 + b] = work.ap[b]
     d_corr, v_corr = lv.d_corr[level], lv.v_corr[level]
-    big = 0.0
     for n in range(N):
-        d, work.v_new[n] = correct_one(work.dp[n], work.vp[n], work.a_new[n], d_corr, v_corr)
-        work.d_new[n] = d
-        big = max(big, abs(d))
-        if not np.isfinite(d):
-            big = np.inf
-    return big
+        work.d_new[n], work.v_new[n] = correct_one(work.dp[n], work.vp[n], work.a_new[n], d_corr, v_corr)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -1007,7 +955,7 @@ def _attempt(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, jt, st, work, s
     """One step of realisation r from instant k0 to k1 with level ``level``'s step: predictor,
     right-hand side, condensation, Newton (from the extrapolated accelerations or the last ones),
     recovery, corrector.  Leaves the candidate state in work and returns (converged, Newton
-    iterations, the candidate's largest |d| in m, inf if not finite)."""
+    iterations)."""
     _prepare(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, st, work)
     N = st.d.shape[1]
     fr = Frame(ch.Rc[k1], ch.J[k1], ch.Rr[k1], ch.omega[k1])
@@ -1016,7 +964,8 @@ def _attempt(r, level, k0, k1, extrapolate, lv, layout, cfg, ch, jt, st, work, s
     out = Out(work.f, work.gl, work.gp, work.delta, work.rate)
     ok, count = newton_one(fr, jt, r, sy, work.ab, work.ap, lv.d_corr[level], lv.v_corr[level],
                            1.0 - cfg.alpha_f, cfg, out, scratch)
-    return ok, count, _recover(level, lv, layout, work)
+    _recover(level, lv, layout, work)
+    return ok, count
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -1100,6 +1049,17 @@ def coarsest_next(level, estimate, tolerance):
     return coarsest
 
 
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _largest(x):
+    """Largest |x|; inf if any entry is inf or nan."""
+    big = 0.0
+    for n in range(x.shape[0]):
+        big = max(big, abs(x[n]))
+        if not np.isfinite(x[n]):
+            big = np.inf
+    return big
+
+
 STEP_DONE, STEP_FAILED, STEP_NEEDS_FINE = 0, 1, 2   # what :func:`_base_step` returns
 
 
@@ -1123,10 +1083,11 @@ def _base_step(r, k_start, lv, layout, cfg, ch, jt, st, rec, work, scratch):
         for start in range(2):     # one call site: _attempt is inlined once
             # extrapolation can mislead Newton across an impact: where it fails from there, retry
             # from the last accepted accelerations (the predictor-free start) before refining
-            ok, count, big = _attempt(r, level, k, k1, start == 0, lv, layout, cfg, ch, jt, st, work, scratch)
+            ok, count = _attempt(r, level, k, k1, start == 0, lv, layout, cfg, ch, jt, st, work, scratch)
             rec.iters[r] += count
             if ok or st.h_past[r, 0] <= 0.0:
                 break
+        big = _largest(work.d_new)
         sound = ok and big < cfg.divergence_limit
         estimate = 0.0
         if sound and cfg.tolerance > 0.0:

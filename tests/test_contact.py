@@ -365,52 +365,6 @@ def test_compiled_newton_update_solves_the_assembled_block_arrow_system():
                                atol=1e-13 * np.abs(want).max())
 
 
-def test_compiled_contact_forces_and_jacobians_in_two_passes_equal_the_vectorised_ones(smoke):
-    """The kernel's contact forces (contact_kernel._evaluate) and, in a pass of their own from the pairs'
-    kept numbers, their Jacobians (_jacobians) equal the vectorised _contacts for every joint of every
-    leg: in contact, sliding with friction and a spinning joint, and with some joints apart (zero
-    force and Jacobians)."""
-    from numba import njit
-
-    from rss6core.contact_dynamics import _contacts, _joints
-    from rss6core.contact_kernel import Frame, Joints, Law, Out, _evaluate, _jacobians, make_scratch
-
-    @njit(_nrt=False)
-    def evaluate(fr, jt, impact, xb, xp, ub, up, s, out):
-        _evaluate(fr, jt, 0, impact, xb, xp, ub, up, s, out)
-        _jacobians(jt.w, s)
-    j, law, w = _joints(smoke, [draw_clearances(smoke, 0, 0)]), smoke.contact, smoke.geometry.w
-    rng = np.random.default_rng(21)
-    e = np.empty((6, 3, 3))
-    radial = np.cross(w, rng.normal(size=(6, 3)))
-    e[:, 0] = (radial / np.linalg.norm(radial, axis=-1, keepdims=True) * (j.radial[0, :, None] + 2e-7)
-               + w * (j.axial[0, :, None] + 1e-7) * rng.choice([-1, 1], size=(6, 1)))
-    for c, size in ((1, j.size_C), (2, j.size_B)):
-        u = rng.normal(size=(6, 3))
-        e[:, c] = u / np.linalg.norm(u, axis=-1, keepdims=True) * (size[0, :, None] + 3e-7)
-    e[1, 2] *= 0.5          # apart: leg 1's sphere B, leg 4's revolute (radially and axially)
-    e[4, 0] *= 0.5
-    de, omega = 1e-3 * rng.normal(size=(6, 3, 3)), rng.normal(size=(6, 3, 3))
-    radius, impact = np.array([0.01, 0.012, 0.012]), np.full((6, 4), 0.05)
-    f, De, Dv, delta, rate = _contacts(e[None], de[None], w, j, impact[None], law, omega, radius[:, None])
-    # identity link frames and no platform: the joint-node vector [e_A, 0, e_C, e_B] gives e
-    xb, ub = (np.concatenate([x[:, 0], np.zeros((6, 3)), x[:, 1], x[:, 2]], -1) for x in (e, de))
-    eye = np.broadcast_to(np.eye(3), (6, 3, 3)).copy()
-    jt = Joints(size=np.stack([j.radial, j.size_C, j.size_B], -1), axial=j.axial,
-                stiffness=np.stack([j.k_A, j.k_C, j.k_B], -1), mu=np.asarray(j.mu, float),
-                restitution=np.asarray(j.restitution, float), w=np.ascontiguousarray(w, dtype=float), radius=radius,
-                law=Law(exponent=float(law.exponent), v0=float(law.stick_velocity), v1=float(law.slip_velocity)))
-    s = make_scratch()
-    out = Out(f=np.empty((6, 3, 3)), gl=np.empty((6, 12)), gp=np.empty(6), delta=np.empty((6, 4)),
-              rate=np.empty((6, 4)))
-    evaluate(Frame(Rc=eye, J=np.zeros((6, 3, 6)), Rr=eye, omega=omega), jt, impact, xb, np.zeros(6), ub,
-             np.zeros(6), s, out)
-    assert np.all(De[0, 1, 2] == 0) and np.all(De[0, 4, 0] == 0) and np.all(delta[0, [1, 4], [3, 0]] < 0)
-    assert np.all(np.abs(De[0, [0, 2, 3, 5]]).max(axis=(-2, -1)) > 0)
-    for mine, ref in ((out.f, f[0]), (s.De, De[0]), (s.Dv, Dv[0]), (out.delta, delta[0]), (out.rate, rate[0])):
-        np.testing.assert_allclose(mine, ref, rtol=1e-10, atol=1e-12 * max(np.abs(ref).max(), 1e-300))
-
-
 def test_compiled_steps_run_without_reference_counting():
     """The entry points that run the steps allocate nothing and skip numba's atomic reference counts
     (a fifth of the steps' time, docs/performance.md section 15); an allocation there fails to compile."""
