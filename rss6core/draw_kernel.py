@@ -5,11 +5,11 @@ order and hands them here; these kernels apply the laws' inverse CDFs and the ve
 pass over the joint-steps, without numpy's temporaries (a per-step draw of the paper level is 12 030
 joint-steps).  No fastmath; scipy's own ``ndtri`` (its Cython export, called by symbol name so the
 kernels stay cacheable).  The angles are uniform in turns (theta = 2 pi u), and their cosine and sine
-come from :func:`_turn`: the quadrant from 4 u, exactly, then fdlibm's polynomials on [-pi/4, pi/4],
+come from :func:`turn`: the quadrant from 4 u, exactly, then fdlibm's polynomials on [-pi/4, pi/4],
 branch-free and without a library call.  That is within 2e-16 of the exact values (numpy's float64
 ``sin(2 pi u)`` is within 7e-16: the product 2 pi u is rounded before the sine reduces it), and
-about 15x cheaper than glibc's sin and cos, which were half of the paper level's per-step draw
-(docs/performance.md section 33).  On the uniform sphere the polar angle eta_1 = arccos z,
+about 20x cheaper than glibc's sin and cos, which took about half of the draw kernel's time
+(docs/performance.md section 34).  On the uniform sphere the polar angle eta_1 = arccos z,
 z = 1 - 2 u, is never formed: its cosine is z and its sine sqrt((1 - z)(1 + z)) (eta_1 lies in
 [0, pi]); the paper's law eta_1 = pi u is half a turn of u.
 

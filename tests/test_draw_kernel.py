@@ -1,7 +1,7 @@
 """The compiled clearance draw (rss6core/draw_kernel.py) against the numpy arithmetic it replaced,
 kept here as an independent reference: the same uniforms in the same order give the same sizes, bit
 for bit, and the same eccentricities to round-off (the kernel's sines and cosines of a turn are not
-glibc's: docs/performance.md sections 30 and 33); the turn's sine and cosine against long double."""
+glibc's: docs/performance.md sections 30 and 34); the turn's sine and cosine against long double."""
 import dataclasses
 
 import numpy as np

@@ -121,7 +121,7 @@ def test_paper_contact_forces_see_a_revolute_pushed_radially_onto_its_wall(paper
 
 def _nan_aware_reductions(err, masks):
     """The window maxima and means of |err| written out with NaN masking, in the history's own
-    layout (the reductions before section 33)."""
+    layout (the reductions before section 34)."""
     e = [np.abs(err)[:, mask] for mask in masks]
     return (np.stack([np.max(np.where(np.isfinite(x), x, -np.inf), axis=1) for x in e]),
             np.stack([np.nanmean(x, axis=1) for x in e]))
@@ -131,7 +131,7 @@ def _nan_aware_reductions(err, masks):
 def test_window_reductions_of_finite_histories_equal_the_nan_aware_ones(steps):
     """A finished run's history (no NaN) takes the short path: its maxima are those of the NaN-aware
     reductions bit for bit, its means to a few units in the last place (pairwise sums along time
-    against row by row), over the windows of window_masks (docs/performance.md sections 29 and 33);
+    against row by row), over the windows of window_masks (docs/performance.md sections 29 and 34);
     a history with a NaN keeps the general path's answer."""
     t = np.arange(steps) / (steps - 1)
     masks = window_masks(t, 0.1, 0.5)

@@ -5,7 +5,7 @@ it the command line in :data:`PREPARE_ENV`.  The server imports this module last
 preloads; it resolves the run's level as the command does (:func:`.run.ensemble_spec_of`) and
 prepares it into the cache every chunk reads (:func:`pipeline.ensemble.run.prepare_ahead`), so the
 workers it forks inherit it: neither spends the elastic and paper levels' 0.25-0.3 s elastic run
-(docs/performance.md section 33).  The level is a deterministic function of the same key, computed
+(docs/performance.md section 34).  The level is a deterministic function of the same key, computed
 with the workers' BLAS and hash settings, so the files do not change.  This is only a head start:
 whatever goes wrong here (a typo, a missing file) is left, silently, for the command to report.
 """
