@@ -210,3 +210,22 @@ def test_a_ctrl_c_no_command_handles_is_one_line_and_exit_130(monkeypatch, capsy
         pytest.fail("the Ctrl-C escaped rss6's main")
     assert code == 130
     assert capsys.readouterr().err == "rss6: interrupted\n"
+
+
+def test_the_rss6_executable_runs_its_exit_handlers_flushes_and_exits_with_the_commands_code(tmp_path):
+    """`rss6` ends its process without the interpreter's module teardown (pipeline.cli._end), but
+    only after the exit handlers (the workers' server is stopped by one) and with its buffered
+    output flushed: stdout to a pipe is block-buffered, so an unflushed line would be lost."""
+    script = ("import atexit, sys\n"
+              "import pipeline.cli as cli\n"
+              "atexit.register(lambda: print('handler ran'))\n"
+              "print('buffered line')\n"
+              "sys.argv = ['rss6', 'stats', 'no_such_file.nc']\n"
+              "cli.command()\n"
+              "print('not reached')\n")
+    buffered = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}   # some shells set it
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=120,
+                         env=buffered)
+    assert out.returncode == 2
+    assert out.stdout.splitlines() == ["buffered line", "handler ran"]
+    assert out.stderr.startswith("rss6: error:") and "no_such_file.nc" in out.stderr
