@@ -74,7 +74,7 @@ def _reference(scene, u, steps):
 ROUND_OFF = 1e-15
 
 
-def _same_bits(got, expected):
+def _same_draw(got, expected):
     """Sizes bit for bit, eccentricities to round-off of the sines and cosines."""
     for field in dataclasses.fields(ClearanceDraw):
         a, b = getattr(got, field.name), getattr(expected, field.name)
@@ -101,9 +101,9 @@ def test_the_compiled_draw_equals_numpys_arithmetic(configs, name, steps):
     for scene in _variants(configs, name):
         for r in range(3):
             stream = realization_rng(5, r).random(uniform_dimension(steps))
-            _same_bits(draw_clearances(scene, 5, r, steps), _reference(scene, stream, steps))
+            _same_draw(draw_clearances(scene, 5, r, steps), _reference(scene, stream, steps))
             u = np.random.default_rng(r).random(uniform_dimension(steps))
-            _same_bits(clearances_from_uniforms(scene, u, steps), _reference(scene, u, steps))
+            _same_draw(clearances_from_uniforms(scene, u, steps), _reference(scene, u, steps))
 
 
 @pytest.mark.parametrize("name", SCENES)
@@ -115,7 +115,7 @@ def test_the_compiled_draw_by_named_uniforms_equals_numpys_arithmetic(configs, n
         skipped = {"A_radial_magnitude"} if law.radial_std == 0 else set()
         skipped |= {"A_axial"} if law.axial_std == 0 else set()
         u = np.concatenate([blocks[b] for b in UNIFORM_BLOCKS if b not in skipped])
-        _same_bits(clearances_from_named_uniforms(scene, blocks), _reference(scene, u, None))
+        _same_draw(clearances_from_named_uniforms(scene, blocks), _reference(scene, u, None))
     assert SIZE_BLOCKS == UNIFORM_BLOCKS[:4]
 
 

@@ -39,7 +39,7 @@ from ..files.writing import sigint_deferred, write_netcdf
 from .cluster import WORKER_TIMEOUT_S, dask_client, results_as_finished
 from .progress import _kernels_to_compile, _Progress, cluster_label, compile_apart
 
-__all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk", "prepare_ahead",
+__all__ = ["EnsembleSpec", "EnsembleOutcome", "ensemble", "run_chunk", "run_ensemble", "default_chunk", "shared_level",
            "parts_dir", "MAX_AUTO_CHUNK", "MAX_AUTO_CHUNK_BY_MODEL", "MAX_AUTO_CHUNKS"]
 
 
@@ -119,8 +119,14 @@ def _finish(parts: list, scene, spec: EnsembleSpec):
 
 
 def _simulate(spec: EnsembleSpec, realizations: list[int]) -> list:
-    level = _level(spec.scene_text, spec.source, spec.model, spec.integrator, spec.dt, spec.elements)
-    return level.simulate(spec.seed, realizations, spec.design())
+    return shared_level(spec).simulate(spec.seed, realizations, spec.design())
+
+
+def shared_level(spec: EnsembleSpec):
+    """The spec's level from this process's cache (:func:`_level`), prepared at the first call: in a
+    worker at its first chunk, or, for ``rss6 run``, in the fork server before it forks the workers,
+    which then inherit it (pipeline/commands/prepare_ahead.py)."""
+    return _level(spec.scene_text, spec.source, spec.model, spec.integrator, spec.dt, spec.elements)
 
 
 @functools.lru_cache(maxsize=1)
@@ -128,12 +134,6 @@ def _level(scene_text: str, source: str, model: str, integrator: str, dt: float,
     """The level every chunk of an ensemble shares, prepared once per worker process (the paper
     level's elastic run took a third of each chunk's time when every chunk computed it)."""
     return prepare_level(parse_scene(scene_text, source), model, integrator, dt, elements)
-
-
-def prepare_ahead(spec: EnsembleSpec) -> None:
-    """Prepare the spec's level in this process's cache (:func:`_level`): the fork server does so
-    before it forks the workers, which then inherit it (pipeline/commands/prepare_ahead.py)."""
-    _level(spec.scene_text, spec.source, spec.model, spec.integrator, spec.dt, spec.elements)
 
 
 def _alone(scene, spec: EnsembleSpec, realization: int):
