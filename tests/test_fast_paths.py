@@ -119,6 +119,25 @@ def test_paper_contact_forces_see_a_revolute_pushed_radially_onto_its_wall(paper
         assert _inside(dataclasses.replace(draw, e_A=e_A), w, size)   # clearly inside: the shortcut
 
 
+def test_the_inside_test_sees_one_spherical_joint_at_one_output_step_and_not_the_pads(paper):
+    """Each spherical joint (C and B, every leg) pushed onto its clearance at a single step: the first
+    and last output steps and one between make the draw not inside; the same push at a pad step (beyond
+    the output steps, read only by the differences) leaves it inside, and a NaN is never inside."""
+    draw = paper_draw(paper, 0, 5, 50)
+    w, pad = paper.geometry.w, CENTRAL_PAD
+    size = np.concatenate([draw.radial_size, draw.size_C, draw.size_B])
+    assert _inside(draw, w, size)
+    for name, offset in (("e_C", 6), ("e_B", 12)):
+        for leg in range(6):
+            for step, inside in ((pad, False), (pad + 20, False), (pad + 49, False), (pad - 1, True), (pad + 50, True)):
+                e = getattr(draw, name).copy()
+                e[step, leg] *= (1.0 - 1e-12) * size[offset + leg] / np.linalg.norm(e[step, leg])
+                assert _inside(dataclasses.replace(draw, **{name: e}), w, size) == inside, (name, leg, step)
+    e = draw.e_B.copy()
+    e[pad + 7, 3, 1] = np.nan
+    assert not _inside(dataclasses.replace(draw, e_B=e), w, size)
+
+
 def _nan_aware_reductions(err, masks):
     """The window maxima and means of |err| written out with NaN masking, in the history's own
     layout (the reductions before section 34)."""
