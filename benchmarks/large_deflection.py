@@ -18,7 +18,7 @@ Prints the tables and the tip rotation at which (b) departs from the exact defle
 the robot's largest element chord rotation (2.4e-3 rad, docs/accelerations.md).  Nondimensional: E = I = L = 1,
 EA = 1e8 EI / L^2 (inextensible to 1e-8, as the elastica), so P L^2 / EI = P and M L / EI = M.
 
-    python benchmarks/large_deflection.py      (about 1 minute)
+    python benchmarks/large_deflection.py      (5-30 s on the shared 2-core machine)
 """
 from __future__ import annotations
 
