@@ -192,9 +192,9 @@ def table(kind: str, values) -> None:
         print(_row(value, exact(value), tips))
 
 
-def _rotation_text(theta: float) -> str:
+def _rotation_text(theta: float, kind: str) -> str:
     if np.isnan(theta):
-        return "not reached up to load 10"
+        return f"not reached up to {'P L^2/EI = ' + f'{FORCES[-1]:g}' if kind == 'force' else 'M L/EI = pi'}"
     return f"{theta:6.3f} rad ({theta / ROBOT_CHORD_ROTATION:4.0f}x)"
 
 
@@ -215,7 +215,7 @@ def main() -> None:
                                 ("force", linear_tip, "(a) linear, tip force"),
                                 ("moment", linear_tip, "(a) = (b), tip moment")):
         for field in FIELDS:
-            at = [_rotation_text(departure(kind, level, solver, field)) for level in (0.01, 0.10)]
+            at = [_rotation_text(departure(kind, level, solver, field), kind) for level in (0.01, 0.10)]
             print(f"  {label:28s} {field:10s} 1 %: {at[0]}   10 %: {at[1]}")
     phi = ROBOT_CHORD_ROTATION
     print(f"At the robot's chord rotation {phi} rad the exact turned axial force N (cos phi, sin phi) differs from "
