@@ -118,30 +118,19 @@ def sphere_directions_into(u1, u2, uniform_sphere, out):
 
 
 @njit(cache=True)
-def _turns(u, cos_out, sin_out):
-    """cos_out[i], sin_out[i] = :func:`turn` (u[i]) over flat arrays: a loop of its own, which vectorises."""
-    for i in range(u.shape[0]):
-        cos_out[i], sin_out[i] = turn(u[i])
-
-
-@njit(cache=True)
-def _unit_vectors(polar_u, azimuth_u, uniform_sphere, x, y, z):
-    """x, y, z[i] = :func:`_direction` (polar_u[i], azimuth_u[i]) over flat arrays, one law per loop so
-    that each vectorises (the interleaved (n, 3) stores of a scaled direction kept the loop scalar)."""
-    if uniform_sphere:
-        for i in range(polar_u.shape[0]):
-            x[i], y[i], z[i] = _direction(polar_u[i], azimuth_u[i], True)
-    else:
-        for i in range(polar_u.shape[0]):
-            x[i], y[i], z[i] = _direction(polar_u[i], azimuth_u[i], False)
-
-
-@njit(cache=True)
 def _spherical(sphere, out):
-    """out[j, l] = k_s delta_s times the direction, (magnitude_u[j, l] size[l]) times each component."""
+    """out[j, l] = k_s delta_s times the direction, (magnitude_u[j, l] size[l]) times each component.
+    The unit vectors first, in a flat loop of their own (one per law) that vectorises, which the
+    interleaved (n, 3) stores of the scaled vectors kept scalar."""
     steps, legs = sphere.magnitude_u.shape
+    polar, azimuth = sphere.polar_u.ravel(), sphere.azimuth_u.ravel()
     x, y, z = np.empty(steps * legs), np.empty(steps * legs), np.empty(steps * legs)
-    _unit_vectors(sphere.polar_u.ravel(), sphere.azimuth_u.ravel(), sphere.uniform_sphere, x, y, z)
+    if sphere.uniform_sphere:
+        for i in range(steps * legs):
+            x[i], y[i], z[i] = _direction(polar[i], azimuth[i], True)
+    else:
+        for i in range(steps * legs):
+            x[i], y[i], z[i] = _direction(polar[i], azimuth[i], False)
     for j in range(steps):
         for leg in range(legs):
             i = j * legs + leg
@@ -154,10 +143,13 @@ def eccentricities_into(rev, C, B, e_A, e_C, e_B):
     """e_A, e_C, e_B (steps, legs, 3) of a draw from its uniforms (steps, legs): the revolute's
     radial (truncated normal) magnitude r at angle theta = 2 pi u (:func:`turn`) plus the axial offset a,
     e_A = r cos(theta) plane_x + r sin(theta) plane_y + a w, and each sphere's k_s delta_s times a
-    direction (:class:`Revolute`, :class:`Sphere`)."""
+    direction (:class:`Revolute`, :class:`Sphere`).  The turns first, in a flat loop of their own that
+    vectorises (beside scipy's ndtri calls they ran scalar)."""
     steps, legs = e_A.shape[0], e_A.shape[1]
+    angle = rev.angle_u.ravel()
     cosines, sines = np.empty(steps * legs), np.empty(steps * legs)
-    _turns(rev.angle_u.ravel(), cosines, sines)   # theta = 2 pi u
+    for i in range(steps * legs):
+        cosines[i], sines[i] = turn(angle[i])   # theta = 2 pi u
     for j in range(steps):
         for leg in range(legs):
             r = _truncated(rev.radial, rev.radial_u[j, leg] if not rev.radial.point else 0.0, leg)
