@@ -7,13 +7,21 @@ from __future__ import annotations
 
 from rss6core import FINISHED
 
-__all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "WINDOWS", "QUANTILES", "STATISTICS", "REQUIRABLE",
+__all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "WINDOWS", "window_words", "QUANTILES", "STATISTICS", "REQUIRABLE",
            "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "UserError", "OptionError"]
 
 QUANTITIES = ("displacement", "velocity", "acceleration")   # of the platform's pose error
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")             # translations (m), rotations (rad)
 FAMILIES = {"translation": DIRECTIONS[:3], "rotation": DIRECTIONS[3:]}   # one unit each
 WINDOWS = ("whole", "startup", "steady")   # analysis windows: [settle, T], [0, t_s), [t_s, T]
+
+
+def window_words(window: str | None) -> str:
+    """How a printed line names the part of the run a number is over: 'whole run' (also for None,
+    a file without windows), else 'steady window', 'startup window'."""
+    return "whole run" if window in (None, "whole") else f"{window} window"
+
+
 QUANTILES = {"q05": 0.05, "q50": 0.5, "q95": 0.95, "q99": 0.99}   # name -> probability
 STATISTICS = ("mean", "std", *QUANTILES, "max")   # the statistics of an ensemble, in table order
 REQUIRABLE = tuple(s for s in STATISTICS if s != "max")   # those with an interval, for --require

@@ -282,3 +282,14 @@ def test_a_pf_spec_is_searched_on_the_gates_rule(paper):
 def test_a_pf_spec_the_sample_cannot_show_is_refused(configs, tmp_path, capsys):
     _refused(["allocate", str(configs / "paper.toml"), "--spec", "displacement:x<=0.1mm@pf<=1e-2", "-n", "100",
               "-o", str(tmp_path / "p")], capsys, "pf <= 0.01", "n = 100", "raise -n")
+
+
+def test_an_unreachable_pf_spec_names_its_order_statistic_in_words_and_what_to_change():
+    """'1-th largest' read as a typo: the order is an English ordinal, and the line says what could
+    make the spec reachable."""
+    from pipeline.studies.allocation import ordinal, out_of_reach
+    assert [ordinal(k) for k in (1, 2, 3, 4, 11, 12, 13, 21, 22, 23, 101, 111)] == [
+        "1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "23rd", "101st", "111th"]
+    message = str(out_of_reach(parse_spec("displacement:z<=0.05mm@pf<=0.01"), 5.137e-5, 300, 0.95))
+    assert "the best attainable 1st largest maximum |error|" in message and "0.05137 mm" in message
+    assert "--classes" in message and "axial play" in message and "\n" not in message

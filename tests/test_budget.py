@@ -210,3 +210,16 @@ def test_a_pf_spec_is_swept_and_lands_at_the_largest_maximum(configs, tmp_path, 
                  "-o", str(tmp_path / "c")])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "n = 64 cannot show pf <= 0.001" in err, err
+
+
+def test_the_limiting_line_names_the_window_of_its_statistic():
+    """exact_scale's limiting line says which part of the run its bound is over (a designer reading
+    'q95: upper bound 0.36 mm' could not tell the steady window from the whole run)."""
+    from pipeline.studies.budget import exact_scale
+
+    from .test_gate import _ensemble, _symmetric
+    verdicts = judge_all([parse_spec("displacement:x<=0.2mm@q95")], _ensemble(_symmetric(100, 1e-4, 2e-5)))
+    ratio, limiting = exact_scale(verdicts)
+    assert limiting.startswith("displacement x q95 (whole run): upper bound ")
+    ratio_steady, limiting = exact_scale([replace(v, window="steady") for v in verdicts])
+    assert limiting.startswith("displacement x q95 (steady window): upper bound ") and ratio_steady == ratio

@@ -149,9 +149,15 @@ def test_stats_prints_the_event_probability_and_judges_pf_with_exit_codes(smoke_
     out = json.loads(capsys.readouterr().out)
     (e,) = out["exceedance"]
     assert (e["exceeding"], e["n"]) == (k, 40) and 0 < k < 40 and e["lower"] < k / 40 < e["upper"]
+    assert e["window"] == "whole"
     assert out["requirements"][0]["outcome"] == "fail" and code == 1
     assert main(["stats", str(smoke_file), "--require", f"displacement:z<={limit_mm!r}mm@pf<=0.9"]) == 0
     assert main(["stats", str(smoke_file), "--require", f"displacement:z<={limit_mm!r}mm@pf<=0.5"]) == 3
     capsys.readouterr()
     assert main(["stats", str(smoke_file), "--event", "displacement:z>1mm/stedy"]) == 2
     assert "unknown window 'stedy'" in capsys.readouterr().err
+    events = ["--event", "displacement:z>1mm", "--event", "displacement:z>1mm/steady"]
+    assert main(["stats", str(smoke_file), *events]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("P(")]
+    assert [ln.split(" = ")[0] for ln in lines] == ["P(displacement:z>1mm) over the whole run",
+                                                    "P(displacement:z>1mm/steady) over the steady window"]

@@ -1,6 +1,7 @@
 """Requirement specs: the grammar, unit conversion, and verdicts decided on one-sided bounds: the
 decisions against an independent binomial test, their error rates measured (a design that meets
 its limit exactly is failed at most nominal + 1 point of the time), the n to decide, exit codes."""
+import dataclasses
 import math
 
 import numpy as np
@@ -299,6 +300,18 @@ def test_spec_verdicts_cover_every_direction():
     table = format_verdicts(verdicts)
     (row,) = [ln for ln in table.splitlines() if ln.split()[1:2] == ["y"]]
     assert "verdict: fail" in table and f"{1e3 * verdicts[1].estimate:.4g}" in row.split()  # mm
+
+
+def test_a_long_spec_keeps_its_direction_and_every_row_names_its_window():
+    """A spec over 40 characters once ran into its direction column (".../steadx"): the spec column is as
+    wide as the longest spec, and a window column says which part of the run each row judges."""
+    x = _symmetric(100, 1e-4, 2e-5)
+    text = "displacement:x,y,z<=0.2mm@q95"
+    verdicts = judge_all([parse_spec(text)], _ensemble(x, y=5 * x))
+    longer = text + "/steady-but-much-longer-than-forty"
+    verdicts += [dataclasses.replace(v, spec=longer, window="steady") for v in verdicts]
+    rows = format_verdicts(verdicts).splitlines()[2:-1]
+    assert [r.split()[:3] for r in rows] == [[text, d, "whole"] for d in "xyz"] + [[longer, d, "steady"] for d in "xyz"]
 
 
 def test_the_rule_and_its_confidence_are_stated():

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats as sps
 
-from ..vocabulary import CONFIDENCE, WINDOWS
+from ..vocabulary import CONFIDENCE, WINDOWS, window_words
 from .spec import SpecError, _NUMBER, _subject, _unit_factor
 
 __all__ = ["Event", "Exceedance", "EventError", "parse_event", "clopper_pearson", "one_sided_cp",
@@ -113,6 +113,7 @@ class Exceedance:
     lower: float
     upper: float
     confidence: float
+    window: str = "whole"   # the part of the run whose maxima the event reads (startup, steady, whole)
     method: str = "Clopper-Pearson exact binomial interval (coverage >= confidence for every p)"
 
 
@@ -136,17 +137,19 @@ def exceedance(ds, event: Event, confidence: float = CONFIDENCE) -> Exceedance:
     n, k = len(values), int(np.count_nonzero(event.exceeds(values)))
     failed = int(ds["status"].size - n) if "status" in ds else 0
     if n == 0:
-        return Exceedance(event.text, 0, 0, failed, float("nan"), float("nan"), float("nan"), confidence)
+        return Exceedance(event.text, 0, 0, failed, float("nan"), float("nan"), float("nan"), confidence,
+                          event.window)
     lower, upper = clopper_pearson(k, n, confidence)
-    return Exceedance(event.text, k, n, failed, k / n, float(lower), float(upper), confidence)
+    return Exceedance(event.text, k, n, failed, k / n, float(lower), float(upper), confidence, event.window)
 
 
 def format_exceedance(results: list[Exceedance]) -> str:
-    """One line per event: P = k/n and its interval with the confidence it reaches."""
+    """One line per event: P = k/n over the part of the run it reads, and its interval with the
+    confidence it reaches."""
     lines = []
     for r in results:
         failed = f"; {r.n_failed} failed realisations left out" if r.n_failed else ""
-        lines.append(f"P({r.event}) = {r.exceeding}/{r.n} = {r.estimate:.4g}, "
+        lines.append(f"P({r.event}) over the {window_words(r.window)} = {r.exceeding}/{r.n} = {r.estimate:.4g}, "
                      f"{100 * r.confidence:g} % interval [{r.lower:.4g}, {r.upper:.4g}] "
                      f"(Clopper-Pearson, exact: covers with at least {100 * r.confidence:g} % "
                      f"for every true P{failed})")

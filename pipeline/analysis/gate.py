@@ -309,9 +309,11 @@ def _num(value: float | None, factor: float) -> str:
 
 
 def format_verdicts(verdicts: list[Verdict]) -> str:
-    """A table in each spec's own unit: spec, direction, bounds, limit, verdict, n to decide."""
+    """A table in each spec's own unit: spec, direction, window, bounds, limit, verdict, n to decide
+    (the spec column as wide as the longest spec: a cut spec ran into its direction)."""
     if not verdicts:
         return ""
+    width = max(40, 1 + max(len(v.spec) for v in verdicts))
     conf = f"{100 * verdicts[0].confidence:g} %"
     failed = verdicts[0].n_failed
     lines = [f"requirements (one-sided {conf} bounds: fail when the bound on the limit's side "
@@ -319,12 +321,12 @@ def format_verdicts(verdicts: list[Verdict]) -> str:
              "realisations"
              + (f"; {failed} failed, so a limit they meet is undecided" if failed else "")
              + "; estimate and bounds in the unit of the spec's limit)",
-             f"{'spec':<40s}{'dir':<4s}{'estimate':>11s}{'bounds':>24s}{'limit':>14s}  "
+             f"{'spec':<{width}s}{'dir':<4s}{'window':<9s}{'estimate':>11s}{'bounds':>24s}{'limit':>14s}  "
              f"{'verdict':<10s}n to decide"]
     for v in verdicts:
         bounds = f"[{_num(v.lower, v.factor)}, {_num(v.upper, v.factor)}]"
         need = "" if v.outcome != "undecided" else (str(v.n_needed) if v.n_needed else "-")
-        lines.append(f"{v.spec:<40.40s}{v.direction:<4s}{_num(v.estimate, v.factor):>11s}"
+        lines.append(f"{v.spec:<{width}s}{v.direction:<4s}{v.window or 'whole':<9s}{_num(v.estimate, v.factor):>11s}"
                      f"{bounds:>24s}{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  "
                      f"{v.outcome:<10s}{need}")
     counts = ", ".join(f"{sum(v.outcome == o for v in verdicts)} {o}" for o in OUTCOMES)

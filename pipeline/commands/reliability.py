@@ -9,7 +9,7 @@ import time
 
 from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
-from ..vocabulary import OptionError
+from ..vocabulary import OptionError, window_words
 from .messages import interrupted
 from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, fraction,
                       positive_int)
@@ -140,5 +140,5 @@ def _text(est, event, output) -> str:
     levels = ", ".join(f"{e}" for e in est.evaluations_per_level)
     interval = (f"{100 * est.confidence:g} % interval [{est.lower:.4g}, {est.upper:.4g}] ({est.interval})"
                 if math.isfinite(est.lower) else f"no {100 * est.confidence:g} % interval: {est.interval}")
-    return (f"wrote {output}\nP({event.text}) = {est.pf:.4g} by {est.method}, CoV {est.cov:.3g}; {interval}\n"
-            f"{est.level.size} evaluations (per level: {levels}); {est.message}")
+    return (f"wrote {output}\nP({event.text}) over the {window_words(event.window)} = {est.pf:.4g} by {est.method}, "
+            f"CoV {est.cov:.3g}; {interval}\n{est.level.size} evaluations (per level: {levels}); {est.message}")

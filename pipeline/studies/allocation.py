@@ -285,13 +285,22 @@ def pf_order_statistic(x: np.ndarray, spec: Spec, confidence: float) -> np.ndarr
     return np.sort(x, axis=0)[x.shape[0] - 1 - k] if k >= 0 else np.full(x.shape[1], np.inf)
 
 
+def ordinal(k: int) -> str:
+    """1st, 2nd, 3rd, 4th, ..., 11th, 12th, 13th, ..., 21st."""
+    suffix = "th" if 10 <= k % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
+    return f"{k}{suffix}"
+
+
 def out_of_reach(spec: Spec, best: float, n: int, confidence: float) -> AllocationError:
-    """The error for a spec no combination meets, with the best attainable value (SI ``best``)."""
-    what = (f"{allowed_exceedances(spec, n, confidence) + 1}-th largest maximum |error| (pf {spec.pf_op} "
+    """The error for a spec no combination meets, with the best attainable value (SI ``best``) and
+    what could change that: tighter classes, the families allocate leaves alone, or the spec."""
+    what = (f"{ordinal(allowed_exceedances(spec, n, confidence) + 1)} largest maximum |error| (pf {spec.pf_op} "
             f"{spec.pf_limit:g} allows {allowed_exceedances(spec, n, confidence)} of {n} above the limit)"
             if spec.statistic == PF else f"{spec.statistic} upper bound")
     return AllocationError(f"--spec {spec.text!r}: no class combination meets it; the best attainable "
-                           f"{what} is {best / spec.factor:.4g} {spec.unit}")
+                           f"{what} is {best / spec.factor:.4g} {spec.unit}; offer tighter fits (--classes), "
+                           f"tighten what allocate keeps at the scene's sizes (the revolute axial play), "
+                           f"or relax the spec")
 
 
 def cost_of(combo) -> float:

@@ -35,7 +35,7 @@ from ..analysis.gate import Verdict, upper_limits_problem
 from ..ensemble.run import EnsembleSpec
 from ..scenes.variant import scene_variant
 from ..analysis.spec import PF, Spec
-from ..vocabulary import CONFIDENCE, UserError
+from ..vocabulary import CONFIDENCE, UserError, window_words
 from .trial import Trial, run_trial
 
 __all__ = ["FAMILY_KEYS", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
@@ -136,7 +136,7 @@ def exact_scale(verdicts: list[Verdict]) -> tuple[float, str]:
                               "clearance meets it")
         ratio = v.limit / v.upper
         if best is None or ratio < best[0]:
-            best = (ratio, f"{v.quantity} {v.direction} {v.statistic}: upper bound "
+            best = (ratio, f"{v.quantity} {v.direction} {v.statistic} ({window_words(v.window)}): upper bound "
                            f"{v.upper / v.factor:.4g} {v.unit} at scale 1, limit {v.limit / v.factor:.4g} {v.unit}")
     return best
 
