@@ -9,7 +9,7 @@ from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
 from ..studies.fits import DEFAULT_FITS
 from ..vocabulary import OptionError
-from .messages import interrupted, warn_oversubscription
+from .messages import interrupted, note_loaded_joints, warn_oversubscription
 from .options import add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, positive_int
 
 
@@ -98,4 +98,5 @@ def main(args) -> int:
     else:
         print(format_allocation(a, level.scene.name, level.model, args.n, note, fresh))
         print(f"allocation file: {folder / 'allocation.nc'}")
+    note_loaded_joints("allocate", level.scene, level.model)
     return EXIT_CODES[overall(list(a.verdicts))]

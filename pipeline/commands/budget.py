@@ -5,7 +5,7 @@ from rss6core import MODELS
 
 from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
-from .messages import interrupted, warn_oversubscription
+from .messages import interrupted, note_loaded_joints, warn_oversubscription
 from .options import (add_confidence, add_model, add_parents, add_scene, add_seed, add_workers, positive_float,
                       positive_int)
 
@@ -50,4 +50,5 @@ def main(args) -> int:
     except KeyboardInterrupt:
         return interrupted(f"finished ensembles and chunks are kept in {folder}")
     print(format_budget(b, level.scene.name, level.model))
+    note_loaded_joints("budget", level.scene, level.model)
     return 0

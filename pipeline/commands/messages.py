@@ -60,3 +60,12 @@ def import_meanwhile(*modules: str) -> None:
             except Exception:   # noqa: BLE001 (the caller's own import reports it)
                 return
     threading.Thread(target=load, name="rss6-imports", daemon=True).start()
+
+
+def note_loaded_joints(command: str, scene, model: str) -> None:
+    """One line on stderr after a designer's answer at a level that places the joints inside their
+    play rather than where the loads push them (:func:`pipeline.studies.loaded_joints.loaded_joints_note`)."""
+    from ..studies.loaded_joints import loaded_joints_note
+    note = loaded_joints_note(scene, model)
+    if note:
+        print(f"rss6 {command}: {note}", file=sys.stderr)

@@ -10,7 +10,7 @@ import time
 from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError, window_words
-from .messages import interrupted
+from .messages import interrupted, note_loaded_joints
 from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, fraction,
                       positive_int)
 
@@ -107,6 +107,7 @@ def main(args) -> int:
               file=sys.stderr)
         return 2
     _report(args, est, event, level, output, figure)
+    note_loaded_joints("reliability", level.scene, level.model)
     return 0
 
 
