@@ -81,7 +81,8 @@ def format_failure_domain(fd: FailureDomain, physical: list | None = None, shown
     """Lines: the groups by shift, the inputs of largest |mean|, the most probable failing realisation
     (its |z| and, where given, ``physical`` rows (name, values, unit) of its inputs)."""
     groups = fd.group_shifts()
-    lines = [f"what fails: z of the {fd.failing} failing evaluations of level {fd.level} against N(0, 1) "
+    lines = [f"what fails: the standard-normal inputs z (z = Phi^-1 of each input's uniform, not the z direction) "
+             f"of the {fd.failing} failing evaluations of level {fd.level} against N(0, 1) "
              "(mean = shift in standard deviations, std < 1 = narrowed)",
              "  families by the rms of their inputs' mean shifts: " + ", ".join(
                  f"{g} {s:.2f}" + (f" ({n})" if n > 1 else "") for g, s, n in groups[:shown])]
