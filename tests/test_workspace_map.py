@@ -156,6 +156,19 @@ def test_the_heat_maps_are_legible_and_mask_the_unreachable(smoke):
     _sibling("test_figures").assert_legible(figs)
 
 
+def test_a_banded_scenes_heat_maps_keep_their_title_on_the_canvas(configs):
+    """paper_tolerance's title lists the families drawn from size bands: it ran past both edges until
+    the title was wrapped (review of 2026-11-27)."""
+    from pipeline.analysis.map_plots import map_figures
+    from rss6core import load_scene
+    from pipeline.studies.workspace_map import GridAxis, workspace_map
+    scene = load_scene(configs / "paper_tolerance.toml")
+    ds = workspace_map(scene, (GridAxis("y", -0.05, 0.05, 3), GridAxis("z", -0.45, -0.35, 3)), 8, 0)
+    figs = map_figures(ds)
+    assert "spherical_B" in figs["workspace_map_z.png"]._suptitle.get_text()
+    _sibling("test_figures").assert_legible(figs)
+
+
 def test_the_map_file_reads_back_as_written(tmp_path, smoke):
     from pipeline.files.writing import write_netcdf
     from pipeline.studies.workspace_map import GridAxis, workspace_map

@@ -2,6 +2,8 @@
 grid, unreachable poses masked (grey), the trajectory's path drawn, units on axes and colour bars."""
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 
 from ..vocabulary import DIRECTIONS, FAMILIES
@@ -56,11 +58,13 @@ def direction_map_figure(ds, direction: str):
     if not ds["reachable"].values.all():
         handles.append(Patch(color="0.8", label="unreachable"))
     fig.legend(handles=handles, loc="outside lower center", fontsize=8, ncols=2)
-    fig.suptitle(f"{ds.attrs.get('model', '?')} level, |{direction} pose error| over the workspace: "
-                 f"scene {ds.attrs.get('scene_name', '?')}, "
-                 f"{ds.attrs.get('n_draws', '?')} draws (seed {ds.attrs.get('seed', '?')}), "
-                 f"worst case with {ds.attrs.get('clearance_sizes', '?')}\nother pose axes fixed at the "
-                 f"trajectory's mean: {_fixed_pose(ds)}", fontsize=10)
+    head = (f"{ds.attrs.get('model', '?')} level, |{direction} pose error| over the workspace: "
+            f"scene {ds.attrs.get('scene_name', '?')}, "
+            f"{ds.attrs.get('n_draws', '?')} draws (seed {ds.attrs.get('seed', '?')}), "
+            f"worst case with {ds.attrs.get('clearance_sizes', '?')}")
+    # wrapped: a banded scene's list of size bands ran past both edges of the figure
+    fig.suptitle("\n".join(textwrap.wrap(head, 130)) + f"\nother pose axes fixed at the trajectory's mean: "
+                 f"{_fixed_pose(ds)}", fontsize=10)
     return fig
 
 
