@@ -8,8 +8,8 @@ import pytest
 import xarray as xr
 from scipy import stats as sps
 
-from pipeline.analysis.exceedance import (EventError, clopper_pearson, exceedance, one_sided_cp,
-                                          parse_event)
+from pipeline.analysis.exceedance import (EventError, clopper_pearson, exceedance, format_exceedance,
+                                          one_sided_cp, parse_event)
 from pipeline.analysis.gate import exit_code, judge
 from pipeline.analysis.spec import SpecError, parse_spec
 from pipeline.cli import main
@@ -41,16 +41,32 @@ def _with_exceeding(n: int, k: int) -> np.ndarray:
 
 def test_events_parse_to_si_with_their_window():
     e = parse_event("displacement:z>0.1mm")
-    assert (e.quantity, e.direction, e.limit, e.window) == ("displacement", "z", pytest.approx(1e-4), "whole")
+    assert (e.quantity, e.directions, e.limit, e.window) == ("displacement", ("z",), pytest.approx(1e-4), "whole")
     v = parse_event("velocity:x > 2 mm/s/steady")
     assert (v.limit, v.unit, v.window) == (pytest.approx(2e-3), "mm/s", "steady")
     assert parse_event("acceleration:y>1m/s^2").window == "whole"
 
 
+def test_an_event_over_several_directions_is_their_union():
+    """'displacement:x,y,z>0.05mm': the platform leaves its 0.05 mm box in some direction; a realisation
+    is in it when any direction's maximum exceeds the limit, so P is at least each direction's and at
+    most their sum."""
+    e = parse_event("displacement:x,y,z>0.05mm/steady")
+    assert (e.directions, e.window, e.direction_words) == (("x", "y", "z"), "steady", "any of x, y, z")
+    ds = _ensemble(np.zeros(400))
+    values = np.random.default_rng(3).uniform(0, 1e-4, (400, 3))     # x, y, z maxima (m)
+    ds["max_abs_error"][0, :, :3] = values
+    union = exceedance(ds, parse_event("displacement:x,y,z>0.05mm"))
+    each = [exceedance(ds, parse_event(f"displacement:{d}>0.05mm")).exceeding for d in "xyz"]
+    assert union.exceeding == int(np.count_nonzero((values > 5e-5).any(axis=-1))) and union.n == 400
+    assert max(each) < union.exceeding < sum(each) and union.directions == ("x", "y", "z")
+    assert "P(displacement:x,y,z>0.05mm) (any of x, y, z) over the whole run = " in format_exceedance([union])
+
+
 @pytest.mark.parametrize("text, token", [
     ("displacement:z>0.1", "missing unit"), ("force:z>1mm", "unknown quantity 'force'"),
     ("displacement:w>1mm", "unknown direction 'w'"), ("displacement:z>1mm/stedy", "unknown window 'stedy'"),
-    ("displacement:z<1mm", "an event reads"), ("displacement:x,z>1mm", "one direction"),
+    ("displacement:z<1mm", "an event reads"), ("displacement:x,rz>1mm", "mix translations and rotations"),
     ("displacement:z>1rad", "unknown unit 'rad'")])
 def test_malformed_events_name_the_bad_token(text, token):
     with pytest.raises(EventError, match="^--event ") as info:

@@ -126,3 +126,18 @@ def test_a_level_without_clearances_takes_the_uncertain_inputs_after_the_clearan
     res = json.loads(capsys.readouterr().out)
     z = load_netcdf(out)["max_abs_error"].sel(quantity="displacement", direction="z").values
     assert 0 < res["pf"] < 1 and res["pf"] == np.count_nonzero(z > 2e-5) / 200
+
+
+def test_the_response_of_an_event_over_several_directions_is_their_largest_maximum():
+    """reliability's limit state for 'displacement:x,y,z>...' is the largest of the three maxima (the
+    union of the directions' events); a realisation failed in any of them (NaN) counts as exceeding."""
+    from pipeline.analysis.exceedance import parse_event
+    from pipeline.studies.reliability import _response
+    maxima = np.zeros((3, 3, 6))                  # rows, quantity, direction
+    maxima[0, 0, :3] = (1.0, 3.0, 2.0)
+    maxima[1, 0, :3] = (0.5, 0.2, 0.1)
+    maxima[1, 0, 4] = 9.0                         # a rotation: not in the event
+    maxima[2, 0, 1] = np.nan
+    r = _response(parse_event("displacement:x,y,z>1mm"), maxima)
+    np.testing.assert_array_equal(r, [3.0, 0.5, np.inf])
+    np.testing.assert_array_equal(_response(parse_event("displacement:x>1mm"), maxima), [1.0, 0.5, 0.0])

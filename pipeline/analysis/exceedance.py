@@ -1,8 +1,9 @@
 """Exceedance probabilities: P(a realisation's maximum |error| over a window exceeds a limit).
 
-An event ``QUANTITY:DIRECTION > LIMIT UNIT[/WINDOW]`` (for example ``displacement:z>0.1mm`` or
-``velocity:x>2mm/s/steady``) holds for a realisation when its ``max_abs_error`` of that quantity
-and direction over the window (default whole) exceeds the limit.  From n independent realisations
+An event ``QUANTITY:DIRECTIONS > LIMIT UNIT[/WINDOW]`` (for example ``displacement:z>0.1mm``,
+``velocity:x>2mm/s/steady`` or ``displacement:x,y,z>0.05mm``) holds for a realisation when its
+``max_abs_error`` of that quantity over the window (default whole) exceeds the limit in at least one of
+the directions (one unit family: translations or rotations).  From n independent realisations
 of which k exceed, the estimate is k / n and the interval is the exact Clopper-Pearson one (beta
 quantiles; at least the stated confidence for every true probability, two-sided, or one-sided for
 each bound of a requirement: coverage measured in tests/test_exceedance.py).  A randomised QMC
@@ -31,20 +32,26 @@ class EventError(SpecError):
 
 @dataclass(frozen=True)
 class Event:
-    """``max |error|`` of ``quantity`` in ``direction`` over ``window`` exceeds ``limit`` (SI; the
-    user's ``unit`` is ``factor`` SI units)."""
+    """``max |error|`` of ``quantity`` in any of ``directions`` (one unit family) over ``window``
+    exceeds ``limit`` (SI; the user's ``unit`` is ``factor`` SI units): the union of the directions'
+    events, so that "the platform leaves its 0.05 mm box" is one event."""
 
     text: str
     quantity: str
-    direction: str
+    directions: tuple[str, ...]
     limit: float
     unit: str
     factor: float
     window: str = "whole"
 
     def exceeds(self, values: np.ndarray) -> np.ndarray:
-        """Whether each maximum |error| (SI) is in the event."""
+        """Whether each maximum |error| (SI; over the event's directions) is in the event."""
         return np.asarray(values) > self.limit
+
+    @property
+    def direction_words(self) -> str:
+        """'z', or 'any of x, y, z'."""
+        return self.directions[0] if len(self.directions) == 1 else "any of " + ", ".join(self.directions)
 
 
 def _fail(text: str, what: str, flag: str) -> EventError:
@@ -78,9 +85,7 @@ def parse_event(text: str, flag: str = "--event") -> Event:
         raise
     except SpecError as exc:       # the spec grammar's message, under this flag
         raise EventError(str(exc).replace("--require", flag, 1)) from None
-    if len(directions) != 1:
-        raise _fail(text, "an event names one direction (write one event per direction)", flag)
-    return Event(text, quantity, directions[0], float(m.group(1)) * factor, m.group(2).strip(), factor,
+    return Event(text, quantity, tuple(directions), float(m.group(1)) * factor, m.group(2).strip(), factor,
                  window)
 
 
@@ -114,12 +119,13 @@ class Exceedance:
     upper: float
     confidence: float
     window: str = "whole"   # the part of the run whose maxima the event reads (startup, steady, whole)
+    directions: tuple[str, ...] = ()   # the event holds where any of them exceeds
     method: str = "Clopper-Pearson exact binomial interval (coverage >= confidence for every p)"
 
 
 def event_values(ds, event: Event) -> np.ndarray:
-    """The event's maxima |error| (SI) over the finished realisations of an ensemble Dataset;
-    ValueError for a QMC file or a window the file lacks."""
+    """The event's maxima |error| (SI; the largest over its directions) over the finished realisations
+    of an ensemble Dataset; ValueError for a QMC file or a window the file lacks."""
     from .stats import finished_values
     if ds.attrs.get("sampler") == "qmc":
         raise ValueError(f"{event.text!r}: an exceedance probability needs independent realisations; "
@@ -128,7 +134,7 @@ def event_values(ds, event: Event) -> np.ndarray:
     if event.window != "whole" and "window" not in ds.dims:
         raise ValueError(f"{event.text!r}: the file has no analysis windows; drop '/{event.window}'")
     values = finished_values(ds, "max_abs_error", event.window)
-    return values.sel(quantity=event.quantity, direction=event.direction).values
+    return values.sel(quantity=event.quantity, direction=list(event.directions)).max("direction").values
 
 
 def exceedance(ds, event: Event, confidence: float = CONFIDENCE) -> Exceedance:
@@ -138,9 +144,10 @@ def exceedance(ds, event: Event, confidence: float = CONFIDENCE) -> Exceedance:
     failed = int(ds["status"].size - n) if "status" in ds else 0
     if n == 0:
         return Exceedance(event.text, 0, 0, failed, float("nan"), float("nan"), float("nan"), confidence,
-                          event.window)
+                          event.window, event.directions)
     lower, upper = clopper_pearson(k, n, confidence)
-    return Exceedance(event.text, k, n, failed, k / n, float(lower), float(upper), confidence, event.window)
+    return Exceedance(event.text, k, n, failed, k / n, float(lower), float(upper), confidence, event.window,
+                      event.directions)
 
 
 def format_exceedance(results: list[Exceedance]) -> str:
@@ -149,7 +156,9 @@ def format_exceedance(results: list[Exceedance]) -> str:
     lines = []
     for r in results:
         failed = f"; {r.n_failed} failed realisations left out" if r.n_failed else ""
-        lines.append(f"P({r.event}) over the {window_words(r.window)} = {r.exceeding}/{r.n} = {r.estimate:.4g}, "
+        union = f" (any of {', '.join(r.directions)})" if len(r.directions) > 1 else ""
+        lines.append(f"P({r.event}){union} over the {window_words(r.window)} = {r.exceeding}/{r.n} = "
+                     f"{r.estimate:.4g}, "
                      f"{100 * r.confidence:g} % interval [{r.lower:.4g}, {r.upper:.4g}] "
                      f"(Clopper-Pearson, exact: covers with at least {100 * r.confidence:g} % "
                      f"for every true P{failed})")

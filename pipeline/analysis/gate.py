@@ -266,7 +266,7 @@ def _judge_pf(spec: Spec, ds, confidence: float) -> list[Verdict]:
     one-sided Clopper-Pearson bounds at ``confidence``."""
     out = []
     for d in spec.directions:
-        event = Event(spec.text, spec.quantity, d, spec.limit, spec.unit, spec.factor, spec.window or "whole")
+        event = Event(spec.text, spec.quantity, (d,), spec.limit, spec.unit, spec.factor, spec.window or "whole")
         values = event_values(ds, event)
         n, k = len(values), int(np.count_nonzero(~spec.holds(values)))
         failed = int(ds["status"].size - n) if "status" in ds else 0

@@ -13,11 +13,11 @@ __all__ = ["plot_reliability"]
 
 def _thresholds_panel(ax, thresholds, event) -> None:
     """Each level's threshold (the last one the limit) in display units, the limit dashed."""
-    factor, unit = figure_unit(event.quantity, event.direction, np.asarray(thresholds))
+    factor, unit = figure_unit(event.quantity, event.directions[0], np.asarray(thresholds))
     levels = np.arange(len(thresholds))
     ax.plot(levels, np.asarray(thresholds) * factor, "o-", label="threshold of the level")
     ax.axhline(event.limit * factor, color="C3", ls="--", label=f"limit {event.text}")
-    ax.set(xlabel="subset level [1]", ylabel=f"max |{event.quantity} error| {event.direction} [{unit}]",
+    ax.set(xlabel="subset level [1]", ylabel=f"max |{event.quantity} error| {event.direction_words} [{unit}]",
            title="intermediate thresholds")
     ax.set_xticks(levels)
     ax.grid(alpha=0.3)

@@ -23,9 +23,9 @@ def add_parser(sub) -> None:
     add_model(p, "model level (default quasi-static; contact costs about 0.4 s per evaluation on the paper "
                  "scene)", default="quasi-static")
     p.add_argument("--event", required=True, metavar="EVENT",
-                   help="QUANTITY:DIRECTION>VALUE UNIT[/WINDOW], e.g. 'displacement:z>0.1mm' or "
-                        "'displacement:z>0.1mm/steady': a realisation's maximum |error| over the window "
-                        "(default whole) exceeds the limit")
+                   help="QUANTITY:DIRECTIONS>VALUE UNIT[/WINDOW], e.g. 'displacement:z>0.1mm' or "
+                        "'displacement:x,y,z>0.1mm/steady': a realisation's maximum |error| over the window "
+                        "(default whole) exceeds the limit, in any of the directions given")
     p.add_argument("--method", choices=METHODS, default="subset",
                    help="subset: subset simulation (Au & Beck 2001, adaptive conditional sampling); mc: plain "
                         "Monte Carlo with an exact Clopper-Pearson interval (default subset)")

@@ -27,8 +27,9 @@ def add_parser(sub) -> None:
     add_require(p)
     p.add_argument("--event", action="append", metavar="EVENT",
                    help="also print the probability that a realisation's maximum |error| exceeds a limit, "
-                        "QUANTITY:DIRECTION>VALUE UNIT[/WINDOW], e.g. 'displacement:z>0.1mm' (repeatable): "
-                        "k/n and its exact Clopper-Pearson interval at --confidence (Monte Carlo files only)")
+                        "QUANTITY:DIRECTIONS>VALUE UNIT[/WINDOW], e.g. 'displacement:z>0.1mm', or "
+                        "'displacement:x,y,z>0.05mm' for any of them (repeatable): k/n and its exact "
+                        "Clopper-Pearson interval at --confidence (not for --sampler qmc files)")
     p.set_defaults(main=main)
 
 

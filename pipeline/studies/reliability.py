@@ -202,9 +202,10 @@ def _evaluate_part(spec, window: str, rows: np.ndarray, index: int) -> dict:
 
 
 def _response(event: Event, maxima: np.ndarray) -> np.ndarray:
-    """The event's maximum |error| per row (SI); +inf where the realisation failed."""
-    r = maxima[:, QUANTITIES.index(event.quantity), DIRECTIONS.index(event.direction)]
-    return np.where(np.isnan(r), np.inf, r)
+    """The event's maximum |error| per row (SI; the largest over its directions); +inf where the
+    realisation failed."""
+    r = maxima[:, QUANTITIES.index(event.quantity), [DIRECTIONS.index(d) for d in event.directions]]
+    return np.where(np.isnan(r).any(axis=-1), np.inf, r.max(axis=-1))
 
 
 def _batches(spec, window: str, client, checkpoint):
