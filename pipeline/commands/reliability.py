@@ -141,5 +141,7 @@ def _text(est, event, output) -> str:
     levels = ", ".join(f"{e}" for e in est.evaluations_per_level)
     interval = (f"{100 * est.confidence:g} % interval [{est.lower:.4g}, {est.upper:.4g}] ({est.interval})"
                 if math.isfinite(est.lower) else f"no {100 * est.confidence:g} % interval: {est.interval}")
-    return (f"wrote {output}\nP({event.text}) over the {window_words(event.window)} = {est.pf:.4g} by {est.method}, "
-            f"CoV {est.cov:.3g}; {interval}\n{est.level.size} evaluations (per level: {levels}); {est.message}")
+    union = f" ({event.direction_words})" if len(event.directions) > 1 else ""
+    return (f"wrote {output}\nP({event.text}){union} over the {window_words(event.window)} = {est.pf:.4g} by "
+            f"{est.method}, CoV {est.cov:.3g}; {interval}\n{est.level.size} evaluations (per level: {levels}); "
+            f"{est.message}")
