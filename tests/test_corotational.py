@@ -7,7 +7,6 @@ and M L / EI = M.  benchmarks/large_deflection.py prints the errors these tests 
 import numpy as np
 import pytest
 from scipy.integrate import solve_bvp
-from scipy.linalg import eigh
 from scipy.optimize import brentq
 
 from rss6core.beam import element_matrices, geometric_stiffness, link_matrices
@@ -195,14 +194,8 @@ def _corotational_euler_load(elements):
 
 def _consistent_euler_load(elements):
     """The smallest P of K x = P K_G x on the pinned column's x-y plane (rss6's K and K_G, E = I = L = 1)."""
-    unit = SectionProperties(area=1.0, Iy=1.0, Iz=1.0, J=1.0)
-    K, _ = link_matrices(unit, 1.0, 0.4, 1.0, 1.0, elements)
-    KG = np.zeros_like(K)
-    for e in range(elements):
-        KG[6 * e:6 * e + 12, 6 * e:6 * e + 12] += geometric_stiffness(unit, 1.0 / elements)
-    dofs = np.arange(K.shape[0])
-    keep = dofs[np.isin(dofs % 6, (1, 5)) & ~np.isin(dofs, [1, 6 * elements + 1])]
-    return eigh(K[np.ix_(keep, keep)], KG[np.ix_(keep, keep)], eigvals_only=True)[0]
+    from .test_rotating_beam import pinned_column_loads
+    return pinned_column_loads(elements, "in-plane")[0]
 
 
 def test_both_geometric_terms_give_the_euler_load_as_the_mesh_refines():

@@ -92,17 +92,22 @@ def test_the_geometric_stiffness_buckles_a_pinned_column_at_the_euler_load(plane
     """K + P K_G of a pinned-pinned column (both ends' translations held) singular at the Euler load
     P = -pi^2 E I / L^2 in either bending plane: the smallest eigenvalue mu = -P of K x = mu K_G x on 8 elements
     within 0.1 % of pi^2 (E = I = L = 1; the cubic element converges from above at fourth order)."""
+    assert pinned_column_loads(8, plane)[0] == pytest.approx(np.pi ** 2, rel=1e-3)
+
+
+def pinned_column_loads(elements: int, plane: str = "in-plane") -> np.ndarray:
+    """The buckling loads P of K x = P K_G x of a pinned-pinned column of rss6's elements in one bending
+    plane (both ends' transverse translations held; E = I = L = 1), ascending (also tests/test_corotational.py)."""
     dofs_of_node = {"in-plane": (1, 5), "flapwise": (2, 4)}[plane]
-    n = 8
     unit = SectionProperties(area=1.0, Iy=1.0, Iz=1.0, J=1.0)
-    K, _ = link_matrices(unit, 1.0, 0.4, 1.0, 1.0, n)
+    K, _ = link_matrices(unit, 1.0, 0.4, 1.0, 1.0, elements)
     KG = np.zeros_like(K)
-    for e in range(n):
-        KG[6 * e:6 * e + 12, 6 * e:6 * e + 12] += geometric_stiffness(unit, 1.0 / n)
+    for e in range(elements):
+        KG[6 * e:6 * e + 12, 6 * e:6 * e + 12] += geometric_stiffness(unit, 1.0 / elements)
     dofs = np.arange(K.shape[0])
-    keep = dofs[np.isin(dofs % 6, dofs_of_node) & ~np.isin(dofs, [dofs_of_node[0], 6 * n + dofs_of_node[0]])]
-    P = eigh(K[np.ix_(keep, keep)], KG[np.ix_(keep, keep)], eigvals_only=True)
-    assert P[0] == pytest.approx(np.pi ** 2, rel=1e-3)
+    ends = [dofs_of_node[0], 6 * elements + dofs_of_node[0]]
+    keep = dofs[np.isin(dofs % 6, dofs_of_node) & ~np.isin(dofs, ends)]
+    return eigh(K[np.ix_(keep, keep)], KG[np.ix_(keep, keep)], eigvals_only=True)
 
 
 def test_the_chord_part_of_the_geometric_load_is_the_axial_force_turned_with_the_chord(beam):
