@@ -63,15 +63,21 @@ def test_allocation_costs_less_than_the_cheapest_passing_uniform_class(exhaustiv
     assert uniform and best < min(_cost(c) for c in uniform)
 
 
-def test_superposition_reproduces_a_run_at_every_size(paper):
-    """The responses' prediction equals a plain run's upper bound at a mixed combination (same draws)."""
-    specs = [parse_spec(SPEC)]
+@pytest.mark.parametrize("eccentricity", ["drawn", "reaction"])
+def test_superposition_reproduces_a_run_at_every_size(paper, eccentricity):
+    """The responses' prediction equals a plain run's upper bound at a mixed combination (same draws), with
+    the joints anywhere in their play or at their walls along the rigid joint forces (the loaded state:
+    linear in the sizes too, the forces not depending on them)."""
+    specs = [parse_spec(SPEC), parse_spec("displacement:z<=1mm@q50/steady")]
+    paper = replace(paper, scene_text=scene_variant(paper.scene_text, {"simulation": {
+        "quasi_static_eccentricity": eccentricity}}, "paper", add=True))
     options = class_options(paper.scene(), SMALL)
     combo = (options["revolute_radial"][0], options["spherical_C"][2], options["spherical_B"][1])
-    predicted = spec_uppers(responses(paper, specs, N), combo, specs, paper.scene(), 0.95)[0]
+    predicted = np.concatenate(spec_uppers(responses(paper, specs, N), combo, specs, paper.scene(), 0.95))
     ds = run_chunk(replace(paper, scene_text=allocated_scene(paper.scene_text, "paper", combo)), list(range(N)))
     measured = [v.upper for v in judge_all(specs, ds, 0.95)]
     assert predicted == pytest.approx(measured, rel=1e-9)
+    assert (measured[3] > 0.2e-3) == (eccentricity == "reaction")   # the loaded state's steady sag
 
 
 def test_command_verifies_and_writes(configs, tmp_path, capsys):

@@ -2,8 +2,9 @@
 
 At the quasi-static level (the paper and contact levels: pipeline.studies.allocation_greedy), whose
 error is linear in the eccentricities, which
-scale with the joint's clearance size on the draw's own uniforms (docs/model.md section 4), so one
-realisation's error is d(t) = sum_j s_j U_j(t) with U_j the error per unit size of joint j.  A class
+scale with the joint's clearance size on the draw's own uniforms (docs/model.md section 4; with
+``quasi_static_eccentricity = "reaction"`` along the rigid joint forces, which do not depend on the
+sizes), so one realisation's error is d(t) = sum_j s_j U_j(t) with U_j the error per unit size of joint j.  A class
 draws each joint's size uniformly in its band [lo, hi] from the draw's size uniform u_j, s_j = lo +
 (hi - lo) u_j, so per family f the error is lo_f A_f(t) + (hi_f - lo_f) B_f(t), with A_f = sum_j U_j
 and B_f = sum_j u_j U_j computed once from the seed's realisations (two given-draw runs per family).
@@ -342,10 +343,6 @@ def check_request(spec: EnsembleSpec, specs: list[Spec], n: int, confidence: flo
     if scene.uncertain or scene.sampling.size_tolerance > 0:
         raise AllocationError(f"{spec.source}: allocate draws sizes from fit classes; give a scene without "
                               "[uncertain.*] tables and with [sampling] size_tolerance = 0")
-    linear = model_level(spec.model).linear_in_clearances
-    if linear and scene.simulation.quasi_static_eccentricity != "drawn":
-        raise AllocationError(f"{spec.source}: allocate needs [simulation] quasi_static_eccentricity = "
-                              "\"drawn\" (the reaction mode's direction does not split by family)")
     if why := upper_limits_problem(specs, confidence, n, "an allocation"):
         raise AllocationError(why)
 
