@@ -51,3 +51,17 @@ def test_the_note_is_one_line_naming_the_assumption_and_the_loaded_maxima(paper,
     assert 'quasi_static_eccentricity = "drawn"' in err and f"x, y, z = {x:.3g}, {y:.3g}, {z:.3g} mm" in err
     note_loaded_joints("budget", paper, "contact")
     assert capsys.readouterr().err == ""
+
+
+def test_stats_notes_the_loaded_joints_when_it_judges_a_drawn_file(tmp_path, capsys):
+    """rss6 stats with --event or --require on a quasi-static (drawn) file ends with the note; plain
+    statistics, which judge nothing, do not."""
+    from pipeline.cli import main
+    path = tmp_path / "qs.nc"
+    assert main(["run", "smoke", "-n", "4", "--model", "quasi-static", "--workers", "1", "-o", str(path)]) == 0
+    capsys.readouterr()
+    assert main(["stats", str(path)]) == 0
+    assert "note:" not in capsys.readouterr().err
+    assert main(["stats", str(path), "--event", "displacement:z>0.1mm"]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("rss6 stats: note: the quasi-static level places each joint") and err.count("\n") == 1

@@ -40,6 +40,7 @@ def main(args) -> int:
     from ..files.opening import open_results
     from ..files.outputs import check_new_output
     from ..files.writing import write_netcdf
+    from .messages import note_loaded_joints
     specs = requirements(args)
     known_windows(specs)
     events = _events(args)
@@ -69,6 +70,9 @@ def main(args) -> int:
             print(format_exceedance(probabilities))
         if specs:
             print(format_verdicts(verdicts))
+    if (specs or events) and "scene_toml" in ds.attrs and "model" in ds.attrs:   # judged: say what it leaves out
+        from rss6core import parse_scene
+        note_loaded_joints("stats", parse_scene(ds.attrs["scene_toml"], str(args.file)), str(ds.attrs["model"]))
     return exit_code(verdicts, args.undecided) if specs else 0
 
 
