@@ -21,7 +21,7 @@ from ..vocabulary import CONFIDENCE, WINDOWS, window_words
 from .spec import SpecError, _NUMBER, _subject, _unit_factor
 
 __all__ = ["Event", "Exceedance", "EventError", "parse_event", "clopper_pearson", "one_sided_cp",
-           "exceedance", "format_exceedance", "exceedance_json"]
+           "exceedance", "format_exceedance", "exceedance_json", "union_words"]
 
 _PER_SECOND = {"s", "s^2", "s2", "s**2"}   # unit tails after '/' that are no window
 
@@ -52,6 +52,12 @@ class Event:
     def direction_words(self) -> str:
         """'z', or 'any of x, y, z'."""
         return self.directions[0] if len(self.directions) == 1 else "any of " + ", ".join(self.directions)
+
+
+def union_words(directions) -> str:
+    """What a printed P(...) line adds for an event over several directions: ' (any of x, y, z)'; ''
+    for one."""
+    return f" (any of {', '.join(directions)})" if len(directions) > 1 else ""
 
 
 def _fail(text: str, what: str, flag: str) -> EventError:
@@ -156,9 +162,8 @@ def format_exceedance(results: list[Exceedance]) -> str:
     lines = []
     for r in results:
         failed = f"; {r.n_failed} failed realisations left out" if r.n_failed else ""
-        union = f" (any of {', '.join(r.directions)})" if len(r.directions) > 1 else ""
-        lines.append(f"P({r.event}){union} over the {window_words(r.window)} = {r.exceeding}/{r.n} = "
-                     f"{r.estimate:.4g}, "
+        lines.append(f"P({r.event}){union_words(r.directions)} over the {window_words(r.window)} = "
+                     f"{r.exceeding}/{r.n} = {r.estimate:.4g}, "
                      f"{100 * r.confidence:g} % interval [{r.lower:.4g}, {r.upper:.4g}] "
                      f"(Clopper-Pearson, exact: covers with at least {100 * r.confidence:g} % "
                      f"for every true P{failed})")

@@ -138,10 +138,10 @@ def _strict(summary: dict) -> dict:
 
 def _text(est, event, output) -> str:
     """The estimate in a few lines."""
+    from ..analysis.exceedance import union_words
     levels = ", ".join(f"{e}" for e in est.evaluations_per_level)
     interval = (f"{100 * est.confidence:g} % interval [{est.lower:.4g}, {est.upper:.4g}] ({est.interval})"
                 if math.isfinite(est.lower) else f"no {100 * est.confidence:g} % interval: {est.interval}")
-    union = f" ({event.direction_words})" if len(event.directions) > 1 else ""
-    return (f"wrote {output}\nP({event.text}){union} over the {window_words(event.window)} = {est.pf:.4g} by "
-            f"{est.method}, CoV {est.cov:.3g}; {interval}\n{est.level.size} evaluations (per level: {levels}); "
-            f"{est.message}")
+    event_line = f"P({event.text}){union_words(event.directions)} over the {window_words(event.window)}"
+    return (f"wrote {output}\n{event_line} = {est.pf:.4g} by {est.method}, CoV {est.cov:.3g}; {interval}\n"
+            f"{est.level.size} evaluations (per level: {levels}); {est.message}")

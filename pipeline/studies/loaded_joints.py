@@ -11,6 +11,8 @@ the answer leaves out is on the screen beside it.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from rss6core import model_level, parse_scene, simulate
@@ -19,8 +21,6 @@ from ..scenes.variant import scene_variant
 from ..vocabulary import DIRECTIONS, FAMILIES
 
 __all__ = ["leaves_out_loaded_joints", "loaded_joint_maxima", "loaded_joints_note"]
-
-_TOLERANCE_FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
 
 
 def leaves_out_loaded_joints(scene, model: str) -> bool:
@@ -36,7 +36,7 @@ def _loaded_scene(scene):
     """The nominal robot (no [uncertain.*] inputs) at its nominal clearance sizes (no size bands, no
     relative size tolerance) with the quasi-static level's joints at their walls along the rigid joint
     forces."""
-    tolerance = [f for f in _TOLERANCE_FAMILIES if getattr(scene.tolerance, f) is not None]
+    tolerance = [f.name for f in dataclasses.fields(scene.tolerance) if getattr(scene.tolerance, f.name) is not None]
     overrides = {"simulation": {"quasi_static_eccentricity": "reaction"}}
     if scene.sampling.size_tolerance > 0.0:
         overrides["sampling"] = {"size_tolerance": 0.0}
