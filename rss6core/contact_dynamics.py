@@ -46,7 +46,7 @@ from .assembly import (LegLayout, build_elastic_model, frame_maps, join, link_fr
                        platform_point_map, scene_link_matrices, split, to_link_coordinates)
 from .link_reduction import craig_bampton, reduce_pair
 from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Records, Settings, State, System,
-                             Out, advance_chunk, fast_inlining, make_scratch, make_work, newton_step)
+                             Out, advance_chunk, kernel_compiling, make_scratch, make_work, newton_step)
 from .contact_options import MAX_CONTACT_REFINEMENTS, TOL_DISPLACEMENT, TOL_VELOCITY
 from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .dynamics import inverse_dynamics, platform_inertia_world, rod_angular_motion
@@ -843,7 +843,7 @@ class CompiledStepper(ContactStepper):
         out = Out(f=np.empty((R, 6, 3, 3)), gl=np.empty((R, 6, 12)), gp=np.empty((R, 6)),
                   delta=np.empty((R, 6, 4)), rate=np.empty((R, 6, 4)))
         done, count = np.zeros(R, np.bool_), np.zeros(R, np.int64)
-        with fast_inlining():
+        with kernel_compiling():
             newton_step(Frame(Rc=ch.Rc[j], J=ch.J[j], Rr=ch.Rr[j], omega=ch.omega[j]), self._joints_of(idx), sy, ab,
                         ap, float(bh2), float(gh), float(wf), self.settings, out, done, count, self.scratch)
         return JointSolution(ab=ab, ap=ap, f=out.f, gl=out.gl, gp=out.gp, converged=done, iterations=count,
@@ -864,7 +864,7 @@ class CompiledStepper(ContactStepper):
         live, arrays, joints = np.flatnonzero(ws.alive), ch.arrays(), self._joints_of(slice(None))
         begin, pause = np.zeros(len(ws.alive), np.int64), np.full(2, -1, np.int64)
         while True:
-            with fast_inlining():
+            with kernel_compiling():
                 advance_chunk(live, first, n_base, self.setup.every, lv, self.layout, self.settings, arrays,
                               joints, state, records, self.work, self.scratch, begin, pause)
             if pause[0] < 0:

@@ -59,7 +59,7 @@ from numba.extending import get_cython_function_address
 
 from .status import DIVERGED, NEWTON_FAILED   # the failure codes written to ``fail``
 
-__all__ = ["newton_step", "advance_chunk", "fast_inlining", "ball", "predict_one", "correct_one", "coarsest_next",
+__all__ = ["newton_step", "advance_chunk", "fast_inlining", "own_subroutines", "kernel_compiling", "ball", "predict_one", "correct_one", "coarsest_next",
            "balance_next", "Levels", "Layout", "Settings", "ChunkArrays", "Frame", "Law", "Joints", "State", "Records",
            "Out", "System", "make_work", "make_scratch"]
 
@@ -132,6 +132,34 @@ def fast_inlining():
         yield
     finally:
         inline_closurecall.copy = saved
+
+
+@contextlib.contextmanager
+def own_subroutines():
+    """Compile with a subroutine cache of the kernels' own.  numba compiles some operations (``x ** 2``)
+    as subroutines that take the caller's fastmath flags but are kept per process by code and
+    signature alone (``cached_internal_func``, numba issue 7168), so the first caller's flags won: a
+    process that had compiled a draw kernel's ``x ** 2`` first gave the contact kernel that square
+    without its flags, and a peak contact force one unit in the last place off a process that had
+    not.  A numba without that cache keeps its own."""
+    context = advance_chunk.targetctx
+    if not isinstance(getattr(context, "cached_internal_func", None), dict):
+        yield
+        return
+    saved = context.cached_internal_func
+    context.cached_internal_func = {}
+    try:
+        yield
+    finally:
+        context.cached_internal_func = saved
+
+
+@contextlib.contextmanager
+def kernel_compiling():
+    """What a kernel's call or compile runs under: :func:`fast_inlining` and :func:`own_subroutines`
+    (both cost nothing once the kernel is compiled or loaded)."""
+    with fast_inlining(), own_subroutines():
+        yield
 
 # --- named structures: every array and constant the kernel reads, by name ---
 

@@ -104,7 +104,7 @@ def compile_kernel(name: str, scene) -> float:
         for other, original in saved.items():
             setattr(contact_dynamics, other, original)
     start = time.perf_counter()
-    with contact_kernel.fast_inlining():
+    with contact_kernel.kernel_compiling():
         kernel.compile(tuple(kernel.typeof_pyval(a) for a in args))
     return time.perf_counter() - start
 
