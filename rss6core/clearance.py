@@ -23,6 +23,7 @@ Sobol' sensitivity design (pipeline/studies/sensitivity.py) by name, six per blo
 from __future__ import annotations
 
 import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,7 +36,8 @@ CLEARANCE_RADII = {"revolute_radial_m": "journal_radius_m", "revolute_axial_m": 
 
 __all__ = ["CLEARANCE_RADII", "SIZE_UNIFORMS", "FAMILIES", "UNIFORM_BLOCKS", "size_band", "SizeBand", "ClearanceDraw",
            "UniformVector", "NamedUniforms", "realization_rng", "truncated_normal", "sphere_directions",
-           "draw_clearances", "clearances_from_uniforms", "clearances_from_named_uniforms", "uniform_dimension"]
+           "draw_clearances", "clearances_from_uniforms", "eccentricities_inside", "clearances_from_named_uniforms",
+           "uniform_dimension"]
 
 
 def realization_rng(seed: int, realization: int) -> np.random.Generator:
@@ -132,6 +134,16 @@ def sphere_directions(rng: np.random.Generator, size: int, law: str = "uniform",
     out = np.empty((size, 3))
     _kernel().sphere_directions_into(u1, u2, law == "uniform", out)
     return out
+
+
+def eccentricities_inside(draw, w, size, margin: float, first: int, stop: int) -> bool:
+    """Whether steps [first, stop) of a per-step draw (eccentricities (steps, 6, 3) m) lie inside their
+    clearances ``size`` (18,) m, A, C, B, with ``margin`` on the squared lengths (the revolute's radial
+    part off its axis w (6, 3)); one compiled pass (:func:`.draw_kernel.inside_clearances`)."""
+    # writable C-ordered float arrays: the argument types of the one compiled overload (draw_kernel._load)
+    e_A, e_C, e_B = (np.require(a, float, "CW") for a in (draw.e_A, draw.e_C, draw.e_B))
+    return _kernel().inside_clearances(e_A, e_C, e_B, np.array(w, float), np.array(size, float),
+                                       float(margin), int(first), int(stop))
 
 
 @dataclass(frozen=True)

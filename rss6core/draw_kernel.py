@@ -28,7 +28,7 @@ from numba import njit, types
 from numba.extending import get_cython_function_address
 
 __all__ = ["TruncatedNormal", "Revolute", "Sphere", "truncated_normals", "sphere_directions_into",
-           "eccentricities_into", "turn"]
+           "eccentricities_into", "inside_clearances", "turn"]
 
 TWO_PI = 2.0 * math.pi
 # fdlibm's minimax polynomials of sin and cos on [-pi/4, pi/4] (k_sin.c, k_cos.c; error < 1 ulp)
@@ -119,12 +119,23 @@ def sphere_directions_into(u1, u2, uniform_sphere, out):
 
 @njit(cache=True)
 def _spherical(sphere, out):
-    """out[j, l] = k_s delta_s times the direction, (magnitude_u[j, l] size[l]) times each component."""
-    for j in range(out.shape[0]):
-        for leg in range(out.shape[1]):
+    """out[j, l] = k_s delta_s times the direction, (magnitude_u[j, l] size[l]) times each component.
+    The unit vectors first, in a flat loop of their own (one per law) that vectorises, which the
+    interleaved (n, 3) stores of the scaled vectors kept scalar."""
+    steps, legs = sphere.magnitude_u.shape
+    polar, azimuth = sphere.polar_u.ravel(), sphere.azimuth_u.ravel()
+    x, y, z = np.empty(steps * legs), np.empty(steps * legs), np.empty(steps * legs)
+    if sphere.uniform_sphere:
+        for i in range(steps * legs):
+            x[i], y[i], z[i] = _direction(polar[i], azimuth[i], True)
+    else:
+        for i in range(steps * legs):
+            x[i], y[i], z[i] = _direction(polar[i], azimuth[i], False)
+    for j in range(steps):
+        for leg in range(legs):
+            i = j * legs + leg
             magnitude = sphere.magnitude_u[j, leg] * sphere.size[leg]
-            x, y, z = _direction(sphere.polar_u[j, leg], sphere.azimuth_u[j, leg], sphere.uniform_sphere)
-            out[j, leg, 0], out[j, leg, 1], out[j, leg, 2] = magnitude * x, magnitude * y, magnitude * z
+            out[j, leg, 0], out[j, leg, 1], out[j, leg, 2] = magnitude * x[i], magnitude * y[i], magnitude * z[i]
 
 
 @njit(cache=True)
@@ -132,17 +143,46 @@ def eccentricities_into(rev, C, B, e_A, e_C, e_B):
     """e_A, e_C, e_B (steps, legs, 3) of a draw from its uniforms (steps, legs): the revolute's
     radial (truncated normal) magnitude r at angle theta = 2 pi u (:func:`turn`) plus the axial offset a,
     e_A = r cos(theta) plane_x + r sin(theta) plane_y + a w, and each sphere's k_s delta_s times a
-    direction (:class:`Revolute`, :class:`Sphere`)."""
-    for j in range(e_A.shape[0]):
-        for leg in range(e_A.shape[1]):
+    direction (:class:`Revolute`, :class:`Sphere`).  The turns first, in a flat loop of their own that
+    vectorises (beside scipy's ndtri calls they ran scalar)."""
+    steps, legs = e_A.shape[0], e_A.shape[1]
+    angle = rev.angle_u.ravel()
+    cosines, sines = np.empty(steps * legs), np.empty(steps * legs)
+    for i in range(steps * legs):
+        cosines[i], sines[i] = turn(angle[i])   # theta = 2 pi u
+    for j in range(steps):
+        for leg in range(legs):
             r = _truncated(rev.radial, rev.radial_u[j, leg] if not rev.radial.point else 0.0, leg)
-            cos_theta, sin_theta = turn(rev.angle_u[j, leg])   # theta = 2 pi u
             a = _truncated(rev.axial, rev.axial_u[j, leg] if not rev.axial.point else 0.0, leg)
-            rc, rs = r * cos_theta, r * sin_theta
+            rc, rs = r * cosines[j * legs + leg], r * sines[j * legs + leg]
             for k in range(3):
                 e_A[j, leg, k] = (rc * rev.plane_x[leg, k] + rs * rev.plane_y[leg, k]) + a * rev.w[leg, k]
     _spherical(C, e_C)
     _spherical(B, e_B)
+
+
+@njit(cache=True)
+def inside_clearances(e_A, e_C, e_B, w, size, margin, first, stop):
+    """Whether every step in [first, stop) of a draw's eccentricities (steps, legs, 3) lies inside its
+    joint's clearance with a margin: |e_A - (e_A . w) w|^2, |e_C|^2 and |e_B|^2 below ``margin`` times
+    the squared size (``size`` (18,) m: A, C, B by leg; ``w`` (legs, 3) the revolute axes).  The same
+    products as numpy's x x + y y + z z; a NaN fails, as in numpy's comparison.  Counted without an
+    early exit, so that the loops vectorise.  Squares as products: numba compiles ``x ** 2`` as a
+    subroutine shared per process with later callers (:func:`.contact_kernel.own_subroutines`)."""
+    legs = e_A.shape[1]
+    outside = 0
+    for j in range(first, stop):
+        for leg in range(legs):
+            x, y, z = e_A[j, leg, 0], e_A[j, leg, 1], e_A[j, leg, 2]
+            along = x * w[leg, 0] + y * w[leg, 1] + z * w[leg, 2]
+            rx, ry, rz = x - along * w[leg, 0], y - along * w[leg, 1], z - along * w[leg, 2]
+            outside += not (rx * rx + ry * ry + rz * rz < margin * (size[leg] * size[leg]))
+    for e, offset in ((e_C, legs), (e_B, 2 * legs)):
+        for j in range(first, stop):
+            for leg in range(legs):
+                x, y, z = e[j, leg, 0], e[j, leg, 1], e[j, leg, 2]
+                outside += not (x * x + y * y + z * z < margin * (size[offset + leg] * size[offset + leg]))
+    return outside == 0
 
 
 def _load() -> None:
@@ -155,6 +195,7 @@ def _load() -> None:
     truncated_normals(law, u, np.zeros((1, 6)))
     sphere = Sphere(legs, u, u, u, True)
     eccentricities_into(Revolute(law, u, u, law, u, vectors, vectors, vectors), sphere, sphere, out, out, out)
+    inside_clearances(out, out, out, vectors, np.ones(18), 1.0, 0, 1)
 
 
 _load()

@@ -36,8 +36,8 @@ import dataclasses
 import numpy as np
 
 from .assembly import link_frames
-from .clearance import (SIZE_UNIFORMS, ClearanceDraw, clearances_from_uniforms, draw_clearances, realization_rng,
-                        uniform_dimension)
+from .clearance import (SIZE_UNIFORMS, ClearanceDraw, clearances_from_uniforms, draw_clearances,
+                        eccentricities_inside, realization_rng, uniform_dimension)
 from .contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
 from .kinematics import rigid_motion
 from .quasi_static import CENTRAL_PAD, closure_matrix, padded_grid, time_derivatives
@@ -118,19 +118,9 @@ INSIDE_MARGIN = 1.0 - 1e-9   # |e|^2 below this times size^2: no penetration des
 def _inside(draw, w, size) -> bool:
     """Whether every output step's eccentricity of a :func:`paper_draw` (the revolute's radial part
     off its axis w (6, 3)) lies clearly inside its clearance ``size`` (18,) m: then no force can
-    act (eq. 17), and the force history is zero.  A cheap test (squared lengths, formed component
-    by component from strided views) with a margin that rounding cannot cross."""
-    inner = slice(CENTRAL_PAD, -CENTRAL_PAD)
-    x, y, z = (draw.e_A[inner, :, k] for k in range(3))
-    along = x * w[:, 0] + y * w[:, 1] + z * w[:, 2]
-    radial = [x - along * w[:, 0], y - along * w[:, 1], z - along * w[:, 2]]
-    squared = np.concatenate([_squared(*radial), _squared(*(draw.e_C[inner, :, k] for k in range(3))),
-                              _squared(*(draw.e_B[inner, :, k] for k in range(3)))], -1)
-    return bool((squared < INSIDE_MARGIN * size ** 2).all())   # a NaN fails it
-
-
-def _squared(x, y, z) -> np.ndarray:
-    return x * x + y * y + z * z
+    act (eq. 17), and the force history is zero.  A cheap test (squared lengths, one compiled pass,
+    :func:`.clearance.eccentricities_inside`) with a margin that rounding cannot cross."""
+    return eccentricities_inside(draw, w, size, INSIDE_MARGIN, CENTRAL_PAD, len(draw.e_A) - CENTRAL_PAD)
 
 
 def paper_draw(scene, seed: int, realization: int, steps: int, uniforms=None) -> ClearanceDraw:
