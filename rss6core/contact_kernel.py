@@ -59,9 +59,9 @@ from numba.extending import get_cython_function_address
 
 from .status import DIVERGED, NEWTON_FAILED   # the failure codes written to ``fail``
 
-__all__ = ["newton_step", "advance_chunk", "fast_inlining", "own_subroutines", "kernel_compiling", "ball", "predict_one", "correct_one", "coarsest_next",
-           "balance_next", "Levels", "Layout", "Settings", "ChunkArrays", "Frame", "Law", "Joints", "State", "Records",
-           "Out", "System", "make_work", "make_scratch"]
+__all__ = ["newton_step", "advance_chunk", "fast_inlining", "own_subroutines", "kernel_compiling", "ball",
+           "predict_one", "correct_one", "coarsest_next", "balance_next", "Levels", "Layout", "Settings",
+           "ChunkArrays", "Frame", "Law", "Joints", "State", "Records", "Out", "System", "make_work", "make_scratch"]
 
 # reassociation and fused multiply-add, but no finite-math assumption: a diverging
 # realisation's inf and nan must survive to be reported.  Every fastmath function is inlined
