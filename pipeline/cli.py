@@ -31,11 +31,39 @@ def commands() -> tuple:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with a one-line error (the option and the problem; ``-h`` gives the usage)."""
+    """argparse with a one-line error (the option and the problem; ``-h`` gives the usage); an option
+    the command does not take names the commands that take it, or this command's nearest options."""
 
     def error(self, message: str):
         print(f"{self.prog}: error: {message} (see {self.prog} -h)", file=sys.stderr)
         sys.exit(2)
+
+    def parse_args(self, args=None, namespace=None):
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            command = getattr(parsed, "command", None)
+            where = f"{self.prog} {command}" if command else self.prog
+            hints = [hint for hint in (_option_hint(self, command, word) for word in extras) if hint]
+            print(f"{where}: error: unrecognized arguments: {' '.join(extras)}"
+                  + "".join(f"; {hint}" for hint in hints) + f" (see {where} -h)", file=sys.stderr)
+            sys.exit(2)
+        return parsed
+
+
+def _option_hint(parser: argparse.ArgumentParser, command: str | None, word: str) -> str:
+    """What to say of an argument ``command`` does not take: for an option, the other commands that
+    take it, else the command's own options it is closest to; nothing for a value."""
+    import difflib
+    option = word.split("=", 1)[0]
+    if not option.startswith("--") or command is None:
+        return ""
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+    takers = [name for name, sub in commands.items() if option in sub._option_string_actions]
+    if takers:
+        return f"{option} is an option of " + ", ".join(f"{parser.prog} {name}" for name in takers)
+    own = [o for o in commands[command]._option_string_actions if o.startswith("--")]
+    near = difflib.get_close_matches(option, own, n=2)
+    return f"{command} has no {option}" + (f"; did you mean {' or '.join(near)}?" if near else "")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -135,3 +135,19 @@ def test_the_loop_covers_every_command_and_the_seed_of_each():
     cases = {(c.values[0], c.values[1]) for c in _cases()}
     assert {c for c, _ in cases} == set(_commands()) - {"check", "warm", "plot"} | {"plot"}
     assert {c for c, o in cases if o == "--seed"} >= {"tradeoff", "stability", "report", "run", "simulate"}
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["run", "smoke", "--event", "displacement:z>0.1mm"],
+     "rss6 run: error: unrecognized arguments: --event displacement:z>0.1mm; --event is an option of "
+     "rss6 stats, rss6 reliability (see rss6 run -h)"),
+    (["run", "smoke", "--workrs=2"], "rss6 run: error: unrecognized arguments: --workrs=2; run has no --workrs; "
+                                     "did you mean --workers? (see rss6 run -h)"),
+    (["check", "smoke", "--zzz"],
+     "rss6 check: error: unrecognized arguments: --zzz; check has no --zzz (see rss6 check -h)"),
+    (["stats", "{file}", "extra"], "rss6 stats: error: unrecognized arguments: extra (see rss6 stats -h)"),
+], ids=["another command's option", "a typo", "nothing near", "a value"])
+def test_an_option_the_command_does_not_take_names_the_commands_that_do_or_the_nearest(argv, says, capsys, tmp_path,
+                                                                                    small_file, no_work):
+    code, err = _run(argv, capsys, tmp_path, small_file)
+    assert code == 2 and err == [says], err
