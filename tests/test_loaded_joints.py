@@ -65,3 +65,18 @@ def test_stats_notes_the_loaded_joints_when_it_judges_a_drawn_file(tmp_path, cap
     assert main(["stats", str(path), "--event", "displacement:z>0.1mm"]) == 0
     err = capsys.readouterr().err
     assert err.startswith("rss6 stats: note: the quasi-static level places each joint") and err.count("\n") == 1
+
+
+def test_run_notes_the_loaded_joints_when_it_judges_a_requirement(tmp_path, capsys):
+    """rss6 run --require at the quasi-static (drawn) level ends with the note, after its verdicts; the
+    same run without a requirement judges nothing and does not."""
+    from pipeline.cli import main
+    argv = ["run", "smoke", "-n", "4", "--model", "quasi-static", "--workers", "1"]
+    assert main([*argv, "-o", str(tmp_path / "plain.nc")]) == 0
+    assert "note:" not in capsys.readouterr().err
+    main([*argv, "-o", str(tmp_path / "judged.nc"), "--require", "displacement:z<=1mm@q95"])
+    out, err = capsys.readouterr()
+    assert "displacement:z<=1mm@q95" in out
+    notes = [line for line in err.splitlines() if "note:" in line]   # after the run's progress lines
+    assert len(notes) == 1 and notes[0].startswith("rss6 run: note: the quasi-static level places each joint")
+    assert err.splitlines()[-1] == notes[0]

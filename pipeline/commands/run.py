@@ -10,7 +10,7 @@ from ..analysis.summary import run_default_level
 from ..ensemble.settings import resolve_cluster, resolve_level, resolve_replicates
 from ..scenes.catalogue import find_scene
 from ..vocabulary import QUANTITIES, STORES, OptionError
-from .messages import import_meanwhile, interrupted, scheduler_lost, warn_oversubscription
+from .messages import import_meanwhile, interrupted, note_loaded_joints, scheduler_lost, warn_oversubscription
 from .options import (LEVELS_HELP, add_level_settings, add_model, add_parents, add_require, add_scene, add_scheduler,
                       add_seed, add_workers, int_at_least, positive_int)
 from .requirements import annotator, known_windows, requirements
@@ -144,6 +144,7 @@ def _report(args, level, outcome, until, output, specs: list, verdicts: list) ->
     if not specs:
         return code
     print(format_verdicts(verdicts))
+    note_loaded_joints("run", level.scene, level.model)   # judged: say what the level leaves out
     return code or exit_code(verdicts, args.undecided)   # an --until cap reached first stays 1
 
 
