@@ -143,3 +143,11 @@ def test_a_bad_cov_request_is_one_line_exit_2(tmp_path, capsys, monkeypatch, ext
         code = exc.code
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and token in err, err
+
+
+def test_mc_without_a_cov_target_claims_no_convergence(tmp_path, capsys):
+    """A fixed -n of plain Monte Carlo is 'finished' (the draws asked for), not 'converged', which only
+    a met CoV target or subset simulation's last level earns."""
+    res = _run_json(capsys, ["reliability", "smoke", "--event", EVENT, "--method", "mc", "-n", "1000",
+                             "--workers", "1", "-o", str(tmp_path / "m.nc"), "--json"])
+    assert res["status"] == "finished" and res["evaluations"] == 1000
