@@ -2,6 +2,7 @@
 every evaluation (its z, level and maxima reproduce the estimate), plain Monte Carlo's exact interval,
 and one-line refusals (exit 2) of a bad event, p0 or N, and of a level without random inputs."""
 import json
+import re
 
 import numpy as np
 import pytest
@@ -87,6 +88,8 @@ def test_a_stalled_subset_run_is_one_line_exit_2_and_keeps_its_evaluations(tmp_p
     captured = capsys.readouterr()
     err = captured.err.strip()
     assert len(err.splitlines()) == 1 and "no estimate of P(displacement:z>0.285mm) (stalled" in err, err
+    threshold = re.search(r"the threshold (\S+) mm does not rise", err)   # in the event's unit
+    assert threshold and 0.01 < float(threshold.group(1)) < 0.285, err
     assert "nan" not in captured.out and str(out) in err
     assert load_netcdf(out)["max_abs_error"].sizes["evaluation"] > 20
 

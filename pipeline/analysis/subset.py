@@ -233,9 +233,10 @@ def _first_level_extreme(r, threshold, record0, records, settings):
 
 
 def subset_simulation(response, dimension: int, threshold: float = 0.0,
-                      settings: SubsetSettings = SubsetSettings()) -> SubsetResult:
+                      settings: SubsetSettings = SubsetSettings(), unit: tuple[str, float] = ("", 1.0)) -> SubsetResult:
     """P(response(z) > threshold), z ~ N(0, I_d); ``response`` maps an (m, d) array to (m,) responses
-    and is called once per level-0 batch and once per chain step (module doc)."""
+    and is called once per level-0 batch and once per chain step (module doc). ``unit``: the name and
+    size (in the response's units) that messages give thresholds in."""
     nc, d = settings.chains, int(dimension)
     z, r = _level_zero(response, d, settings)
     records = [(z.reshape(-1, d), np.zeros(r.size, int), r.ravel())]
@@ -254,8 +255,8 @@ def subset_simulation(response, dimension: int, threshold: float = 0.0,
                            f"{level + 1} levels", settings)
         if not b > previous:
             return _finish(levels, float("nan"), records, "stalled",
-                           f"level {level}: the threshold {b:g} (SI units) does not rise; the response may be flat "
-                           "or discontinuous here", settings)
+                           f"level {level}: the threshold {b / unit[1]:g}{unit[0] and ' ' + unit[0]} does not rise; "
+                           "the response may be flat or discontinuous here", settings)
         levels.append(_level_record(r, b, level, evaluations, acceptance, scale))
         pf, previous = pf * levels[-1].probability, b
         (z, r), (cz, cr), acceptance, scale = _grow_chains(response, z.reshape(-1, d)[seeds],

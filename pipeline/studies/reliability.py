@@ -223,7 +223,7 @@ def _subset(spec, event: Event, dimension: int, settings: SubsetSettings, client
         collected.append(batch(z))
         return _response(event, collected[-1])
 
-    res = subset_simulation(response, dimension, event.limit, settings)
+    res = subset_simulation(response, dimension, event.limit, settings, (event.unit, event.factor))
     e = res.evaluations
     return Estimate("subset", res.pf, res.lower, res.upper, res.confidence, res.cov, res.interval,
                     tuple(rec.evaluations for rec in res.levels), tuple(rec.threshold for rec in res.levels),
