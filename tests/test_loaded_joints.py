@@ -53,30 +53,27 @@ def test_the_note_is_one_line_naming_the_assumption_and_the_loaded_maxima(paper,
     assert capsys.readouterr().err == ""
 
 
-def test_stats_notes_the_loaded_joints_when_it_judges_a_drawn_file(tmp_path, capsys):
-    """rss6 stats with --event or --require on a quasi-static (drawn) file ends with the note; plain
-    statistics, which judge nothing, do not."""
+def test_run_and_stats_end_with_the_note_on_a_drawn_level_and_not_on_the_loaded_one(tmp_path, capsys, configs):
+    """rss6 run at the quasi-static (drawn) level ends with the note, after its statistics and verdicts, and
+    so does rss6 stats on its file (plain, or judging with --event or --require); at the "reaction" mode
+    (the loaded joints) neither does."""
     from pipeline.cli import main
     path = tmp_path / "qs.nc"
-    assert main(["run", "smoke", "-n", "4", "--model", "quasi-static", "--workers", "1", "-o", str(path)]) == 0
-    capsys.readouterr()
-    assert main(["stats", str(path)]) == 0
-    assert "note:" not in capsys.readouterr().err
-    assert main(["stats", str(path), "--event", "displacement:z>0.1mm"]) == 0
-    err = capsys.readouterr().err
-    assert err.startswith("rss6 stats: note: the quasi-static level places each joint") and err.count("\n") == 1
-
-
-def test_run_notes_the_loaded_joints_when_it_judges_a_requirement(tmp_path, capsys):
-    """rss6 run --require at the quasi-static (drawn) level ends with the note, after its verdicts; the
-    same run without a requirement judges nothing and does not."""
-    from pipeline.cli import main
-    argv = ["run", "smoke", "-n", "4", "--model", "quasi-static", "--workers", "1"]
-    assert main([*argv, "-o", str(tmp_path / "plain.nc")]) == 0
-    assert "note:" not in capsys.readouterr().err
-    main([*argv, "-o", str(tmp_path / "judged.nc"), "--require", "displacement:z<=1mm@q95"])
+    assert main(["run", "smoke", "-n", "4", "--model", "quasi-static", "--workers", "1", "-o", str(path),
+                 "--require", "displacement:z<=1mm@q95"]) == 3   # undecided at n = 4
     out, err = capsys.readouterr()
     assert "displacement:z<=1mm@q95" in out
     notes = [line for line in err.splitlines() if "note:" in line]   # after the run's progress lines
     assert len(notes) == 1 and notes[0].startswith("rss6 run: note: the quasi-static level places each joint")
     assert err.splitlines()[-1] == notes[0]
+    for judge in ([], ["--event", "displacement:z>0.1mm"], ["--require", "displacement:z<=1mm@q95"]):
+        assert main(["stats", str(path), *judge]) == (3 if judge[:1] == ["--require"] else 0)
+        err = capsys.readouterr().err
+        assert err.startswith("rss6 stats: note: the quasi-static level places each joint") and err.count("\n") == 1
+    loaded = tmp_path / "loaded.toml"
+    loaded.write_text(scene_variant((configs / "smoke.toml").read_text(),
+                                    {"simulation": {"quasi_static_eccentricity": "reaction"}}, "smoke", add=True))
+    assert main(["run", str(loaded), "-n", "4", "--model", "quasi-static", "--workers", "1",
+                 "-o", str(tmp_path / "r.nc")]) == 0
+    assert main(["stats", str(tmp_path / "r.nc")]) == 0
+    assert "note:" not in capsys.readouterr().err

@@ -141,10 +141,11 @@ def _report(args, level, outcome, until, output, specs: list, verdicts: list) ->
     if not dynamic:
         print(f"(displacement only; rss6 stats {output} shows velocity and acceleration too)")
     code = 0 if until is None else _until_verdict(until, args.n)
+    if specs:
+        print(format_verdicts(verdicts))
+    note_loaded_joints("run", level.scene, level.model)   # what the level's statistics leave out
     if not specs:
         return code
-    print(format_verdicts(verdicts))
-    note_loaded_joints("run", level.scene, level.model)   # judged: say what the level leaves out
     return code or exit_code(verdicts, args.undecided)   # an --until cap reached first stays 1
 
 

@@ -70,7 +70,7 @@ def main(args) -> int:
             print(format_exceedance(probabilities))
         if specs:
             print(format_verdicts(verdicts))
-    if (specs or events) and "scene_toml" in ds.attrs and "model" in ds.attrs:   # judged: say what it leaves out
+    if "scene_toml" in ds.attrs and "model" in ds.attrs:   # say what the level's statistics leave out
         from rss6core import parse_scene
         note_loaded_joints("stats", parse_scene(ds.attrs["scene_toml"], str(args.file)), str(ds.attrs["model"]))
     return exit_code(verdicts, args.undecided) if specs else 0
