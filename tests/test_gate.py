@@ -389,6 +389,7 @@ def test_quantile_decisions_err_at_most_nominal_plus_one_point(law, statistic):
         x = _samples(law, n, seed=10 * i + int(100 * p))
         lower, upper = quantile_bounds(np.sort(x, axis=0), p, CONF)
         failed_le, failed_ge = lower > truth, upper < truth          # NaN compares False
+        print(f"failed at the limit {statistic} {law} n={n}: {max(failed_le.mean(), failed_ge.mean()):.4f}")
         assert failed_le.mean() <= 0.06 and failed_ge.mean() <= 0.06, (n, failed_le.mean(),
                                                                         failed_ge.mean())
         assert (upper < truth).mean() <= 0.06 and (lower > truth).mean() <= 0.06  # passed '<', '>'
@@ -404,6 +405,8 @@ def test_mean_decisions_err_at_most_nominal_plus_one_point(law):
     law_ = LAWS[law]
     for i, n in enumerate(SIZES):
         lower, upper = mean_bounds(_samples(law, n, seed=500 + i), CONF)
+        print(f"failed at the limit mean {law} n={n}: "
+              f"{max((lower > law_.mean()).mean(), (upper < law_.mean()).mean()):.4f}")
         assert (lower > law_.mean()).mean() <= 0.06, (n, (lower > law_.mean()).mean())
         assert (upper < law_.mean()).mean() <= 0.06, (n, (upper < law_.mean()).mean())
 
