@@ -52,7 +52,7 @@ ACCELERATION = (
     "{steady_a:.3g} mm/s^2 in steady operation (t >= {steady_after:g} s, medians of the "
     "per-realisation maxima). {start} An impact's peak depends on the contact stiffness and on "
     "resolving it in time, which is why the contact level halves its step where an impact needs it "
-    "(README, 'Speed and accuracy': a fixed step fine enough for these peaks would have to be fine "
+    "(docs/guide.md, 'Speed and accuracy': a fixed step fine enough for these peaks would have to be fine "
     "for the whole run). On the paper scene rss6's steady maxima are converged in mesh and step "
     "within 5 %, but an independent geometrically exact model converges to maxima 1.3-2.4x larger "
     "(displacement maxima within 0.3 %), cause partly found (the rods' spin and the spherical joints' "
