@@ -65,7 +65,21 @@ def import_meanwhile(*modules: str) -> None:
 def note_loaded_joints(command: str, scene, model: str) -> None:
     """One line on stderr after a designer's answer at a level that places the joints inside their
     play rather than where the loads push them (:func:`pipeline.studies.loaded_joints.loaded_joints_note`)."""
-    from ..studies.loaded_joints import loaded_joints_note
-    note = loaded_joints_note(scene, model)
-    if note:
-        print(f"rss6 {command}: {note}", file=sys.stderr)
+    loaded_joints_meanwhile(command, scene, model)()
+
+
+def loaded_joints_meanwhile(command: str, scene, model: str):
+    """Start :func:`note_loaded_joints`'s computation in a thread and return the function that prints
+    it once the answer is out: its quasi-static run (and the draw kernels' import, 0.3-0.4 s) then
+    overlaps the command's own work instead of following it."""
+    from ..studies.loaded_joints import leaves_out_loaded_joints, loaded_joints_note
+    if not leaves_out_loaded_joints(scene, model):
+        return lambda: None
+    import concurrent.futures
+    pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="rss6-note")
+    note = pool.submit(loaded_joints_note, scene, model)
+    pool.shutdown(wait=False)
+
+    def show() -> None:
+        print(f"rss6 {command}: {note.result()}", file=sys.stderr)
+    return show

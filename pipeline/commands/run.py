@@ -10,7 +10,8 @@ from ..analysis.summary import run_default_level
 from ..ensemble.settings import resolve_cluster, resolve_level, resolve_replicates
 from ..scenes.catalogue import find_scene
 from ..vocabulary import QUANTITIES, STORES, OptionError
-from .messages import import_meanwhile, interrupted, note_loaded_joints, scheduler_lost, warn_oversubscription
+from .messages import (import_meanwhile, interrupted, loaded_joints_meanwhile, scheduler_lost,
+                       warn_oversubscription)
 from .options import (LEVELS_HELP, add_level_settings, add_model, add_parents, add_require, add_scene, add_scheduler,
                       add_seed, add_workers, int_at_least, positive_int)
 from .requirements import annotator, known_windows, requirements
@@ -82,13 +83,14 @@ def main(args) -> int:
     import_meanwhile("distributed", "pipeline.analysis.gate")   # gate imports stats (scipy.stats)
     spec = level.ensemble_spec(args.seed, args.store, replicates)
     kept = f"finished chunks are kept in {parts_dir(output)}"
+    note = loaded_joints_meanwhile("run", level.scene, level.model)   # what the statistics will leave out
     try:
         outcome, until = _compute(args, spec, targets, output, cluster, annotator(specs, verdicts))
     except SchedulerUnavailable as exc:
         return scheduler_lost(exc, kept, parts_dir(output).exists())
     except KeyboardInterrupt:
         return interrupted(kept if parts_dir(output).exists() else None)
-    return _report(args, level, outcome, until, output, specs, verdicts)
+    return _report(args, level, outcome, until, output, specs, verdicts, note)
 
 
 def level_settings(args):
@@ -120,8 +122,9 @@ def _compute(args, spec, targets: list, output, cluster, annotate):
     return outcome, None
 
 
-def _report(args, level, outcome, until, output, specs: list, verdicts: list) -> int:
-    """Print what was written, the statistics and the verdicts; the exit code."""
+def _report(args, level, outcome, until, output, specs: list, verdicts: list, note) -> int:
+    """Print what was written, the statistics, the verdicts and ``note`` (what they leave out); the exit
+    code."""
     from ..analysis.gate import exit_code, format_verdicts
     from ..analysis.stats import ensemble_stats, format_stats
     from ..analysis.summary import failure_reasons
@@ -143,7 +146,7 @@ def _report(args, level, outcome, until, output, specs: list, verdicts: list) ->
     code = 0 if until is None else _until_verdict(until, args.n)
     if specs:
         print(format_verdicts(verdicts))
-    note_loaded_joints("run", level.scene, level.model)   # what the level's statistics leave out
+    note()
     if not specs:
         return code
     return code or exit_code(verdicts, args.undecided)   # an --until cap reached first stays 1

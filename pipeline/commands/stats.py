@@ -40,7 +40,6 @@ def main(args) -> int:
     from ..files.opening import open_results
     from ..files.outputs import check_new_output
     from ..files.writing import write_netcdf
-    from .messages import note_loaded_joints
     specs = requirements(args)
     known_windows(specs)
     events = _events(args)
@@ -52,6 +51,7 @@ def main(args) -> int:
     if args.output:
         check_new_output(args.output, "rss6 stats", args.parents)
     ds = open_results(args.file)
+    note = _loaded_joints_note(ds, args.file)
     full = ensemble_stats(ds, args.confidence, window=None)
     if args.window is not None:
         full, specs = _window_of(full, args.window), [replace(s, window=s.window or args.window) for s in specs]
@@ -70,10 +70,19 @@ def main(args) -> int:
             print(format_exceedance(probabilities))
         if specs:
             print(format_verdicts(verdicts))
-    if "scene_toml" in ds.attrs and "model" in ds.attrs:   # say what the level's statistics leave out
-        from rss6core import parse_scene
-        note_loaded_joints("stats", parse_scene(ds.attrs["scene_toml"], str(args.file)), str(ds.attrs["model"]))
+    note()
     return exit_code(verdicts, args.undecided) if specs else 0
+
+
+def _loaded_joints_note(ds, path):
+    """The function that prints what the file's level leaves out (:func:`.messages.loaded_joints_meanwhile`,
+    computed meanwhile); nothing for a file without its scene and level."""
+    if "scene_toml" not in ds.attrs or "model" not in ds.attrs:
+        return lambda: None
+    from rss6core import parse_scene
+
+    from .messages import loaded_joints_meanwhile
+    return loaded_joints_meanwhile("stats", parse_scene(ds.attrs["scene_toml"], str(path)), str(ds.attrs["model"]))
 
 
 def _events(args) -> list:
