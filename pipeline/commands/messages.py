@@ -70,8 +70,8 @@ def note_loaded_joints(command: str, scene, model: str) -> None:
 
 def loaded_joints_meanwhile(command: str, scene, model: str):
     """Start :func:`note_loaded_joints`'s computation in a thread and return the function that prints
-    it once the answer is out: its quasi-static run (and the draw kernels' import, 0.3-0.4 s) then
-    overlaps the command's own work instead of following it."""
+    it once the answer is out: its quasi-static run (and the draw kernels' import) then overlaps the
+    command's own work instead of following it (docs/performance.md section 36)."""
     from ..studies.loaded_joints import leaves_out_loaded_joints, loaded_joints_note
     if not leaves_out_loaded_joints(scene, model):
         return lambda: None

@@ -5,8 +5,8 @@ place each joint's element anywhere inside its play; under gravity and inertia l
 against their walls, which the contact level shows and the quasi-static level's ``"reaction"`` mode
 reproduces to 1.5 % of the error on a slowed trajectory (docs/guide.md, "One realisation of each
 level"): on the paper scene the steady z displacement error is about 1 mm against 0.07-0.1 mm drawn.
-A designer's answer (``rss6 reliability``, ``allocate``, ``budget``, a verdict of ``run`` or ``stats``) at
-such a level says so, with the loaded state's steady maxima from one quasi-static run at the nominal
+A designer's answer (``rss6 reliability``, ``allocate``, ``budget``, and the statistics ``run`` and ``stats``
+print) at such a level says so, with the loaded state's steady maxima from one quasi-static run at the nominal
 sizes, so that the size of what the answer leaves out is on the screen beside it.
 """
 from __future__ import annotations
