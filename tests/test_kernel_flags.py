@@ -51,6 +51,10 @@ def test_a_kernel_compiled_with_its_own_subroutines_keeps_its_flags_on_every_squ
 
 
 def test_without_its_own_subroutines_a_kernel_takes_the_flags_of_whoever_compiled_the_square_first():
-    """The defect the fix removes, so that the test above can fail: numba's own cache."""
+    """The defect the fix removes, so that the test above can fail: numba's own cache (skipped on a numba
+    that no longer shares the subroutine across flags)."""
     assert _square_flags("alone", "numba") == [FAST]
-    assert _square_flags("plain-first", "numba") == [""]
+    shared = _square_flags("plain-first", "numba")
+    if shared == [FAST]:
+        pytest.skip("this numba keeps a subroutine per caller's flags (numba issue 7168 fixed)")
+    assert shared == [""]
