@@ -27,7 +27,8 @@ Running a level
 - SimulationResult: what every level returns (error histories in SI, status and message).
 - FINISHED, FAILED, STATUSES: the status vocabulary every level and every file uses.
 - ContactBatch: the contact level's results for a batch of realisations (one SimulationResult each).
-- time_grid: the output instants (s) of a duration and step, or ValueError if the step does not divide it.
+- time_grid: the output instants (s) of a duration and step, or ValueError if the step does not divide it;
+  check_step_count: a run's number of steps, or ValueError outside 10 to 1,000,000.
 - stored_draw: the clearance draw an ensemble file records for one realisation.
 - stored_inputs: the uncertain inputs ([uncertain.*]) an ensemble file records for one realisation, or None.
 - check_uncertain_level: ValueError naming a level that cannot take a scene's uncertain inputs yet.
@@ -82,7 +83,7 @@ The rigid robot
   and the rigid crank's frequency (Hz) on a servo of a given stiffness ([actuator]).
 """
 from .elastic import quasi_static_state, simulate_elastic
-from .results import ContactBatch, SimulationResult, time_grid
+from .results import ContactBatch, SimulationResult, check_step_count, time_grid
 from .assembly import build_elastic_model
 from .beam import BEAM_THEORIES, BeamTheory
 from .link_reduction import max_link_modes
@@ -99,7 +100,7 @@ from .levels import (MODEL_LEVELS, MODELS, ModelLevel, check_uncertain_level, de
 from .quasi_static import closure_matrix
 from .models import (Level, degrees_of_freedom, natural_frequencies, prepare_level, simulate, simulate_batch,
                      stored_draw, stored_inputs)
-from .scene import CLEARANCE_RADII, Scene, SceneError, load_scene, parse_scene
+from .scene import CLEARANCE_RADII, MAX_ELEMENTS_PER_LINK, Scene, SceneError, load_scene, parse_scene
 from .uncertain import inputs_from_uniforms
 from .realised import realised_clearances
 from .status import FAILED, FINISHED, STATUSES
@@ -113,7 +114,8 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII"
            "MODELS", "MODEL_LEVELS", "ModelLevel", "model_level", "models_with", "INTEGRATORS", "CONTACT_STARTS",
            "TOL_DISPLACEMENT", "TOL_VELOCITY", "closure_matrix",
            "simulate", "simulate_batch", "prepare_level", "Level",
-           "SimulationResult", "ContactBatch", "time_grid", "FINISHED", "FAILED", "STATUSES",
+           "MAX_ELEMENTS_PER_LINK", "SimulationResult", "ContactBatch", "time_grid", "check_step_count", "FINISHED",
+           "FAILED", "STATUSES",
            "stored_draw", "stored_inputs", "check_uncertain_level", "draws_per_realisation", "inputs_from_uniforms",
            "realised_clearances",
            "default_time_step", "default_integrator", "natural_frequencies",

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SimulationResult", "ContactBatch", "time_grid", "PEAK_WINDOWS"]
+__all__ = ["SimulationResult", "ContactBatch", "time_grid", "check_step_count", "PEAK_WINDOWS"]
 
 PEAK_WINDOWS = ("startup", "steady")   # axis 0 of the peaks: t < steady_after, t >= steady_after
 
@@ -49,6 +49,20 @@ class ContactBatch:
                                 self.status[k], self.message[k], int(self.steps[k]),
                                 peak_abs_error=self.peak[k], contact_force_peak=self.contact_peak[k],
                                 iterations=int(self.iterations[k]))
+
+
+MIN_STEPS, MAX_STEPS = 10, 1_000_000   # a run's output steps: enough for its windows, few enough for its memory
+
+
+def check_step_count(duration: float, dt: float) -> int:
+    """The number of output steps of a run of ``duration`` s at ``dt`` s, or ValueError where the step
+    does not divide the duration or gives fewer than MIN_STEPS or more than MAX_STEPS steps (the run's
+    histories and derivatives need a few samples; each step holds arrays for every realisation)."""
+    steps = len(time_grid(duration, dt)) - 1
+    if not MIN_STEPS <= steps <= MAX_STEPS:
+        raise ValueError(f"time step {dt!r} s gives {steps} steps over the duration {duration!r} s; a run takes "
+                         f"{MIN_STEPS} to {MAX_STEPS} steps")
+    return steps
 
 
 def time_grid(duration: float, dt: float) -> np.ndarray:

@@ -27,9 +27,12 @@ from .kinematics import WorkspaceError, check_workspace
 from .link_reduction import max_link_modes
 from .levels import MODELS
 from .pose_csv import file_trajectory, with_pose_samples
+from .results import MAX_STEPS, MIN_STEPS
 from .sections import RectangleSection, TubeSection
 from .uncertain import UncertainInputError, UncertainInputs, parse_uncertain
 from .trajectory_kinds import TRAJECTORY_KINDS, SampledPoses, Sinusoid, TrajectoryError, ViaPoints, via_points
+
+MAX_ELEMENTS_PER_LINK = 64   # beam elements per crank and per rod
 
 __all__ = [
     "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping",
@@ -297,7 +300,7 @@ _SCHEMA: dict = {
         "time_step_s": _Key(float, check=_POS),
         "model": _Key(str, default="elastic", choices=MODELS),
         "integrator": _Key(str, default="newmark", choices=INTEGRATORS),
-        "elements_per_link": _Key(int, default=4, bounds=(1, 64)),
+        "elements_per_link": _Key(int, default=4, bounds=(1, MAX_ELEMENTS_PER_LINK)),
         "newmark_beta": _Key(float, default=0.25, bounds=(0.0, 0.5)),
         "newmark_gamma": _Key(float, default=0.5, bounds=(0.0, 1.0)),
         "hht_alpha": _Key(float, default=0.05, bounds=(0.0, 1.0 / 3.0)),
@@ -546,6 +549,9 @@ def _build(v: dict, text: str, source: str) -> Scene:
     if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
         raise SceneError(f"[simulation] time_step_s: {dt!r} does not divide "
                          f"{where} = {duration!r} into whole steps")
+    if not MIN_STEPS <= round(steps) <= MAX_STEPS:
+        raise SceneError(f"[simulation] time_step_s: {dt!r} gives {round(steps)} steps over {where} = "
+                         f"{duration!r}; a run takes {MIN_STEPS} to {MAX_STEPS} steps")
     if v["simulation"]["settle_time_s"] >= duration:
         raise SceneError(f"[simulation] settle_time_s: must be shorter than {where} "
                          f"= {duration!r}, got {v['simulation']['settle_time_s']!r}")

@@ -651,3 +651,20 @@ def test_contact_envelopes_show_the_steady_window_on_axes_of_their_own(smoke, fu
     finally:
         for fig in figs.values():
             plt.close(fig)
+
+
+def test_a_figure_that_cannot_be_written_is_one_line_naming_it_and_leaves_no_partial_file(tmp_path, monkeypatch):
+    """A full disk while a PNG is written (bad-input audit: PIL's OSError was a traceback)."""
+    import errno
+
+    from pipeline.analysis.plot_common import save_figure
+    from pipeline.vocabulary import UserError
+    fig, path = plt.figure(), tmp_path / "f.png"
+
+    def full_disk(target, **kwargs):
+        Path(target).write_bytes(b"half a png")
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(fig, "savefig", full_disk)
+    with pytest.raises(UserError, match=r"f\.png: the figure could not be written: No space left on device$"):
+        save_figure(fig, path)
+    assert not path.exists()

@@ -122,6 +122,23 @@ COMBINATIONS = [
     ["map", "smoke", "--grid", "y:-0.05:0.05:5", "--grid", "y:-0.01:0.01:5"],
     ["map", "smoke", "--grid", "y:0.05:-0.05:5", "--grid", "z:-0.4:-0.3:5"],
     ["map", "smoke", "--grid", "n1:-10:10:1", "--grid", "z:-0.4:-0.3:5"],
+    # values past what a run can hold or mean (bad-input audit: each had run out of memory, hung or
+    # ended in a traceback)
+    ["run", "smoke", "--elements", "65"],
+    ["run", "smoke", "--workers", "257"],
+    ["run", "smoke", "-n", "10000001"],
+    ["run", "smoke", "--model", "quasi-static", "--dt", "0.1"],
+    ["run", "smoke", "--model", "quasi-static", "--dt", "1e9"],
+    ["run", "smoke", "--model", "quasi-static", "--dt", "1e-8"],
+    ["simulate", "smoke", "--realization", str(2 ** 63)],
+    ["budget", "smoke", "--spec", "displacement:z<=0mm@q95"],
+    ["stats", "{file}", "--require", "displacement:x<=-1mm@q95"],
+    ["stats", "{file}", "--event", "displacement:z>-1mm"],
+    ["map", "smoke", "--grid", "x:-0.01:0.01:100000", "--grid", "y:-0.01:0.01:5"],
+    ["report", "smoke", "-o", "{file}"],
+    ["report", "smoke", "-o", "{tmp}/r", "--data", "{file}"],
+    ["sensitivity", "smoke", "-n", "64", "-o", "{tmp}/s.nc", "--plots", "{file}"],
+    ["sensitivity", "smoke", "-n", "64", "-o", "{tmp}/s.nc", "--plots", "{tmp}/p", "--no-plots"],
 ]
 
 

@@ -86,6 +86,8 @@ def parse_event(text: str, flag: str = "--event") -> Event:
         m = _NUMBER.match(rest)
         if m is None or not np.isfinite(float(m.group(1))):
             raise _fail(text, "missing value after '>' (e.g. 0.1mm)", flag)
+        if float(m.group(1)) <= 0:
+            raise _fail(text, f"value {m.group(1)!r} is not positive (|error| exceeds it almost surely)", flag)
         factor = _unit_factor(text, m.group(2).strip(), quantity, directions)
     except EventError:
         raise

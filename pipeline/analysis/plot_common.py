@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..vocabulary import DIRECTIONS  # noqa: E402
+from ..vocabulary import DIRECTIONS, UserError  # noqa: E402
 from ..vocabulary import FAMILIES as _FAMILIES  # noqa: E402
 
 __all__ = ["plt", "SI_UNITS", "FAMILY_DIRECTIONS", "figure_unit", "family_units", "si_text", "figure_title",
@@ -86,9 +86,15 @@ def panel_grid(title: str):
 
 
 def save_figure(fig, path: Path) -> Path:
-    """Write ``fig`` as a PNG to ``path`` and close it."""
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    """Write ``fig`` as a PNG to ``path`` and close it; a write that fails (a full disk) is one line
+    naming the file, and leaves no partial file."""
+    try:
+        fig.savefig(path, dpi=110)
+    except OSError as exc:
+        Path(path).unlink(missing_ok=True)
+        raise UserError(f"{path}: the figure could not be written: {exc.strerror or exc}") from None
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -199,8 +199,8 @@ def parse_spec(text: str) -> Spec:
     if m is None:
         raise _fail(text, f"missing value after {op!r} (e.g. 0.05mm)")
     value, unit = float(m.group(1)), m.group(2).strip()
-    if not math.isfinite(value):
-        raise _fail(text, f"value {m.group(1)!r} is not a finite number")
+    if not math.isfinite(value) or value <= 0:
+        raise _fail(text, f"value {m.group(1)!r} is not a positive finite number (a limit on |error|)")
     factor = _unit_factor(text, unit, quantity, directions)
     if right.strip().startswith(PF):
         pf_op, pf_limit, window = _pf(text, op, right)

@@ -12,6 +12,9 @@ from .options import add_parents, add_scene, add_seed, positive_int
 _AXES = {"x": "m", "y": "m", "z": "m", "n1": "deg", "n2": "deg", "n3": "deg"}   # --grid's axes and units
 
 
+MAX_GRID_POINTS = 1000   # per axis: a million poses at most
+
+
 def grid_axis(text: str):
     """An argparse type: AXIS:LO:HI:N (x, y, z in m; n1, n2, n3 in deg; LO < HI; N >= 2), in SI."""
     import numpy as np
@@ -24,8 +27,8 @@ def grid_axis(text: str):
         low, high, count = float(parts[1]), float(parts[2]), int(parts[3])
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected numbers LO, HI and an integer N in {text!r}") from None
-    if not (np.isfinite(low) and np.isfinite(high) and low < high) or count < 2:
-        raise argparse.ArgumentTypeError(f"{text!r}: needs LO < HI and N >= 2")
+    if not (np.isfinite(low) and np.isfinite(high) and low < high) or not 2 <= count <= MAX_GRID_POINTS:
+        raise argparse.ArgumentTypeError(f"{text!r}: needs LO < HI and 2 <= N <= {MAX_GRID_POINTS}")
     factor = 1.0 if _AXES[parts[0]] == "m" else np.pi / 180.0
     return GridAxis(parts[0], low * factor, high * factor, count)
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from rss6core import CONTACT_STARTS, INTEGRATORS, MODELS, MODEL_LEVELS
+from rss6core import CONTACT_STARTS, INTEGRATORS, MAX_ELEMENTS_PER_LINK, MODELS, MODEL_LEVELS
 
-from ..ensemble.settings import LOCAL_WORKERS
+from ..ensemble.settings import LOCAL_WORKERS, MAX_LOCAL_WORKERS
 from ..vocabulary import CONFIDENCE, WINDOWS
 
 
@@ -48,8 +48,8 @@ def fraction_above(low: float = 0.0):
 fraction = fraction_above()   # an argparse type: a number strictly between 0 and 1
 
 
-def int_at_least(minimum: int):
-    """An argparse type: an integer of at least ``minimum``."""
+def int_at_least(minimum: int, maximum: int | None = None, why: str = ""):
+    """An argparse type: an integer of at least ``minimum`` (and at most ``maximum``, ``why`` saying why)."""
     def parse(text: str) -> int:
         try:
             value = int(text)
@@ -57,6 +57,8 @@ def int_at_least(minimum: int):
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if value < minimum:
             raise argparse.ArgumentTypeError(f"must be {minimum} or more, got {text}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum}{why}, got {text}")
         return value
     return parse
 
@@ -67,7 +69,8 @@ MAX_SEED = 2 ** 63 - 1   # a file's seed attribute is a netCDF int64
 
 
 def seed_int(text: str) -> int:
-    """An argparse type: a seed, 0 to MAX_SEED (refused before any work, not when the file is written)."""
+    """An argparse type: a seed or a realisation's index, 0 to MAX_SEED (refused before any work, not when
+    the file is written)."""
     value = nonnegative_int(text)
     if value > MAX_SEED:
         raise argparse.ArgumentTypeError(f"must be at most 2^63 - 1 = {MAX_SEED} (the files store it as a 64-bit "
@@ -125,13 +128,15 @@ def add_level_settings(p) -> None:
     """--integrator, --dt, --elements and --start: a level's numerics, the scene's unless given."""
     p.add_argument("--integrator", choices=INTEGRATORS, help=INTEGRATOR_HELP)
     p.add_argument("--dt", type=positive_float, help=DT_HELP)
-    p.add_argument("--elements", type=positive_int, help=ELEMENTS_HELP)
+    p.add_argument("--elements", type=int_at_least(1, MAX_ELEMENTS_PER_LINK, " (a scene's elements_per_link bound)"),
+                   help=ELEMENTS_HELP)
     p.add_argument("--start", choices=CONTACT_STARTS, help=START_HELP)
 
 
 def add_workers(p, what: str = "local dask workers, one thread each") -> None:
     """--workers; left None here, so that resolve_cluster can tell it from --scheduler's workers."""
-    p.add_argument("--workers", type=positive_int, help=f"{what} (default {LOCAL_WORKERS})")
+    p.add_argument("--workers", type=int_at_least(1, MAX_LOCAL_WORKERS, " (one machine; more: --scheduler)"),
+                   help=f"{what} (default {LOCAL_WORKERS})")
 
 
 def add_scheduler(p, worker_timeout: bool = True) -> None:

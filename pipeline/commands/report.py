@@ -47,8 +47,11 @@ def _tracked(paths: list) -> list[str]:
 def main(args) -> int:
     from ..ensemble.cluster import SchedulerUnavailable
     from ..studies.report import ReportPlan, write_report
+    from ..files.outputs import check_output_folder
     cluster = resolve_cluster(args.workers, args.scheduler, args.worker_timeout)
-    out = Path(args.output)
+    out = check_output_folder(args.output, create_parents=True)   # the report makes its folders
+    if args.data:
+        check_output_folder(args.data, create_parents=True, option="--data")
     tracked = [] if args.overwrite_tracked else _tracked([out / "results.md", out / "results"])
     if tracked:
         raise OptionError(f"{args.output}: would overwrite {tracked[0]}, which git tracks "

@@ -9,6 +9,7 @@ from rss6core import models_with
 
 from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
+from ..vocabulary import OptionError
 from .messages import interrupted, warn_oversubscription
 from .options import (add_confidence, add_model, add_parents, add_scene, add_seed, add_window_choice, add_workers,
                       positive_int)
@@ -46,7 +47,7 @@ def main(args) -> int:
     import shutil
     from ..analysis.sensitivity_plots import plot_sensitivity
     from ..ensemble.run import parts_dir
-    from ..files.outputs import OutputLock, check_new_output
+    from ..files.outputs import OutputLock, check_new_output, check_output_folder
     from ..files.reading import load_netcdf
     from ..files.writing import write_netcdf
     from ..studies.sensitivity import format_joints, format_sensitivity, sensitivity
@@ -54,6 +55,11 @@ def main(args) -> int:
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
     output = check_new_output(args.output or f"{level.scene.name}_{level.model}_sobol.nc", "rss6 sensitivity",
                               args.parents)
+    plots = Path(args.plots or output.with_name(output.stem + "_plots"))
+    if args.plots and args.no_plots:
+        raise OptionError("--plots and --no-plots: give one")
+    if not args.no_plots:
+        check_output_folder(plots, args.parents, "--plots")   # before the work, which the charts follow
     warn_oversubscription(cluster.workers, None)
     start, parts = time.perf_counter(), parts_dir(output)
     with OutputLock(output):
@@ -66,7 +72,6 @@ def main(args) -> int:
         write_netcdf(ds, output)
         if parts.exists():
             shutil.rmtree(parts)
-    plots = Path(args.plots or output.with_name(output.stem + "_plots"))
     paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
     print(f"wrote {output} in {time.perf_counter() - start:.1f} s" + (f"; bar charts in {plots}/" if paths else ""))
     print(format_sensitivity(ds))

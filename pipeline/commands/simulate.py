@@ -11,8 +11,7 @@ from ..analysis.summary import contact_peaks, error_summary, format_errors
 from ..ensemble.settings import resolve_level
 from ..scenes.catalogue import find_scene
 from .messages import note_compiling
-from .options import (LEVELS_HELP, add_json, add_level_settings, add_model, add_parents, add_scene, add_seed,
-                      nonnegative_int)
+from .options import LEVELS_HELP, add_json, add_level_settings, add_model, add_parents, add_scene, add_seed, seed_int
 
 
 def add_parser(sub) -> None:
@@ -21,7 +20,7 @@ def add_parser(sub) -> None:
     add_model(p, f"model level (default: the scene's). {LEVELS_HELP}")
     add_level_settings(p)
     add_seed(p, "random seed of the run")
-    p.add_argument("--realization", type=nonnegative_int, default=0,
+    p.add_argument("--realization", type=seed_int, default=0,
                    help="which clearance realisation of the seeded run (default 0)")
     p.add_argument("-o", "--output", help="write the error histories to this netCDF file "
                    "(default: none); its folder must exist unless --parents is given")

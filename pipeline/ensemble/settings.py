@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from rss6core import (SceneError, check_uncertain_level, default_integrator, default_time_step, max_link_modes,
-                      draws_per_realisation, model_level, parse_scene, time_grid, uniform_dimension)
+from rss6core import (SceneError, check_step_count, check_uncertain_level, default_integrator, default_time_step,
+                      draws_per_realisation, max_link_modes, model_level, parse_scene, time_grid, uniform_dimension)
 
 from ..scenes.variant import scene_variant
 from ..vocabulary import OptionError
@@ -16,6 +16,7 @@ from .run import EnsembleSpec
 from .sampler import DEFAULT_REPLICATES, check_qmc
 
 LOCAL_WORKERS = 2   # --workers' default where --scheduler is the alternative
+MAX_LOCAL_WORKERS = 256   # a local cluster's processes at most (more machines: --scheduler)
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,7 @@ def resolve_level(scene, config, *, model: str | None = None, integrator: str | 
     scene = _with_start(scene, start)
     step = dt or default_time_step(scene, model)
     try:
-        time_grid(scene.trajectory.duration, step)
+        check_step_count(scene.trajectory.duration, step)
     except ValueError as exc:
         if dt:
             raise OptionError(f"--dt: {exc}") from None

@@ -42,13 +42,13 @@ def check_output_path(path, create_dirs: bool = False) -> Path:
     return path
 
 
-def check_output_folder(path, create_parents: bool = False) -> Path:
+def check_output_folder(path, create_parents: bool = False, option: str = "-o") -> Path:
     """Refuse (before any work) an output folder that is a file, sits below a file, or would be made
     in a folder that is not writable; its parent folder must exist unless ``create_parents`` (the
-    ``--parents`` option)."""
+    ``--parents`` option). ``option``: the option that named it."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise EnsembleFileError(f"{path}: exists and is not a folder; -o names the output folder")
+        raise EnsembleFileError(f"{path}: exists and is not a folder; {option} names the output folder")
     nearest = path
     while not nearest.exists():
         nearest = nearest.parent if str(nearest.parent) != str(nearest) else Path(".")
