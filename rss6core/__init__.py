@@ -7,6 +7,7 @@ Scenes
 - Scene: the immutable description of one robot, its motion and its run settings (SI).
 - SceneError: a scene that cannot describe a physical robot; the message names the file and key.
 - load_scene: a Scene from a TOML file.
+- MAX_ELEMENTS_PER_LINK: the most beam elements per crank and per rod a scene or --elements may ask for.
 - parse_scene: a Scene from TOML text.
 - CLEARANCE_RADII: each [clearance] key and the [contact] radius of its joint, which a clearance must stay below.
 - RELATIVE_BAND_REACH: the multiple of its nominal up to which [sampling] size_tolerance draws a size.
@@ -27,8 +28,8 @@ Running a level
 - SimulationResult: what every level returns (error histories in SI, status and message).
 - FINISHED, FAILED, STATUSES: the status vocabulary every level and every file uses.
 - ContactBatch: the contact level's results for a batch of realisations (one SimulationResult each).
-- time_grid: the output instants (s) of a duration and step, or ValueError if the step does not divide it;
-  check_step_count: a run's number of steps, or ValueError outside 10 to 1,000,000.
+- time_grid: the output instants (s) of a duration and step, or ValueError if the step does not divide it.
+- check_step_count: a run's number of steps, or ValueError outside 10 to 1,000,000.
 - stored_draw: the clearance draw an ensemble file records for one realisation.
 - stored_inputs: the uncertain inputs ([uncertain.*]) an ensemble file records for one realisation, or None.
 - check_uncertain_level: ValueError naming a level that cannot take a scene's uncertain inputs yet.

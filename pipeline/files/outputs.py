@@ -181,6 +181,9 @@ def sha256(path) -> str:
     return digest.hexdigest()
 
 
+MAX_NAMED = 5   # bad parts named in one refusal (the others counted)
+
+
 class PartsManifest:
     """``OUT.nc.parts/manifest.json``: checksum, realisations and provenance of every stored part.
 
@@ -204,9 +207,9 @@ class PartsManifest:
         try:
             data = json.loads(self.path.read_text())
             entries = data["parts"]
-        except (OSError, ValueError, KeyError, TypeError):
-            raise EnsembleFileError(f"{self.path}: unreadable manifest; delete {self.folder} to "
-                                    f"recompute its {self.items}") from None
+        except (OSError, ValueError, KeyError, TypeError):   # kept aside; its parts are then unvouched
+            self.path.replace(self.path.with_name("manifest.json.unreadable"))
+            return {}
         if data.get("provenance") != self.provenance:
             raise EnsembleFileError(f"{self.path}: the parts were made with different settings "
                                     f"({self.settings}); choose another output file or the same settings")
@@ -227,6 +230,17 @@ class PartsManifest:
             self._save()
             os.replace(incoming, final)
         return final
+
+    def adopt(self, path: Path, ds) -> None:
+        """Vouch for part ``path`` (its Dataset ``ds``) that no entry listed, once the caller has
+        verified its values' own checksums and its identity: a lost or unreadable manifest then costs
+        no finished work."""
+        self.entries[path.name] = {"sha256": sha256(path), self.index + "s": [int(r) for r in ds[self.index].values]}
+        self._save()
+
+    def vouched(self, path: Path) -> bool:
+        """Whether the manifest lists part ``path``."""
+        return path.name in self.entries
 
     def problem(self, path: Path) -> str | None:
         """Why part ``path`` cannot be used (not listed in the manifest, or its bytes changed since it
@@ -255,7 +269,9 @@ class PartsManifest:
         every = len(bad) == len(self.parts())
         remove = (f"rm -r {shlex.quote(str(self.folder))}" if every
                   else "rm " + " ".join(shlex.quote(str(p)) for p in bad))
-        listed = "; ".join(f"{p.name}: {why}" for p, why in bad.items())
+        named = list(bad.items())[:MAX_NAMED]
+        listed = "; ".join(f"{p.name}: {why}" for p, why in named) + (
+            f"; and {len(bad) - len(named)} more" if len(bad) > len(named) else "")
         raise EnsembleFileError(f"{self.folder}: {len(bad)} of {len(self.parts())} stored parts cannot "
                                 f"be used ({listed}); recover with `{remove}` and rerun the same command "
                                 f"(it computes their {self.items} again)")
