@@ -154,12 +154,12 @@ def _numbers(value, key: str, width: int | None = None) -> np.ndarray:
 def increasing(times: np.ndarray, where) -> None:
     """Times (s) that start at 0 and strictly increase; ``where(i)`` names entry i in the message."""
     if times[0] != 0.0:
-        raise TrajectoryError(f"{where(0)}: the first time must be 0 s, got {times[0]!r}")
+        raise TrajectoryError(f"{where(0)}: the first time must be 0 s, got {float(times[0])!r}")
     bad = np.flatnonzero(~(np.diff(times) > 0))
     if bad.size:
         i = int(bad[0]) + 1
-        raise TrajectoryError(f"{where(i)}: time {times[i]!r} s does not increase "
-                              f"(the previous is {times[i - 1]!r} s)")
+        raise TrajectoryError(f"{where(i)}: time {float(times[i])!r} s does not increase "
+                              f"(the previous is {float(times[i - 1])!r} s)")
 
 
 def via_points(table: dict) -> ViaPoints:
@@ -178,7 +178,7 @@ def via_points(table: dict) -> ViaPoints:
             raise TrajectoryError(f"[trajectory] {key}: {len(values)} entries for {n} times_s")
     bad = np.flatnonzero(dwell < 0)
     if bad.size:
-        raise TrajectoryError(f"[trajectory] dwell_s[{bad[0]}]: must be non-negative, got {dwell[bad[0]]!r}")
+        raise TrajectoryError(f"[trajectory] dwell_s[{bad[0]}]: must be non-negative, got {float(dwell[bad[0]])!r}")
     increasing(times, lambda i: f"[trajectory] times_s[{i}]")
     late = np.flatnonzero(~(times[1:] > times[:-1] + dwell[:-1]))
     if late.size:

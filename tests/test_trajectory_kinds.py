@@ -165,7 +165,7 @@ BAD = {
     "duration given": (POINTS + "\nduration_s = 1.0", None, ["duration_s", "not allowed", "'points'"]),
     "step": (POINTS.replace("1.0]", "1.0005]"), None, ["[simulation] time_step_s", "times_s"]),
     "csv times": (FILE, [HEADER] + _csv_rows()[:3] + ["0.2,0,0,-0.387,0,0,0"] + _csv_rows()[4:],
-                  ["poses.csv row 4 (line 5), column t_s", "does not increase"]),
+                  ["poses.csv row 4 (line 5), column t_s", "time 0.2 s does not increase", "previous is 0.2 s"]),
     "missing column": (FILE, [HEADER.removesuffix(",n3_deg")] + [r.rsplit(",", 1)[0] for r in _csv_rows()],
                        ["poses.csv", "column n3_deg missing"]),
     "misspelt column": (FILE, [HEADER.replace("n2_deg", "n2_dge")] + _csv_rows(),
