@@ -135,6 +135,8 @@ COMBINATIONS = [
     ["stats", "{file}", "--require", "displacement:x<=-1mm@q95"],
     ["stats", "{file}", "--event", "displacement:z>-1mm"],
     ["map", "smoke", "--grid", "x:-0.01:0.01:100000", "--grid", "y:-0.01:0.01:5"],
+    ["run", "smoke", "--model", "quasi-static", "--integrator", "hht"],
+    ["simulate", "smoke", "--model", "rigid", "--integrator", "newmark"],
     ["report", "smoke", "-o", "{file}"],
     ["report", "smoke", "-o", "{tmp}/r", "--data", "{file}"],
     ["sensitivity", "smoke", "-n", "64", "-o", "{tmp}/s.nc", "--plots", "{file}"],

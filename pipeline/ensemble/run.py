@@ -196,12 +196,12 @@ def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest, summary_b
 def _checked_parts(manifest: PartsManifest, spec: EnsembleSpec, summary_block: int | None = None) -> list:
     """Every stored part with its Dataset (histories on disk), after checking them all: the bad
     ones are named together in one EnsembleFileError (:meth:`PartsManifest.refuse`). A part the
-    manifest vouches for is not read again for its checksums (its bytes were); one it does not list
-    (a lost or unreadable manifest) is, and is adopted if its values and identity hold."""
+    manifest vouches for is not read again for its checksums (its bytes were); one of a deleted or
+    unreadable manifest is, and is adopted if its values and identity hold."""
     problems, parts = {}, []
     for path in manifest.parts():
         problems[path] = manifest.problem(path)
-        unvouched = not manifest.vouched(path)
+        unvouched = manifest.adoptable(path)
         if problems[path] is None or unvouched:
             try:
                 ds = open_ensemble(path, lazy=True, verify=unvouched, summary_block=summary_block)

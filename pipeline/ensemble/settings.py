@@ -50,6 +50,9 @@ def resolve_level(scene, config, *, model: str | None = None, integrator: str | 
     sim = scene.simulation
     given, model = model is not None, model or sim.model
     _check_uncertain(scene, model, from_option=given)
+    if integrator is not None and not model_level(model).elastic_links:
+        raise OptionError(f"--integrator {integrator}: the {model} level integrates nothing in time (its links "
+                          "are rigid); integrators are for the elastic, paper and contact levels")
     if start is not None and not model_level(model).contact_start:
         raise OptionError(f"--start {start}: sets the contact level's initial state; this run is the "
                           f"{model} level")

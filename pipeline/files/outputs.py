@@ -199,16 +199,19 @@ class PartsManifest:
         self.folder, self.provenance = Path(folder), provenance
         self.index, self.items, self.settings = index, items, settings
         self.path = self.folder / "manifest.json"
+        self.lost = False   # the parts' manifest was deleted or unreadable (:meth:`adopt`)
         self.entries = self._read()
 
     def _read(self) -> dict:
         if not self.path.exists():
+            self.lost = any(self.folder.glob("*.nc"))
             return {}
         try:
             data = json.loads(self.path.read_text())
             entries = data["parts"]
         except (OSError, ValueError, KeyError, TypeError):   # kept aside; its parts are then unvouched
             self.path.replace(self.path.with_name("manifest.json.unreadable"))
+            self.lost = True
             return {}
         if data.get("provenance") != self.provenance:
             raise EnsembleFileError(f"{self.path}: the parts were made with different settings "
@@ -232,15 +235,16 @@ class PartsManifest:
         return final
 
     def adopt(self, path: Path, ds) -> None:
-        """Vouch for part ``path`` (its Dataset ``ds``) that no entry listed, once the caller has
-        verified its values' own checksums and its identity: a lost or unreadable manifest then costs
-        no finished work."""
+        """Vouch for part ``path`` (its Dataset ``ds``) of a lost manifest, once the caller has verified
+        its values' own checksums and its identity: a deleted or unreadable manifest then costs no
+        finished work (a part an intact manifest does not list stays refused: something else put it
+        there)."""
         self.entries[path.name] = {"sha256": sha256(path), self.index + "s": [int(r) for r in ds[self.index].values]}
         self._save()
 
-    def vouched(self, path: Path) -> bool:
-        """Whether the manifest lists part ``path``."""
-        return path.name in self.entries
+    def adoptable(self, path: Path) -> bool:
+        """Whether part ``path`` is one the lost manifest would have listed (:meth:`adopt`)."""
+        return self.lost and path.name not in self.entries
 
     def problem(self, path: Path) -> str | None:
         """Why part ``path`` cannot be used (not listed in the manifest, or its bytes changed since it
