@@ -136,6 +136,8 @@ COMBINATIONS = [
     ["stats", "{file}", "--event", "displacement:z>-1mm"],
     ["map", "smoke", "--grid", "x:-0.01:0.01:100000", "--grid", "y:-0.01:0.01:5"],
     ["run", "smoke", "--model", "quasi-static", "--integrator", "hht"],
+    ["allocate", "smoke", "--spec", "displacement:x<=1mm@q95", "--classes", ""],
+    ["allocate", "smoke", "--spec", "displacement:x<=1mm@q95", "--classes", " , "],
     ["simulate", "smoke", "--model", "rigid", "--integrator", "newmark"],
     ["report", "smoke", "-o", "{file}"],
     ["report", "smoke", "-o", "{tmp}/r", "--data", "{file}"],

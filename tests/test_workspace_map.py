@@ -229,3 +229,13 @@ def test_a_scene_with_uncertain_inputs_is_refused_in_one_line_before_any_work(tm
     assert len(err.splitlines()) == 1
     assert "[uncertain.crank_length]" in err and "paper_manufacturing" in err
     assert not out.exists()
+
+
+def test_a_grid_the_robot_reaches_nowhere_is_one_line_and_exit_2(tmp_path, capsys):
+    """Not "reachable: 0 of 9 poses", exit 0 and empty heat maps (bad-input audit)."""
+    from pipeline.cli import main
+    out = tmp_path / "map"
+    assert main(["map", "smoke", "--grid", "x:-2:-1:3", "--grid", "y:-2:-1:3", "-n", "4", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("rss6: error: --grid x:-2:-1:3 --grid y:-2:-1:3: the robot reaches none of its 9 poses; choose "
+                   "a grid inside the workspace (rss6 check prints the trajectory's)") and not out.exists()

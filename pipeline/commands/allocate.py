@@ -70,7 +70,10 @@ def main(args) -> int:
         raise OptionError(f"--per-joint: at the {', '.join(m for m in MODELS if model_level(m).linear_in_clearances)} "
                           f"level only (exact linear scaling); at the {level.model} level each per-joint step "
                           "would need its own ensemble, and a scene has one size band a family")
-    options = class_options(level.scene, [f.strip() for f in args.classes.split(",") if f.strip()], args.costs)
+    fits = [f.strip() for f in args.classes.split(",") if f.strip()]
+    if not fits:
+        raise OptionError(f"--classes {args.classes!r}: names no fit; give ISO 286 fits, e.g. H7/g6,H9/e9")
+    options = class_options(level.scene, fits, args.costs)
     check_request(level.ensemble_spec(args.seed), specs, args.n, args.confidence)
     folder = check_output_folder(args.output or f"allocate_{level.scene.name}_{level.model}", args.parents)
     warn_oversubscription(cluster.workers, None)

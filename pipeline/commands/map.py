@@ -80,6 +80,10 @@ def main(args) -> int:
     print(f"rss6 map: scene {scene.name}, {args.model} level, {args.n} drawn realisations (seed {args.seed})",
           flush=True)
     ds = workspace_map(scene, tuple(args.grid) if args.grid else None, args.n, args.seed, args.model)
+    if not ds["reachable"].values.any():
+        grid = " ".join(f"--grid {g.option()}" for g in args.grid) if args.grid else "the default grid"
+        raise OptionError(f"{grid}: the robot reaches none of its {ds['reachable'].size} poses; choose a grid "
+                          "inside the workspace (rss6 check prints the trajectory's)")
     print(f"grid: {ds.attrs['grid']}; worst case with {ds.attrs['clearance_sizes']}")
     print(map_table(ds))
     paths = write_map(ds, args.output)
