@@ -137,6 +137,9 @@ COMBINATIONS = [
     ["map", "smoke", "--grid", "x:-0.01:0.01:100000", "--grid", "y:-0.01:0.01:5"],
     ["run", "smoke", "--model", "quasi-static", "--integrator", "hht"],
     ["allocate", "smoke", "--spec", "displacement:x<=1mm@q95", "--classes", ""],
+    ["reliability", "smoke", "--event", "displacement:z>0.1mm", "-n", "10000001"],
+    ["budget", "smoke", "--spec", "displacement:x<=1mm@q95", "-n", "10000001"],
+    ["allocate", "smoke", "--spec", "displacement:x<=1mm@q95", "-n", "10000001"],
     ["allocate", "smoke", "--spec", "displacement:x<=1mm@q95", "--classes", " , "],
     ["simulate", "smoke", "--model", "rigid", "--integrator", "newmark"],
     ["report", "smoke", "-o", "{file}"],
@@ -172,3 +175,19 @@ def test_an_option_the_command_does_not_take_names_the_commands_that_do_or_the_n
                                                                                     small_file, no_work):
     code, err = _run(argv, capsys, tmp_path, small_file)
     assert code == 2 and err == [says], err
+
+
+def test_report_checks_every_scene_before_it_makes_a_folder(configs, tmp_path, capsys):
+    """A scene with a typo is refused before OUT/results exists (bad-input audit)."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text((configs / "smoke.toml").read_text().replace("duration_s", "duration_sec", 1))
+    assert main(["report", str(configs / "smoke.toml"), str(bad), "-o", str(tmp_path / "R")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "bad.toml" in err and not (tmp_path / "R").exists(), err
+
+
+@pytest.mark.parametrize("command", ["stats", "plot"])
+def test_a_folder_given_as_a_file_is_named_as_a_folder(command, tmp_path, capsys):
+    """As rss6 run says it, not netCDF's "Unknown file format" (bad-input audit)."""
+    assert main([command, str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip() == f"rss6: error: {tmp_path}: is a folder; give an rss6 netCDF file"

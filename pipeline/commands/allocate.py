@@ -10,7 +10,8 @@ from ..scenes.catalogue import find_scene
 from ..studies.fits import DEFAULT_FITS
 from ..vocabulary import OptionError
 from .messages import interrupted, note_loaded_joints, warn_oversubscription
-from .options import add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, positive_int
+from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, positive_int,
+                      realisations)
 
 
 def add_parser(sub) -> None:
@@ -34,7 +35,7 @@ def add_parser(sub) -> None:
     p.add_argument("--costs", metavar="TOML", help="costs per joint: [<family>] \"<fit>\" = cost for each "
                                                    "family and fit (default: the reciprocal-power cost law), and "
                                                    "named classes [classes.<family>.<name>] low_m, high_m, cost")
-    p.add_argument("-n", type=positive_int, default=200,
+    p.add_argument("-n", type=realisations, default=200,
                    help="realisations of the search and of the verification ensemble (default 200)")
     p.add_argument("-o", "--output", help="folder of the allocation file, scene and verification ensemble "
                                           "(default: allocate_SCENE_MODEL); rerunning resumes the ensemble")

@@ -7,7 +7,7 @@ from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
 from .messages import interrupted, note_loaded_joints, warn_oversubscription
 from .options import (add_confidence, add_model, add_parents, add_scene, add_seed, add_workers, positive_float,
-                      positive_int)
+                      realisations)
 
 
 def add_parser(sub) -> None:
@@ -19,7 +19,7 @@ def add_parser(sub) -> None:
                         "default)")
     add_model(p, "model level (default quasi-static: exact scaling from one ensemble; other levels: a "
                  "bisection of ensemble runs)", choices=MODELS, default="quasi-static")
-    p.add_argument("-n", type=positive_int, default=200,
+    p.add_argument("-n", type=realisations, default=200,
                    help="realisations per ensemble (default 200; q95 has an interval from n = 59)")
     p.add_argument("-o", "--output", help="folder of the ensembles and the budget scene "
                                           "(default: budget_SCENE_MODEL); rerunning resumes")

@@ -12,7 +12,7 @@ from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError, window_words
 from .messages import interrupted, note_loaded_joints
 from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, fraction,
-                      positive_int)
+                      positive_int, realisations)
 
 
 def add_parser(sub) -> None:
@@ -29,7 +29,7 @@ def add_parser(sub) -> None:
     p.add_argument("--method", choices=METHODS, default="subset",
                    help="subset: subset simulation (Au & Beck 2001, adaptive conditional sampling); mc: plain "
                         "Monte Carlo with an exact Clopper-Pearson interval (default subset)")
-    p.add_argument("-n", type=positive_int, help="subset: evaluations per level N, a multiple of 1 / p0 "
+    p.add_argument("-n", type=realisations, help="subset: evaluations per level N, a multiple of 1 / p0 "
                                                  "(default 1000); mc: realisations (default 20000)")
     p.add_argument("--cov", type=fraction, metavar="C",
                    help="a CoV target in (0, 1): mc adds realisations (blocks of 1000), subset doubles N (a fresh "

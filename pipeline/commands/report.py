@@ -48,6 +48,9 @@ def main(args) -> int:
     from ..ensemble.cluster import SchedulerUnavailable
     from ..studies.report import ReportPlan, write_report
     from ..files.outputs import check_output_folder
+    from ..scenes.catalogue import find_scene
+    for config in args.configs:   # every scene checked before any folder is made
+        find_scene(config)
     cluster = resolve_cluster(args.workers, args.scheduler, args.worker_timeout)
     out = check_output_folder(args.output, create_parents=True)   # the report makes its folders
     if args.data:

@@ -13,19 +13,15 @@ from ..vocabulary import QUANTITIES, STORES, OptionError
 from .messages import (import_meanwhile, interrupted, loaded_joints_meanwhile, scheduler_lost,
                        warn_oversubscription)
 from .options import (LEVELS_HELP, add_level_settings, add_model, add_parents, add_require, add_scene, add_scheduler,
-                      add_seed, add_workers, int_at_least, positive_int)
+                      add_seed, add_workers, int_at_least, positive_int, realisations)
 from .requirements import annotator, known_windows, requirements
-
-
-MAX_RUN_REALISATIONS = 10_000_000   # ten times the largest measured (docs/performance.md section 26)
 
 
 def add_parser(sub) -> None:
     from ..ensemble.run import MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL
     p = sub.add_parser("run", help="run a Monte Carlo ensemble of clearance realisations")
     add_scene(p)
-    p.add_argument("-n", type=int_at_least(1, MAX_RUN_REALISATIONS, " per file (a rare event: rss6 reliability)"),
-                   default=32, help="realisations (default 32)")
+    p.add_argument("-n", type=realisations, default=32, help="realisations (default 32)")
     p.add_argument("-o", "--output", help="ensemble netCDF file (default: SCENE_MODEL.nc); its "
                    "folder must exist unless --parents is given. Rerunning the same command "
                    "resumes from the parts stored in OUTPUT.parts")

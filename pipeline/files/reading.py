@@ -36,6 +36,8 @@ def load_netcdf(path, lazy: bool = False, verify: bool = True, summary_block: in
     """
     if not os.path.exists(path):
         raise EnsembleFileError(f"{path}: {unfinished(path) or 'no such file'}")
+    if os.path.isdir(path):
+        raise EnsembleFileError(f"{path}: is a folder; give an rss6 netCDF file")
     try:
         if lazy:
             # opened without dask: only the histories become dask arrays (loading each small
