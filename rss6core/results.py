@@ -57,8 +57,9 @@ MIN_STEPS, MAX_STEPS = 10, 1_000_000   # a run's output steps: enough for its wi
 def check_step_count(duration: float, dt: float) -> int:
     """The number of output steps of a run of ``duration`` s at ``dt`` s, or ValueError where the step
     does not divide the duration or gives fewer than MIN_STEPS or more than MAX_STEPS steps (the run's
-    histories and derivatives need a few samples; each step holds arrays for every realisation)."""
-    steps = len(time_grid(duration, dt)) - 1
+    histories and derivatives need a few samples; each step holds arrays for every realisation).
+    Counted, not built: the grid it guards may not fit in memory."""
+    steps = _steps(duration, dt)
     if not MIN_STEPS <= steps <= MAX_STEPS:
         raise ValueError(f"time step {dt!r} s gives {steps} steps over the duration {duration!r} s; a run takes "
                          f"{MIN_STEPS} to {MAX_STEPS} steps")
@@ -67,9 +68,14 @@ def check_step_count(duration: float, dt: float) -> int:
 
 def time_grid(duration: float, dt: float) -> np.ndarray:
     """t_k = k dt on [0, duration]; dt must divide the duration."""
+    return np.arange(_steps(duration, dt) + 1) * dt
+
+
+def _steps(duration: float, dt: float) -> int:
+    """How many steps of ``dt`` make ``duration`` (s), or ValueError where dt does not divide it."""
     if not dt > 0:
         raise ValueError(f"time step must be positive, got {dt!r}")
     n = duration / dt
     if abs(n - round(n)) > 1e-6 * max(1.0, n):
         raise ValueError(f"time step {dt!r} s does not divide the duration {duration!r} s")
-    return np.arange(int(round(n)) + 1) * dt
+    return int(round(n))

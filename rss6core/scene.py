@@ -27,7 +27,7 @@ from .kinematics import WorkspaceError, check_workspace
 from .link_reduction import max_link_modes
 from .levels import MODELS
 from .pose_csv import file_trajectory, with_pose_samples
-from .results import MAX_STEPS, MIN_STEPS
+from .results import check_step_count
 from .sections import RectangleSection, TubeSection
 from .uncertain import UncertainInputError, UncertainInputs, parse_uncertain
 from .trajectory_kinds import TRAJECTORY_KINDS, SampledPoses, Sinusoid, TrajectoryError, ViaPoints, via_points
@@ -549,9 +549,10 @@ def _build(v: dict, text: str, source: str) -> Scene:
     if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
         raise SceneError(f"[simulation] time_step_s: {dt!r} does not divide "
                          f"{where} = {duration!r} into whole steps")
-    if not MIN_STEPS <= round(steps) <= MAX_STEPS:
-        raise SceneError(f"[simulation] time_step_s: {dt!r} gives {round(steps)} steps over {where} = "
-                         f"{duration!r}; a run takes {MIN_STEPS} to {MAX_STEPS} steps")
+    try:
+        check_step_count(duration, dt)
+    except ValueError as exc:
+        raise SceneError(f"[simulation] time_step_s: {exc} ({where})") from None
     if v["simulation"]["settle_time_s"] >= duration:
         raise SceneError(f"[simulation] settle_time_s: must be shorter than {where} "
                          f"= {duration!r}, got {v['simulation']['settle_time_s']!r}")

@@ -99,7 +99,8 @@ def test_time_step_must_divide_duration(paper_text):
         parse_scene(_edit(paper_text, "time_step_s = 1.0e-3", "time_step_s = 3.0e-3"))
 
 
-@pytest.mark.parametrize("step, steps", [("0.25", 8), ("1.0e9", 0), ("1.0e-6", 2_000_000)])
+@pytest.mark.parametrize("step, steps", [("0.25", 8), ("1.0e9", 0), ("1.0e-6", 2_000_000),
+                                         ("1.0e-12", 2_000_000_000_000)])
 def test_a_run_takes_ten_to_a_million_steps(paper_text, step, steps):
     """A step that divides the 2 s duration into too few steps for the run's windows and derivatives, or
     into so many that its arrays would not fit, is refused by name before any work (bad-input audit:

@@ -18,7 +18,7 @@ import numpy as np
 from scipy import stats as sps
 
 from ..vocabulary import CONFIDENCE, WINDOWS, window_words
-from .spec import SpecError, _NUMBER, _subject, _unit_factor
+from .spec import SpecError, _NUMBER, _limit, _subject, _unit_factor
 
 __all__ = ["Event", "Exceedance", "EventError", "parse_event", "clopper_pearson", "one_sided_cp",
            "exceedance", "format_exceedance", "exceedance_json", "union_words"]
@@ -86,15 +86,13 @@ def parse_event(text: str, flag: str = "--event") -> Event:
         m = _NUMBER.match(rest)
         if m is None or not np.isfinite(float(m.group(1))):
             raise _fail(text, "missing value after '>' (e.g. 0.1mm)", flag)
-        if float(m.group(1)) <= 0:
-            raise _fail(text, f"value {m.group(1)!r} is not positive (|error| exceeds it almost surely)", flag)
+        limit = _limit(text, m)
         factor = _unit_factor(text, m.group(2).strip(), quantity, directions)
     except EventError:
         raise
     except SpecError as exc:       # the spec grammar's message, under this flag
         raise EventError(str(exc).replace("--require", flag, 1)) from None
-    return Event(text, quantity, tuple(directions), float(m.group(1)) * factor, m.group(2).strip(), factor,
-                 window)
+    return Event(text, quantity, tuple(directions), limit * factor, m.group(2).strip(), factor, window)
 
 
 def clopper_pearson(k, n, confidence: float = CONFIDENCE) -> tuple:

@@ -188,6 +188,15 @@ def _comparison(text: str, left: str) -> tuple[str, str, str]:
     return left[:m.start()], op, left[m.end():]
 
 
+def _limit(text: str, m) -> float:
+    """The limit a spec's or an event's number match ``m`` gives (in its unit): |error| is never
+    negative, so only a positive finite one means anything."""
+    value = float(m.group(1))
+    if not math.isfinite(value) or value <= 0:
+        raise _fail(text, f"value {m.group(1)!r} is not a positive finite number (a limit on |error|)")
+    return value
+
+
 def parse_spec(text: str) -> Spec:
     """Parse one spec (see module doc); raises SpecError with one line on any malformed token."""
     left, at, right = text.partition("@")
@@ -198,9 +207,7 @@ def parse_spec(text: str) -> Spec:
     m = _NUMBER.match(rest)
     if m is None:
         raise _fail(text, f"missing value after {op!r} (e.g. 0.05mm)")
-    value, unit = float(m.group(1)), m.group(2).strip()
-    if not math.isfinite(value) or value <= 0:
-        raise _fail(text, f"value {m.group(1)!r} is not a positive finite number (a limit on |error|)")
+    value, unit = _limit(text, m), m.group(2).strip()
     factor = _unit_factor(text, unit, quantity, directions)
     if right.strip().startswith(PF):
         pf_op, pf_limit, window = _pf(text, op, right)
