@@ -13,6 +13,8 @@ BAD_TEXT = {"require": "displacement:x<=1parsec@q95", "event": "displacement:z>1
             "spec": "displacement:x<=1mm@q101", "quantity": "torque", "direction": "w", "window": "midnight",
             "output": "{missing}/out", "classes": "H7/x6", "costs": "{missing}/costs.toml",
             "plots": None, "data": None, "configs": None, "file": None, "config": None, "plot": "{missing}/fig.png"}
+# options that size the work: each has a ceiling, so a huge value is refused before it exhausts memory
+COUNTS = {"n", "low_n", "family_n", "budget", "workers", "elements"}
 # per command, what else must be given for the option to be judged (a file to read, a required option)
 ANY_TEXT = {("report", "output")}   # report creates its output folder, parents included
 NEEDS = {"stats": ["{file}"], "plot": ["{file}"], "budget": ["--spec", "displacement:x<=1mm@q95"],
@@ -39,6 +41,8 @@ def _bad_values(action) -> list[str]:
         return ["no-such-choice"]
     if action.type is not None and action.dest == "seed":
         return ["x", "-1", str(2 ** 64)]   # above 2^63 - 1 the file's int64 attribute would fail at the end
+    if action.dest in COUNTS:
+        return ["x", "-1", "inf", "nan", str(10 ** 11)]   # 10^11: each had run out of memory in a traceback
     if action.type is not None:
         return ["x", "-1", "inf", "nan"] if action.type is not str else []
     bad = BAD_TEXT.get(action.dest, "?")
@@ -147,6 +151,9 @@ COMBINATIONS = [
     ["report", "smoke", "-o", "{tmp}/r", "--data", "{file}"],
     ["sensitivity", "smoke", "-n", "64", "-o", "{tmp}/s.nc", "--plots", "{file}"],
     ["sensitivity", "smoke", "-n", "64", "-o", "{tmp}/s.nc", "--plots", "{tmp}/p", "--no-plots"],
+    ["sensitivity", "smoke", "-n", str(2 ** 40)],             # a power of 2: past the form's own check
+    ["reliability", "smoke", "--event", "displacement:z>0.1mm", "--cov", "0.1", "--budget", str(10 ** 11)],
+    ["multifidelity", "-o", "{tmp}/m.nc", "-n", str(10 ** 11), "--low-n", str(10 ** 11)],
 ]
 
 

@@ -7,7 +7,7 @@ from rss6core import MODELS
 
 from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError
-from .options import add_parents, add_scene, add_seed, positive_int
+from .options import add_parents, add_scene, add_seed, int_at_least
 
 _AXES = {"x": "m", "y": "m", "z": "m", "n1": "deg", "n2": "deg", "n3": "deg"}   # --grid's axes and units
 
@@ -34,7 +34,7 @@ def grid_axis(text: str):
 
 
 def add_parser(sub) -> None:
-    from ..studies.workspace_map import DEFAULT_COUNT, DEFAULT_DRAWS, MAP_MODELS
+    from ..studies.workspace_map import DEFAULT_COUNT, DEFAULT_DRAWS, MAP_MODELS, MAX_DRAWS
     p = sub.add_parser("map", help="worst-case and q95 pose error over a grid of poses (quasi-static level)")
     add_scene(p)
     p.add_argument("--model", choices=MODELS, default=MAP_MODELS[0],
@@ -43,7 +43,8 @@ def add_parser(sub) -> None:
                    help="a grid axis: x, y, z (m) or n1, n2, n3 (deg) from LO to HI in N points; give two "
                         "(default: the trajectory's two position axes of largest range, padded, "
                         f"{DEFAULT_COUNT} points each, the rest at the trajectory's mean pose)")
-    p.add_argument("-n", type=positive_int, default=DEFAULT_DRAWS,
+    p.add_argument("-n", type=int_at_least(1, MAX_DRAWS, " (the map holds 64 poses x N draws of errors at once)"),
+                   default=DEFAULT_DRAWS,
                    help=f"clearance realisations for the q95 and max (default {DEFAULT_DRAWS})")
     add_seed(p)
     p.add_argument("-o", "--output", default="workspace_map", help="output folder (default: workspace_map)")

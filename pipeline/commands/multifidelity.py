@@ -11,7 +11,7 @@ from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError
 from .messages import interrupted, scheduler_lost, warn_oversubscription
 from .options import (add_confidence, add_json, add_parents, add_scene, add_scheduler, add_seed, add_window_choice,
-                      add_workers, fraction, int_at_least, positive_float, positive_int)
+                      MAX_REALISATIONS, add_workers, fraction, int_at_least, positive_float, realisations)
 
 
 def add_parser(sub) -> None:
@@ -22,9 +22,9 @@ def add_parser(sub) -> None:
                    help="the dear level, run on realisations 0..N-1 (default: contact)")
     p.add_argument("--low", choices=MODELS, default="quasi-static",
                    help="the cheap level, run on realisations 0..M-1 (default: quasi-static)")
-    p.add_argument("-n", type=int_at_least(3), default=64,
+    p.add_argument("-n", type=int_at_least(3, MAX_REALISATIONS, " per ensemble"), default=64,
                    help="high-level realisations N, 3 or more (default 64); no interval below N = 32")
-    p.add_argument("--low-n", type=positive_int, default=1024,
+    p.add_argument("--low-n", type=realisations, default=1024,
                    help="low-level realisations M, at least N (default 1024)")
     p.add_argument("-o", "--output", required=True,
                    help="multi-fidelity netCDF file F.nc; the two ensembles are ordinary rss6 run "

@@ -168,6 +168,6 @@ def add_study_arguments(p, output: str, n: int, tolerance_help: str) -> None:
     add_scene(p)
     p.add_argument("-o", "--output", default=output, help=f"output folder (default: {output})")
     add_parents(p)
-    p.add_argument("-n", type=positive_int, default=n, help=f"realisations per setting (default {n})")
+    p.add_argument("-n", type=realisations, default=n, help=f"realisations per setting (default {n})")
     add_seed(p)
     p.add_argument("--tolerance", type=positive_float, default=0.05, help=f"{tolerance_help} (default 0.05)")

@@ -12,7 +12,7 @@ from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError, window_words
 from .messages import interrupted, note_loaded_joints
 from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, fraction,
-                      positive_int, realisations)
+                      realisations)
 
 
 def add_parser(sub) -> None:
@@ -35,7 +35,7 @@ def add_parser(sub) -> None:
                    help="a CoV target in (0, 1): mc adds realisations (blocks of 1000), subset doubles N (a fresh "
                         "run each time), until the estimated CoV is at most C or --budget would be exceeded "
                         "(exit 0 either way; status 'budget' if not met)")
-    p.add_argument("--budget", type=positive_int, metavar="E",
+    p.add_argument("--budget", type=realisations, metavar="E",
                    help="with --cov: evaluations at most, over all runs (default 20000 subset, 200000 mc)")
     p.add_argument("-p0", "--p0", type=float, default=0.1,
                    help="subset: conditional probability of each level, in (0, 0.5] (default 0.1)")

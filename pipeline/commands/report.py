@@ -7,7 +7,7 @@ from pathlib import Path
 from ..ensemble.settings import resolve_cluster
 from ..vocabulary import OptionError
 from .messages import interrupted, scheduler_lost
-from .options import add_scheduler, add_seed, add_workers, positive_int
+from .options import add_scheduler, add_seed, add_workers, realisations
 
 
 def add_parser(sub) -> None:
@@ -19,8 +19,8 @@ def add_parser(sub) -> None:
     p.add_argument("--overwrite-tracked", action="store_true",
                    help="allow overwriting results.md and figures that git tracks (e.g. -o docs)")
     p.add_argument("--data", help="folder of the ensemble files (default: OUTPUT/results-data)")
-    p.add_argument("-n", type=positive_int, default=1000, help="realisations per level and scene (default 1000)")
-    p.add_argument("--family-n", type=positive_int, default=100,
+    p.add_argument("-n", type=realisations, default=1000, help="realisations per level and scene (default 1000)")
+    p.add_argument("--family-n", type=realisations, default=100,
                    help="realisations per joint-family run (default 100)")
     add_seed(p)
     add_workers(p)

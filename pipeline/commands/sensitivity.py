@@ -12,11 +12,11 @@ from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError
 from .messages import interrupted, warn_oversubscription
 from .options import (add_confidence, add_model, add_parents, add_scene, add_seed, add_window_choice, add_workers,
-                      positive_int)
+                      int_at_least)
 
 
 def add_parser(sub) -> None:
-    from ..studies.sensitivity import MIN_N
+    from ..studies.sensitivity import MAX_N, MIN_N
     p = sub.add_parser("sensitivity", help="Sobol' indices of the error statistics by joint family "
                                            "(and joint), with bootstrap intervals (SALib); keeps its "
                                            "finished evaluations in OUTPUT.parts, so a rerun of the same "
@@ -24,7 +24,7 @@ def add_parser(sub) -> None:
     add_scene(p)
     add_model(p, "model level (default quasi-static; contact costs about 0.4 s per evaluation on the paper "
                  "scene)", choices=models_with("function_of_one_draw"), default="quasi-static")
-    p.add_argument("-n", type=positive_int, default=1024,
+    p.add_argument("-n", type=int_at_least(1, MAX_N, " (26 N evaluations with --per-joint)"), default=1024,
                    help=f"base sample N, a power of 2 of at least {MIN_N}; the level is evaluated "
                         "N (G + 2) times for G groups: 6 N for the 4 families, 20 N more for the "
                         "18 joints (default 1024)")

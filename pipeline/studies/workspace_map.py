@@ -24,6 +24,7 @@ __all__ = ["MAP_MODELS", "GridAxis", "DEFAULT_COUNT", "DEFAULT_DRAWS", "PAD", "M
 MAP_MODELS = models_with("linear_in_clearances")   # the levels whose worst case has a closed form
 DEFAULT_COUNT = 21          # grid points per axis
 DEFAULT_DRAWS = 1000        # realisations for the q95 and max
+MAX_DRAWS = 100_000         # at most: a block then holds 64 x N x 6 errors, 0.3 GB
 PAD = 0.1                   # the default grid reaches this fraction of the range beyond the trajectory
 MIN_PAD = {"m": 5e-3, "rad": np.radians(2.0)}   # and at least this far (m, rad)
 USER_UNITS = {"m": (1.0, "m"), "rad": (180.0 / np.pi, "deg")}   # --grid's units: metres and degrees
