@@ -207,3 +207,38 @@ def test_a_designs_stored_rows_and_their_count_come_from_its_own_chunks(tmp_path
         assert [(r.start, r.stop) for r, _ in stored] == rows
         assert parts.count() == sum(r.stop - r.start for r, _ in stored)
     assert np.array_equal(families.stored()[0][1], stats[9:]) and np.array_equal(joints.stored()[0][1], stats[4:9])
+
+
+@pytest.mark.parametrize("loss", ["deleted", "unreadable"])
+def test_a_lost_manifest_costs_no_finished_chunk(interrupted, whole, configs, monkeypatch, capsys, loss):
+    """A deleted or unreadable manifest: each chunk is read with its values' checksums and its settings
+    compared, then adopted; the rerun evaluates only the missing rows and writes the uninterrupted indices."""
+    manifest = _parts(interrupted) / "manifest.json"
+    if loss == "deleted":
+        manifest.unlink()
+    else:
+        manifest.write_text("{not json")
+    calls = _counting(monkeypatch)
+    assert main(_argv(configs, interrupted)) == 0, capsys.readouterr().err
+    assert sum(calls) == 64 * 20 - JOINT_CHUNK
+    _same_indices(interrupted, whole)
+
+
+def test_a_lost_manifests_chunk_with_changed_values_or_other_settings_is_refused(interrupted, configs, capsys):
+    """Without the manifest a chunk is adopted only if its values match their checksums and it names the
+    rerun's settings: a flipped value, or a rerun with another seed, is refused in one line (exit 2)."""
+    parts = _parts(interrupted)
+    (parts / "manifest.json").unlink()
+    assert main(_argv(configs, interrupted, "--seed", "1")) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "made with other settings (scene, model" in err[0], err
+    part = parts / "joints-0000000-0000255.nc"
+    with xr.open_dataset(part) as ds:
+        ds = ds.load()
+    name = next(v for v in ds.data_vars if ds[v].dtype.kind == "f")
+    ds[name].values.flat[3] += 1e-3
+    (parts / "manifest.json").unlink(missing_ok=True)
+    ds.to_netcdf(part)   # keeps the attributes, so the checksums of the old values
+    assert main(_argv(configs, interrupted)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "joints-0000000-0000255.nc" in err[0] and "families-" not in err[0], err

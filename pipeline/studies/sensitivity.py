@@ -19,6 +19,7 @@ a rerun of the same command evaluates only the rows still missing.
 from __future__ import annotations
 
 import contextlib
+import json
 import warnings
 from dataclasses import dataclass
 
@@ -163,8 +164,30 @@ def parts_manifest(spec, n: int, per_joint: bool, window: str, folder) -> PartsM
                   "seed": int(spec.seed), "n_base_samples": n, "per_joint": per_joint, "window": window,
                   "designs": ["families"] + (["joints"] if per_joint else []), "rss6_version": __version__}
     manifest = PartsManifest(folder, provenance, index="row", items="rows", settings=PART_SETTINGS)
-    manifest.refuse({path: manifest.problem(path) for path in manifest.parts()})
+    problems = {path: manifest.problem(path) for path in manifest.parts()}
+    manifest.refuse({path: _adopted(manifest, path) if why and manifest.adoptable(path) else why
+                     for path, why in problems.items()})
     return manifest
+
+
+def _provenance_text(provenance: dict) -> str:
+    """The manifest's provenance as each stored chunk carries it (its ``provenance`` attribute)."""
+    return json.dumps(provenance, sort_keys=True)
+
+
+def _adopted(manifest: PartsManifest, path) -> str | None:
+    """Vouch for chunk ``path`` of a deleted or unreadable manifest (None) if its values match their own
+    checksums and it was made with the manifest's settings; otherwise why not."""
+    try:
+        ds = load_netcdf(path)
+    except UserError as exc:
+        return str(exc).removeprefix(f"{path}: ")
+    if ds.encoding.get("rss6_unverified"):
+        return "carries no checksums of its values"
+    if ds.attrs.get("provenance") != _provenance_text(manifest.provenance):
+        return f"made with other settings ({PART_SETTINGS})"
+    manifest.adopt(path, ds)
+    return None
 
 
 @dataclass(frozen=True)
@@ -189,12 +212,13 @@ class RowParts:
 
     def keep(self, rows: slice, stats: np.ndarray) -> None:
         """Store the statistics of ``rows`` at once (PartsManifest.write: all or nothing)."""
-        self.manifest.write(_part_dataset(self.design, rows, stats),
+        self.manifest.write(_part_dataset(self.design, rows, stats, self.manifest.provenance),
                             f"{self.design}-{rows.start:07d}-{rows.stop - 1:07d}.nc")
 
 
-def _part_dataset(design: str, rows: slice, stats: np.ndarray) -> xr.Dataset:
-    """A stored chunk: the statistics (rows, 2, 3, 6) SI of ``rows`` of the ``design``'s sample."""
+def _part_dataset(design: str, rows: slice, stats: np.ndarray, provenance: dict) -> xr.Dataset:
+    """A stored chunk: the statistics (rows, 2, 3, 6) SI of ``rows`` of the ``design``'s sample, with the
+    run's ``provenance`` (which a lost manifest's chunks are adopted by)."""
     data = {name: (("row", "quantity", "direction"), stats[:, s], {"long_name": f"{what} over time of |platform "
                                                                    "pose error| of the row", "units": MIXED_UNITS})
             for s, (name, what) in enumerate(zip(SUMMARIES, ("maximum", "mean")))}
@@ -202,7 +226,7 @@ def _part_dataset(design: str, rows: slice, stats: np.ndarray) -> xr.Dataset:
               "quantity": ("quantity", list(QUANTITIES)), "direction": ("direction", list(DIRECTIONS)),
               "unit": (("quantity", "direction"), _unit_table(), {"long_name": "SI unit of the statistic"})}
     return xr.Dataset(data, coords=coords, attrs={"title": f"rss6 sensitivity: finished rows of the {design} design",
-                                                  "design": design})
+                                                  "design": design, "provenance": _provenance_text(provenance)})
 
 
 # --- evaluation ------------------------------------------------------------------------------
