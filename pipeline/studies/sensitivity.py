@@ -19,23 +19,21 @@ a rerun of the same command evaluates only the rows still missing.
 from __future__ import annotations
 
 import contextlib
-import json
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 
-from rss6core import (__version__, FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms,
+from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_named_uniforms,
                       inputs_from_uniforms, MODELS, model_level, models_with, prepare_level, realised_clearances,
                       size_band)
 
 from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client, results_as_finished
 from ..files.records import check_window, window_label, window_summaries
-from ..files.outputs import PartsManifest
-from ..files.reading import load_netcdf
-from ..files.schema import JOINTS, MIXED_UNITS, _provenance, _unit_table, command_line, settings_attrs
+from ..files.schema import JOINTS, _provenance, _unit_table, command_line
 from ..files.writing import sigint_deferred
+from .sensitivity_parts import RowParts, parts_manifest
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, UserError, WINDOWS
 
 __all__ = ["JOINT_FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
@@ -149,84 +147,6 @@ def sample_design(design: Design, n: int, seed: int) -> np.ndarray:
     from SALib.sample import sobol
     return sobol.sample(design.problem, n, calc_second_order=False, scramble=True,
                         seed=_salib_seed(seed, design.name, "sample"))
-
-
-# --- the finished chunks kept in OUT.parts ----------------------------------------------------
-
-PART_SETTINGS = "scene, model, integrator, step, mesh, seed, -n, --per-joint or --window"
-
-
-def parts_manifest(spec, n: int, per_joint: bool, window: str, folder) -> PartsManifest:
-    """The manifest of ``folder`` (OUT.parts), whose provenance names all the stored rows depend on;
-    EnsembleFileError (before any work) for parts of other settings or changed since written."""
-    provenance = {"scene_toml": spec.scene_text, **settings_attrs(model=spec.model, integrator=spec.integrator,
-                                                                   dt=float(spec.dt), elements=int(spec.elements)),
-                  "seed": int(spec.seed), "n_base_samples": n, "per_joint": per_joint, "window": window,
-                  "designs": ["families"] + (["joints"] if per_joint else []), "rss6_version": __version__}
-    manifest = PartsManifest(folder, provenance, index="row", items="rows", settings=PART_SETTINGS)
-    problems = {path: manifest.problem(path) for path in manifest.parts()}
-    manifest.refuse({path: _adopted(manifest, path) if why and manifest.adoptable(path) else why
-                     for path, why in problems.items()})
-    return manifest
-
-
-def _provenance_text(provenance: dict) -> str:
-    """The manifest's provenance as each stored chunk carries it (its ``provenance`` attribute)."""
-    return json.dumps(provenance, sort_keys=True)
-
-
-def _adopted(manifest: PartsManifest, path) -> str | None:
-    """Vouch for chunk ``path`` of a deleted or unreadable manifest (None) if its values match their own
-    checksums and it was made with the manifest's settings; otherwise why not."""
-    try:
-        ds = load_netcdf(path)
-    except UserError as exc:
-        return str(exc).removeprefix(f"{path}: ")
-    if ds.encoding.get("rss6_unverified"):
-        return "carries no checksums of its values"
-    if ds.attrs.get("provenance") != _provenance_text(manifest.provenance):
-        return f"made with other settings ({PART_SETTINGS})"
-    manifest.adopt(path, ds)
-    return None
-
-
-@dataclass(frozen=True)
-class RowParts:
-    """The stored chunks of one design: ``DESIGN-FIRST-LAST.nc`` in the manifest's folder, holding
-    the statistics (rows, 2, 3, 6) SI of the design's rows FIRST..LAST."""
-    manifest: PartsManifest
-    design: str
-
-    def parts(self) -> list:
-        """The design's stored chunks (verified by :func:`parts_manifest`)."""
-        return [path for path in self.manifest.parts() if path.name.startswith(f"{self.design}-")]
-
-    def stored(self) -> list[tuple[slice, np.ndarray]]:
-        """(rows, their statistics) of every stored chunk of the design."""
-        return [(slice(int(ds["row"][0]), int(ds["row"][-1]) + 1), np.stack([ds[k].values for k in SUMMARIES], axis=1))
-                for ds in (load_netcdf(path, verify=False) for path in self.parts())]
-
-    def count(self) -> int:
-        """How many of the design's rows are stored (as the manifest lists them, without reading the chunks)."""
-        return sum(len(self.manifest.entries[path.name]["rows"]) for path in self.parts())
-
-    def keep(self, rows: slice, stats: np.ndarray) -> None:
-        """Store the statistics of ``rows`` at once (PartsManifest.write: all or nothing)."""
-        self.manifest.write(_part_dataset(self.design, rows, stats, self.manifest.provenance),
-                            f"{self.design}-{rows.start:07d}-{rows.stop - 1:07d}.nc")
-
-
-def _part_dataset(design: str, rows: slice, stats: np.ndarray, provenance: dict) -> xr.Dataset:
-    """A stored chunk: the statistics (rows, 2, 3, 6) SI of ``rows`` of the ``design``'s sample, with the
-    run's ``provenance`` (which a lost manifest's chunks are adopted by)."""
-    data = {name: (("row", "quantity", "direction"), stats[:, s], {"long_name": f"{what} over time of |platform "
-                                                                   "pose error| of the row", "units": MIXED_UNITS})
-            for s, (name, what) in enumerate(zip(SUMMARIES, ("maximum", "mean")))}
-    coords = {"row": ("row", np.arange(rows.start, rows.stop), {"long_name": f"row of the {design} design's sample"}),
-              "quantity": ("quantity", list(QUANTITIES)), "direction": ("direction", list(DIRECTIONS)),
-              "unit": (("quantity", "direction"), _unit_table(), {"long_name": "SI unit of the statistic"})}
-    return xr.Dataset(data, coords=coords, attrs={"title": f"rss6 sensitivity: finished rows of the {design} design",
-                                                  "design": design, "provenance": _provenance_text(provenance)})
 
 
 # --- evaluation ------------------------------------------------------------------------------
