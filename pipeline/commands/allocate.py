@@ -102,5 +102,10 @@ def main(args) -> int:
     else:
         print(format_allocation(a, level.scene.name, level.model, args.n, note, fresh))
         print(f"allocation file: {folder / 'allocation.nc'}")
-    note_loaded_joints("allocate", level.scene, level.model)
+    if a.scene_path is not None:   # what the answer's robot does under its loads
+        note_loaded_joints("allocate", find_scene(str(a.scene_path)), level.model, specs,
+                           "the answer's robot at its fits' middle sizes")
+    else:
+        note_loaded_joints("allocate", level.scene, level.model, specs, "the nominal robot at the scene's sizes "
+                           "(a per-joint answer has no scene of its own)")
     return EXIT_CODES[overall(list(a.verdicts))]

@@ -50,5 +50,6 @@ def main(args) -> int:
     except KeyboardInterrupt:
         return interrupted(f"finished ensembles and chunks are kept in {folder}")
     print(format_budget(b, level.scene.name, level.model))
-    note_loaded_joints("budget", level.scene, level.model)
+    note_loaded_joints("budget", find_scene(str(b.scene_path)), level.model, specs,
+                       f"the answer's robot (clearances x {b.scale:.4g})")
     return 0

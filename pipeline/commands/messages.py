@@ -62,13 +62,15 @@ def import_meanwhile(*modules: str) -> None:
     threading.Thread(target=load, name="rss6-imports", daemon=True).start()
 
 
-def note_loaded_joints(command: str, scene, model: str) -> None:
-    """One line on stderr after a designer's answer at a level that places the joints inside their
+def note_loaded_joints(command: str, scene, model: str, specs=(),
+                       robot: str = "the nominal robot at its nominal sizes") -> None:
+    """The lines on stderr after a designer's answer at a level that places the joints inside their
     play rather than where the loads push them (:func:`pipeline.studies.loaded_joints.loaded_joints_note`)."""
-    loaded_joints_meanwhile(command, scene, model)()
+    loaded_joints_meanwhile(command, scene, model, specs, robot)()
 
 
-def loaded_joints_meanwhile(command: str, scene, model: str):
+def loaded_joints_meanwhile(command: str, scene, model: str, specs=(),
+                            robot: str = "the nominal robot at its nominal sizes"):
     """Start :func:`note_loaded_joints`'s computation in a thread and return the function that prints
     it once the answer is out: its quasi-static run (and the draw kernels' import) then overlaps the
     command's own work instead of following it (docs/performance.md section 36)."""
@@ -77,9 +79,10 @@ def loaded_joints_meanwhile(command: str, scene, model: str):
         return lambda: None
     import concurrent.futures
     pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="rss6-note")
-    note = pool.submit(loaded_joints_note, scene, model)
+    note = pool.submit(loaded_joints_note, scene, model, specs, robot)
     pool.shutdown(wait=False)
 
     def show() -> None:
-        print(f"rss6 {command}: {note.result()}", file=sys.stderr)
+        for line in note.result():
+            print(f"rss6 {command}: {line}", file=sys.stderr)
     return show

@@ -107,7 +107,7 @@ def main(args) -> int:
               file=sys.stderr)
         return 2
     _report(args, est, event, level, output, figure)
-    note_loaded_joints("reliability", level.scene, level.model)
+    note_loaded_joints("reliability", level.scene, level.model, [event])
     return 0
 
 

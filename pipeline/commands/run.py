@@ -83,7 +83,7 @@ def main(args) -> int:
     import_meanwhile("distributed", "pipeline.analysis.gate")   # gate imports stats (scipy.stats)
     spec = level.ensemble_spec(args.seed, args.store, replicates)
     kept = f"finished chunks are kept in {parts_dir(output)}"
-    note = loaded_joints_meanwhile("run", level.scene, level.model)   # what the statistics will leave out
+    note = loaded_joints_meanwhile("run", level.scene, level.model, specs)   # what the statistics leave out
     try:
         outcome, until = _compute(args, spec, targets, output, cluster, annotator(specs, verdicts))
     except SchedulerUnavailable as exc:

@@ -50,11 +50,13 @@ def main(args) -> int:
             raise OptionError(f"--{exc} (with --require)") from None
     if args.output:
         check_new_output(args.output, "rss6 stats", args.parents)
+    if args.window is not None:
+        specs = [replace(s, window=s.window or args.window) for s in specs]
     ds = open_results(args.file)
-    note = _loaded_joints_note(ds, args.file)
+    note = _loaded_joints_note(ds, args.file, specs + events)
     full = ensemble_stats(ds, args.confidence, window=None)
     if args.window is not None:
-        full, specs = _window_of(full, args.window), [replace(s, window=s.window or args.window) for s in specs]
+        full = _window_of(full, args.window)
     verdicts = judge(ds, specs, args.confidence)
     probabilities = _probabilities(ds, events, args.confidence)
     sds = _selection(full, args)
@@ -74,15 +76,17 @@ def main(args) -> int:
     return exit_code(verdicts, args.undecided) if specs else 0
 
 
-def _loaded_joints_note(ds, path):
-    """The function that prints what the file's level leaves out (:func:`.messages.loaded_joints_meanwhile`,
-    computed meanwhile); nothing for a file without its scene and level."""
+def _loaded_joints_note(ds, path, limits):
+    """The function that prints what the file's level leaves out and which of ``limits`` (specs and events) the
+    loaded robot is past (:func:`.messages.loaded_joints_meanwhile`, computed meanwhile); nothing for a file
+    without its scene and level."""
     if "scene_toml" not in ds.attrs or "model" not in ds.attrs:
         return lambda: None
     from rss6core import parse_scene
 
     from .messages import loaded_joints_meanwhile
-    return loaded_joints_meanwhile("stats", parse_scene(ds.attrs["scene_toml"], str(path)), str(ds.attrs["model"]))
+    return loaded_joints_meanwhile("stats", parse_scene(ds.attrs["scene_toml"], str(path)), str(ds.attrs["model"]),
+                                   limits)
 
 
 def _events(args) -> list:

@@ -20,7 +20,9 @@ from rss6core import model_level, parse_scene, simulate
 from ..scenes.variant import scene_variant
 from ..vocabulary import DIRECTIONS, FAMILIES
 
-__all__ = ["leaves_out_loaded_joints", "loaded_joint_maxima", "loaded_joints_note"]
+__all__ = ["leaves_out_loaded_joints", "loaded_joint_maxima", "loaded_joints_note", "loaded_breaches"]
+
+TRANSLATIONS = FAMILIES["translation"]   # x, y, z: the directions the loaded maxima are given in
 
 
 def leaves_out_loaded_joints(scene, model: str) -> bool:
@@ -50,19 +52,41 @@ def loaded_joint_maxima(scene) -> np.ndarray:
     loaded = _loaded_scene(scene)
     result = simulate(loaded, "quasi-static")
     steady = result.t >= loaded.simulation.steady_after
-    translations = [DIRECTIONS.index(d) for d in FAMILIES["translation"]]
-    return np.abs(result.displacement[steady][:, translations]).max(axis=0)
+    return np.abs(result.displacement[steady][:, [DIRECTIONS.index(d) for d in TRANSLATIONS]]).max(axis=0)
 
 
-def loaded_joints_note(scene, model: str) -> str | None:
-    """One line for a designer's answer at a level that leaves the loaded joints out (None otherwise):
-    what the answer assumes, and the loaded state's steady displacement maxima beside it."""
+def loaded_joints_note(scene, model: str, specs=(), robot: str = "the nominal robot at its nominal sizes"
+                       ) -> list[str]:
+    """The lines a designer's answer at a level that leaves the loaded joints out ends with (none
+    otherwise): what the answer assumes and the loaded state's steady displacement maxima of ``robot``
+    (``scene``, described so), then a warning naming each of ``specs`` (Spec or Event) they are already past."""
     if not leaves_out_loaded_joints(scene, model):
-        return None
-    x, y, z = 1e3 * loaded_joint_maxima(scene)
+        return []
+    maxima = loaded_joint_maxima(scene)
+    x, y, z = 1e3 * maxima
     where = ("redraws each joint anywhere inside its play every step" if model_level(model).redraws_every_step
              else "places each joint anywhere inside its play (quasi_static_eccentricity = \"drawn\")")
-    return (f"note: the {model} level {where}; the scene's loads push the joints against their walls, where "
-            "one quasi-static run of the nominal robot at its nominal sizes (\"reaction\") gives steady "
-            f"displacement maxima x, y, z = {x:.3g}, {y:.3g}, {z:.3g} mm: this answer does not include that; "
-            "the contact level does (docs/guide.md, \"One realisation of each level\")")
+    lines = [f"note: the {model} level {where}; the scene's loads push the joints against their walls, where "
+             f"one quasi-static run of {robot} (\"reaction\") gives steady "
+             f"displacement maxima x, y, z = {x:.3g}, {y:.3g}, {z:.3g} mm: this answer does not include that; "
+             "the contact level does (docs/guide.md, \"One realisation of each level\")"]
+    broken = loaded_breaches(maxima, specs)
+    if broken:
+        lines.append(f"warning: under its loads {robot} is past the limit of {'; '.join(broken)}: judge it with "
+                     "quasi_static_eccentricity = \"reaction\" in the scene's [simulation] or at the contact level")
+    return lines
+
+
+def loaded_breaches(maxima: np.ndarray, limits) -> list[str]:
+    """Each translation limit of ``limits`` (Spec or Event on a max |displacement| over the steady or whole
+    run) that the loaded state's steady maxima (m, x y z) are already past, as "'SPEC' (z 0.288 mm)"."""
+    out = []
+    for limit in limits:
+        if limit.quantity != "displacement" or getattr(limit, "measure", "max") != "max" or limit.window == "startup":
+            continue
+        past = limit.exceeds if hasattr(limit, "exceeds") else (lambda value, spec=limit: not spec.holds(value))
+        over = [f"{d} {maxima[TRANSLATIONS.index(d)] / limit.factor:.3g} {limit.unit}" for d in limit.directions
+                if d in TRANSLATIONS and past(maxima[TRANSLATIONS.index(d)])]
+        if over:
+            out.append(f"{limit.text!r} ({', '.join(over)})")
+    return out
