@@ -317,6 +317,7 @@ def test_a_long_spec_keeps_its_direction_and_every_row_names_its_window():
 def test_the_rule_and_its_confidence_are_stated():
     ds = _ensemble(_symmetric(100, 1e-4, 2e-5))
     (q,) = verdicts_json(judge(parse_spec("displacement:x<=0.2mm@q95"), ds))
+    assert q["window"] == "whole"   # named in the JSON as in the table, not null (claims55)
     assert q["rule"] == ("one-sided 95 % bounds of q95 (exact binomial order statistics, "
                          "distribution-free): fail when the lower bound violates the limit, pass "
                          "when the upper bound meets it")

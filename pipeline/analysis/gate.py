@@ -57,7 +57,7 @@ class Verdict:
     direction: str
     statistic: str
     measure: str
-    window: str | None
+    window: str             # the spec's window, "whole" when it names none
     op: str
     limit: float
     unit: str
@@ -235,7 +235,7 @@ def _judge(spec: Spec, ds, bounds) -> list[Verdict]:
         ev = _Evidence(*(float(da.sel(direction=d, bound=b)) for b in ("estimate", "lower", "upper")),
                        values=values.sel(direction=d).values)
         outcome, need, reason = _decision(spec, ev, n, failed, confidence, replicates)
-        out.append(Verdict(spec.text, spec.quantity, d, spec.statistic, spec.measure, spec.window,
+        out.append(Verdict(spec.text, spec.quantity, d, spec.statistic, spec.measure, spec.window or "whole",
                            spec.op, spec.limit, spec.unit, spec.factor, ev.estimate,
                            ev.lower if np.isfinite(ev.lower) else None,
                            ev.upper if np.isfinite(ev.upper) else None,
@@ -272,7 +272,7 @@ def _judge_pf(spec: Spec, ds, confidence: float) -> list[Verdict]:
         failed = int(ds["status"].size - n) if "status" in ds else 0
         lower, upper = (float(b) for b in one_sided_cp(k, n, confidence))
         outcome, need, reason = _pf_decision(spec, k, n, failed, lower, upper, confidence)
-        out.append(Verdict(spec.text, spec.quantity, d, PF, "max", spec.window, spec.pf_op, spec.pf_limit,
+        out.append(Verdict(spec.text, spec.quantity, d, PF, "max", spec.window or "whole", spec.pf_op, spec.pf_limit,
                            "", 1.0, k / n if n else float("nan"), lower, upper, confidence, n, failed,
                            outcome, need, reason, _rule(spec, confidence, None)))
     return out
