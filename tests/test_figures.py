@@ -84,7 +84,7 @@ def assert_legible(figs: dict) -> None:
 @pytest.fixture(scope="module")
 def full_ensemble(tmp_path_factory):
     path = tmp_path_factory.mktemp("figs") / "smoke.nc"
-    assert main(["run", SMOKE, "-n", "12", "--workers", "2", "--model", "quasi-static",
+    assert main(["run", SMOKE, "-n", "20", "--workers", "2", "--model", "quasi-static",
                  "--store", "full", "-o", str(path)]) == 0
     return path
 
@@ -103,7 +103,7 @@ def test_ensemble_figures_are_legible(full_ensemble):
         title = fig._suptitle.get_text()
         flat = " ".join(title.split())
         assert "scene smoke" in flat and "quasi-static level" in flat and "smoke.nc" in flat
-        assert "n = 12" in flat, (name, title)
+        assert "n = 20" in flat, (name, title)
     assert_legible(figs)
 
 
@@ -517,7 +517,7 @@ def test_histogram_of_spreads_within_the_solver_tolerance_is_a_note(smoke, full_
                 assert bool(ax.patches) == (not note), ax.get_title()      # bars only without a note
                 if not note:
                     continue
-                assert "all 12 realisations agree within" in note and "below what the level resolves" in note
+                assert "all 20 realisations agree within" in note and "below what the level resolves" in note
                 if q != "displacement":
                     assert f"twice the level's {100 * CONTACT_ACCURACY[q]:g} % accuracy in {q}" in note, note
                 elif d in ("x", "y", "z"):
@@ -597,7 +597,7 @@ def test_one_unit_per_direction_family_in_every_figure(smoke, full_ensemble, sim
 
 
 def test_convergence_counts_are_integers_and_the_running_mean_shows_from_n_1(full_ensemble):
-    """Three realisations: every tick of the n axis is a whole number.  Twelve, the first six
+    """Three realisations: every tick of the n axis is a whole number.  Twenty, the first six
     times the others' maxima: every point of the running mean (n = 1, 2, ...) lies inside the y
     range, which also holds the interval from n = MIN_N_MEAN up to its top."""
     ds = open_ensemble(full_ensemble).load()

@@ -11,7 +11,7 @@ from scipy import stats as sps
 
 from pipeline.analysis.gate import exit_code, format_verdicts, judge, judge_all, verdicts_json
 from pipeline.analysis.spec import STANDARD_GRAVITY, SpecError, parse_spec
-from pipeline.analysis.estimators import (MIN_N_STD, mean_bounds, one_sided_ranks, quantile_bounds,
+from pipeline.analysis.estimators import (MIN_N_MEAN, MIN_N_STD, mean_bounds, one_sided_ranks, quantile_bounds,
                                           quantile_decision_n, rqmc_intervals)
 from pipeline.vocabulary import QUANTILES, STATISTICS
 
@@ -254,7 +254,7 @@ def test_missing_bounds_give_the_smallest_n_that_has_them():
     (m,) = judge(parse_spec("displacement:x<=10mm@std"), _ensemble(_symmetric(32, 1e-4, 3e-5)))
     assert (m.outcome, m.n_needed, m.lower) == ("undecided", MIN_N_STD, None)
     (q,) = judge(parse_spec("displacement:x<=1mm@mean"), _ensemble(_symmetric(5, 1e-4, 3e-5)))
-    assert (q.outcome, q.n_needed) == ("undecided", 8)
+    assert (q.outcome, q.n_needed) == ("undecided", 16)
 
 
 # --- failed realisations, directions, exit codes, the table ---------------------------------------
@@ -410,6 +410,17 @@ def test_mean_decisions_err_at_most_nominal_plus_one_point(law):
               f"{max((lower > law_.mean()).mean(), (upper < law_.mean()).mean()):.4f}")
         assert (lower > law_.mean()).mean() <= 0.06, (n, (lower > law_.mean()).mean())
         assert (upper < law_.mean()).mean() <= 0.06, (n, (upper < law_.mean()).mean())
+
+
+@pytest.mark.parametrize("law", [sps.expon(), sps.chi2(1)], ids=["exponential", "chi2(1)"])
+def test_a_mean_at_its_limit_is_passed_at_most_nominal_from_the_first_n_with_bounds(law):
+    """Skewed laws (skewness 2 and 2.8), 20 000 samples at the mean's floor MIN_N_MEAN: a design whose mean
+    equals a '<=' limit is passed (upper bound below it) in at most 5.5 % (5 % nominal, +3 standard errors).
+    At n = 8, the former floor, it is 5.8 % and 7.3 % (this test with MIN_N_MEAN = 8)."""
+    x = law.rvs(size=(MIN_N_MEAN, 20_000), random_state=np.random.default_rng(31))
+    wrong = (mean_bounds(x, CONF)[1] < law.mean()).mean()
+    print(f"passed at the limit mean n={MIN_N_MEAN}: {wrong:.4f}")
+    assert wrong <= 0.055, wrong
 
 
 @pytest.mark.parametrize("law", list(LAWS))

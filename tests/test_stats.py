@@ -28,9 +28,9 @@ CONFIGS = Path(str(resources.files(PACKAGE)))  # the shipped scenes
 
 CONF = 0.95
 TRIALS = 2000
-SIZES = (8, 16, 32, 100, 300, 1000)
+SIZES = (8, 16, 32, 100, 200, 300, 1000)
 LAWS = {"normal (symmetric)": sps.norm(), "gamma(2) (skewed)": sps.gamma(2.0),
-        "Laplace (heavy-tailed)": sps.laplace()}
+        "exponential (skewness 2)": sps.expon(), "Laplace (heavy-tailed)": sps.laplace()}
 
 
 def _coverage(law, n: int, target, interval, seed: int):
@@ -66,6 +66,18 @@ def test_every_interval_covers_at_least_nominal_minus_two_points(statistic, law)
         if given:
             print(f"coverage {statistic} {law} n={n}: {coverage:.4f}")   # pytest -s: the documented worst case
             assert coverage >= CONF - 0.02, (statistic, law, n, coverage)
+
+
+@pytest.mark.parametrize("law", [sps.gamma(2.0), sps.expon()], ids=["gamma(2)", "exponential"])
+def test_the_widened_std_interval_reaches_its_label_from_its_floor(law):
+    """20 000 samples of n = MIN_N_STD on skewed laws: the std interval covers >= 94.5 % (95 % nominal, -3
+    standard errors). Bonett's interval at its own level covers 94.1 % and 93.4 % there (this test with
+    STD_WIDENING = 1), which is why it is computed at 97 % (estimators' module text)."""
+    x = law.rvs(size=(MIN_N_STD, 20_000), random_state=np.random.default_rng(37))
+    lo, hi = std_interval(x, CONF)
+    coverage = ((lo <= law.std()) & (law.std() <= hi)).mean()
+    print(f"coverage std n={MIN_N_STD}: {coverage:.4f}")
+    assert coverage >= 0.945, coverage
 
 
 def test_the_sample_maximum_gets_no_interval():

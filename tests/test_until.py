@@ -229,9 +229,9 @@ def test_the_workers_are_said_to_start_once_for_every_batch(tmp_path, capsys):
                         scene.simulation.elements_per_link, 3)
     targets = [parse_target("displacement:x@mean<=0.0001%")]          # never met: every checkpoint runs
     stream = io.StringIO()
-    run_until(spec, targets, 12, tmp_path / "u.nc", workers=1, stream=stream)
+    run_until(spec, targets, 25, tmp_path / "u.nc", workers=1, stream=stream)
     bar = capsys.readouterr().err                                      # the batches' progress lines
-    assert checkpoints(targets, 12) == [8, 10, 12] and bar.count("realisations to compute") == 3
-    assert stream.getvalue().startswith("rss6 run --until: at most 3 batches (checks at n = 8 to 12) on 1 workers; "
+    assert checkpoints(targets, 25) == [16, 20, 25] and bar.count("realisations to compute") == 3
+    assert stream.getvalue().startswith("rss6 run --until: at most 3 batches (checks at n = 16 to 25) on 1 workers; "
                                         "starting workers\n")
     assert (stream.getvalue() + bar).count("starting workers") == 1

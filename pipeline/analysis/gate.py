@@ -42,7 +42,7 @@ EXIT_CODES = {"pass": 0, "fail": 1, "undecided": 3}
 UPPER_LIMITS = ("<=", "<")
 BOUND_METHODS = {"quantile": "exact binomial order statistics, distribution-free",
                  "mean": "union of Student t and Hall's skewness-corrected t",
-                 "std": "those of the two-sided Bonett interval",
+                 "std": "those of the two-sided (widened) Bonett interval",
                  "qmc": "Student t over the randomised-QMC replicates",
                  PF: "exact Clopper-Pearson binomial bounds"}
 

@@ -18,7 +18,7 @@ import xarray as xr
 
 from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
-from .estimators import (BOUNDS, MAX_NOTE, MIN_N_MEAN, MIN_N_STD, MIN_POINTS_RQMC, estimates_and_bounds,
+from .estimators import (BOUNDS, MAX_NOTE, MIN_N_MEAN, MIN_N_STD, MIN_POINTS_RQMC, STD_WIDENING, estimates_and_bounds,
                          interval_floor, min_n_for_quantile, replicate_groups, rqmc_intervals)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
@@ -168,7 +168,8 @@ def _attrs(ds, n: int, failed: int, confidence: float) -> dict:
             "confidence": confidence,
             "interval_mean": f"union of Student t and Hall (1992) skewness-corrected t; NaN for "
                              f"n < {MIN_N_MEAN}",
-            "interval_std": f"Bonett (2006); NaN for n < {MIN_N_STD}",
+            "interval_std": f"Bonett (2006) at the level 1 - {STD_WIDENING:g} (1 - confidence); NaN for "
+                            f"n < {MIN_N_STD}",
             "interval_quantiles": "distribution-free order statistics, exact binomial coverage; "
                                   "NaN for n < " + ", ".join(f"{v} ({k})" for k, v in needed.items()),
             "interval_max": MAX_NOTE,
