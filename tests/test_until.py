@@ -235,3 +235,25 @@ def test_the_workers_are_said_to_start_once_for_every_batch(tmp_path, capsys):
     assert stream.getvalue().startswith("rss6 run --until: at most 3 batches (checks at n = 16 to 25) on 1 workers; "
                                         "starting workers\n")
     assert (stream.getvalue() + bar).count("starting workers") == 1
+
+
+def test_the_statistics_of_a_run_stopped_by_its_intervals_say_what_that_costs_them(tmp_path):
+    """A run that stopped where its intervals met the target carries the note on their coverage
+    (benchmarks/until_coverage.py) in its statistics' attributes and table; one that ran to its cap,
+    like a plain run, does not."""
+    from pipeline.analysis.stats import UNTIL_NOTE, ensemble_stats, format_stats
+    from pipeline.analysis.until import run_until
+    from pipeline.ensemble.run import EnsembleSpec
+    from pipeline.files.reading import load_netcdf
+    from pipeline.scenes.catalogue import find_scene
+    scene = find_scene("smoke")
+    spec = EnsembleSpec(scene.source_text, "smoke", "quasi-static", "newmark", scene.time_step,
+                        scene.simulation.elements_per_link, 3)
+    for target, name, noted in (("displacement:z@mean<=50%", "met.nc", True),
+                                ("displacement:z@mean<=0.0001%", "cap.nc", False)):
+        run_until(spec, [parse_target(target)], 20, tmp_path / name, workers=1, stream=io.StringIO())
+        ds = load_netcdf(tmp_path / name)
+        assert (ds.attrs["until_met"] == "met") == noted
+        sds = ensemble_stats(ds)
+        assert ("interval_after_until" in sds.attrs) == noted
+        assert (format_stats(sds).splitlines()[-1] == f"  --until: {UNTIL_NOTE}") == noted
