@@ -277,6 +277,9 @@ def test_total_estimates_outside_zero_one_get_a_note_naming_the_worst(sobol_file
     ds = load_netcdf(sobol_file)
     inside = ds.assign(max_abs_error_sobol=ds["max_abs_error_sobol"].clip(0, 1))
     assert "note:" not in format_sensitivity(inside)
+    # the label comes with its coverage on a maximum over time (benchmarks/sobol_coverage.py), below 95 %
+    assert format_sensitivity(inside).splitlines()[0].endswith(
+        "[95 % bootstrap interval, covering 88-94 % on a maximum over time, docs/ensembles.md]")
     st = inside["max_abs_error_sobol"]
     st.loc[dict(index="ST", bound="estimate", group="spherical_B", quantity="velocity", direction="rz")] = 1.4
     st.loc[dict(index="ST", bound="estimate", group="revolute_axial", quantity="velocity", direction="x")] = -0.1
