@@ -8,6 +8,7 @@ import xarray as xr
 from scipy import stats as sps
 
 from pipeline.cli import main
+from pipeline.analysis.estimators import MIN_N_MEAN
 from pipeline.studies.multifidelity import (MIN_N_MF, control_variate_mean, cost_ratio, format_multifidelity,
                                             level_paths, multifidelity_dataset, optimal_low_ratio, paired_values,
                                             variance_reduction)
@@ -135,8 +136,11 @@ def test_dataset_from_a_smoke_pair_and_pairing_check(configs):
     y = high["max_abs_error"].sel(window="whole").transpose("realization", ...).values  # all finished
     mf = sized["max_abs_error_mean"].sel(estimator="multifidelity", bound="estimate").values
     n_plain = (1.959964 * y.std(axis=0, ddof=1) / (0.05 * mf)) ** 2          # independent formula
-    np.testing.assert_allclose(sized["max_abs_error_plain_n_for_width"], np.ceil(n_plain), atol=1)
-    assert (sized["max_abs_error_high_n_for_width"] <= sized["max_abs_error_plain_n_for_width"]).all()
+    np.testing.assert_allclose(sized["max_abs_error_plain_n_for_width"], np.maximum(np.ceil(n_plain), MIN_N_MEAN),
+                               atol=1)
+    high_n, low_n = sized["max_abs_error_high_n_for_width"], sized["max_abs_error_low_n_for_width"]
+    assert (high_n >= MIN_N_MF).all() and (low_n >= high_n).all()   # never a size without an interval
+    assert (high_n <= np.maximum(sized["max_abs_error_plain_n_for_width"], MIN_N_MF)).all()
     other = _ensemble(configs, "smoke", "quasi-static", range(6), seed=1)
     with pytest.raises(EnsembleFileError, match="seed"):
         multifidelity_dataset(high, other)
