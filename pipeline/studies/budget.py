@@ -194,7 +194,8 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
         if not trials[-1].passed:   # the scaling argument of the module doc failed
             raise RuntimeError(f"the ensemble at the exact scale {scale:g} does not pass: {trials[-1].path}")
         method = ("exact scaling from the ensemble at scale 1, the level being linear in the "
-                  "clearance; checked by an ensemble at the answer")
+                  "clearance; checked by an ensemble at the answer on the same draws: a check of the "
+                  "scaling, not a fresh sample")
     else:
         trials = tuple(_sweep(run, tolerance))
         scale = max(t.candidate for t in trials if t.passed)
