@@ -177,3 +177,18 @@ def test_stats_prints_the_event_probability_and_judges_pf_with_exit_codes(smoke_
     lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("P(")]
     assert [ln.split(" = ")[0] for ln in lines] == ["P(displacement:z>1mm) over the whole run",
                                                     "P(displacement:z>1mm/steady) over the steady window"]
+
+
+def test_failed_realisations_widen_the_interval_to_either_outcome():
+    """40 draws, 6 finished in the event, 30 finished out of it, 4 failed: the estimate is 6/36 over the
+    finished ones; the interval is exact over all 40 whatever the failed ones were, its lower end the
+    Clopper-Pearson bound of 6/40 and its upper end that of 10/40 (scipy's exact binomial interval,
+    an independent computation), and the line says how the failed ones are counted."""
+    ds = _ensemble(_with_exceeding(40, 6))
+    ds["status"][36:] = "diverged"
+    r = exceedance(ds, parse_event("displacement:z>0.1mm"))
+    assert (r.exceeding, r.n, r.n_failed) == (6, 36, 4) and r.estimate == pytest.approx(6 / 36)
+    low = sps.binomtest(6, 40).proportion_ci(CONF, method="exact").low
+    high = sps.binomtest(10, 40).proportion_ci(CONF, method="exact").high
+    assert (r.lower, r.upper) == (pytest.approx(low, rel=1e-9), pytest.approx(high, rel=1e-9))
+    assert "the interval counts them out on its lower side and in on its upper one" in format_exceedance([r])

@@ -113,8 +113,9 @@ def one_sided_cp(k, n, confidence: float = CONFIDENCE) -> tuple:
 
 @dataclass(frozen=True)
 class Exceedance:
-    """The estimate k / n of an event's probability and its two-sided Clopper-Pearson interval at
-    ``confidence`` over the n finished realisations (``n_failed`` others left out)."""
+    """The estimate k / n of an event's probability over the n finished realisations and its two-sided
+    Clopper-Pearson interval at ``confidence`` over all n + ``n_failed`` draws, whose failed ones may or
+    may not be in the event (counted out on the lower side, in on the upper)."""
 
     event: str
     exceeding: int
@@ -151,7 +152,10 @@ def exceedance(ds, event: Event, confidence: float = CONFIDENCE) -> Exceedance:
     if n == 0:
         return Exceedance(event.text, 0, 0, failed, float("nan"), float("nan"), float("nan"), confidence,
                           event.window, event.directions)
-    lower, upper = clopper_pearson(k, n, confidence)
+    # a failed realisation may or may not be in the event: the interval takes it as neither on the lower
+    # side and as in it on the upper one, so it covers the probability over every draw
+    lower = clopper_pearson(k, n + failed, confidence)[0]
+    upper = clopper_pearson(k + failed, n + failed, confidence)[1]
     return Exceedance(event.text, k, n, failed, k / n, float(lower), float(upper), confidence, event.window,
                       event.directions)
 
@@ -161,7 +165,8 @@ def format_exceedance(results: list[Exceedance]) -> str:
     confidence it reaches."""
     lines = []
     for r in results:
-        failed = f"; {r.n_failed} failed realisations left out" if r.n_failed else ""
+        failed = (f"; the estimate leaves the {r.n_failed} failed realisations out, the interval counts them "
+                  "out on its lower side and in on its upper one") if r.n_failed else ""
         lines.append(f"P({r.event}){union_words(r.directions)} over the {window_words(r.window)} = "
                      f"{r.exceeding}/{r.n} = {r.estimate:.4g}, "
                      f"{100 * r.confidence:g} % interval [{r.lower:.4g}, {r.upper:.4g}] "
