@@ -66,6 +66,12 @@ def test_warm_on_a_warm_cache_compiles_nothing():
     line = proc.stdout.strip()
     assert line.startswith("rss6 warm: nothing to compile: contact_kernel.advance_chunk, "
                            "contact_kernel.newton_step (the contact level's"), line
+    assert "every level's draw kernels compiled or loaded at their import in " in line   # newcomer55
+    # a new process loads every draw kernel warm left in the cache: no compile, only cache hits
+    hits = _python("import json; from rss6core import draw_kernel as k; "
+                   "print(json.dumps({n: [sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values())] "
+                   "for n in ('eccentricities_into', 'truncated_normals') for f in [getattr(k, n)]}))")
+    assert all(h >= 1 and m == 0 for h, m in hits.values()), hits
     assert _python("import json; from rss6core import kernels_to_compile; "
                    "print(json.dumps(kernels_to_compile('contact')))") == []
 
