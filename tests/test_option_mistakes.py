@@ -199,3 +199,22 @@ def test_a_folder_given_as_a_file_is_named_as_a_folder(command, tmp_path, capsys
     """As rss6 run says it, not netCDF's "Unknown file format" (bad-input audit)."""
     assert main([command, str(tmp_path)]) == 2
     assert capsys.readouterr().err.strip() == f"rss6: error: {tmp_path}: is a folder; give an rss6 netCDF file"
+
+
+def test_a_file_of_another_kind_is_named_by_what_wrote_it(tmp_path, small_file, capsys):
+    """A statistics file (rss6 stats -o) given to stats names the command that wrote it and its title, a
+    scene (text) given for a netCDF file says it is text, and a netCDF file cut short stays 'truncated or
+    corrupt?' (newcomer55: all three had said 'not an rss6 ensemble file' or 'truncated or corrupt?')."""
+    stats_file, scene, cut = tmp_path / "s.nc", tmp_path / "scene.toml", tmp_path / "cut.nc"
+    assert main(["stats", str(small_file), "-o", str(stats_file)]) == 0
+    scene.write_text("[geometry]\nbase_radius_m = 0.2\n")
+    cut.write_bytes(small_file.read_bytes()[:1000])
+    capsys.readouterr()
+    said = {}
+    for path in (stats_file, scene, cut):
+        code, err = _run(["stats", str(path)], capsys, tmp_path, small_file)
+        assert code == 2 and len(err) == 1, err
+        said[path] = err[0]
+    assert f"{stats_file}: not an ensemble file (rss6 run -o) but \"rss6 statistics of" in said[stats_file]
+    assert f"{scene}: not a netCDF file but text (a scene file?" in said[scene]
+    assert f"{cut}: not a readable netCDF file (truncated or corrupt?)" in said[cut]

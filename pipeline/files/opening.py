@@ -22,10 +22,25 @@ def checked_ensemble(ds: xr.Dataset, path) -> xr.Dataset:
     """``ds`` (read from ``path``) if it is a well-formed rss6 ensemble, else EnsembleFileError."""
     missing = [k for k in ("max_abs_error", "mean_abs_error", "status") if k not in ds]
     if missing or "rss6_version" not in ds.attrs or "realization" not in ds.dims:
+        other = _other_kind(ds)
+        if other:
+            raise EnsembleFileError(f"{path}: not an ensemble file (rss6 run -o) but {other}")
         raise EnsembleFileError(f"{path}: not an rss6 ensemble file (missing "
                                 f"{', '.join(missing) or 'rss6 attributes'})")
     check_ensemble(ds, path)
     return ds
+
+
+def _other_kind(ds) -> str | None:
+    """What another rss6 command's file holds (its title, with the command its history names when the
+    title does not say), else None."""
+    ours = "rss6_version" in ds.attrs or str(ds.attrs.get("source", "")).startswith("rss6")
+    title = str(ds.attrs.get("title", ""))
+    if not ours or not title:
+        return None
+    history = str(ds.attrs.get("history", "")).split()
+    made = f" ({' '.join(history[:2])})" if not title.startswith("rss6") and history[:1] == ["rss6"] else ""
+    return f"{title!r}{made}"
 
 
 def open_results(path):

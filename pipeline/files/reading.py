@@ -21,6 +21,23 @@ HISTORY_BLOCK = 64   # realisations per block of a history read lazily (a merge 
 SUMMARY_BLOCK = 2 ** 16
 
 
+NETCDF_MAGIC = (b"CDF\x01", b"CDF\x02", b"CDF\x05", b"\x89HDF\r\n\x1a\n")   # classic, 64-bit, CDF5, netCDF-4
+
+
+def _unreadable(path) -> str:
+    """Why a file netCDF could not open is no rss6 file: not netCDF at all (a scene or text file given for
+    a netCDF one?), or a netCDF file cut short or damaged."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError:
+        head = b""
+    if head and not head.startswith(NETCDF_MAGIC):
+        text = head.isascii() and all(c >= 9 for c in head)
+        return "not a netCDF file" + (" but text (a scene file? this option takes a .nc file)" if text else "")
+    return "not a readable netCDF file (truncated or corrupt?)"
+
+
 def load_netcdf(path, lazy: bool = False, verify: bool = True, summary_block: int | None = None) -> xr.Dataset:
     """Any netCDF file fully into memory; EnsembleFileError names the file if it is missing (or not
     written yet by a run, :func:`unfinished`) or unreadable.
@@ -51,8 +68,7 @@ def load_netcdf(path, lazy: bool = False, verify: bool = True, summary_block: in
             with xr.open_dataset(path, engine="netcdf4", decode_times=False) as opened:
                 ds = opened.load()
     except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...
-        raise EnsembleFileError(f"{path}: not a readable netCDF file "
-                                f"(truncated or corrupt?): {exc}") from None
+        raise EnsembleFileError(f"{path}: {_unreadable(path)}: {exc}") from None
     verified = verify and verify_checksums(ds, path)
     try:
         out = _forget_string_widths(cf_decode(ds))
