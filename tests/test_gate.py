@@ -433,3 +433,25 @@ def test_a_clearly_failing_design_is_failed(law):
     assert (quantile_bounds(np.sort(x20, axis=0), 0.95, CONF)[0] > law_.ppf(0.5)).mean() >= 0.99
     assert (quantile_bounds(np.sort(x100, axis=0), 0.95, CONF)[0] > law_.ppf(0.8)).mean() >= 0.95
     assert (mean_bounds(x20, CONF)[0] > law_.mean() - law_.std()).mean() >= 0.95
+
+
+def test_an_ensemble_of_a_level_that_draws_nothing_is_decided_by_its_one_run(tmp_path, capsys):
+    """The elastic level on a scene without [uncertain.*] inputs draws nothing: its 4 realisations are one
+    run, whose value decides each spec exactly (bounds = estimate, no 'run 59'); the std of identical runs
+    is 0 and pf is 0 or 1. The quasi-static level's 4 drawn realisations stay undecided (newcomer55)."""
+    from pipeline.cli import main
+    from pipeline.files.reading import load_netcdf
+    path = tmp_path / "el.nc"
+    assert main(["run", "smoke", "--model", "elastic", "-n", "4", "--workers", "1", "-o", str(path)]) == 0
+    ds = load_netcdf(path)
+    z = float(ds["max_abs_error"].sel(window="whole", quantity="displacement", direction="z")[0])
+    texts = [f"displacement:z<={1.01 * z * 1e3}mm@q95", f"displacement:z<={0.99 * z * 1e3}mm@q95",
+             "displacement:z<=0.001um@std", f"displacement:z<={0.99 * z * 1e3}mm@pf<=0.5"]
+    verdicts = judge_all([parse_spec(t) for t in texts], ds)
+    assert [v.outcome for v in verdicts] == ["pass", "fail", "pass", "fail"]
+    assert all(v.lower == v.upper == v.estimate and v.n_needed is None for v in verdicts)
+    assert verdicts[0].estimate == z and verdicts[2].estimate == 0.0 and verdicts[3].estimate == 1.0
+    assert verdicts[0].rule.startswith("exact: the level draws nothing")
+    drawn = tmp_path / "qs.nc"
+    assert main(["run", "smoke", "--model", "quasi-static", "-n", "4", "--workers", "1", "-o", str(drawn)]) == 0
+    assert judge_all([parse_spec("displacement:z<=10mm@q95")], load_netcdf(drawn))[0].outcome == "undecided"
