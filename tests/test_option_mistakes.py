@@ -218,3 +218,16 @@ def test_a_file_of_another_kind_is_named_by_what_wrote_it(tmp_path, small_file, 
     assert f"{stats_file}: not an ensemble file (rss6 run -o) but \"rss6 statistics of" in said[stats_file]
     assert f"{scene}: not a netCDF file but text (a scene file?" in said[scene]
     assert f"{cut}: not a readable netCDF file (truncated or corrupt?)" in said[cut]
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["check", "{tmp}"], "is a folder; give a scene file (.toml) or a shipped scene (paper,"),
+    (["check", "configs/paper.toml"], "no such scene file; the shipped scene of that name is 'paper'"),
+    (["run", "smoke", "--require", "displacement:z<=1mm@q95/stedy"], "--require 'displacement:z<=1mm@q95/stedy': "
+                                                                     "unknown window 'stedy'")])
+def test_a_scene_or_window_mistake_says_what_was_meant(argv, says, capsys, tmp_path, small_file, no_work, monkeypatch):
+    """newcomer55: a folder given as a scene, the repository's path of a shipped scene used from another folder,
+    and a spec's window typo, each one line naming what is wrong."""
+    monkeypatch.chdir(tmp_path)
+    code, err = _run(argv, capsys, tmp_path, small_file)
+    assert code == 2 and len(err) == 1 and says in err[0], err

@@ -77,6 +77,9 @@ def _window(text: str, flag: str) -> tuple[str, str]:
 def parse_event(text: str, flag: str = "--event") -> Event:
     """Parse ``QUANTITY:DIRECTION > VALUE UNIT[/WINDOW]``; EventError (one line, naming ``flag``) on
     an unknown quantity, direction or window, a missing operator, value or unit."""
+    if "@" in text:
+        raise _fail(text, "an event has no @statistic: it is each realisation's max |error| above the limit "
+                          "(a limit on a statistic is a --require spec, e.g. 'displacement:z<=0.5mm@q95')", flag)
     body, window = _window(text, flag)
     subject, op, rest = body.partition(">")
     if not op or rest.startswith("="):

@@ -19,7 +19,8 @@ def known_windows(specs: list) -> None:
     """A --require or --until naming a window the files do not have is a one-line error before any work."""
     for s in specs:
         if s.window is not None and s.window not in WINDOWS:
-            raise OptionError(f"{s.text!r}: unknown window {s.window!r}; choose one of {', '.join(WINDOWS)}")
+            flag = "--until" if hasattr(s, "relative") else "--require"
+            raise OptionError(f"{flag} {s.text!r}: unknown window {s.window!r}; choose one of {', '.join(WINDOWS)}")
 
 
 def judge(ds, specs: list, confidence: float = CONFIDENCE) -> list:

@@ -25,7 +25,15 @@ def scene_text(name: str) -> str:
 
 
 def find_scene(config: str | Path) -> Scene:
-    """The scene of a TOML file path, else of the shipped scene of that name."""
-    if Path(config).is_file() or str(config).endswith(".toml"):
+    """The scene of a TOML file path, else of the shipped scene of that name; SceneError naming a folder,
+    or a missing file whose name is a shipped scene's (``configs/paper.toml`` outside the repository)."""
+    path = Path(config)
+    if path.is_dir():
+        raise SceneError(f"{config}: is a folder; give a scene file (.toml) or a shipped scene "
+                         f"({', '.join(scene_names())})")
+    if not path.is_file() and path.suffix == ".toml" and path.stem in scene_names():
+        raise SceneError(f"{config}: no such scene file; the shipped scene of that name is {path.stem!r} "
+                         f"(rss6 check {path.stem} works from any folder)")
+    if path.is_file() or str(config).endswith(".toml"):
         return load_scene(config)
     return parse_scene(scene_text(str(config)), str(config))
