@@ -488,6 +488,9 @@ def _check_actuator(actuator: dict, link_modes: int) -> None:
         raise SceneError(f"[actuator] drive: 'servo' needs the full mesh, [beam] link_modes = 0 (got {link_modes})")
 
 
+MAX_SIZE_M = 20.0   # a [geometry] length above this is a unit slip (a flight simulator's legs are a few metres)
+
+
 def _below_radius(where: str, size: float, radius: str, contact: dict) -> None:
     """A clearance is a small gap between pin and bore: a ``size`` (m) not below the joint's [contact]
     ``radius`` is refused (typically a value in mm written in an _m key)."""
@@ -539,6 +542,10 @@ def _build(v: dict, text: str, source: str) -> Scene:
     _check_link_modes(v["beam"]["link_modes"], v["simulation"]["elements_per_link"])
     _check_actuator(v["actuator"], v["beam"]["link_modes"])
     _check_clearances(v["clearance"], ct)
+    for key in ("base_radius_m", "platform_radius_m", "crank_length_m", "rod_length_m"):
+        if g[key] > MAX_SIZE_M:
+            raise SceneError(f"[geometry] {key}: {g[key]!r} m is above {MAX_SIZE_M:g} m, no 6-RSS robot's size "
+                             "(a length in mm written in metres?)")
     if any(g["actuator_offsets_deg"]):
         raise SceneError("[geometry] actuator_offsets_deg: the nominal offsets are 0 (the controller's zero); "
                          "draw them in an [uncertain.NAME] table")

@@ -188,3 +188,14 @@ def test_settle_time_must_be_shorter_than_the_trajectory(paper_text):
     assert parse_scene(paper_text).simulation.settle_time == 0.0
     with pytest.raises(SceneError, match=r"\[simulation\] settle_time_s"):
         parse_scene(_edit(paper_text, "time_step_s = 1.0e-3", "time_step_s = 1.0e-3\nsettle_time_s = 5.0"))
+
+
+def test_a_geometry_length_in_mm_written_in_metres_is_named(paper_text):
+    """rod_length_m = 450 (mm meant): named with the hint instead of a workspace failure; 20 m passes this
+    check (and fails the paper trajectory's workspace instead, not by this message)."""
+    line = next(ln for ln in paper_text.splitlines() if ln.startswith("rod_length_m"))
+    with pytest.raises(SceneError, match=r"\[geometry\] rod_length_m: 450.0 m is above 20 m, .*in mm written"):
+        parse_scene(_edit(paper_text, line, "rod_length_m = 450.0"))
+    with pytest.raises(SceneError) as info:
+        parse_scene(_edit(paper_text, line, "rod_length_m = 20.0"))
+    assert "in mm written" not in str(info.value)
