@@ -197,6 +197,11 @@ def test_text_table_shows_dashes_and_the_n_needed(tmp_path, capsys):
     assert "q99: no 95 % interval below n = 299" in out and "q50: no" not in out
     lower = next(line for line in out.splitlines() if line.strip().startswith("lower"))
     assert lower.split()[1:].count("-") == 5          # std, q05, q95, q99, max
+    assert "confidence" not in out.splitlines()[-1]   # at 95 %: no note on the level
+    assert main(["stats", str(path), "--direction", "z", "--confidence", "0.99"]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        "  confidence 99 %: the quantiles' intervals are exact at any level, but the mean's and std's floors and "
+        "coverage were measured at 95 % only (tests/test_stats.py)")
     with pytest.raises(SystemExit) as stop:           # argparse: usage error, exit 2
         main(["stats", str(path), "--confidence", "1.5"])
     assert stop.value.code == 2

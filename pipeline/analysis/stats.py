@@ -232,7 +232,10 @@ def _missing_notes(sds: xr.Dataset) -> list[str]:
         notes.insert(0, f"randomised QMC, {replicates} replicates: intervals are Student t over "
                         "the replicates (none if a realisation failed)")
     until = [f"--until: {sds.attrs['interval_after_until']}"] if "interval_after_until" in sds.attrs else []
-    return notes + [f"max: {MAX_NOTE}"] + until
+    other = [f"confidence {conf:g} %: the quantiles' intervals are exact at any level, but the mean's and std's "
+             f"floors and coverage were measured at {100 * CONFIDENCE:g} % only (tests/test_stats.py)"] \
+        if replicates is None and abs(sds.attrs["confidence"] - CONFIDENCE) > 1e-12 else []
+    return notes + [f"max: {MAX_NOTE}"] + until + other
 
 
 def format_stats(sds: xr.Dataset) -> str:
