@@ -1,6 +1,8 @@
 """The note a designer's answer carries at a level that places the joints inside their play: which levels
 leave the loaded joints out, and the loaded state's steady maxima it prints (the quasi-static reaction mode
 at the nominal sizes of the nominal robot, docs/guide.md's "quasi-static (reaction)" row)."""
+import json
+
 import numpy as np
 import pytest
 
@@ -77,6 +79,14 @@ def test_run_and_stats_end_with_the_note_on_a_drawn_level_and_not_on_the_loaded_
             "rss6 stats: warning: under its loads the nominal robot at its nominal sizes is past the limit of "
             "'displacement:z>0.1mm' (z 0.975 mm): judge it with quasi_static_eccentricity = \"reaction\" in the "
             "scene's [simulation] or at the contact level"])
+    assert main(["stats", str(path), "--json", "--event", "displacement:z>0.1mm"]) == 0   # newcomer55: in JSON too
+    out, err = capsys.readouterr()
+    notes = json.loads(out)["notes"]
+    assert notes[0].startswith("note: the quasi-static level places each joint") and notes[1].startswith("warning:")
+    assert [f"rss6 stats: {line}" for line in notes] == err.splitlines()
+    assert main(["reliability", "smoke", "--method", "mc", "-n", "64", "--event", "displacement:z>0.1mm", "--json",
+                 "--workers", "1", "-o", str(tmp_path / "rel.nc")]) == 0
+    assert json.loads(capsys.readouterr().out)["notes"][1].startswith("warning: under its loads")
     loaded = tmp_path / "loaded.toml"
     loaded.write_text(scene_variant((configs / "smoke.toml").read_text(),
                                     {"simulation": {"quasi_static_eccentricity": "reaction"}}, "smoke", add=True))

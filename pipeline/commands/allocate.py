@@ -9,7 +9,7 @@ from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
 from ..studies.fits import DEFAULT_FITS
 from ..vocabulary import OptionError
-from .messages import interrupted, note_loaded_joints, warn_oversubscription
+from .messages import interrupted, loaded_joints_meanwhile, warn_oversubscription
 from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, positive_int,
                       realisations)
 
@@ -96,16 +96,17 @@ def main(args) -> int:
     ds = allocation_dataset(a, level.scene, level.model, level.integrator, level.dt, level.elements, opts, note)
     write_netcdf(ds, folder / "allocation.nc")
     fresh = fresh_check_command(a, level.model, args.n, args.seed, args.spec)
+    if a.scene_path is not None:   # what the answer's robot does under its loads
+        loaded = loaded_joints_meanwhile("allocate", find_scene(str(a.scene_path)), level.model, specs,
+                                         "the answer's robot at its fits' middle sizes")
+    else:
+        loaded = loaded_joints_meanwhile("allocate", level.scene, level.model, specs, "the nominal robot at the "
+                                         "scene's sizes (a per-joint answer has no scene of its own)")
     if args.json:
-        print(json.dumps(allocation_json(a) | {"file": str(folder / "allocation.nc"), "fresh_check": fresh},
-                         indent=2, allow_nan=False))
+        print(json.dumps(allocation_json(a) | {"file": str(folder / "allocation.nc"), "fresh_check": fresh}
+                         | ({"notes": loaded.lines()} if loaded.lines() else {}), indent=2, allow_nan=False))
     else:
         print(format_allocation(a, level.scene.name, level.model, args.n, note, fresh))
         print(f"allocation file: {folder / 'allocation.nc'}")
-    if a.scene_path is not None:   # what the answer's robot does under its loads
-        note_loaded_joints("allocate", find_scene(str(a.scene_path)), level.model, specs,
-                           "the answer's robot at its fits' middle sizes")
-    else:
-        note_loaded_joints("allocate", level.scene, level.model, specs, "the nominal robot at the scene's sizes "
-                           "(a per-joint answer has no scene of its own)")
+    loaded()
     return EXIT_CODES[overall(list(a.verdicts))]

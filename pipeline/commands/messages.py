@@ -63,26 +63,40 @@ def import_meanwhile(*modules: str) -> None:
 
 
 def note_loaded_joints(command: str, scene, model: str, specs=(),
-                       robot: str = "the nominal robot at its nominal sizes") -> None:
-    """The lines on stderr after a designer's answer at a level that places the joints inside their
-    play rather than where the loads push them (:func:`pipeline.studies.loaded_joints.loaded_joints_note`)."""
-    loaded_joints_meanwhile(command, scene, model, specs, robot)()
+                       robot: str = "the nominal robot at its nominal sizes") -> "LoadedJointsNote":
+    """Print on stderr the lines after a designer's answer at a level that places the joints inside their
+    play rather than where the loads push them (:func:`pipeline.studies.loaded_joints.loaded_joints_note`);
+    returns the note, whose lines a --json answer also carries."""
+    note = loaded_joints_meanwhile(command, scene, model, specs, robot)
+    note()
+    return note
+
+
+class LoadedJointsNote:
+    """The loaded-joints lines of a command's answer, computed in a thread meanwhile (or none): ``lines()``
+    for a --json answer, calling it prints them on stderr once the answer is out."""
+
+    def __init__(self, command: str, future=None):
+        self.command, self._future = command, future
+
+    def lines(self) -> list[str]:
+        return self._future.result() if self._future is not None else []
+
+    def __call__(self) -> None:
+        for line in self.lines():
+            print(f"rss6 {self.command}: {line}", file=sys.stderr)
 
 
 def loaded_joints_meanwhile(command: str, scene, model: str, specs=(),
-                            robot: str = "the nominal robot at its nominal sizes"):
-    """Start :func:`note_loaded_joints`'s computation in a thread and return the function that prints
-    it once the answer is out: its quasi-static run (and the draw kernels' import) then overlaps the
-    command's own work instead of following it (docs/performance.md section 36)."""
+                            robot: str = "the nominal robot at its nominal sizes") -> LoadedJointsNote:
+    """Start :func:`note_loaded_joints`'s computation in a thread and return the note: its quasi-static
+    run (and the draw kernels' import) then overlaps the command's own work instead of following it
+    (docs/performance.md section 36)."""
     from ..studies.loaded_joints import leaves_out_loaded_joints, loaded_joints_note
     if not leaves_out_loaded_joints(scene, model):
-        return lambda: None
+        return LoadedJointsNote(command)
     import concurrent.futures
     pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="rss6-note")
     note = pool.submit(loaded_joints_note, scene, model, specs, robot)
     pool.shutdown(wait=False)
-
-    def show() -> None:
-        for line in note.result():
-            print(f"rss6 {command}: {line}", file=sys.stderr)
-    return show
+    return LoadedJointsNote(command, note)

@@ -10,7 +10,7 @@ import time
 from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError, window_words
-from .messages import interrupted, note_loaded_joints
+from .messages import interrupted, loaded_joints_meanwhile
 from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, fraction,
                       realisations)
 
@@ -91,6 +91,7 @@ def main(args) -> int:
         (f" --p0 {args.p0:g}" if args.method == "subset" else "") + f" --seed {args.seed}" + \
         (f" --cov {args.cov:g}" if args.cov else "") + (f" --budget {args.budget}" if args.budget else "")
     start = time.perf_counter()
+    note = loaded_joints_meanwhile("reliability", level.scene, level.model, [event])
     with OutputLock(output):
         checkpoint = Checkpoint(checkpoint_path(output), {**spec.attrs(), "options": options}, args.resume)
         try:
@@ -106,12 +107,12 @@ def main(args) -> int:
               f"{est.level.size} evaluations are in {output}; a larger -n or another --p0 may get one",
               file=sys.stderr)
         return 2
-    _report(args, est, event, level, output, figure)
-    note_loaded_joints("reliability", level.scene, level.model, [event])
+    _report(args, est, event, level, output, figure, note)
+    note()
     return 0
 
 
-def _report(args, est, event, level, output, figure) -> None:
+def _report(args, est, event, level, output, figure, note) -> None:
     """Print the estimate and what fails (text or JSON); write the figure if asked."""
     from ..analysis.failure_domain import failure_domain_json, format_failure_domain
     from ..studies.reliability import what_fails
@@ -122,6 +123,7 @@ def _report(args, est, event, level, output, figure) -> None:
                                                  f"{level.scene.name}, {level.model} level, {output.name}")
     if args.json:
         out = _strict(est.summary()) | {"failure_domain": failure_domain_json(fd, physical) if fd else None}
+        out |= {"notes": note.lines()} if note.lines() else {}
         print(json.dumps(out, indent=2))
         return
     print(_text(est, event, output))

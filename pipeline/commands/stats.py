@@ -65,6 +65,7 @@ def main(args) -> int:
     if args.json:
         out = to_json(sds) | ({"requirements": verdicts_json(verdicts)} if specs else {})
         out |= {"exceedance": exceedance_json(probabilities)} if events else {}
+        out |= {"notes": note.lines()} if note.lines() else {}
         print(json.dumps(out, indent=2, allow_nan=False))
     else:
         print(format_stats(sds))
@@ -80,11 +81,10 @@ def _loaded_joints_note(ds, path, limits):
     """The function that prints what the file's level leaves out and which of ``limits`` (specs and events) the
     loaded robot is past (:func:`.messages.loaded_joints_meanwhile`, computed meanwhile); nothing for a file
     without its scene and level."""
+    from .messages import LoadedJointsNote, loaded_joints_meanwhile
     if "scene_toml" not in ds.attrs or "model" not in ds.attrs:
-        return lambda: None
+        return LoadedJointsNote("stats")
     from rss6core import parse_scene
-
-    from .messages import loaded_joints_meanwhile
     return loaded_joints_meanwhile("stats", parse_scene(ds.attrs["scene_toml"], str(path)), str(ds.attrs["model"]),
                                    limits)
 
