@@ -2,8 +2,9 @@
 
 Run on demand: ``python benchmarks/subset_verification.py [--reps R] [-n N]`` (default 200 runs, N = 1000,
 a few seconds).
-For linear limit states in 20 standard normal dimensions at P = 1e-3 and 1e-4 (P = Phi(-beta)) and
-the outside of a sphere in 5 dimensions at P = 1e-4 (P = chi2_5.sf(c)), R runs with seeds 0..R-1 at
+For linear limit states in 20 standard normal dimensions at P = 1e-3 and 1e-4 (P = Phi(-beta)), their
+two-sided versions |a . z| > t (two failure regions, P = 2 Phi(-t)) and the outside of a sphere in 5
+dimensions at P = 1e-4 (P = chi2_5.sf(c)), R runs with seeds 0..R-1 at
 N draws per level, p0 = 0.1: mean relative bias, observed CoV of the estimates, mean reported CoV,
 coverage of the 95 % interval (the log-normal one rss6 prints from N = MIN_N_INTERVAL on, computed here
 at any N), mean evaluations, and the coverage an interval from the uncorrelated CoV would have had.
@@ -23,9 +24,13 @@ from pipeline.analysis.subset import SubsetSettings, lognormal_interval, subset_
 def cases() -> dict:
     """name -> (response, dimension, true P)."""
     b3, b4, c = sps.norm.isf(1e-3), sps.norm.isf(1e-4), sps.chi2.isf(1e-4, 5)
+    t3, t4 = sps.norm.isf(0.5e-3), sps.norm.isf(0.5e-4)   # P(|Z| > t) = 2 P(Z > t)
     return {"linear 1e-3 (d = 20)": (lambda z: z.sum(axis=1) / math.sqrt(z.shape[1]) - b3, 20, 1e-3),
             "linear 1e-4 (d = 20)": (lambda z: z.sum(axis=1) / math.sqrt(z.shape[1]) - b4, 20, 1e-4),
-            "sphere 1e-4 (d = 5)": (lambda z: (z ** 2).sum(axis=1) - c, 5, 1e-4)}
+            "sphere 1e-4 (d = 5)": (lambda z: (z ** 2).sum(axis=1) - c, 5, 1e-4),
+            # two failure regions, |a . z| > b: the chains of one level may find one side only
+            "two-sided 1e-3 (d = 20)": (lambda z: np.abs(z.sum(axis=1)) / math.sqrt(z.shape[1]) - t3, 20, 1e-3),
+            "two-sided 1e-4 (d = 20)": (lambda z: np.abs(z.sum(axis=1)) / math.sqrt(z.shape[1]) - t4, 20, 1e-4)}
 
 
 def main() -> None:
