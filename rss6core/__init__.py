@@ -44,6 +44,7 @@ Compiled kernels (numba; the contact level's)
 - level_kernels: the compiled kernels a level calls (none but the contact level's).
 - kernels_to_compile: those a level would compile first here (not in numba's cache for this machine).
 - compile_kernels: compile every level's kernels into numba's cache now; seconds per kernel compiled.
+- load_draw_kernels: import (compile or load) every level's draw kernels now; seconds it took.
 - compile_kernel: compile one named contact-kernel entry point into numba's cache (two processes, one each).
 - kernel_cache_folder: where numba's cache keeps them.
 
@@ -94,7 +95,8 @@ from .clearance import (RELATIVE_BAND_REACH, SIZE_UNIFORMS, UNIFORM_BLOCKS, Clea
 from .contact_options import CONTACT_STARTS, TOL_DISPLACEMENT, TOL_VELOCITY
 from .dynamics import inverse_dynamics
 from .integrators import INTEGRATORS, Integrator
-from .kernels import compile_kernel, compile_kernels, kernel_cache_folder, kernels_to_compile, level_kernels
+from .kernels import (compile_kernel, compile_kernels, kernel_cache_folder, kernels_to_compile, level_kernels,
+                      load_draw_kernels)
 from .kinematics import rigid_motion, workspace_quality
 from .levels import (MODEL_LEVELS, MODELS, ModelLevel, check_uncertain_level, default_integrator, default_time_step,
                      draws_per_realisation, model_level, models_with)
@@ -121,7 +123,7 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII"
            "realised_clearances",
            "default_time_step", "default_integrator", "natural_frequencies",
            "degrees_of_freedom", "level_kernels", "kernels_to_compile", "compile_kernels", "compile_kernel",
-           "kernel_cache_folder",
+           "load_draw_kernels", "kernel_cache_folder",
            "ClearanceDraw", "draw_clearances", "clearances_from_uniforms", "uniform_dimension", "size_band",
            "SIZE_UNIFORMS", "UNIFORM_BLOCKS", "clearances_from_named_uniforms", "Integrator", "build_elastic_model",
            "BeamTheory", "BEAM_THEORIES", "max_link_modes",

@@ -22,6 +22,7 @@ import time
 from .levels import MODELS, model_level
 
 __all__ = ["level_kernels", "kernels_to_compile", "compile_kernels", "compile_kernel", "kernel_cache_folder",
+           "load_draw_kernels",
            "ENTRY_POINTS"]
 
 ENTRY_POINTS = ("advance_chunk", "newton_step")   # .contact_kernel's, called by the contact-joint levels
@@ -50,6 +51,14 @@ def kernel_cache_folder() -> str:
     """Where numba keeps the compiled kernels (``NUMBA_CACHE_DIR``, else beside the source)."""
     from . import contact_kernel
     return str(contact_kernel.advance_chunk._cache._cache_path)
+
+
+def load_draw_kernels() -> float:
+    """Seconds to import :mod:`.draw_kernel`, whose import compiles (or loads from numba's cache) the
+    clearance draws every level runs: a few seconds on an empty cache, then well under one."""
+    start = time.perf_counter()
+    from . import draw_kernel  # noqa: F401
+    return time.perf_counter() - start
 
 
 def compile_kernels(scene) -> dict[str, float]:

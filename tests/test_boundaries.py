@@ -47,6 +47,7 @@ def _core_modules_imported(node) -> set[str]:
 # or spline, not in every rss6 process (docs/performance.md section 31)
 LAZY = {("models", "contact_dynamics"), ("models", "contact_start"), ("kernels", "contact_kernel"),
         ("kernels", "models"), ("kernels", "contact_dynamics"), ("clearance", "draw_kernel"),
+        ("kernels", "draw_kernel"),   # rss6 warm's load_draw_kernels: numba's import only when asked
         ("uncertain", "<not core: scipy>"), ("trajectory_kinds", "<not core: scipy.interpolate>")}
 # the modules that run a level: none of them is the scene's business
 LADDER = {"models", "assembly", "elastic", "quasi_static", "paper_method", "contact_dynamics", "contact_kernel",

@@ -215,7 +215,7 @@ def test_a_file_of_another_kind_is_named_by_what_wrote_it(tmp_path, small_file, 
         code, err = _run(["stats", str(path)], capsys, tmp_path, small_file)
         assert code == 2 and len(err) == 1, err
         said[path] = err[0]
-    assert f"{stats_file}: not an ensemble file (rss6 run -o) but \"rss6 statistics of" in said[stats_file]
+    assert f"{stats_file}: not an rss6 ensemble file (rss6 run -o) but \"rss6 statistics of" in said[stats_file]
     assert f"{scene}: not a netCDF file but text (a scene file?" in said[scene]
     assert f"{cut}: not a readable netCDF file (truncated or corrupt?)" in said[cut]
 

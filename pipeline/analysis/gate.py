@@ -297,9 +297,9 @@ EXACT_RULE = "exact: the level draws nothing on this scene, so every realisation
 def _draws_nothing(ds) -> bool:
     """Whether every realisation of ``ds`` is the same run: its level draws no clearances and its scene no
     [uncertain.*] inputs, and none failed (then each statistic is that run's value, known exactly)."""
-    from rss6core import model_level, parse_scene
+    from rss6core import FINISHED, model_level, parse_scene
     model, text = ds.attrs.get("model"), ds.attrs.get("scene_toml")
-    if model is None or text is None or ("status" in ds and (ds["status"].values.astype(str) != "finished").any()):
+    if model is None or text is None or ("status" in ds and (ds["status"].values.astype(str) != FINISHED).any()):
         return False
     return not model_level(str(model)).draws_clearances and not parse_scene(str(text), "file").uncertain.inputs
 

@@ -14,11 +14,11 @@ def add_parser(sub) -> None:
 
 
 def main(args) -> int:
-    from rss6core import MODELS, compile_kernels, kernel_cache_folder, level_kernels
+    from rss6core import MODELS, compile_kernels, kernel_cache_folder, level_kernels, load_draw_kernels
     start = time.perf_counter()
     compiled = compile_kernels(find_scene("smoke"))
     wall = time.perf_counter() - start
-    draws = _draw_kernels()
+    draws = load_draw_kernels()
     where = f"numba's cache ({kernel_cache_folder()})"
     every = f"; every level's draw kernels compiled or loaded at their import in {draws:.1f} s"
     if not compiled:
@@ -29,11 +29,3 @@ def main(args) -> int:
     print("rss6 warm: compiled " + ", ".join(f"{k} ({s:.0f} s)" for k, s in compiled.items())
           + f" into {where} in {wall:.0f} s{every}")
     return 0
-
-
-def _draw_kernels() -> float:
-    """Seconds to import :mod:`rss6core.draw_kernel`, whose import compiles (or loads from numba's cache)
-    the clearance draws every level runs: a few seconds on an empty cache, then well under one."""
-    start = time.perf_counter()
-    import rss6core.draw_kernel  # noqa: F401
-    return time.perf_counter() - start

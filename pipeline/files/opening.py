@@ -22,9 +22,9 @@ def checked_ensemble(ds: xr.Dataset, path) -> xr.Dataset:
     """``ds`` (read from ``path``) if it is a well-formed rss6 ensemble, else EnsembleFileError."""
     missing = [k for k in ("max_abs_error", "mean_abs_error", "status") if k not in ds]
     if missing or "rss6_version" not in ds.attrs or "realization" not in ds.dims:
-        other = _other_kind(ds)
+        other = _other_kind(ds) if missing else None   # a tampered ensemble keeps the message below
         if other:
-            raise EnsembleFileError(f"{path}: not an ensemble file (rss6 run -o) but {other}")
+            raise EnsembleFileError(f"{path}: not an rss6 ensemble file (rss6 run -o) but {other}")
         raise EnsembleFileError(f"{path}: not an rss6 ensemble file (missing "
                                 f"{', '.join(missing) or 'rss6 attributes'})")
     check_ensemble(ds, path)
