@@ -231,3 +231,10 @@ def test_a_scene_or_window_mistake_says_what_was_meant(argv, says, capsys, tmp_p
     monkeypatch.chdir(tmp_path)
     code, err = _run(argv, capsys, tmp_path, small_file)
     assert code == 2 and len(err) == 1 and says in err[0], err
+
+
+def test_a_folder_named_like_a_shipped_scene_leaves_the_name_to_the_scene(tmp_path, monkeypatch, capsys):
+    """A folder 'paper' in the working folder (an output folder, say) does not hide the shipped scene."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "paper").mkdir()
+    assert main(["check", "paper"]) == 0

@@ -28,7 +28,7 @@ def find_scene(config: str | Path) -> Scene:
     """The scene of a TOML file path, else of the shipped scene of that name; SceneError naming a folder,
     or a missing file whose name is a shipped scene's (``configs/paper.toml`` outside the repository)."""
     path = Path(config)
-    if path.is_dir():
+    if path.is_dir() and str(config) not in scene_names():   # a folder named like a shipped scene is not one
         raise SceneError(f"{config}: is a folder; give a scene file (.toml) or a shipped scene "
                          f"({', '.join(scene_names())})")
     if not path.is_file() and path.suffix == ".toml" and path.stem in scene_names():
