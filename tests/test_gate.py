@@ -452,6 +452,24 @@ def test_an_ensemble_of_a_level_that_draws_nothing_is_decided_by_its_one_run(tmp
     assert all(v.lower == v.upper == v.estimate and v.n_needed is None for v in verdicts)
     assert verdicts[0].estimate == z and verdicts[2].estimate == 0.0 and verdicts[3].estimate == 1.0
     assert verdicts[0].rule.startswith("exact: the level draws nothing")
+    assert format_verdicts(verdicts).startswith("requirements (exact: every realisation is the same run")
     drawn = tmp_path / "qs.nc"
     assert main(["run", "smoke", "--model", "quasi-static", "-n", "4", "--workers", "1", "-o", str(drawn)]) == 0
     assert judge_all([parse_spec("displacement:z<=10mm@q95")], load_netcdf(drawn))[0].outcome == "undecided"
+
+
+def test_whole_run_verdicts_of_a_contact_level_file_point_to_the_steady_window():
+    """A contact-level file judged over the whole run gets the note naming those specs and the start-up
+    window (its maxima include the joints settling onto their walls); '/steady' specs, and a level without
+    contact joints, get none (claims55 finding 6)."""
+    from pipeline.analysis.gate import start_up_note
+    x = _symmetric(100, 1e-4, 2e-5)
+    contact = _ensemble(x, attrs={"model": "contact", "steady_after_s": 0.75})
+    whole = judge_all([parse_spec("displacement:x<=0.2mm@q95"), parse_spec("displacement:y<=0.2mm@q95")], contact)
+    assert start_up_note(whole, contact) == (
+        "note: 'displacement:x<=0.2mm@q95', 'displacement:y<=0.2mm@q95' judged over the whole run, whose "
+        "contact-level maxima include start-up (t < 0.75 s, the joints settling onto their walls); append "
+        "'/steady' to judge the robot in operation")
+    steady = [dataclasses.replace(v, window="steady") for v in whole]
+    assert start_up_note(steady, contact) is None
+    assert start_up_note(whole, _ensemble(x, attrs={"model": "quasi-static"})) is None

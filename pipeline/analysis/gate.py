@@ -337,6 +337,21 @@ def _num(value: float | None, factor: float) -> str:
     return "-" if value is None else f"{value / factor:.4g}"
 
 
+def start_up_note(verdicts: list[Verdict], ds) -> str | None:
+    """A line for the verdicts judged over the whole run of a contact-level file: its maxima include the
+    start-up window, where the joints settle onto their walls, not the robot in operation (None if none)."""
+    from rss6core import model_level
+    model = ds.attrs.get("model")
+    whole = sorted({v.spec for v in verdicts if v.window == "whole"})
+    if not whole or model is None or not model_level(str(model)).contact_joints:
+        return None
+    after = ds.attrs.get("steady_after_s")
+    until = f"t < {float(after):g} s, " if after is not None else ""
+    return (f"note: {', '.join(repr(s) for s in whole)} judged over the whole run, whose {model}-level maxima "
+            f"include start-up ({until}the joints settling onto their walls); append '/steady' to judge the robot "
+            "in operation")
+
+
 def format_verdicts(verdicts: list[Verdict]) -> str:
     """A table in each spec's own unit: spec, direction, window, bounds, limit, verdict, n to decide
     (the spec column as wide as the longest spec: a cut spec ran into its direction)."""
@@ -345,9 +360,10 @@ def format_verdicts(verdicts: list[Verdict]) -> str:
     width = max(40, 1 + max(len(v.spec) for v in verdicts))
     conf = f"{100 * verdicts[0].confidence:g} %"
     failed = verdicts[0].n_failed
-    lines = [f"requirements (one-sided {conf} bounds: fail when the bound on the limit's side "
-             f"violates it, pass when the other bound meets it; n = {verdicts[0].n} finished "
-             "realisations"
+    rule = ("exact: every realisation is the same run, whose value decides" if all(v.rule == EXACT_RULE
+            for v in verdicts) else f"one-sided {conf} bounds: fail when the bound on the limit's side violates it, "
+            "pass when the other bound meets it")
+    lines = [f"requirements ({rule}; n = {verdicts[0].n} finished realisations"
              + (f"; {failed} failed, so a limit they meet is undecided" if failed else "")
              + "; estimate and bounds in the unit of the spec's limit)",
              f"{'spec':<{width}s}{'dir':<4s}{'window':<9s}{'estimate':>11s}{'bounds':>24s}{'limit':>14s}  "

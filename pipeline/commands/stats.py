@@ -34,7 +34,7 @@ def add_parser(sub) -> None:
 
 
 def main(args) -> int:
-    from ..analysis.gate import check_confidence, exit_code, format_verdicts, verdicts_json
+    from ..analysis.gate import check_confidence, exit_code, format_verdicts, start_up_note, verdicts_json
     from ..analysis.exceedance import exceedance_json, format_exceedance
     from ..analysis.stats import ensemble_stats, format_stats, to_json
     from ..files.opening import open_results
@@ -73,6 +73,9 @@ def main(args) -> int:
             print(format_exceedance(probabilities))
         if specs:
             print(format_verdicts(verdicts))
+            startup = start_up_note(verdicts, ds)
+            if startup:
+                print(startup)
     note()
     return exit_code(verdicts, args.undecided) if specs else 0
 
