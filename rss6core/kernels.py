@@ -9,7 +9,8 @@ calls a kernel with the same argument types (tests/test_kernels.py), so one comp
 kernel serves every run; the cache check below takes any overload for this CPU and source as the one.
 Asking about a level without kernels imports nothing (numba is 0.3 s of import per process).
 Every level's clearance draw also runs compiled code (:mod:`.draw_kernel`), small enough to compile
-or load at its import (about 1.5 s on an empty cache), which is why it is not listed here.
+or load at its import (about 1.5 s on an empty cache), which is why it is not listed here;
+``rss6 warm`` imports it too (:func:`load_draw_kernels`).
 """
 from __future__ import annotations
 
