@@ -1,9 +1,9 @@
 """Coverage of the randomised-QMC intervals (``--sampler qmc``) per statistic and points per replicate.
 
 Run on demand: ``python benchmarks/rqmc_coverage.py [--points 128 256 512 1024] [--reps R]`` (default
-2000 runs per size; about 3 minutes).  The output is a maximum over time of |sum_i c_i(t) e_i| (24
-uniform inputs e_i in [-1, 1] in 4 groups of 6 with scales 1, 0.15, 0.8, 0.7, 50 instants of a period),
-the clearance response's shape at the quasi-static level; its true statistics come from 4e6 plain
+2000 runs per size; about 3 minutes).  The output is benchmarks/sobol_coverage.py's maximum over time
+of |sum_i c_i(t) e_i| (24 uniform inputs in 4 groups), the clearance response's shape at the
+quasi-static level; its true statistics come from 4e6 plain
 draws.  Each run draws R = 8 scrambled Sobol' replicates of m points and takes
 :func:`pipeline.analysis.estimators.rqmc_intervals` at 95 %; the table gives the share of runs whose
 interval covers each truth, also below the statistic's floor MIN_POINTS_RQMC (marked).  tests/test_sampler.py
@@ -18,16 +18,9 @@ from scipy.stats import qmc
 
 from pipeline.analysis.estimators import MIN_POINTS_RQMC, rqmc_intervals
 from pipeline.vocabulary import STATISTICS
+from sobol_coverage import GROUPS, PER, response   # the same output as the Sobol' benchmark's
 
-D, T, R = 24, 50, 8
-
-
-def response():
-    """The maximum over time of |sum_i c_i(t) e_i|, e = 2 u - 1, for uniforms u (rows, D)."""
-    rng = np.random.default_rng(5)
-    t = np.linspace(0.0, 2.0 * np.pi, T)
-    coef = np.repeat([1.0, 0.15, 0.8, 0.7], 6)[:, None] * np.cos(t[None, :] + rng.uniform(0, 2 * np.pi, D)[:, None])
-    return lambda u: np.abs((2.0 * u - 1.0) @ coef).max(axis=1)
+D, R = GROUPS * PER, 8
 
 
 def main(argv=None) -> None:
@@ -35,7 +28,7 @@ def main(argv=None) -> None:
     parser.add_argument("--points", type=int, nargs="+", default=[128, 256, 512, 1024])
     parser.add_argument("--reps", type=int, default=2000)
     args = parser.parse_args(argv)
-    model, rng = response(), np.random.default_rng(7)
+    model, rng = response, np.random.default_rng(7)
     ys = np.concatenate([model(rng.random((500_000, D))) for _ in range(8)])
     truth = {"mean": ys.mean(), "std": ys.std(ddof=1),
              **{f"q{p:02d}": np.quantile(ys, p / 100) for p in (5, 50, 95, 99)}}
