@@ -286,9 +286,9 @@ def judge_all(specs: list[Spec], ds, confidence: float = CONFIDENCE) -> list[Ver
         return []
     check_confidence(confidence)
     bounds = ensemble_stats(ds, confidence, window=None, one_sided=True)
-    verdicts = [v for s in specs
-                for v in (_judge_pf(s, ds, confidence) if s.statistic == PF else _judge(s, ds, bounds))]
-    return [_exact(v, ds) for v in verdicts] if _draws_nothing(ds) else verdicts
+    exact = _draws_nothing(ds)
+    return [_exact(v, s, ds) if exact else v for s in specs
+            for v in (_judge_pf(s, ds, confidence) if s.statistic == PF else _judge(s, ds, bounds))]
 
 
 EXACT_RULE = "exact: the level draws nothing on this scene, so every realisation is the same run"
@@ -304,14 +304,13 @@ def _draws_nothing(ds) -> bool:
     return not model_level(str(model)).draws_clearances and not parse_scene(str(text), "file").uncertain.inputs
 
 
-def _exact(v: Verdict, ds) -> Verdict:
-    """Verdict ``v`` decided by the one run's value (the std of identical runs is 0; pf is 0 or 1)."""
+def _exact(v: Verdict, spec: Spec, ds) -> Verdict:
+    """Verdict ``v`` of ``spec`` decided by the one run's value (the std of identical runs is 0; pf is 0
+    or 1)."""
     from dataclasses import replace
     if v.statistic == PF:
         value, holds = v.estimate, (v.estimate <= v.limit if v.op == "<=" else v.estimate < v.limit)
     else:
-        spec = Spec(v.spec, v.quantity, (v.direction,), v.op, v.limit, v.unit, v.factor, v.statistic,
-                    v.measure, v.window)
         value = 0.0 if v.statistic == "std" else float(_values(ds, spec).sel(direction=v.direction).values[0])
         holds = bool(spec.holds(value))
     return replace(v, estimate=value, lower=value, upper=value, outcome="pass" if holds else "fail",

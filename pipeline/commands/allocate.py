@@ -104,7 +104,7 @@ def main(args) -> int:
                                          "scene's sizes (a per-joint answer has no scene of its own)")
     if args.json:
         print(json.dumps(allocation_json(a) | {"file": str(folder / "allocation.nc"), "fresh_check": fresh}
-                         | ({"notes": loaded.lines()} if loaded.lines() else {}), indent=2, allow_nan=False))
+                         | loaded.json(), indent=2, allow_nan=False))
     else:
         print(format_allocation(a, level.scene.name, level.model, args.n, note, fresh))
         print(f"allocation file: {folder / 'allocation.nc'}")

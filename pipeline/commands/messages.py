@@ -63,13 +63,10 @@ def import_meanwhile(*modules: str) -> None:
 
 
 def note_loaded_joints(command: str, scene, model: str, specs=(),
-                       robot: str = "the nominal robot at its nominal sizes") -> "LoadedJointsNote":
+                       robot: str = "the nominal robot at its nominal sizes") -> None:
     """Print on stderr the lines after a designer's answer at a level that places the joints inside their
-    play rather than where the loads push them (:func:`pipeline.studies.loaded_joints.loaded_joints_note`);
-    returns the note, whose lines a --json answer also carries."""
-    note = loaded_joints_meanwhile(command, scene, model, specs, robot)
-    note()
-    return note
+    play rather than where the loads push them (:func:`pipeline.studies.loaded_joints.loaded_joints_note`)."""
+    loaded_joints_meanwhile(command, scene, model, specs, robot)()
 
 
 class LoadedJointsNote:
@@ -81,6 +78,10 @@ class LoadedJointsNote:
 
     def lines(self) -> list[str]:
         return self._future.result() if self._future is not None else []
+
+    def json(self) -> dict:
+        """What a --json answer adds: {"notes": the lines}, or nothing when there are none."""
+        return {"notes": self.lines()} if self.lines() else {}
 
     def __call__(self) -> None:
         for line in self.lines():

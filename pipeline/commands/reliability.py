@@ -123,7 +123,7 @@ def _report(args, est, event, level, output, figure, note) -> None:
                                                  f"{level.scene.name}, {level.model} level, {output.name}")
     if args.json:
         out = _strict(est.summary()) | {"failure_domain": failure_domain_json(fd, physical) if fd else None}
-        out |= {"notes": note.lines()} if note.lines() else {}
+        out |= note.json()
         print(json.dumps(out, indent=2))
         return
     print(_text(est, event, output))

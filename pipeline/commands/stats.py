@@ -65,7 +65,7 @@ def main(args) -> int:
     if args.json:
         out = to_json(sds) | ({"requirements": verdicts_json(verdicts)} if specs else {})
         out |= {"exceedance": exceedance_json(probabilities)} if events else {}
-        out |= {"notes": note.lines()} if note.lines() else {}
+        out |= note.json()
         print(json.dumps(out, indent=2, allow_nan=False))
     else:
         print(format_stats(sds))
