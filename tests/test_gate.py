@@ -350,7 +350,7 @@ def test_window_must_exist_in_the_file():
 
 def test_a_qmc_file_is_judged_on_one_sided_replicate_t_bounds():
     """Randomised QMC realisations are not iid, so no binomial argument: Student t over the 8
-    replicates, one-sided (two-sided level 0.90), and q95 waits for 128 points per replicate even
+    replicates, one-sided (two-sided level 0.90), and q95 waits for 512 points per replicate even
     when every realisation violates it."""
     rng = np.random.default_rng(2)
     x = rng.gamma(2.0, 1e-4, size=136)                      # 8 replicates x 17 points
@@ -360,7 +360,7 @@ def test_a_qmc_file_is_judged_on_one_sided_replicate_t_bounds():
     assert (v.lower, v.upper) == pytest.approx(tuple(want), rel=1e-12)
     assert "Student t over the randomised-QMC replicates" in v.rule
     (q,) = judge(parse_spec("displacement:x<=0.001mm@q95"), ds)
-    assert (q.outcome, q.n_needed) == ("undecided", 8 * 128)
+    assert (q.outcome, q.n_needed) == ("undecided", 8 * 512)
 
 
 # --- measured error rates ------------------------------------------------------------------------------

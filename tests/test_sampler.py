@@ -187,12 +187,14 @@ def test_the_linear_map_is_the_quasi_static_level(paper):
 def test_rqmc_intervals_cover_at_nominal_minus_2_points_over_500_repetitions(paper):
     """500 independent RQMC runs (R = 8 scramblings of 128 points, n = 1024) of the max |error| over
     16 instants of the quasi-static level; the truth from 2^20 iid draws (its own error is 0.1-0.3
-    % of the value, under a tenth of the intervals' half-widths of 6-20 %)."""
+    % of the value, under a tenth of the intervals' half-widths of 6-20 %).  q95 has no interval at
+    128 points (its floor, 512: benchmarks/rqmc_coverage.py)."""
     assert paper.sampling.size_tolerance == 0.0             # _max_errors relies on fixed sizes
     M = _linear_map(paper, 16)
     rng = np.random.default_rng(12345)
     ref = np.concatenate([_max_errors(paper, M, rng.random((2 ** 18, 78))) for _ in range(4)])
-    names = ("mean", "std", "q05", "q50", "q95")
+    names = ("mean", "std", "q05", "q50")
+    assert np.isnan(rqmc_intervals(np.ones((8, 128, 1)), 0.95)[STATISTICS.index("q95")]).all()
     truth = estimates(ref, names).T                         # (statistic, 6)
     rows = [STATISTICS.index(s) for s in names]
     hits = np.zeros((len(names), 6))

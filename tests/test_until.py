@@ -12,10 +12,12 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from pipeline.analysis.estimators import min_n_for_quantile
+from pipeline.analysis.estimators import estimates_and_bounds, min_n_for_quantile, quantile_interval
 from pipeline.analysis.stats import ensemble_stats
 from pipeline.files.opening import open_ensemble
-from pipeline.analysis.until import GROWTH, UntilError, Width, checkpoints, format_widths, parse_target, widths
+from pipeline.vocabulary import STATISTICS
+from pipeline.analysis.until import (GROWTH, LEVEL, UntilError, Width, checkpoints, format_widths, parse_target,
+                                     widths)
 
 
 def test_a_relative_target_over_every_direction():
@@ -62,10 +64,11 @@ def test_the_check_line_says_which_half_widths_are_not_met_yet_in_words():
 def test_checkpoints_start_at_the_statistics_minimum_n_and_grow_to_the_cap():
     q95 = parse_target("displacement:x@q95<=5%")
     points = checkpoints([q95, parse_target("displacement:x@mean<=5%")], 200)
-    assert points[0] == min_n_for_quantile(0.95, 0.95) == 59
-    assert points == [59, 74, 93, 117, 147, 184, 200]
+    assert points[0] == min_n_for_quantile(0.95, LEVEL) == 72       # the widened level's floor
+    assert LEVEL == 0.975
+    assert points == [72, 90, 113, 142, 178, 200]
     assert all(b == max(a + 1, int(np.ceil(a * GROWTH))) for a, b in zip(points[:-2], points[1:-1]))
-    assert checkpoints([q95], 2048, replicates=8) == [1024, 2048]
+    assert checkpoints([q95], 8192, replicates=8) == [4096, 8192]
     assert checkpoints([parse_target("displacement:x@mean<=5%")], 1000, replicates=8) == [
         128, 256, 512, 1000]
     assert checkpoints([q95], 30) == [30]
@@ -110,7 +113,7 @@ def _rss6(args, cwd) -> subprocess.CompletedProcess:
     return subprocess.run(cmd + list(args), cwd=cwd, capture_output=True, text=True, timeout=600)
 
 
-TARGETS = ["displacement:y,z@q50<=12%", "displacement:z@mean<=50%"]   # the second met at once
+TARGETS = ["displacement:y,z@q50<=15%", "displacement:z@mean<=50%"]   # the second met at once
 UNTIL = [a for t in TARGETS for a in ("--until", t)]
 RUN = ["run", "smoke", "--model", "quasi-static", "--seed", "3", "--workers", "1"]
 
@@ -137,7 +140,7 @@ def test_until_stops_at_the_first_checkpoint_meeting_every_target(until_run):
     earlier = points[points.index(n) - 1]                   # the previous check was not met
     assert not all(w.met for w in widths(targets,
                                          ensemble_stats(ds.sel(realization=slice(0, earlier - 1)))))
-    assert f"n = {earlier}: displacement q50 half-width <= 12 %" in proc.stderr
+    assert f"n = {earlier}: displacement q50 half-width <= 15 %" in proc.stderr
     assert f"every target met at n = {n}" in proc.stdout
 
 
@@ -172,12 +175,12 @@ def test_a_run_stopped_at_a_cap_resumes_to_the_same_file_and_a_cap_reached_first
 
 
 def test_the_rule_lists_the_stored_n_a_resume_checked_first(tmp_path):
-    """Stopped at a cap of 60 (no checkpoint of a cap of 100), resumed to 100: 60 was checked first,
+    """Stopped at a cap of 80 (no checkpoint of a cap of 100), resumed to 100: 80 was checked first,
     so the rule names it among the checks."""
     argv = RUN + ["--until", "displacement:x@q95<=0.0001%", "-o", "r.nc"]
-    assert _rss6(argv + ["-n", "60"], tmp_path).returncode == 1
+    assert _rss6(argv + ["-n", "80"], tmp_path).returncode == 1
     assert _rss6(argv + ["-n", "100"], tmp_path).returncode == 1
-    assert "checked at n = 59, 60, 74, 93, 100; cap -n 100" in open_ensemble(tmp_path / "r.nc").attrs["until_rule"]
+    assert "checked at n = 72, 80, 90, 100; cap -n 100" in open_ensemble(tmp_path / "r.nc").attrs["until_rule"]
 
 
 def test_a_malformed_target_or_qmc_option_exits_2_before_any_work(tmp_path):
@@ -187,8 +190,8 @@ def test_a_malformed_target_or_qmc_option_exits_2_before_any_work(tmp_path):
                                                             "multiple of --replicates 8"),
                          (["--replicates", "4"], "--replicates applies to --sampler qmc only"),
                          (["-n", "100", "--until", "displacement:x@q99<=50%"],
-                          "--until 'displacement:x@q99<=50%': q99 has no 95 % interval below n = 299 "
-                          "(-n 100); raise -n")):
+                          "--until 'displacement:x@q99<=50%': q99 has no 95 % interval after --until below "
+                          "n = 368 (-n 100; docs/ensembles.md); raise -n")):
         proc = _rss6(["run", "smoke", "--model", "quasi-static", "-o", "x.nc"] + extra, tmp_path)
         assert proc.returncode == 2 and token in proc.stderr, proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1
@@ -213,7 +216,7 @@ def test_every_batch_runs_on_one_client_of_one_cluster(tmp_path, monkeypatch):
                         scene.simulation.elements_per_link, 3)
     targets = [parse_target("displacement:x@q95<=0.0001%")]          # never met: every checkpoint runs
     out = run_until(spec, targets, 93, tmp_path / "u.nc", workers=1, progress=False, stream=io.StringIO())
-    assert out.n == 93 and not out.met and checkpoints(targets, 93) == [59, 74, 93]
+    assert out.n == 93 and not out.met and checkpoints(targets, 93) == [72, 90, 93]
     assert out.ensemble.computed == 93
     assert len(clients) == 1 and len(clusters) == 1
 
@@ -237,11 +240,11 @@ def test_the_workers_are_said_to_start_once_for_every_batch(tmp_path, capsys):
     assert (stream.getvalue() + bar).count("starting workers") == 1
 
 
-def test_the_statistics_of_a_run_stopped_by_its_intervals_say_what_that_costs_them(tmp_path):
-    """A run that stopped where its intervals met the target carries the note on their coverage
-    (benchmarks/until_coverage.py) in its statistics' attributes and table; one that ran to its cap,
-    like a plain run, does not."""
-    from pipeline.analysis.stats import UNTIL_NOTE, ensemble_stats, format_stats
+def test_the_statistics_of_a_run_stopped_by_its_intervals_take_the_quantiles_at_the_widened_level(tmp_path):
+    """A file written by --until, met or stopped at its cap, takes its quantiles' bounds at LEVEL
+    (97.5 % for 95 %) and says why in its statistics' attributes and table; the same data without
+    the until attributes, like a plain run, at the label's 95 %."""
+    from pipeline.analysis.stats import UNTIL_NOTE, ensemble_stats, format_stats, in_window
     from pipeline.analysis.until import run_until
     from pipeline.ensemble.run import EnsembleSpec
     from pipeline.files.reading import load_netcdf
@@ -249,11 +252,36 @@ def test_the_statistics_of_a_run_stopped_by_its_intervals_say_what_that_costs_th
     scene = find_scene("smoke")
     spec = EnsembleSpec(scene.source_text, "smoke", "quasi-static", "newmark", scene.time_step,
                         scene.simulation.elements_per_link, 3)
-    for target, name, noted in (("displacement:z@mean<=50%", "met.nc", True),
-                                ("displacement:z@mean<=0.0001%", "cap.nc", False)):
+    for target, name, met in (("displacement:z@q50<=50%", "met.nc", True),
+                              ("displacement:z@q50<=0.0001%", "cap.nc", False)):
         run_until(spec, [parse_target(target)], 20, tmp_path / name, workers=1, stream=io.StringIO())
         ds = load_netcdf(tmp_path / name)
-        assert (ds.attrs["until_met"] == "met") == noted
-        sds = ensemble_stats(ds)
-        assert ("interval_after_until" in sds.attrs) == noted
-        assert (format_stats(sds).splitlines()[-1] == f"  --until: {UNTIL_NOTE}") == noted
+        assert (ds.attrs["until_met"] == "met") == met
+        plain = ds.copy()
+        plain.attrs = {k: v for k, v in ds.attrs.items() if not k.startswith("until_")}
+        x = np.sort(in_window(ds, "whole")["max_abs_error"].sel(quantity="displacement")
+                    .transpose("realization", "direction").values, axis=0)
+        for data, level, noted in ((ds, LEVEL, True), (plain, 0.95, False)):
+            sds = ensemble_stats(data)
+            got = sds["max_abs_error"].sel(quantity="displacement", statistic="q50", bound=["lower", "upper"]).values
+            assert np.array_equal(got, quantile_interval(x, 0.5, level))
+            assert ("interval_after_until" in sds.attrs) == noted
+            assert (format_stats(sds).splitlines()[-1] == f"  --until: {UNTIL_NOTE}") == noted
+    assert not np.array_equal(quantile_interval(x, 0.5, LEVEL), quantile_interval(x, 0.5, 0.95))
+
+
+def test_the_widened_quantile_bounds_reach_their_label_where_until_stops():
+    """gamma(2) data, q95 half-width <= 20 %, the rule's checkpoints (2000 runs): at the stop the
+    interval covered 93.4 % at the label's level and covers >= 95 % at LEVEL (96.1 % measured, benchmarks/
+    until_coverage.py); a bound at 95 % fails this."""
+    from scipy import stats as sps
+    target, law, reps = parse_target("displacement:z@q95<=20%"), sps.gamma(2.0), 2000
+    x = law.rvs(size=(400, reps), random_state=np.random.default_rng(11))
+    truth, row = law.ppf(0.95), STATISTICS.index("q95")
+    done, cover = np.zeros(reps, bool), np.zeros(reps, bool)
+    for n in checkpoints([target], 400):
+        est, lower, upper = estimates_and_bounds(x[:n], 0.95, stopped_by_width=True)[row]
+        new = (((upper - lower) / 2 <= target.relative * est) | (n == 400)) & ~done
+        cover[new] = (lower[new] <= truth) & (truth <= upper[new])
+        done |= new
+    assert cover.mean() >= 0.95, cover.mean()

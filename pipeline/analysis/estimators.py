@@ -39,6 +39,12 @@ kurtosis about 1):
 
 No bootstrap runs: none of the intervals above needs one.
 
+A sample size chosen by the intervals' own widths (``rss6 run --until``) costs them coverage:
+at the stop a q95 interval at 95 % covered 92.3-93.4 % and its one-sided upper bound missed in up
+to 6.3 % (benchmarks/until_coverage.py).  There the quantiles' bounds (RQMC: every statistic's)
+are computed at the level 1 - UNTIL_WIDENING (1 - confidence) (:func:`stopped_level`), which
+reaches the label at the stop (docs/ensembles.md, "Run until known").
+
 One-sided bounds (``ensemble_stats(..., one_sided=True)``; the requirement gate,
 pipeline/analysis/gate.py, decides on them): ``lower`` and ``upper`` are each a bound at the
 confidence on its own side (not together an interval at it); error rates of the
@@ -71,7 +77,8 @@ MIN_POINTS_RQMC[statistic] points (a replicate's quantile or std estimate is
 biased by O(1/m); coverage measured in tests/test_sampler.py and, per m, by
 benchmarks/rqmc_coverage.py: on a maximum over time the q99 interval covered
 90.7, 92.2, 93.9 and 94.3 % at m = 128, 256, 512, 1024 (2000 runs each), hence
-its floor of 1024; q95 93.8-94.0 % at 128-256, 94.9 % from 512), never for the
+its floor of 1024; q95 93.8-94.0 % at 128-256, 94.9 % at 512, hence its floor of
+512), never for the
 maximum, and not at all if a realisation failed (a replicate with holes is no
 longer a scrambled net).  Point estimates stay those of all n realisations.
 """
@@ -87,17 +94,19 @@ from scipy import stats as sps
 
 from ..vocabulary import QUANTILES, STATISTICS
 
-__all__ = ["BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "STD_WIDENING", "MIN_POINTS_RQMC", "MAX_NOTE", "QUANTILE_DECISION_CAP",
+__all__ = ["BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "STD_WIDENING", "UNTIL_WIDENING", "MIN_POINTS_RQMC", "MAX_NOTE",
+           "QUANTILE_DECISION_CAP",
            "quantile_ranks", "min_n_for_quantile", "quantile_estimates", "quantile_interval", "BoundRanks",
            "one_sided_ranks", "quantile_bounds", "quantile_decision_n", "mean_interval", "mean_bounds",
-           "running_mean_interval", "std_interval", "estimates", "one_sided_bounds", "estimates_and_bounds",
-           "replicate_groups", "rqmc_intervals", "interval_floor", "no_interval_at"]
+           "running_mean_interval", "std_interval", "estimates", "one_sided_bounds", "stopped_level",
+           "estimates_and_bounds", "replicate_groups", "rqmc_intervals", "interval_floor", "no_interval_at"]
 
 BOUNDS = ("estimate", "lower", "upper")
 MIN_N_MEAN = 16     # smallest n whose coverage reaches the label on the measured laws (module doc)
 MIN_N_STD = 300     # widened Bonett: >= 94.7 % measured on the laws of the module doc from here
 STD_WIDENING = 0.6  # Bonett's interval is computed at the level 1 - STD_WIDENING (1 - confidence)
-MIN_POINTS_RQMC = {"mean": 16, "std": 32, "q05": 128, "q50": 16, "q95": 128, "q99": 1024}
+UNTIL_WIDENING = 0.5  # n chosen by the intervals' widths: bounds at 1 - UNTIL_WIDENING (1 - confidence)
+MIN_POINTS_RQMC = {"mean": 16, "std": 32, "q05": 128, "q50": 16, "q95": 512, "q99": 1024}
 MAX_NOTE = ("no interval: the sample maximum estimates no population parameter; the next "
             "realisation exceeds it with probability 1/(n + 1)")
 _RTOL = 1e-12       # binomial coverage computed in floating point
@@ -317,31 +326,42 @@ def estimates(x: np.ndarray, names=STATISTICS) -> np.ndarray:
     return np.stack(out, axis=-1)
 
 
-def _intervals(x: np.ndarray, confidence: float) -> np.ndarray:
-    """(statistic, 2, cells) lower and upper bounds for finite data x (n, cells)."""
+def _intervals(x: np.ndarray, confidence: float, quantile_confidence: float) -> np.ndarray:
+    """(statistic, 2, cells) lower and upper bounds for finite data x (n, cells), the quantiles'
+    at ``quantile_confidence`` (:func:`stopped_level`)."""
     sx = np.sort(x, axis=0)
     rows = [mean_interval(x, confidence), std_interval(x, confidence)]
-    rows += [quantile_interval(sx, p, confidence) for p in QUANTILES.values()]
+    rows += [quantile_interval(sx, p, quantile_confidence) for p in QUANTILES.values()]
     rows.append(np.full((2,) + x.shape[1:], np.nan))        # max: see module doc
     return np.stack(rows)
 
 
-def one_sided_bounds(x: np.ndarray, confidence: float) -> np.ndarray:
-    """(statistic, 2, cells) one-sided lower and upper bounds, each at ``confidence``, for finite data
-    x (n, cells) (module doc); the bounds the requirement gate decides on."""
+def one_sided_bounds(x: np.ndarray, confidence: float, quantile_confidence: float | None = None) -> np.ndarray:
+    """(statistic, 2, cells) one-sided lower and upper bounds, each at ``confidence`` (the quantiles'
+    at ``quantile_confidence``, default the same), for finite data x (n, cells) (module doc); the
+    bounds the requirement gate decides on."""
     sx = np.sort(x, axis=0)
     rows = [mean_bounds(x, confidence), std_interval(x, confidence)]
-    rows += [quantile_bounds(sx, p, confidence) for p in QUANTILES.values()]
+    rows += [quantile_bounds(sx, p, quantile_confidence or confidence) for p in QUANTILES.values()]
     rows.append(np.full((2,) + x.shape[1:], np.nan))
     return np.stack(rows)
 
 
-def estimates_and_bounds(x: np.ndarray, confidence: float, one_sided: bool = False) -> np.ndarray:
-    """(statistic, bound, cells) for finite data x (n, cells); all NaN when n = 0."""
+def stopped_level(confidence: float, stopped_by_width: bool) -> float:
+    """The level bounds are computed at for a ``confidence`` label: widened where the sample size was
+    chosen by the intervals' own widths (``rss6 run --until``; module doc), else the label's."""
+    return 1.0 - UNTIL_WIDENING * (1.0 - confidence) if stopped_by_width else confidence
+
+
+def estimates_and_bounds(x: np.ndarray, confidence: float, one_sided: bool = False,
+                         stopped_by_width: bool = False) -> np.ndarray:
+    """(statistic, bound, cells) for finite data x (n, cells); all NaN when n = 0.  ``stopped_by_width``:
+    n was chosen by the intervals' own widths (the quantiles' bounds widened, :func:`stopped_level`)."""
     if x.shape[0] == 0:
         return np.full((len(STATISTICS), len(BOUNDS), x.shape[1]), np.nan)
     est = np.moveaxis(estimates(x), -1, 0)                   # (statistic, cells)
-    bounds = one_sided_bounds(x, confidence) if one_sided else _intervals(x, confidence)
+    level = stopped_level(confidence, stopped_by_width)
+    bounds = one_sided_bounds(x, confidence, level) if one_sided else _intervals(x, confidence, level)
     return np.concatenate([est[:, None], bounds], axis=1)
 
 

@@ -18,8 +18,9 @@ import xarray as xr
 
 from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
-from .estimators import (BOUNDS, MAX_NOTE, MIN_N_MEAN, MIN_N_STD, MIN_POINTS_RQMC, STD_WIDENING, estimates_and_bounds,
-                         interval_floor, min_n_for_quantile, replicate_groups, rqmc_intervals)
+from .estimators import (BOUNDS, MAX_NOTE, MIN_N_MEAN, MIN_N_STD, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
+                         estimates_and_bounds, interval_floor, min_n_for_quantile, stopped_level, replicate_groups,
+                         rqmc_intervals)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
            "to_json", "format_stats"]
@@ -84,22 +85,26 @@ def _provenance(ds: xr.Dataset, confidence: float) -> dict:
 
 
 def ensemble_stats(ds: xr.Dataset, confidence: float = CONFIDENCE, window: str | None = "whole",
-                   one_sided: bool = False) -> xr.Dataset:
+                   one_sided: bool = False, stopped_by_width: bool | None = None) -> xr.Dataset:
     """Statistics (statistic, bound, quantity, direction) of ``max_abs_error`` and
     ``mean_abs_error`` over the finished realisations of an ensemble (or single-run) Dataset, in
     analysis window ``window``; ``window=None``: every window of the file, along a leading window
     dimension (a file without windows gives none).  ``one_sided``: ``lower`` and ``upper`` are
     one-sided bounds, each at ``confidence`` (:mod:`pipeline.analysis.estimators`), not a
-    two-sided interval."""
+    two-sided interval.  ``stopped_by_width``: n was chosen by the intervals' own widths, so the
+    quantiles' bounds are widened (default: whether the file was written by ``rss6 run --until``)."""
+    if stopped_by_width is None:
+        stopped_by_width = "until_rule" in ds.attrs
     if window is None and "window" in ds.dims:
-        parts = [_window_stats(in_window(ds, w), confidence, one_sided).expand_dims(window=[w])
+        parts = [_window_stats(in_window(ds, w), confidence, one_sided, stopped_by_width).expand_dims(window=[w])
                  for w in windows_of(ds)]
         out = xr.concat(parts, dim="window", combine_attrs="override")
         return out.assign_coords(unit=parts[0]["unit"]) if "unit" in parts[0].coords else out
-    return _window_stats(in_window(ds, window or "whole"), confidence, one_sided)
+    return _window_stats(in_window(ds, window or "whole"), confidence, one_sided, stopped_by_width)
 
 
-def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False) -> xr.Dataset:
+def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False,
+                  stopped_by_width: bool = False) -> xr.Dataset:
     """:func:`ensemble_stats` of a Dataset without a window dimension."""
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
@@ -112,14 +117,15 @@ def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False) ->
     for name in SUMMARIES:
         var = ens[name].transpose("realization", "quantity", "direction")
         per_quantity = [_column_stats(var.isel(quantity=q).values[finished], ens["realization"].values, finished,
-                                      design, confidence, one_sided) for q in range(var.sizes["quantity"])]
+                                      design, confidence, one_sided, stopped_by_width)
+                        for q in range(var.sizes["quantity"])]
         attrs = {"long_name": f"statistics over finished realisations of {name}",
                  "units": var.attrs.get("units", "")}
         data[name] = (("statistic", "bound", "quantity", "direction"), np.stack(per_quantity, axis=2), attrs)
     n = int(finished.sum())
-    attrs = _attrs(ds, n, int((~finished).sum()), confidence)
+    attrs = _attrs(ds, n, int((~finished).sum()), confidence, stopped_by_width)
     if design is not None:
-        attrs |= _rqmc_attrs(design.replicates, confidence)
+        attrs |= _rqmc_attrs(design.replicates, confidence, stopped_by_width)
     if one_sided:
         attrs["bounds"] = ("one-sided: 'lower' and 'upper' are each a bound at the confidence on its "
                            "own side (pipeline.analysis.estimators, one-sided bounds)")
@@ -131,14 +137,15 @@ def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False) ->
 
 
 def _column_stats(x: np.ndarray, realizations, finished: np.ndarray, design, confidence: float,
-                  one_sided: bool) -> np.ndarray:
+                  one_sided: bool, stopped_by_width: bool) -> np.ndarray:
     """(statistic, bound, cells) of the finished data x (n, cells). Every cell is independent of the
     others, so an ensemble's statistics are taken one quantity at a time: a 1,000,000-realisation
     file's values are then read 48 MB at a time, not all at once (docs/performance.md section 26)."""
-    flat = estimates_and_bounds(x, confidence, one_sided)
+    flat = estimates_and_bounds(x, confidence, one_sided, stopped_by_width)
     if design is not None:                          # not iid: see pipeline.analysis.estimators
+        level = stopped_level(confidence, stopped_by_width)   # every statistic's width comes from R replicates
         flat[:, 1:] = _rqmc_bounds(x, realizations, finished, design.replicates,
-                                   2 * confidence - 1 if one_sided else confidence)
+                                   2 * level - 1 if one_sided else level)
     return flat
 
 
@@ -150,19 +157,26 @@ def _rqmc_bounds(x: np.ndarray, realizations, finished: np.ndarray, replicates: 
     return rqmc_intervals(replicate_groups(x, realizations, replicates), confidence)
 
 
-def _rqmc_attrs(replicates: int, confidence: float) -> dict:
+def _widened(confidence: float, stopped_by_width: bool) -> str:
+    """What an interval's text adds where its level is widened (:func:`.estimators.stopped_level`)."""
+    if not stopped_by_width:
+        return ""
+    return f" at the level {stopped_level(confidence, True):g} (the run chose n by its widths: interval_after_until)"
+
+
+def _rqmc_attrs(replicates: int, confidence: float, stopped_by_width: bool) -> dict:
     """The attributes that say which intervals a QMC file's statistics carry (pipeline.analysis.estimators)."""
     floors = ", ".join(f"{k} {interval_floor(k, confidence, replicates)}" for k in MIN_POINTS_RQMC)
     text = (f"randomised QMC: Student t ({replicates - 1} degrees of freedom) over the "
-            f"{replicates} replicate estimates, centred on the estimate of all complete "
-            f"replicate rounds; NaN below n = {floors}, or if a realisation failed")
+            f"{replicates} replicate estimates{_widened(confidence, stopped_by_width)}, centred on the estimate of "
+            f"all complete replicate rounds; NaN below n = {floors}, or if a realisation failed")
     return {"sampler": "qmc", "qmc_replicates": replicates,
             **{f"interval_{k}": text for k in ("mean", "std", "quantiles")},
             **{f"min_n_{k}": interval_floor(k, confidence, replicates) for k in QUANTILES}}
 
 
-def _attrs(ds, n: int, failed: int, confidence: float) -> dict:
-    needed = {k: min_n_for_quantile(p, confidence) for k, p in QUANTILES.items()}
+def _attrs(ds, n: int, failed: int, confidence: float, stopped_by_width: bool) -> dict:
+    needed = {k: min_n_for_quantile(p, stopped_level(confidence, stopped_by_width)) for k, p in QUANTILES.items()}
     steady = {"steady_after_s": ds.attrs["steady_after_s"]} if "steady_after_s" in ds.attrs else {}
     return {**_provenance(ds, confidence), **steady, "n_finished": n, "n_failed": failed,
             "confidence": confidence,
@@ -170,16 +184,18 @@ def _attrs(ds, n: int, failed: int, confidence: float) -> dict:
                              f"n < {MIN_N_MEAN}",
             "interval_std": f"Bonett (2006) at the level 1 - {STD_WIDENING:g} (1 - confidence); NaN for "
                             f"n < {MIN_N_STD}",
-            "interval_quantiles": "distribution-free order statistics, exact binomial coverage; "
-                                  "NaN for n < " + ", ".join(f"{v} ({k})" for k, v in needed.items()),
+            "interval_quantiles": "distribution-free order statistics, exact binomial coverage"
+                                  f"{_widened(confidence, stopped_by_width)}; NaN for n < "
+                                  + ", ".join(f"{v} ({k})" for k, v in needed.items()),
             "interval_max": MAX_NOTE,
             **{f"min_n_{k}": v for k, v in needed.items()},
-            **({"interval_after_until": UNTIL_NOTE} if ds.attrs.get("until_met") == "met" else {})}
+            **({"interval_after_until": UNTIL_NOTE} if stopped_by_width else {})}
 
 
-UNTIL_NOTE = ("this run stopped at the first n where its own intervals met --until's half-widths; choosing n "
-              "so lowers the quantiles' interval coverage at 95 % to 92.0-93.4 % (q95, three skewed laws; "
-              "python benchmarks/until_coverage.py), the mean's stays >= 94.8 %")
+UNTIL_NOTE = (f"this run chose n by its own intervals' widths (rss6 run --until), which costs them coverage (q95 at "
+              f"95 %: 92.3-93.4 %), so its quantiles' bounds (with --sampler qmc every statistic's) are taken at "
+              f"the level 1 - {UNTIL_WIDENING:g} (1 - confidence): 95.4-98.0 % at the stop, the mean's 94.5-95.8 % "
+              f"unwidened (python benchmarks/until_coverage.py; rqmc_coverage.py --until)")
 
 
 def json_number(v):

@@ -13,9 +13,11 @@ Stopping rule: the ensemble is checked only at the fixed sample sizes of
 :func:`checkpoints` (a function of the targets, the cap ``-n`` and the sampler;
 never of timing), and stops at the first one where every target is met.  A
 statistic without an interval at that n (below its minimum n) is not met.  The
-intervals are those of pipeline/analysis/estimators.py at the run's confidence (95 %), so
-the file at the final n is the file of a plain ``-n FINAL`` run plus the
-``until_*`` attributes.  A file that already holds realisations (a resumed
+intervals are those of pipeline/analysis/estimators.py at the run's confidence (95 %), the
+quantiles' taken at the widened level LEVEL (97.5 %): choosing n by an interval's own width
+costs it coverage (:data:`pipeline.analysis.stats.UNTIL_NOTE`), and every later statistic of
+the file is taken the same way.  The file at the final n is the file of a plain ``-n FINAL``
+run plus the ``until_*`` attributes.  A file that already holds realisations (a resumed
 run) is checked at its own n first.
 """
 from __future__ import annotations
@@ -30,12 +32,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..vocabulary import CONFIDENCE, UserError
+from .estimators import stopped_level
 from .spec import SpecError, _statistic, _subject, _unit_factor
 
 __all__ = ["Target", "UntilError", "parse_target", "parse_targets", "checkpoints", "widths",
            "run_until", "GROWTH", "CONFIDENCE"]
 
 GROWTH = 1.25        # mc: each checked n is the previous one times this, rounded up
+LEVEL = stopped_level(CONFIDENCE, stopped_by_width=True)   # the quantiles' bounds the rule checks
 _WIDTH = re.compile(r"\s*((?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(%?)\s*(.*)$")
 
 
@@ -113,10 +117,12 @@ def parse_targets(texts: list[str] | None) -> list[Target]:
 def check_cap(targets: list[Target], cap: int, replicates: int | None = None) -> None:
     """UntilError, before any work, for a target whose statistic has no interval at the cap ``-n``:
     no check could meet it (as ``rss6 budget`` refuses the same request)."""
-    from .estimators import no_interval_at
+    from .estimators import interval_floor
     for t in targets:
-        if why := no_interval_at(t.statistic, CONFIDENCE, cap, replicates):
-            raise _fail(t.text, why)
+        floor = interval_floor(t.statistic, LEVEL, replicates)
+        if cap < floor:
+            raise _fail(t.text, f"{t.statistic} has no {100 * CONFIDENCE:g} % interval after --until below "
+                                f"n = {floor} (-n {cap}; docs/ensembles.md); raise -n")
 
 
 def checkpoints(targets: list[Target], cap: int, replicates: int | None = None) -> list[int]:
@@ -126,7 +132,7 @@ def checkpoints(targets: list[Target], cap: int, replicates: int | None = None) 
     time.  qmc (R ``replicates``): R m with m doubling from the largest minimum points per
     replicate, so each replicate stays a power-of-two prefix of its Sobol' sequence."""
     from .estimators import interval_floor
-    first = max(interval_floor(t.statistic, CONFIDENCE, replicates) for t in targets)
+    first = max(interval_floor(t.statistic, LEVEL, replicates) for t in targets)
     out, n = [], first
     while n < cap:
         out.append(n)
@@ -187,7 +193,8 @@ def until_attrs(targets: list[Target], found: list[Width], n: int, points: list[
     shown = points if len(points) <= 12 else points[:6] + ["..."] + points[-3:]
     return {"until_rule": ("stop at the first checked n where every target holds: "
                            + "; ".join(t.text for t in targets)
-                           + f" (interval half-widths at {100 * CONFIDENCE:g} % confidence; "
+                           + f" (interval half-widths at {100 * CONFIDENCE:g} % confidence, the quantiles' bounds at "
+                           f"{100 * LEVEL:g} %; "
                            f"checked at n = {', '.join(map(str, shown))}; cap -n {cap})"),
             "until_met": "met" if met else "not met",
             "until_n": n,
@@ -235,7 +242,7 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
 
     def judge(ds) -> dict:
         n = ds.sizes["realization"]
-        found.update(n=n, widths=widths(targets, ensemble_stats(ds, CONFIDENCE, window=None)))
+        found.update(n=n, widths=widths(targets, ensemble_stats(ds, CONFIDENCE, window=None, stopped_by_width=True)))
         extra = until_attrs(targets, found["widths"], n, checked, cap)
         return extra | (annotate(ds) if annotate else {})
 
