@@ -106,8 +106,8 @@ def test_quasi_static_indices_match_the_closed_form(paper):
     evaluations) lie within their 95 % bootstrap intervals: coverage was measured at 94-98 % (slow
     test below), so 1-2 of 48 may lie outside; at most 5 are allowed (more happens with
     probability 3 % at 95 % coverage, 0.1 % at 97.5 %, were the cells independent), none by more
-    than half an interval width beyond its bound, and every interval is narrower than 0.15 (so a
-    swapped or misweighted family fails)."""
+    than half an interval width beyond its bound, and every interval is narrower than 0.22 (0.15 at
+    the label's own z, 1.43x narrower than the widened one; a swapped or misweighted family fails)."""
     inputs = clearance_inputs(paper)
     design = designs(inputs, False)[0]
     u = sample_design(design, 1024, seed=1)
@@ -117,15 +117,16 @@ def test_quasi_static_indices_match_the_closed_form(paper):
     outside = (S < lo) | (S > hi)
     assert outside.sum() <= 5, np.argwhere(outside)
     assert np.all(np.abs(S - est) <= 1.5 * (hi - lo) / 2)
-    assert np.all(hi - lo < 0.15)
+    assert np.all(hi - lo < 0.22)
 
 
 @pytest.mark.slow
 def test_bootstrap_intervals_reach_their_confidence_on_the_linear_model(paper):
     """Coverage of the 95 % bootstrap intervals at N = 64 (the smallest N the command accepts) over
     200 independent designs (sampling and bootstrap seeds), on the closed-form case: at least 93 %
-    (nominal minus 2 points) for S1 and for ST.  Measured: S1 94.2 %, ST 96.1 %; at N = 256, 97.7 %
-    and 97.5 %.  The model is evaluated through its Jacobian (the test above checks the core)."""
+    (nominal minus 2 points) for S1 and for ST.  Measured with the widened z: S1 99.3 %, ST 99.1 %;
+    at N = 256, 99.9 % and 99.6 % (at the label's own z: 94.2 %, 96.1 %; 97.7 %, 97.5 %).  The model
+    is evaluated through its Jacobian (the test above checks the core)."""
     G, n = closure_matrix(rigid_motion(paper, np.array([T0])))
     J = np.einsum("kl,li->lki", np.linalg.inv(G[0]), n[0])
     inputs = clearance_inputs(paper)
@@ -139,6 +140,40 @@ def test_bootstrap_intervals_reach_their_confidence_on_the_linear_model(paper):
         inside.append((values[:, 1] <= S) & (S <= values[:, 2]))
     coverage = np.mean(inside, axis=(0, 2, 3))
     assert coverage.min() >= 0.93, coverage
+
+
+def _max_over_time(u: np.ndarray) -> np.ndarray:
+    """(rows,) max over 50 instants of |sum_i c_i(t) e_i|, e = 2 u - 1: 24 inputs in 4 groups of 6
+    (scales 1, 0.15, 0.8, 0.7), the clearance response's shape at the quasi-static level (the output
+    of benchmarks/sobol_coverage.py)."""
+    phase = np.random.default_rng(5).uniform(0.0, 2.0 * np.pi, 24)
+    t = np.linspace(0.0, 2.0 * np.pi, 50)
+    coef = np.repeat((1.0, 0.15, 0.8, 0.7), 6)[:, None] * np.cos(t[None, :] + phase[:, None])
+    return np.abs((2.0 * u - 1.0) @ coef).max(axis=1)
+
+
+@pytest.mark.slow   # about 2 minutes
+def test_widened_bootstrap_intervals_reach_their_label_on_a_maximum_over_time():
+    """On a maximum over time, the statistic rss6 ranks, the bootstrap's own 95 % z covers the truth
+    (N = 2^16) in under 95 % of 500 designs at N = 64 for some group (88.6-93.4 % measured); the
+    widened z (SOBOL_WIDENING) in at least 95 % for every group and index (96.2-99.2 %).  The seeds
+    are benchmarks/sobol_coverage.py's, so these are its numbers."""
+    from SALib.sample import sobol
+    from pipeline.studies.sensitivity import SOBOL_WIDENING, Design
+    names = [f"u{i}" for i in range(24)]
+    problem = {"num_vars": 24, "names": names, "bounds": [[0.0, 1.0]] * 24,
+               "groups": [f"g{i // 6}" for i in range(24)]}
+    design = Design("families", tuple(f"g{k}" for k in range(4)), problem)
+
+    def indices(n, seed, widening):
+        u = sobol.sample(problem, n, calc_second_order=False, scramble=True, seed=seed)
+        return sobol_indices(design, _max_over_time(u)[:, None], 0.95, seed, widening=widening).values[..., 0]
+
+    truth = indices(2 ** 16, 123, SOBOL_WIDENING)[:, 0]
+    for widening, reaches in ((SOBOL_WIDENING, True), (1.0, False)):
+        hits = sum((v[:, 1] <= truth) & (truth <= v[:, 2]) for v in (indices(64, 1000 + k, widening)
+                                                                      for k in range(500)))
+        assert (hits.min() / 500 >= 0.95) == reaches, hits / 500
 
 
 def test_evaluations_do_not_depend_on_chunking(smoke):
@@ -277,9 +312,9 @@ def test_total_estimates_outside_zero_one_get_a_note_naming_the_worst(sobol_file
     ds = load_netcdf(sobol_file)
     inside = ds.assign(max_abs_error_sobol=ds["max_abs_error_sobol"].clip(0, 1))
     assert "note:" not in format_sensitivity(inside)
-    # the label comes with its coverage on a maximum over time (benchmarks/sobol_coverage.py), below 95 %
+    # the label comes with its coverage on a maximum over time (benchmarks/sobol_coverage.py)
     assert format_sensitivity(inside).splitlines()[0].endswith(
-        "[95 % bootstrap interval, covering 88-94 % on a maximum over time, docs/ensembles.md]")
+        "[95 % bootstrap interval, z widened: >= 96 % measured on a maximum over time, docs/ensembles.md]")
     st = inside["max_abs_error_sobol"]
     st.loc[dict(index="ST", bound="estimate", group="spherical_B", quantity="velocity", direction="rz")] = 1.4
     st.loc[dict(index="ST", bound="estimate", group="revolute_axial", quantity="velocity", direction="x")] = -0.1
