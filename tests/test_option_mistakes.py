@@ -101,6 +101,21 @@ def test_an_option_mistake_is_one_line_and_exit_2(command, option, bad, capsys, 
     assert option in err[0] or bad.format(missing="") in err[0] or "no" in err[0], err
 
 
+@pytest.mark.parametrize("argv, says, not_says", [
+    (["run", "smoke", "-n", "100000000"], "at most 10000000 per ensemble (a rare event: rss6 reliability",
+     "evaluations"),
+    (["reliability", *NEEDS["reliability"], "--budget", "100000000"], "at most 10000000 model evaluations",
+     "rare event"),
+    (["reliability", *NEEDS["reliability"], "-n", "100000000"], "at most 10000000 model evaluations",
+     "rare event")])
+def test_a_size_past_its_ceiling_says_what_the_command_counts(argv, says, not_says, capsys, tmp_path, small_file,
+                                                              no_work):
+    """rss6 reliability counts model evaluations and is itself the rare-event route: its ceiling does not
+    point to itself as an ensemble's does."""
+    code, err = _run(argv, capsys, tmp_path, small_file)
+    assert code == 2 and len(err) == 1 and says in err[0] and not_says not in err[0], err
+
+
 COMBINATIONS = [
     ["run", "smoke", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
     ["run", "smoke", "--worker-timeout", "5"],

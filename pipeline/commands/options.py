@@ -67,6 +67,8 @@ positive_int = int_at_least(1)
 nonnegative_int = int_at_least(0)
 MAX_REALISATIONS = 10_000_000   # an ensemble's at most: ten times the largest measured (docs/performance.md 26)
 realisations = int_at_least(1, MAX_REALISATIONS, " per ensemble (a rare event: rss6 reliability's subset method)")
+evaluations = int_at_least(1, MAX_REALISATIONS, " model evaluations (rss6 reliability's subset method reaches "
+                                                "probabilities far below 1 / N)")
 MAX_SEED = 2 ** 63 - 1   # a file's seed attribute is a netCDF int64
 
 

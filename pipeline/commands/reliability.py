@@ -11,8 +11,8 @@ from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError, window_words
 from .messages import interrupted, loaded_joints_meanwhile
-from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, fraction,
-                      realisations)
+from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers,
+                      evaluations, fraction)
 
 
 def add_parser(sub) -> None:
@@ -29,13 +29,13 @@ def add_parser(sub) -> None:
     p.add_argument("--method", choices=METHODS, default="subset",
                    help="subset: subset simulation (Au & Beck 2001, adaptive conditional sampling); mc: plain "
                         "Monte Carlo with an exact Clopper-Pearson interval (default subset)")
-    p.add_argument("-n", type=realisations, help="subset: evaluations per level N, a multiple of 1 / p0 "
+    p.add_argument("-n", type=evaluations, help="subset: evaluations per level N, a multiple of 1 / p0 "
                                                  "(default 1000); mc: realisations (default 20000)")
     p.add_argument("--cov", type=fraction, metavar="C",
                    help="a CoV target in (0, 1): mc adds realisations (blocks of 1000), subset doubles N (a fresh "
                         "run each time), until the estimated CoV is at most C or --budget would be exceeded "
                         "(exit 0 either way; status 'budget' if not met)")
-    p.add_argument("--budget", type=realisations, metavar="E",
+    p.add_argument("--budget", type=evaluations, metavar="E",
                    help="with --cov: evaluations at most, over all runs (default 20000 subset, 200000 mc)")
     p.add_argument("-p0", "--p0", type=float, default=0.1,
                    help="subset: conditional probability of each level, in (0, 0.5] (default 0.1)")
