@@ -11,7 +11,7 @@ from pipeline.cli import main
 from pipeline.analysis.estimators import MIN_N_MEAN
 from pipeline.studies.multifidelity import (MIN_N_MF, control_variate_mean, cost_ratio, format_multifidelity,
                                             level_paths, multifidelity_dataset, optimal_low_ratio, paired_values,
-                                            variance_reduction)
+                                            variance_reduction, width_cost)
 from pipeline.ensemble.run import EnsembleSpec, run_chunk
 from pipeline.files.reading import load_netcdf
 from pipeline.files.records import window_label
@@ -34,9 +34,10 @@ def _pairs(law, rho: float, n: int, m: int, trials: int, seed: int):
 
 
 @pytest.mark.parametrize("law", list(LAWS))
-def test_interval_covers_at_least_nominal_minus_two_points(law):
-    """10 000 repetitions per cell (N = 32, 64; M/N = 1, 32; rho = 0, 0.8, 0.95); the worst cell
-    (gamma(2), N = 32, M/N = 32) covers about 93.6 %, 2.5 binomial standard errors above 93 %."""
+def test_interval_reaches_its_label(law):
+    """10 000 repetitions per cell (N = 32, 64; M/N = 1, 32; rho = 0, 0.8, 0.95): every cell covers at
+    least 95 % (the widened union; Student t alone at the label covered 93.6 % on gamma(2) at N = 32,
+    M/N = 32), and not vacuously: the worst cell below 99 % (measured about 98 %)."""
     worst = 1.0
     for i, (n, ratio, rho) in enumerate((n, r, rho) for n in (MIN_N_MF, 64) for r in (1, 32)
                                         for rho in (0.0, 0.8, 0.95)):
@@ -44,8 +45,8 @@ def test_interval_covers_at_least_nominal_minus_two_points(law):
         cv = control_variate_mean(y, x, CONF)
         coverage = np.mean((cv.lower <= 0) & (0 <= cv.upper))
         worst = min(worst, coverage)
-        assert coverage >= CONF - 0.02, (law, n, ratio, rho, coverage)
-    assert worst < 0.97   # not vacuously wide
+        assert coverage >= CONF, (law, n, ratio, rho, coverage)
+    assert worst < 0.99   # not vacuously wide
 
 
 def test_no_interval_below_the_measured_minimum():
@@ -140,7 +141,9 @@ def test_dataset_from_a_smoke_pair_and_pairing_check(configs):
                                atol=1)
     high_n, low_n = sized["max_abs_error_high_n_for_width"], sized["max_abs_error_low_n_for_width"]
     assert (high_n >= MIN_N_MF).all() and (low_n >= high_n).all()   # never a size without an interval
-    assert (high_n <= np.maximum(sized["max_abs_error_plain_n_for_width"], MIN_N_MF)).all()
+    # the widened interval costs width_cost(0.95) = 1.41 in sample size: MF may need more than plain MC
+    assert width_cost(CONF) == pytest.approx((2.326348 / 1.959964) ** 2, rel=1e-6)
+    assert (high_n <= np.maximum(np.ceil(sized["max_abs_error_plain_n_for_width"] * width_cost(CONF)), MIN_N_MF)).all()
     other = _ensemble(configs, "smoke", "quasi-static", range(6), seed=1)
     with pytest.raises(EnsembleFileError, match="seed"):
         multifidelity_dataset(high, other)

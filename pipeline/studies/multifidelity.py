@@ -16,18 +16,22 @@ over plain Monte Carlo on the same N, which tends to 1/(1 - rho^2) for M >> N;
 N times it is the equivalent plain-MC sample size.
 
 Interval: with Z = Y - alpha X on the N pairs, the standard error
-sqrt(var(Z)/N + alpha^2 var_M(X)/M) (var(Z) with N - 2 degrees of freedom, alpha
-being fitted) and Student t with N - 2 degrees of freedom.  Coverage measured by
-simulation (4000 repetitions per cell; N = 8, 16, 32, 64; M/N = 1, 4, 32;
-rho = 0, 0.5, 0.8, 0.95; normal, gamma(2) and Laplace margins as in
-pipeline/stats.py; 20 000 repetitions for gamma(2), the worst law): >= 93.6 % everywhere
-from N = MIN_N_MF = 32, down to 91.5 % for gamma(2) at N = 8-16, so below 32 the
-interval is withheld (NaN); tests/test_multifidelity.py repeats N = 32 and 64 with 10 000
-repetitions per cell and a real pair of quasi-static ensembles.  On margins of skewness 2-2.9
-(exponential, lognormal(0.75), chi2(1)) it covers only 88.5-94.9 % at N = 32-64, mostly missing
-below the mean (benchmarks/multifidelity_coverage.py); a skewness correction of the residuals
-(Hall's, as for the plain mean) recovered half of that at rho <= 0.5 and little at rho = 0.95, so
-the table states the measured range (SKEWED_COVERAGE) instead.  The reported variance reduction
+se = sqrt(var(Z)/N + alpha^2 var_M(X)/M) (var(Z) with N - 2 degrees of freedom, alpha
+being fitted).  Student t with N - 2 degrees of freedom on se covered >= 93.6 % on normal,
+gamma(2) and Laplace margins from N = MIN_N_MF = 32 (91.5 % for gamma(2) at N = 8-16, so
+below 32 the interval is withheld), but only 88.5-94.9 % on margins of skewness 2-2.9
+(exponential, lognormal(0.75), chi2(1)) at N = 32-64, mostly missing below the mean
+(benchmarks/multifidelity_coverage.py, 4000 repetitions per cell).  So the interval is the
+union of that t interval and the plain mean's interval (Student t and Hall's skewness
+correction, :func:`pipeline.analysis.estimators.mean_interval`) of the residuals Z around the
+estimate, its half-widths scaled by se / (sd(Z) / sqrt(N)), both at the level
+1 - MF_WIDENING (1 - confidence): 95.5-98.3 % on those margins and 97.7-98.8 % on normal and
+gamma(2) ones at N = 32-64, M/N = 4 and 32, rho = 0.5-0.95 (the same benchmark);
+tests/test_multifidelity.py repeats N = 32 and 64 with 10 000
+repetitions per cell and a real pair of quasi-static ensembles.  The widening costs the
+interval about z_L / z_c = 1.19 in width against a plain-MC interval at the label, so the
+sizes and costs for a given width (:func:`_costs`) carry that factor squared (WIDTH_COST, 1.41).
+The reported variance reduction
 (:func:`estimated_variance_reduction`) corrects the sample correlation's upward bias and
 the factor (N - 2)/(N - 3) the fitted alpha costs; its median over repetitions is within
 3 % of the measured reduction at N = 32 (tests).
@@ -58,16 +62,17 @@ from ..analysis.stats import in_window
 from ..files.records import window_label
 from ..vocabulary import CONFIDENCE, SUMMARIES
 
-__all__ = ["MIN_N_MF", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
+__all__ = ["MIN_N_MF", "MF_WIDENING", "width_cost", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
            "variance_reduction", "estimated_variance_reduction", "adjusted_correlation",
            "optimal_low_ratio", "cost_ratio", "paired_values", "multifidelity_dataset",
            "format_multifidelity", "to_json", "level_paths"]
 
 HISTORY = "rss6 multifidelity"   # how the last line of a multi-fidelity file's history begins
-MIN_N_MF = 32   # smallest N whose interval coverage was measured >= 93 % on all laws (module doc)
-SKEWED_COVERAGE = ("Student t; a 95 % interval covered >= 93.6 % on normal, gamma(2) and Laplace margins but "
-                   "88.5-94.9 % on margins of skewness 2-2.9 at N = 32-64, most misses below the mean "
-                   "(python benchmarks/multifidelity_coverage.py)")
+MIN_N_MF = 32   # smallest N whose interval coverage was measured on all laws (module doc)
+MF_WIDENING = 0.4   # the interval is taken at the level 1 - MF_WIDENING (1 - confidence) (module doc)
+SKEWED_COVERAGE = ("the union of Student t and the residuals' skewness-corrected interval, at 1 - 0.4 (1 - "
+                   "confidence): a 95 % interval covered 95.5-98.3 % on margins of skewness 2-2.9 at "
+                   "N = 32-64 (python benchmarks/multifidelity_coverage.py)")
 ESTIMATORS = ("multifidelity", "high_only")
 
 
@@ -120,6 +125,25 @@ def cost_ratio(rho, cost_high_over_low: float, low_ratio=None):
     return (1 - (1 - 1 / r) * rho2) * (1 + r / cost_high_over_low)
 
 
+def _interval(estimate, resid, se, level: float):
+    """(lower, upper) at ``level``: the union of Student t (N - 2 degrees of freedom) on the standard
+    error ``se`` and the residuals' mean interval (Student t and Hall) around ``estimate``, its
+    half-widths scaled from the residuals' own standard error to ``se`` (module doc)."""
+    n = resid.shape[0]
+    half = sps.t.ppf(0.5 + level / 2, n - 2) * se
+    with np.errstate(all="ignore"):
+        scale = np.where(se > 0, se / (resid.std(axis=0, ddof=1) / np.sqrt(n)), 0.0)
+        low, high = mean_interval(resid, level)                  # around the residuals' mean, 0
+    return (estimate - np.maximum(half, np.nan_to_num(-low * scale)),
+            estimate + np.maximum(half, np.nan_to_num(high * scale)))
+
+
+def width_cost(confidence: float) -> float:
+    """(z_L / z_c)^2: the sample-size factor the widened level L = 1 - MF_WIDENING (1 - c) costs the
+    interval against a plain-MC one at the label c, for the same width (normal quantiles)."""
+    return float((sps.norm.ppf(1 - MF_WIDENING * (1 - confidence) / 2) / sps.norm.ppf(0.5 + confidence / 2)) ** 2)
+
+
 def control_variate_mean(y: np.ndarray, x: np.ndarray, confidence: float = CONFIDENCE) -> ControlVariateMean:
     """The multi-fidelity mean of ``y`` (N, ...) with the control variate ``x`` (M, ...), M >= N,
     whose first N rows are the same draws as ``y``'s; all values finite."""
@@ -137,10 +161,9 @@ def control_variate_mean(y: np.ndarray, x: np.ndarray, confidence: float = CONFI
     estimate = y.mean(axis=0) + alpha * (x.mean(axis=0) - xp.mean(axis=0))
     resid = dy - alpha * dx
     se = np.sqrt((resid ** 2).sum(axis=0) / (n - 2) / n + alpha ** 2 * x.var(axis=0, ddof=1) / m)
-    half = sps.t.ppf(0.5 + confidence / 2, n - 2) * se
+    lower, upper = _interval(estimate, resid, se, 1.0 - MF_WIDENING * (1.0 - confidence))
     given = n >= MIN_N_MF
-    lower = np.where(given, estimate - half, np.nan)
-    upper = np.where(given, estimate + half, np.nan)
+    lower, upper = np.where(given, lower, np.nan), np.where(given, upper, np.nan)
     vr = estimated_variance_reduction(rho, n, m)
     return ControlVariateMean(estimate, lower, upper, rho, alpha, vr, n * vr, n, m)
 
@@ -247,13 +270,14 @@ def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float =
 def _costs(ds: xr.Dataset, y: np.ndarray, name: str, cost: float, width, confidence) -> dict:
     """The cost variables of summary ``name``: optimal M/N, cost over plain MC, and with a relative
     half-width the sample sizes reaching it (normal approximation, standard deviation of y), all
-    at the adjusted correlation."""
+    at the adjusted correlation, the multi-fidelity ones with its widened interval's factor
+    (:func:`width_cost`)."""
     cells, one = ("quantity", "direction"), {"units": "1"}
     rho = adjusted_correlation(ds[f"{name}_correlation"].values, y.shape[0])
-    ratio = optimal_low_ratio(rho, cost)
+    ratio, widened = optimal_low_ratio(rho, cost), width_cost(confidence)
     out = {f"{name}_optimal_low_ratio": (cells, ratio, {**one, "long_name": "cost-optimal ratio of "
                                                         "low to high realisations"}),
-           f"{name}_cost_ratio": (cells, cost_ratio(rho, cost), {**one, "long_name": "multi-fidelity "
+           f"{name}_cost_ratio": (cells, widened * cost_ratio(rho, cost), {**one, "long_name": "multi-fidelity "
                                   "cost over plain MC cost for the same interval width, at the "
                                   "optimal ratio"})}
     if width is None:
@@ -261,7 +285,7 @@ def _costs(ds: xr.Dataset, y: np.ndarray, name: str, cost: float, width, confide
     mean = np.abs(ds[f"{name}_mean"].sel(estimator="multifidelity", bound="estimate").values)
     z = sps.norm.ppf(0.5 + confidence / 2)
     plain = np.maximum(np.ceil((z * y.std(axis=0, ddof=1) / (width * mean)) ** 2), MIN_N_MEAN)
-    high = np.maximum(np.ceil(plain * (1 - (1 - 1 / ratio) * rho ** 2)), MIN_N_MF)   # no interval below
+    high = np.maximum(np.ceil(plain * widened * (1 - (1 - 1 / ratio) * rho ** 2)), MIN_N_MF)   # none below
     return out | {
         f"{name}_plain_n_for_width": (cells, plain, {**one, "long_name": "plain MC high "
                                       "realisations for the relative half-width"}),
@@ -299,7 +323,7 @@ def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
             "confidence": confidence,
             "estimator": "two-model multi-fidelity Monte Carlo (control variate, optimal fitted "
                          "coefficient, low mean from all low realisations)",
-            "interval_multifidelity": f"Student t, N - 2 degrees of freedom; NaN for N < {MIN_N_MF}",
+            "interval_multifidelity": f"{SKEWED_COVERAGE}; NaN for N < {MIN_N_MF}",
             "interval_high_only": f"pipeline.analysis.estimators mean interval; NaN for n < {MIN_N_MEAN}",
             "min_n_multifidelity": MIN_N_MF,
             "statistics_offered": "mean only (quantiles and exceedance probabilities: see "
