@@ -30,7 +30,8 @@ gamma(2) ones at N = 32-64, M/N = 4 and 32, rho = 0.5-0.95 (the same benchmark);
 tests/test_multifidelity.py repeats N = 32 and 64 with 10 000
 repetitions per cell and a real pair of quasi-static ensembles.  The widening costs the
 interval about z_L / z_c = 1.19 in width against a plain-MC interval at the label, so the
-sizes and costs for a given width (:func:`_costs`) carry that factor squared (WIDTH_COST, 1.41).
+sizes and costs for a given width (:func:`_costs`) carry that factor squared (:func:`width_cost`,
+1.41 at 95 %).
 The reported variance reduction
 (:func:`estimated_variance_reduction`) corrects the sample correlation's upward bias and
 the factor (N - 2)/(N - 3) the fitted alpha costs; its median over repetitions is within
