@@ -31,7 +31,7 @@ import numpy as np
 from .exceedance import Event, event_values, one_sided_cp
 from .spec import PF, Spec
 from ..vocabulary import CONFIDENCE, QUANTILES, WINDOWS
-from .estimators import QUANTILE_DECISION_CAP, interval_floor, no_interval_at, quantile_decision_n
+from .estimators import QUANTILE_DECISION_CAP, interval_floor, no_interval_at, quantile_decision_n, stopped_level
 from .stats import ensemble_stats, finished_values
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
@@ -222,6 +222,13 @@ def _values(ds, spec: Spec):
     return finished_values(ds, spec.variable, spec.window or "whole").sel(quantity=spec.quantity)
 
 
+def _level(spec: Spec, bounds, confidence: float, replicates: int | None) -> float:
+    """The level ``spec``'s bounds were taken at: widened for a file --until wrote (its quantiles', with
+    qmc every statistic's: :func:`.estimators.stopped_level`), else the label ``confidence``."""
+    widened = "interval_after_until" in bounds.attrs and (replicates is not None or spec.statistic in QUANTILES)
+    return stopped_level(confidence, widened)
+
+
 def _judge(spec: Spec, ds, bounds) -> list[Verdict]:
     """Verdicts of one spec, one per direction, from the ensemble ``ds`` and its one-sided bounds."""
     da, values = _select(spec=spec, stats=bounds), _values(ds, spec)
@@ -229,12 +236,14 @@ def _judge(spec: Spec, ds, bounds) -> list[Verdict]:
     failed = int(bounds.attrs.get("n_failed", 0))
     replicates = bounds.attrs.get("qmc_replicates")
     replicates = None if replicates is None else int(replicates)
-    rule = _rule(spec, confidence, replicates)
+    at = _level(spec, bounds, confidence, replicates)
+    rule = _rule(spec, at, replicates) + ("" if at == confidence else
+                                          f" (for a {100 * confidence:g} % label: the run chose n by its widths)")
     out = []
     for d in spec.directions:
         ev = _Evidence(*(float(da.sel(direction=d, bound=b)) for b in ("estimate", "lower", "upper")),
                        values=values.sel(direction=d).values)
-        outcome, need, reason = _decision(spec, ev, n, failed, confidence, replicates)
+        outcome, need, reason = _decision(spec, ev, n, failed, at, replicates)
         out.append(Verdict(spec.text, spec.quantity, d, spec.statistic, spec.measure, spec.window or "whole",
                            spec.op, spec.limit, spec.unit, spec.factor, ev.estimate,
                            ev.lower if np.isfinite(ev.lower) else None,
