@@ -285,3 +285,16 @@ def test_the_widened_quantile_bounds_reach_their_label_where_until_stops():
         cover[new] = (lower[new] <= truth) & (truth <= upper[new])
         done |= new
     assert cover.mean() >= 0.95, cover.mean()
+
+
+def test_one_rule_says_which_bounds_a_file_until_wrote_widens():
+    """bound_level: the quantiles (with RQMC every statistic) at 1 - 0.5 (1 - c) where n was chosen
+    by the widths, else at c; estimates_and_bounds takes each row at that level."""
+    from pipeline.analysis.estimators import bound_level, mean_interval
+    assert [bound_level(s, 0.95, True) for s in ("mean", "std", "q50", "q95")] == [0.95, 0.95, 0.975, 0.975]
+    assert bound_level("mean", 0.95, True, rqmc=True) == 0.975
+    assert {bound_level(s, 0.95, False, rqmc=True) for s in STATISTICS} == {0.95}
+    x = np.random.default_rng(3).gamma(2.0, size=(300, 2))
+    rows = estimates_and_bounds(x, 0.95, stopped_by_width=True)
+    assert np.array_equal(rows[STATISTICS.index("mean"), 1:], mean_interval(x, 0.95))
+    assert np.array_equal(rows[STATISTICS.index("q95"), 1:], quantile_interval(np.sort(x, axis=0), 0.95, 0.975))

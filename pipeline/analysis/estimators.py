@@ -98,7 +98,7 @@ __all__ = ["BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "STD_WIDENING", "UNTIL_WIDENING"
            "QUANTILE_DECISION_CAP",
            "quantile_ranks", "min_n_for_quantile", "quantile_estimates", "quantile_interval", "BoundRanks",
            "one_sided_ranks", "quantile_bounds", "quantile_decision_n", "mean_interval", "mean_bounds",
-           "running_mean_interval", "std_interval", "estimates", "one_sided_bounds", "stopped_level",
+           "running_mean_interval", "std_interval", "estimates", "one_sided_bounds", "stopped_level", "bound_level",
            "estimates_and_bounds", "replicate_groups", "rqmc_intervals", "interval_floor", "no_interval_at"]
 
 BOUNDS = ("estimate", "lower", "upper")
@@ -326,23 +326,22 @@ def estimates(x: np.ndarray, names=STATISTICS) -> np.ndarray:
     return np.stack(out, axis=-1)
 
 
-def _intervals(x: np.ndarray, confidence: float, quantile_confidence: float) -> np.ndarray:
-    """(statistic, 2, cells) lower and upper bounds for finite data x (n, cells), the quantiles'
-    at ``quantile_confidence`` (:func:`stopped_level`)."""
+def _intervals(x: np.ndarray, confidence: float, stopped_by_width: bool = False) -> np.ndarray:
+    """(statistic, 2, cells) lower and upper bounds for finite data x (n, cells), each at its
+    :func:`bound_level`."""
     sx = np.sort(x, axis=0)
     rows = [mean_interval(x, confidence), std_interval(x, confidence)]
-    rows += [quantile_interval(sx, p, quantile_confidence) for p in QUANTILES.values()]
+    rows += [quantile_interval(sx, p, bound_level(k, confidence, stopped_by_width)) for k, p in QUANTILES.items()]
     rows.append(np.full((2,) + x.shape[1:], np.nan))        # max: see module doc
     return np.stack(rows)
 
 
-def one_sided_bounds(x: np.ndarray, confidence: float, quantile_confidence: float | None = None) -> np.ndarray:
-    """(statistic, 2, cells) one-sided lower and upper bounds, each at ``confidence`` (the quantiles'
-    at ``quantile_confidence``, default the same), for finite data x (n, cells) (module doc); the
-    bounds the requirement gate decides on."""
+def one_sided_bounds(x: np.ndarray, confidence: float, stopped_by_width: bool = False) -> np.ndarray:
+    """(statistic, 2, cells) one-sided lower and upper bounds, each at its :func:`bound_level` for
+    ``confidence``, for finite data x (n, cells) (module doc); the bounds the requirement gate decides on."""
     sx = np.sort(x, axis=0)
     rows = [mean_bounds(x, confidence), std_interval(x, confidence)]
-    rows += [quantile_bounds(sx, p, quantile_confidence or confidence) for p in QUANTILES.values()]
+    rows += [quantile_bounds(sx, p, bound_level(k, confidence, stopped_by_width)) for k, p in QUANTILES.items()]
     rows.append(np.full((2,) + x.shape[1:], np.nan))
     return np.stack(rows)
 
@@ -353,6 +352,14 @@ def stopped_level(confidence: float, stopped_by_width: bool) -> float:
     return 1.0 - UNTIL_WIDENING * (1.0 - confidence) if stopped_by_width else confidence
 
 
+def bound_level(statistic: str, confidence: float, stopped_by_width: bool, rqmc: bool = False) -> float:
+    """The level ``statistic``'s bounds are computed at for a ``confidence`` label: where n was chosen by
+    the intervals' widths, widened (:func:`stopped_level`) for the quantiles, and with ``rqmc`` for every
+    statistic (all their widths come from the replicates); else the label's. The one statement of the
+    rule that the tables, the statistics files and the requirement gate apply."""
+    return stopped_level(confidence, stopped_by_width and (rqmc or statistic in QUANTILES))
+
+
 def estimates_and_bounds(x: np.ndarray, confidence: float, one_sided: bool = False,
                          stopped_by_width: bool = False) -> np.ndarray:
     """(statistic, bound, cells) for finite data x (n, cells); all NaN when n = 0.  ``stopped_by_width``:
@@ -360,8 +367,7 @@ def estimates_and_bounds(x: np.ndarray, confidence: float, one_sided: bool = Fal
     if x.shape[0] == 0:
         return np.full((len(STATISTICS), len(BOUNDS), x.shape[1]), np.nan)
     est = np.moveaxis(estimates(x), -1, 0)                   # (statistic, cells)
-    level = stopped_level(confidence, stopped_by_width)
-    bounds = one_sided_bounds(x, confidence, level) if one_sided else _intervals(x, confidence, level)
+    bounds = (one_sided_bounds if one_sided else _intervals)(x, confidence, stopped_by_width)
     return np.concatenate([est[:, None], bounds], axis=1)
 
 

@@ -31,7 +31,7 @@ import numpy as np
 from .exceedance import Event, event_values, one_sided_cp
 from .spec import PF, Spec
 from ..vocabulary import CONFIDENCE, QUANTILES, WINDOWS
-from .estimators import QUANTILE_DECISION_CAP, interval_floor, no_interval_at, quantile_decision_n, stopped_level
+from .estimators import QUANTILE_DECISION_CAP, bound_level, interval_floor, no_interval_at, quantile_decision_n
 from .stats import ensemble_stats, finished_values
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
@@ -223,10 +223,9 @@ def _values(ds, spec: Spec):
 
 
 def _level(spec: Spec, bounds, confidence: float, replicates: int | None) -> float:
-    """The level ``spec``'s bounds were taken at: widened for a file --until wrote (its quantiles', with
-    qmc every statistic's: :func:`.estimators.stopped_level`), else the label ``confidence``."""
-    widened = "interval_after_until" in bounds.attrs and (replicates is not None or spec.statistic in QUANTILES)
-    return stopped_level(confidence, widened)
+    """The level ``spec``'s bounds were taken at (:func:`.estimators.bound_level`): widened for a file
+    --until wrote, else the label ``confidence``."""
+    return bound_level(spec.statistic, confidence, "interval_after_until" in bounds.attrs, replicates is not None)
 
 
 def _judge(spec: Spec, ds, bounds) -> list[Verdict]:

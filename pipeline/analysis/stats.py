@@ -19,8 +19,8 @@ import xarray as xr
 from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
 from .estimators import (BOUNDS, MAX_NOTE, MIN_N_MEAN, MIN_N_STD, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
-                         estimates_and_bounds, interval_floor, min_n_for_quantile, stopped_level, replicate_groups,
-                         rqmc_intervals)
+                         bound_level, estimates_and_bounds, interval_floor, min_n_for_quantile, stopped_level,
+                         replicate_groups, rqmc_intervals)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
            "to_json", "format_stats"]
@@ -143,7 +143,7 @@ def _column_stats(x: np.ndarray, realizations, finished: np.ndarray, design, con
     file's values are then read 48 MB at a time, not all at once (docs/performance.md section 26)."""
     flat = estimates_and_bounds(x, confidence, one_sided, stopped_by_width)
     if design is not None:                          # not iid: see pipeline.analysis.estimators
-        level = stopped_level(confidence, stopped_by_width)   # every statistic's width comes from R replicates
+        level = bound_level("mean", confidence, stopped_by_width, rqmc=True)
         flat[:, 1:] = _rqmc_bounds(x, realizations, finished, design.replicates,
                                    2 * level - 1 if one_sided else level)
     return flat
@@ -176,7 +176,7 @@ def _rqmc_attrs(replicates: int, confidence: float, stopped_by_width: bool) -> d
 
 
 def _attrs(ds, n: int, failed: int, confidence: float, stopped_by_width: bool) -> dict:
-    needed = {k: min_n_for_quantile(p, stopped_level(confidence, stopped_by_width)) for k, p in QUANTILES.items()}
+    needed = {k: min_n_for_quantile(p, bound_level(k, confidence, stopped_by_width)) for k, p in QUANTILES.items()}
     steady = {"steady_after_s": ds.attrs["steady_after_s"]} if "steady_after_s" in ds.attrs else {}
     return {**_provenance(ds, confidence), **steady, "n_finished": n, "n_failed": failed,
             "confidence": confidence,
