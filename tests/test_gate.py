@@ -489,3 +489,6 @@ def test_whole_run_verdicts_of_a_contact_level_file_point_to_the_steady_window()
     steady = [dataclasses.replace(v, window="steady") for v in whole]
     assert start_up_note(steady, contact) is None
     assert start_up_note(whole, _ensemble(x, attrs={"model": "quasi-static"})) is None
+    from pipeline.analysis.gate import verdicts_with_note      # what rss6 run and rss6 stats print
+    assert verdicts_with_note(whole, contact) == format_verdicts(whole) + "\n" + start_up_note(whole, contact)
+    assert verdicts_with_note(steady, contact) == format_verdicts(steady)

@@ -35,7 +35,7 @@ from .estimators import QUANTILE_DECISION_CAP, bound_level, interval_floor, no_i
 from .stats import ensemble_stats, finished_values
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
-           "allowed_exceedances", "overall", "judge", "judge_all", "verdicts_json"]
+           "verdicts_with_note", "allowed_exceedances", "overall", "judge", "judge_all", "verdicts_json"]
 
 OUTCOMES = ("pass", "undecided", "fail")
 EXIT_CODES = {"pass": 0, "fail": 1, "undecided": 3}
@@ -357,6 +357,13 @@ def start_up_note(verdicts: list[Verdict], ds) -> str | None:
     return (f"note: {', '.join(repr(s) for s in whole)} judged over the whole run, whose {model}-level maxima "
             f"include start-up ({until}the joints settling onto their walls); append '/steady' to judge the robot "
             "in operation")
+
+
+def verdicts_with_note(verdicts: list[Verdict], ds) -> str:
+    """The verdicts' table (:func:`format_verdicts`) and, for a contact-level file judged over the whole
+    run, the :func:`start_up_note` below it: what ``rss6 run`` and ``rss6 stats`` print."""
+    startup = start_up_note(verdicts, ds)
+    return format_verdicts(verdicts) + (f"\n{startup}" if startup else "")
 
 
 def format_verdicts(verdicts: list[Verdict]) -> str:

@@ -125,7 +125,7 @@ def _compute(args, spec, targets: list, output, cluster, annotate):
 def _report(args, level, outcome, until, output, specs: list, verdicts: list, note) -> int:
     """Print what was written, the statistics, the verdicts and ``note`` (what they leave out); the exit
     code."""
-    from ..analysis.gate import exit_code, format_verdicts, start_up_note
+    from ..analysis.gate import exit_code, verdicts_with_note
     from ..analysis.stats import ensemble_stats, format_stats
     from ..analysis.summary import failure_reasons
     ds = outcome.dataset
@@ -145,10 +145,7 @@ def _report(args, level, outcome, until, output, specs: list, verdicts: list, no
         print(f"(displacement only; rss6 stats {output} shows velocity and acceleration too)")
     code = 0 if until is None else _until_verdict(until, args.n)
     if specs:
-        print(format_verdicts(verdicts))
-        startup = start_up_note(verdicts, ds)
-        if startup:
-            print(startup)
+        print(verdicts_with_note(verdicts, ds))
     note()
     if not specs:
         return code

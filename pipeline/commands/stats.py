@@ -34,7 +34,7 @@ def add_parser(sub) -> None:
 
 
 def main(args) -> int:
-    from ..analysis.gate import check_confidence, exit_code, format_verdicts, start_up_note, verdicts_json
+    from ..analysis.gate import check_confidence, exit_code, verdicts_json, verdicts_with_note
     from ..analysis.exceedance import exceedance_json, format_exceedance
     from ..analysis.stats import ensemble_stats, format_stats, to_json
     from ..files.opening import open_results
@@ -72,10 +72,7 @@ def main(args) -> int:
         if events:
             print(format_exceedance(probabilities))
         if specs:
-            print(format_verdicts(verdicts))
-            startup = start_up_note(verdicts, ds)
-            if startup:
-                print(startup)
+            print(verdicts_with_note(verdicts, ds))
     note()
     return exit_code(verdicts, args.undecided) if specs else 0
 
