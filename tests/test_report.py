@@ -138,3 +138,12 @@ def test_report_keeps_the_sections_below_its_marker(configs, report, tmp_path):
     (copy / "results.md").write_text(generated + tail)
     assert main(["report", str(configs / "smoke.toml"), "-o", str(copy), "-n", "3", "--family-n", "2"]) == 0
     assert (copy / "results.md").read_text() == generated + tail
+
+
+def test_the_command_results_md_quotes_regenerates_it():
+    """The quoted command carries what the run was given beyond the defaults: a seed, and
+    --overwrite-tracked (without it the command refuses a folder git tracks, such as docs/)."""
+    from pipeline.studies.report import ReportPlan, report_command
+    assert report_command(["paper"], "out", ReportPlan(8, 2)) == "rss6 report paper -o out -n 8 --family-n 2"
+    assert report_command(["paper", "smoke"], "docs", ReportPlan(8, 2, seed=3, overwrite_tracked=True)) == (
+        "rss6 report paper smoke -o docs -n 8 --family-n 2 --seed 3 --overwrite-tracked")

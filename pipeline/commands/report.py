@@ -59,7 +59,8 @@ def main(args) -> int:
     if tracked:
         raise OptionError(f"{args.output}: would overwrite {tracked[0]}, which git tracks "
                           f"({len(tracked)} tracked files); choose another -o or pass --overwrite-tracked")
-    plan = ReportPlan(args.n, args.family_n, cluster.workers, cluster.scheduler, args.seed, cluster.worker_timeout)
+    plan = ReportPlan(args.n, args.family_n, cluster.workers, cluster.scheduler, args.seed, cluster.worker_timeout,
+                      args.overwrite_tracked)
     kept = f"finished ensembles and chunks are kept in {args.data or out / 'results-data'}"
     try:
         path = write_report(args.configs, args.output, plan, args.data)

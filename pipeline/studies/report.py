@@ -36,7 +36,7 @@ from ..files.schema import EnsembleFileError, display_unit
 from ..files.writing import write_netcdf
 from ..vocabulary import CONFIDENCE, DIRECTIONS, FINISHED, QUANTILES
 
-__all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "PAPER_VALUES", "OFF"]
+__all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "report_command", "PAPER_VALUES", "OFF"]
 
 # m: clearance of a switched-off joint family at the contact level, which needs positive
 # clearances; the contact error shrinks in proportion to the clearance (tested), so a 10 um
@@ -73,6 +73,7 @@ class ReportPlan:
     scheduler: str | None = None
     seed: int = 0
     worker_timeout: float = WORKER_TIMEOUT_S   # s without workers before an external scheduler is given up
+    overwrite_tracked: bool = False   # given --overwrite-tracked: the command results.md quotes needs it again
 
 
 def with_clearance(text: str, values: dict[str, float], source: str = "<report>") -> str:
@@ -457,10 +458,8 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
             st[scene.name] = {k: ensemble_stats(ds) for k, ds in ens[scene.name].items()}
             scenes.append(scene)
     rel = lambda p: Path(p).relative_to(out).as_posix() if Path(p).is_relative_to(out) else str(p)  # noqa: E731
-    command = ("rss6 report " + " ".join(map(str, configs)) + f" -o {out} -n {plan.n} "
-               f"--family-n {plan.family_n}")
     md = ["# Results: the seed paper's section 6 with rss6", "",
-          text.INTRO.format(command=command, data=rel(data), confidence=95,
+          text.INTRO.format(command=report_command(configs, out, plan), data=rel(data), confidence=95,
                             min_n_q95=min_n_for_quantile(QUANTILES["q95"], CONFIDENCE)), ""]
     for scene in scenes:
         md += _scene_section(scene, ens[scene.name], st[scene.name], figs, rel)
@@ -470,6 +469,14 @@ def write_report(configs: list, out: Path, plan: ReportPlan, data: Path | None =
     path = out / "results.md"
     path.write_text("\n".join(md) + "\n" + kept_studies(path), encoding="utf-8")
     return path
+
+
+def report_command(configs, out, plan: ReportPlan) -> str:
+    """The command that regenerates the report (results.md quotes it): its scenes, folder and sizes, and
+    the seed and --overwrite-tracked where they were given."""
+    return ("rss6 report " + " ".join(map(str, configs)) + f" -o {out} -n {plan.n} --family-n {plan.family_n}"
+            + (f" --seed {plan.seed}" if plan.seed else "")
+            + (" --overwrite-tracked" if plan.overwrite_tracked else ""))
 
 
 KEPT_MARKER = "<!-- rss6 report keeps what follows: sections written from other commands' output -->"
