@@ -1,6 +1,7 @@
 """Values changed after rss6 wrote them are caught: the checksums of a file's values (verified by
 every reader), the bounds the summaries obey by construction, and a parts folder checked whole."""
 import json
+import os
 import shlex
 import subprocess
 from importlib import resources
@@ -357,3 +358,18 @@ def test_a_file_written_before_the_attribute_checksums_is_read_as_before(merged,
     _edit(old, "max_abs_error_displacement_translation", (0, 3, 0))
     assert main(["stats", str(old)]) == 2
     _one_line(capsys, f"{old}: variable max_abs_error_displacement_translation ", CHECKSUM)
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="lists open files through /proc")
+def test_a_lazily_opened_file_is_closed_by_its_dataset_or_a_view_of_it(merged):
+    """load_netcdf(lazy=True) leaves the file open for its dask arrays; closing the Dataset, or a
+    selection from it, closes the file (not the garbage collector, which may run at any time)."""
+    fds = Path("/proc/self/fd")
+
+    def is_open() -> bool:
+        return any(os.path.realpath(fds / fd) == os.path.realpath(merged) for fd in os.listdir(fds))
+    for close in (lambda ds: ds.close(), lambda ds: ds.sel(realization=[0, 1]).close()):
+        ds = load_netcdf(merged, lazy=True)
+        assert is_open()
+        close(ds)
+        assert not is_open()

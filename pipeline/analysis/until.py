@@ -261,6 +261,8 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
     # start-up every check
     with dask_client(workers, scheduler) if plan else contextlib.nullcontext() as client:
         for n in plan:
+            if outcome is not None:   # judged: the next batch opens the file again
+                outcome.dataset.close()
             size = default_chunk(max(n - done, 1), workers, spec.model) if chunk is None else chunk
             outcome = ensemble(spec, n, output, workers, scheduler, size, progress, judge,
                                worker_timeout or WORKER_TIMEOUT_S, client=client)

@@ -294,6 +294,8 @@ def ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: st
         annotated = any(str(merged.attrs.get(k)) != str(v) for k, v in extra.items())
         if not up_to_date or annotated:
             write_netcdf(merged.assign_attrs(extra), output)   # streams the histories from the parts
+            for piece in pieces:   # their files stay open until closed; the parts are deleted below
+                piece.close()
             merged = open_ensemble(output, lazy=True, verify=False)   # just written
         if manifest.folder.exists():
             shutil.rmtree(manifest.folder)

@@ -55,11 +55,13 @@ def load_netcdf(path, lazy: bool = False, verify: bool = True, summary_block: in
         raise EnsembleFileError(f"{path}: {unfinished(path) or 'no such file'}")
     if os.path.isdir(path):
         raise EnsembleFileError(f"{path}: is a folder; give an rss6 netCDF file")
+    closer = None   # a lazy Dataset's file stays open: Dataset.close() (and a view's) closes it
     try:
         if lazy:
             # opened without dask: only the histories become dask arrays (loading each small
             # variable through dask took 3x as long as reading it)
             ds = xr.open_dataset(path, engine="netcdf4", decode_times=False)
+            closer = ds.close
             ds = ds.assign(_on_disk(ds, SUMMARY_BLOCK if summary_block is None else summary_block))
             for var in ds.variables.values():
                 if _ELAPSED not in var.dims and var.chunks is None:
@@ -68,7 +70,23 @@ def load_netcdf(path, lazy: bool = False, verify: bool = True, summary_block: in
             with xr.open_dataset(path, engine="netcdf4", decode_times=False) as opened:
                 ds = opened.load()
     except Exception as exc:  # netCDF4/HDF5 raise OSError, RuntimeError, ValueError...
+        if closer is not None:
+            closer()
         raise EnsembleFileError(f"{path}: {_unreadable(path)}: {exc}") from None
+    try:
+        out = _decoded(ds, path, verify)
+    except BaseException:
+        if closer is not None:
+            closer()
+        raise
+    if closer is not None:
+        out.set_close(closer)   # xarray's assign and rss6's decoding drop it
+    return out
+
+
+def _decoded(ds: xr.Dataset, path, verify: bool) -> xr.Dataset:
+    """The Dataset as rss6 holds it (:func:`.schema.cf_decode`), its checksums checked if ``verify``
+    (:func:`load_netcdf`); EnsembleFileError where its values or attributes were altered."""
     verified = verify and verify_checksums(ds, path)
     try:
         out = _forget_string_widths(cf_decode(ds))

@@ -369,5 +369,6 @@ def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: 
     path = folder / f"{scene.name}_{spec.model}_allocated.nc"
     outcome = ensemble(replace(spec, scene_text=text), n, path, workers=workers, progress=False)
     verdicts = tuple(judge_all(specs, outcome.dataset, confidence))
+    outcome.dataset.close()
     return Allocation(combo, cost_of(combo), uniform, None if uniform is None else cost_of(uniform), judged,
                       verdicts, predicted, path, scene_path)

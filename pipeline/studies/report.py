@@ -90,12 +90,13 @@ def _only(text: str, family: str, source: str) -> str:
                          drop={"tolerance": [k.removesuffix("_m") for k in off]})
 
 
-def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store, client):
+def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store, client) -> None:
+    """Run or resume one of the report's ensembles into ``path`` (the report reads it again, into memory)."""
     sim = scene.simulation
     spec = EnsembleSpec(text, source, model, default_integrator(scene, model),
                         default_time_step(scene, model), sim.elements_per_link, plan.seed, store)
-    return run_ensemble(spec, n, path, workers=plan.workers, scheduler=plan.scheduler,
-                        worker_timeout=plan.worker_timeout, client=client)
+    run_ensemble(spec, n, path, workers=plan.workers, scheduler=plan.scheduler,
+                 worker_timeout=plan.worker_timeout, client=client).close()
 
 
 def run_scene(config, data: Path, plan: ReportPlan, client=None) -> dict[str, Path]:

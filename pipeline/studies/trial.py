@@ -29,4 +29,6 @@ def run_trial(spec: EnsembleSpec, scene_text: str, candidate, specs, n: int, pat
     """Run (or resume) the n-realisation ensemble of ``spec`` with the scene ``scene_text`` (the
     candidate's) into ``path`` and judge ``specs`` on it at ``confidence``."""
     outcome = ensemble(replace(spec, scene_text=scene_text), n, path, workers=workers, progress=False)
-    return Trial(candidate, path, tuple(judge_all(specs, outcome.dataset, confidence)))
+    verdicts = tuple(judge_all(specs, outcome.dataset, confidence))
+    outcome.dataset.close()   # a search runs many trials in one process: each file is let go once judged
+    return Trial(candidate, path, verdicts)
