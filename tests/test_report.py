@@ -163,7 +163,7 @@ def _open_files_under(folder) -> list[str]:
 @pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="lists open files through /proc")
 def test_running_the_reports_files_leaves_none_of_them_open(configs, cluster_client, tmp_path):
     """run_scene lets go of every file it ran or resumed, closed when done and not left to the garbage
-    collector (a file still open when the report reads it again failed once in 13 runs with an HDF error)."""
+    collector (with files left open, a resumed report intermittently failed to read an intact one: HDF error)."""
     from pipeline.studies.report import ReportPlan, run_scene
     gc.disable()   # cycles would close them only when collected
     try:
