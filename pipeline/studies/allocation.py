@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import itertools
 import tomllib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -25,13 +25,14 @@ import numpy as np
 from rss6core import ClearanceDraw, model_level, models_with, parse_scene, prepare_level, stored_draw
 
 from ..analysis.estimators import one_sided_bounds
-from ..analysis.gate import Verdict, allowed_exceedances, judge_all, upper_limits_problem
+from ..analysis.gate import Verdict, allowed_exceedances, upper_limits_problem
 from ..analysis.spec import PF, Spec
-from ..ensemble.run import EnsembleSpec, ensemble
+from ..ensemble.run import EnsembleSpec
 from ..files.records import window_masks
 from ..scenes.variant import dump_scene_toml
 from ..vocabulary import DIRECTIONS, QUANTITIES, STATISTICS, WINDOWS, UserError
 from .fits import COST_LAW, DEFAULT_FITS, FitError, fit_limits, parse_fit
+from .trial import run_trial
 
 __all__ = ["ALLOCATED", "DEFAULT_FITS", "ClassOption", "Allocation", "AllocationError", "class_options",
            "Responses", "responses", "spec_uppers", "error_uppers", "search", "allocate", "allocated_scene",
@@ -367,8 +368,6 @@ def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: 
     scene_path = folder / f"{scene.name}_allocated.toml"
     scene_path.write_text(text)
     path = folder / f"{scene.name}_{spec.model}_allocated.nc"
-    outcome = ensemble(replace(spec, scene_text=text), n, path, workers=workers, progress=False)
-    verdicts = tuple(judge_all(specs, outcome.dataset, confidence))
-    outcome.dataset.close()
+    verdicts = run_trial(spec, text, combo, specs, n, path, confidence, workers).verdicts
     return Allocation(combo, cost_of(combo), uniform, None if uniform is None else cost_of(uniform), judged,
                       verdicts, predicted, path, scene_path)
