@@ -85,10 +85,13 @@ def main(args) -> int:
         except KeyboardInterrupt:
             return interrupted(kept)
     try:
-        mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio, args.width, args.window)
+        mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio, args.width, args.window).load()
     except ValueError as exc:   # too few finished pairs
         print(f"rss6: error: {files[0]}: {exc}", file=sys.stderr)
         return 1
+    finally:
+        for level_data in data:
+            level_data.close()
     write_netcdf(mds, output)
     if args.json:
         print(json.dumps(to_json(mds), indent=2, allow_nan=False))
