@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 from rss6core import MODELS, model_level
 
@@ -38,7 +39,8 @@ def add_parser(sub) -> None:
     p.add_argument("-n", type=realisations, default=200,
                    help="realisations of the search and of the verification ensemble (default 200)")
     p.add_argument("-o", "--output", help="folder of the allocation file, scene and verification ensemble "
-                                          "(default: allocate_SCENE_MODEL); rerunning resumes the ensemble")
+                                          "(default: allocate_SCENE_MODEL); rerunning the same request resumes the ensemble, "
+                                          "another request is refused")
     add_parents(p)
     add_seed(p)
     add_confidence(p, "confidence of the one-sided bounds the specs are judged on, above 0.5", above=0.5)
@@ -55,9 +57,18 @@ def _specs(texts):
         raise SpecError(str(exc).replace("--require", "--spec", 1)) from None
 
 
+def _request(args, level, fits: list[str]) -> dict:
+    """What the allocation folder's answer depends on (:func:`claimed_output_folder`)."""
+    from ..files.outputs import text_identity
+    return {"scene": text_identity(level.scene.source_text), "--model": level.model, "--spec": args.spec,
+            "--per-joint": args.per_joint, "--classes": fits, "-n": args.n, "--seed": args.seed,
+            "--confidence": args.confidence, "--max-ensembles": args.max_ensembles,
+            "--costs": text_identity(Path(args.costs).read_bytes()) if args.costs else None}
+
+
 def main(args) -> int:
     from ..analysis.gate import EXIT_CODES, overall
-    from ..files.outputs import check_output_folder
+    from ..files.outputs import check_output_folder, claimed_output_folder
     from ..files.writing import write_netcdf
     from ..studies.allocation import allocate, check_request, class_options
     from ..studies.allocation_greedy import greedy_allocate
@@ -77,18 +88,19 @@ def main(args) -> int:
     options = class_options(level.scene, fits, args.costs)
     check_request(level.ensemble_spec(args.seed), specs, args.n, args.confidence)
     folder = check_output_folder(args.output or f"allocate_{level.scene.name}_{level.model}", args.parents)
-    warn_oversubscription(cluster.workers, None)
-    try:
-        spec = level.ensemble_spec(args.seed)
-        if args.per_joint:
-            a = allocate_per_joint(spec, specs, args.n, folder, args.confidence, options)
-        elif model_level(level.model).linear_in_clearances:
-            a = allocate(spec, specs, args.n, folder, args.confidence, options, cluster.workers)
-        else:
-            a = greedy_allocate(spec, specs, args.n, folder, args.confidence, options, cluster.workers,
-                                args.max_ensembles)
-    except KeyboardInterrupt:
-        return interrupted(f"finished chunks of the verification ensemble are kept in {folder}")
+    with claimed_output_folder(folder, "allocate", _request(args, level, fits)):
+        warn_oversubscription(cluster.workers, None)
+        try:
+            spec = level.ensemble_spec(args.seed)
+            if args.per_joint:
+                a = allocate_per_joint(spec, specs, args.n, folder, args.confidence, options)
+            elif model_level(level.model).linear_in_clearances:
+                a = allocate(spec, specs, args.n, folder, args.confidence, options, cluster.workers)
+            else:
+                a = greedy_allocate(spec, specs, args.n, folder, args.confidence, options, cluster.workers,
+                                    args.max_ensembles)
+        except KeyboardInterrupt:
+            return interrupted(f"finished chunks of the verification ensemble are kept in {folder}")
     note = f"per joint from {args.costs}" if args.costs else COST_NOTE
     opts = ("--per-joint " if args.per_joint else "") + f"-n {args.n} --seed {args.seed} --confidence " \
         f"{args.confidence} --classes {args.classes} " + " ".join(

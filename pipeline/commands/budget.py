@@ -22,7 +22,8 @@ def add_parser(sub) -> None:
     p.add_argument("-n", type=realisations, default=200,
                    help="realisations per ensemble (default 200; q95 has an interval from n = 59)")
     p.add_argument("-o", "--output", help="folder of the ensembles and the budget scene "
-                                          "(default: budget_SCENE_MODEL); rerunning resumes")
+                                          "(default: budget_SCENE_MODEL); rerunning the same request resumes, another "
+                                          "request is refused")
     add_parents(p)
     add_seed(p)
     add_confidence(p, "confidence of the one-sided bounds the specs are judged on, above 0.5", above=0.5)
@@ -34,7 +35,7 @@ def add_parser(sub) -> None:
 
 def main(args) -> int:
     from ..analysis.spec import SpecError, parse_spec
-    from ..files.outputs import check_output_folder
+    from ..files.outputs import check_output_folder, claimed_output_folder, text_identity
     from ..studies.budget import budget, format_budget
     try:
         specs = [parse_spec(t) for t in args.spec]
@@ -43,12 +44,15 @@ def main(args) -> int:
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
     folder = check_output_folder(args.output or f"budget_{level.scene.name}_{level.model}", args.parents)
-    warn_oversubscription(cluster.workers, None)
-    try:
-        b = budget(level.ensemble_spec(args.seed), specs, args.n, folder, args.confidence, cluster.workers,
-                   args.tolerance)
-    except KeyboardInterrupt:
-        return interrupted(f"finished ensembles and chunks are kept in {folder}")
+    request = {"scene": text_identity(level.scene.source_text), "--model": level.model, "--spec": args.spec,
+               "-n": args.n, "--seed": args.seed, "--confidence": args.confidence, "--tolerance": args.tolerance}
+    with claimed_output_folder(folder, "budget", request):
+        warn_oversubscription(cluster.workers, None)
+        try:
+            b = budget(level.ensemble_spec(args.seed), specs, args.n, folder, args.confidence, cluster.workers,
+                       args.tolerance)
+        except KeyboardInterrupt:
+            return interrupted(f"finished ensembles and chunks are kept in {folder}")
     print(format_budget(b, level.scene.name, level.model))
     note_loaded_joints("budget", find_scene(str(b.scene_path)), level.model, specs,
                        f"the answer's robot (clearances x {b.scale:.4g})")

@@ -72,21 +72,24 @@ def _check_scene(scene, source: str) -> None:
 
 
 def main(args) -> int:
-    from ..files.outputs import check_output_folder
+    from ..files.outputs import check_output_folder, claimed_output_folder, text_identity
     from ..studies.workspace_map import map_table, workspace_map, write_map
     _check(args)
     scene = find_scene(args.config)
     _check_scene(scene, args.config)
     check_output_folder(args.output, args.parents)
-    print(f"rss6 map: scene {scene.name}, {args.model} level, {args.n} drawn realisations (seed {args.seed})",
-          flush=True)
-    ds = workspace_map(scene, tuple(args.grid) if args.grid else None, args.n, args.seed, args.model)
-    if not ds["reachable"].values.any():
-        grid = " ".join(f"--grid {g.option()}" for g in args.grid) if args.grid else "the default grid"
-        raise OptionError(f"{grid}: the robot reaches none of its {ds['reachable'].size} poses; choose a grid "
-                          "inside the workspace (rss6 check prints the trajectory's)")
-    print(f"grid: {ds.attrs['grid']}; worst case with {ds.attrs['clearance_sizes']}")
-    print(map_table(ds))
-    paths = write_map(ds, args.output)
+    request = {"scene": text_identity(scene.source_text), "--model": args.model, "-n": args.n, "--seed": args.seed,
+               "--grid": [g.option() for g in args.grid] if args.grid else None}
+    with claimed_output_folder(args.output, "map", request):
+        print(f"rss6 map: scene {scene.name}, {args.model} level, {args.n} drawn realisations (seed {args.seed})",
+              flush=True)
+        ds = workspace_map(scene, tuple(args.grid) if args.grid else None, args.n, args.seed, args.model)
+        if not ds["reachable"].values.any():
+            grid = " ".join(f"--grid {g.option()}" for g in args.grid) if args.grid else "the default grid"
+            raise OptionError(f"{grid}: the robot reaches none of its {ds['reachable'].size} poses; choose a "
+                              "grid inside the workspace (rss6 check prints the trajectory's)")
+        print(f"grid: {ds.attrs['grid']}; worst case with {ds.attrs['clearance_sizes']}")
+        print(map_table(ds))
+        paths = write_map(ds, args.output)
     print(f"wrote {paths[0]} and {len(paths) - 1} heat maps ({paths[1].name} ...)")
     return 0

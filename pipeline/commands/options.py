@@ -173,3 +173,11 @@ def add_study_arguments(p, output: str, n: int, tolerance_help: str) -> None:
     p.add_argument("-n", type=realisations, default=n, help=f"realisations per setting (default {n})")
     add_seed(p)
     p.add_argument("--tolerance", type=positive_float, default=0.05, help=f"{tolerance_help} (default 0.05)")
+
+
+def study_request(scene, args, **extra) -> dict:
+    """What a tradeoff's or stability's folder answers (:func:`claimed_output_folder`): the scene and
+    :func:`add_study_arguments`' settings, with ``extra`` options (keyed by their names)."""
+    from ..files.outputs import text_identity
+    return {"scene": text_identity(scene.source_text), "-n": args.n, "--seed": args.seed,
+            "--tolerance": args.tolerance} | extra

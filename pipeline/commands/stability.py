@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..scenes.catalogue import find_scene
-from .options import add_study_arguments, positive_float
+from ..vocabulary import OptionError
+from .options import add_study_arguments, positive_float, study_request
 
 
 def add_parser(sub) -> None:
@@ -16,13 +17,17 @@ def add_parser(sub) -> None:
 
 
 def main(args) -> int:
-    from ..files.outputs import check_output_folder
+    from ..files.outputs import check_output_folder, claimed_output_folder
     from ..studies.stability import stability, write_stability
     scene = find_scene(args.config)
+    if args.horizon > scene.trajectory.duration:
+        raise OptionError(f"--horizon {args.horizon:g}: longer than the scene's trajectory "
+                          f"({scene.trajectory.duration:g} s); give at most that")
     check_output_folder(args.output, args.parents)
-    print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
-    ds = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
-    write_stability(ds, args.output)
+    with claimed_output_folder(args.output, "stability", study_request(scene, args, **{"--horizon": args.horizon})):
+        print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
+        ds = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
+        write_stability(ds, args.output)
     print(f"wrote {args.output}/stability.csv, stability.nc, stability.png")
     for name in ds["sweep"].values:
         print(f"{name}: " + ", ".join(

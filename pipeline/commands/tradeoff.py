@@ -3,7 +3,7 @@ setting within a tolerance of the reference."""
 from __future__ import annotations
 
 from ..scenes.catalogue import find_scene
-from .options import add_study_arguments
+from .options import add_study_arguments, study_request
 
 
 def add_parser(sub) -> None:
@@ -13,12 +13,13 @@ def add_parser(sub) -> None:
 
 
 def main(args) -> int:
-    from ..files.outputs import check_output_folder
+    from ..files.outputs import check_output_folder, claimed_output_folder
     from ..studies.tradeoff import tradeoff, write_tradeoff
     scene = find_scene(args.config)
     check_output_folder(args.output, args.parents)
-    print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")
-    ds = tradeoff(scene, args.n, args.seed)
+    with claimed_output_folder(args.output, "tradeoff", study_request(scene, args)):
+        print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")
+        ds = tradeoff(scene, args.n, args.seed)
     change = float(ds["reference_change"].max())
     print(f"reference {ds.attrs['reference']}: its step halved and mesh doubled change the statistics by at "
           f"most {100 * change:.2f} %" + ("" if change < 0.01 else " (not converged to 1 %)"))

@@ -11,6 +11,7 @@ import os
 import socket
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from .schema import EnsembleFileError
@@ -59,6 +60,68 @@ def check_output_folder(path, create_parents: bool = False, option: str = "-o") 
     if not os.access(nearest, os.W_OK | os.X_OK):
         raise EnsembleFileError(f"{path}: folder {nearest} is not writable")
     return path
+
+
+@contextmanager
+def claimed_output_folder(folder: Path, command: str, request: dict):
+    """Record in ``folder`` the request whose outputs it holds (``rss6_COMMAND_request.json``: the
+    scene's sha256 and every option that changes them, keyed by the option's name), or refuse,
+    before any work, a folder holding ``command``'s outputs for another request: a rerun of the same
+    request resumes or rewrites the same files, and another one overwrites no finished answer. A
+    body that ends in an exception before writing anything in the folder takes the record (and a
+    folder it made) back."""
+    folder = Path(folder)
+    path = folder / f"rss6_{command}_request.json"
+    request = json.loads(json.dumps(request))   # as it reads back (tuples as lists)
+    if path.exists():
+        _refuse_another_request(folder, path, command, request)
+        yield folder
+        return
+    made = not folder.exists()
+    folder.mkdir(parents=True, exist_ok=True)
+    before = set(folder.iterdir())
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(request, indent=1, sort_keys=True))
+    os.replace(tmp, path)
+    try:
+        yield folder
+    except BaseException:
+        if set(folder.iterdir()) == before | {path}:   # nothing written: nothing to claim
+            path.unlink()
+            if made:
+                folder.rmdir()
+        raise
+
+
+def _refuse_another_request(folder: Path, path: Path, command: str, request: dict) -> None:
+    """EnsembleFileError unless the record ``path`` holds ``request``, naming each option it changes."""
+    try:
+        held = json.loads(path.read_text())
+    except (OSError, ValueError):
+        raise EnsembleFileError(f"{path}: unreadable; it records which request the folder's outputs answer, "
+                                "so choose another -o, or remove the folder to replace them") from None
+    changed = [key for key in request | held if request.get(key) != held.get(key)]
+    if changed:
+        said = "; ".join("another scene text" if key == "scene" else
+                         f"{key} {_said(held.get(key))} there, {_said(request.get(key))} now" for key in changed)
+        raise EnsembleFileError(f"{folder}: holds rss6 {command}'s outputs for another request ({said}); "
+                                f"choose another -o, or remove {folder} to replace them")
+
+
+def _said(value) -> str:
+    """A recorded option's value as a message names it."""
+    if value is None:
+        return "unset"
+    if isinstance(value, list):
+        import shlex
+        return " ".join(shlex.quote(str(v)) for v in value) or "none"
+    return str(value)
+
+
+def text_identity(text: str | bytes) -> str:
+    """What a request record holds of a scene's or an input file's text: its sha256 (any edit is
+    another request)."""
+    return hashlib.sha256(text.encode() if isinstance(text, str) else text).hexdigest()
 
 
 def check_new_output(path, command: str, create_dirs: bool = False) -> Path:

@@ -1,0 +1,85 @@
+"""A command writing a folder of answers (allocate, budget, map, tradeoff, stability) records the request
+they answer and refuses, before any work, to overwrite them with another request's."""
+import json
+
+import pytest
+
+from pipeline.cli import main
+from pipeline.files.outputs import claimed_output_folder
+from pipeline.files.schema import EnsembleFileError
+
+SPEC = "displacement:x,y,z<=0.1mm@q95"
+
+
+def claim_output_folder(folder, command: str, request: dict) -> None:
+    """Claim ``folder`` for ``request`` and write an output in it."""
+    with claimed_output_folder(folder, command, request):
+        (folder / f"{command}.out").write_text("answer")
+
+
+def test_a_folder_answers_one_request_and_names_what_another_changes(tmp_path):
+    request = {"scene": "a1", "--spec": ["displacement:z<=1mm@q95"], "-n": 59, "--costs": None}
+    claim_output_folder(tmp_path / "f", "allocate", request)
+    claim_output_folder(tmp_path / "f", "allocate", dict(request))   # the same request: resumes
+    claim_output_folder(tmp_path / "f", "budget", request | {"-n": 60})   # another command's record
+    with pytest.raises(EnsembleFileError, match=r"-n 59 there, 60 now") as exc:
+        claim_output_folder(tmp_path / "f", "allocate", request | {"-n": 60})
+    assert str(exc.value).startswith(f"{tmp_path / 'f'}: holds rss6 allocate's outputs")
+    with pytest.raises(EnsembleFileError, match=r"another scene text; --costs unset there, c2 now"):
+        claim_output_folder(tmp_path / "f", "allocate", request | {"scene": "b2", "--costs": "c2"})
+    with pytest.raises(EnsembleFileError, match=r"--spec 'displacement:z<=1mm@q95' there, none now"):
+        claim_output_folder(tmp_path / "f", "allocate", request | {"--spec": []})
+    (tmp_path / "f" / "rss6_allocate_request.json").write_text("{")
+    with pytest.raises(EnsembleFileError, match=r"rss6_allocate_request.json: unreadable"):
+        claim_output_folder(tmp_path / "f", "allocate", request)
+
+
+def test_a_request_that_fails_before_writing_anything_claims_nothing(tmp_path):
+    (tmp_path / "notes.txt").write_text("the user's")
+    for folder, held in ((tmp_path / "new", None), (tmp_path, {"notes.txt"})):
+        with pytest.raises(ValueError), claimed_output_folder(folder, "map", {"-n": 4}):
+            raise ValueError("no pose reachable")
+        assert not folder.exists() if held is None else {p.name for p in folder.iterdir()} == held
+    with pytest.raises(KeyboardInterrupt), claimed_output_folder(tmp_path / "part", "budget", {"-n": 4}):
+        (tmp_path / "part" / "chunk.nc").write_text("finished work")
+        raise KeyboardInterrupt
+    assert (tmp_path / "part" / "rss6_budget_request.json").exists()   # claims the work it keeps
+
+
+def _one_line_refusal(argv, capsys, *words) -> None:
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and len(captured.err.strip().splitlines()) == 1, captured.err
+    for word in words:
+        assert word in captured.err, captured.err
+
+
+def test_allocate_with_another_spec_keeps_the_folders_answer(tmp_path, capsys):
+    """The reported case: a second allocate into the folder of a first, with another spec, rewrote the
+    answer's scene and then failed on the verification ensemble; now it stops before the search."""
+    folder = tmp_path / "al"
+    argv = ["allocate", "smoke", "--spec", SPEC, "-n", "59", "--workers", "1", "-o", str(folder)]
+    assert main(argv) == 0
+    capsys.readouterr()
+    answer = {p.name: p.read_bytes() for p in folder.iterdir()}
+    _one_line_refusal(argv[:3] + ["displacement:x,y,z<=0.2mm@q95"] + argv[4:], capsys,
+                      str(folder), "--spec", "0.1mm", "0.2mm", "choose another -o")
+    _one_line_refusal(argv + ["--seed", "3"], capsys, "--seed 0 there, 3 now")
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == answer
+    assert main(argv) == 0   # the same request again
+
+
+def test_map_into_the_folder_of_another_map_is_refused(tmp_path, capsys):
+    folder = tmp_path / "m"
+    assert main(["map", "smoke", "-n", "4", "-o", str(folder)]) == 0
+    capsys.readouterr()
+    before = (folder / "workspace_map.nc").read_bytes()
+    _one_line_refusal(["map", "smoke", "-n", "8", "-o", str(folder)], capsys, "-n 4 there, 8 now")
+    assert (folder / "workspace_map.nc").read_bytes() == before
+    assert json.loads((folder / "rss6_map_request.json").read_text())["-n"] == 4
+
+
+def test_a_stability_horizon_past_the_trajectory_is_refused_before_work(tmp_path, capsys):
+    _one_line_refusal(["stability", "paper", "--horizon", "5", "-o", str(tmp_path / "s")], capsys,
+                      "--horizon 5", "2 s")
+    assert not (tmp_path / "s").exists()
