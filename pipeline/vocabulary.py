@@ -13,7 +13,7 @@ __all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "WINDOWS", "window_words", "Q
 QUANTITIES = ("displacement", "velocity", "acceleration")   # of the platform's pose error
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")             # translations (m), rotations (rad)
 FAMILIES = {"translation": DIRECTIONS[:3], "rotation": DIRECTIONS[3:]}   # one unit each
-WINDOWS = ("whole", "startup", "steady")   # analysis windows: [settle, T], [0, t_s), [t_s, T]
+WINDOWS = ("whole", "startup", "steady")   # analysis windows: [settle, T], [settle, t_s), [max(settle, t_s), T]
 
 
 def window_words(window: str | None) -> str:

@@ -10,7 +10,7 @@ import pytest
 from pipeline.cli import main
 from pipeline.files.opening import open_results
 from pipeline.analysis.stats import ensemble_stats, in_window, to_json
-from pipeline.files.records import window_masks, window_summaries
+from pipeline.files.records import window_label, window_masks, window_summaries
 from pipeline.files.schema import cf_encode
 from pipeline.files.writing import write_netcdf
 from pipeline.vocabulary import WINDOWS
@@ -187,3 +187,39 @@ def test_filecheck_checks_every_window(ensemble_file, tmp_path, capsys, tamper, 
     assert main(["stats", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
+
+
+def test_window_labels_name_the_times_each_window_covers():
+    """settle_time_s leaves [0, settle) out of every window, and the labels say so; a startup window with
+    steady_after_s <= settle_time_s says it is empty."""
+    assert [window_label(w, 0.5) for w in WINDOWS] == ["whole run", "startup (t < 0.5 s)", "steady (t >= 0.5 s)"]
+    assert [window_label(w, 0.5, 0.2) for w in WINDOWS] == [
+        "whole run (t >= 0.2 s)", "startup (0.2 s <= t < 0.5 s)", "steady (t >= 0.5 s)"]
+    assert window_label("startup", 0.1, 0.15) == "startup (empty: steady_after_s 0.1 s <= settle_time_s 0.15 s)"
+    assert window_label("steady", 0.1, 0.15) == "steady (t >= 0.15 s)"
+
+
+def test_an_empty_startup_window_is_refused_for_every_claim_before_work(smoke, tmp_path, capsys):
+    """A scene whose settle_time_s reaches past steady_after_s has no startup sample: a requirement, an
+    event or --window there is one line and exit 2 (it gave NaN, 'undecided' and 0/n with an interval)."""
+    text = smoke.source_text.replace("time_step_s = 1.0e-3", "time_step_s = 1.0e-3\nsettle_time_s = 0.15\n"
+                                     "steady_after_s = 0.1", 1)
+    scene, out = tmp_path / "late.toml", tmp_path / "late.nc"
+    scene.write_text(text)
+    startup_spec = ["--require", "displacement:z<=1mm@q50/startup"]
+
+    def refused(argv, *words):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and all(w in err[0] for w in words), err
+
+    refused(["run", str(scene), "-n", "4", "--model", "quasi-static", "-o", str(out), *startup_spec],
+            "--require", "startup (empty")
+    assert not out.exists()
+    assert main(["run", str(scene), "-n", "4", "--model", "quasi-static", "-o", str(out)]) == 0
+    capsys.readouterr()
+    refused(["stats", str(out), *startup_spec], "--require", "startup window is empty")
+    refused(["stats", str(out), "--event", "displacement:z>0.01mm/startup"], "--event", "startup window is empty")
+    refused(["stats", str(out), "--window", "startup"], "--window startup", "startup window is empty")
+    assert main(["stats", str(out), "--window", "steady"]) == 0
+    assert "window: steady (t >= 0.15 s)" in capsys.readouterr().out

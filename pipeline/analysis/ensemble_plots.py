@@ -11,7 +11,7 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 
-from ..files.records import window_label
+from ..files.records import file_window_label
 from ..vocabulary import CONFIDENCE, DIRECTIONS, FINISHED, QUANTITIES
 from .envelopes import draw_envelope, envelope_marks, marked_windows, steady_samples
 from .estimators import MIN_N_MEAN, estimates, running_mean_interval
@@ -32,13 +32,12 @@ def _envelope(ds, q: str, finished, sds):
     views = ["whole"] + (["steady"] if steady_samples(ds).any() else [])
     fig, axes = plt.subplots(2 * len(views), 3, figsize=(13, 1 + 5.5 * len(views)), constrained_layout=True)
     fig.suptitle(figure_title(f"|{q} error| envelope over realisations", ds, err.shape[0]))
-    t_s = float(ds.attrs.get("steady_after_s", np.nan))
     for i, view in enumerate(views):
         for k, (ax, d) in enumerate(zip(axes.ravel()[6 * i:6 * i + 6], DIRECTIONS)):
             f, unit = units[d]
             draw_envelope(ax, ds, err[..., k], finer, k, f, steady=view == "steady")
             ax.set(xlabel="time [s]", ylabel=f"|{d} error| [{unit}]",
-                   title=d if view == "whole" else f"{d}, {window_label('steady', t_s)}")
+                   title=d if view == "whole" else f"{d}, {file_window_label('steady', ds.attrs)}")
             ax.grid(alpha=0.3)
             plain_ticks(ax)
     figure_legend(fig, axes.ravel())
@@ -63,7 +62,7 @@ def _histograms(ds, q: str, finished, sds):
     t_s = float(ds.attrs.get("steady_after_s", np.nan))
     for i, (w, peak) in enumerate(peaks.items()):
         for k, (ax, d) in enumerate(zip(axes.ravel()[6 * i:6 * i + 6], DIRECTIONS)):
-            panel = _Panel(q, d, w, i, units[d], res[d], window_label(w, t_s))
+            panel = _Panel(q, d, w, i, units[d], res[d], file_window_label(w, ds.attrs))
             _histogram_panel(ax, peak[:, k], in_window(sds, w)["max_abs_error"].sel(
                 statistic="q95", quantity=q, direction=d), panel)
     fig.supxlabel(_histogram_key(t_s, sds), fontsize=9)

@@ -136,13 +136,17 @@ class Exceedance:
 def event_values(ds, event: Event) -> np.ndarray:
     """The event's maxima |error| (SI; the largest over its directions) over the finished realisations
     of an ensemble Dataset; ValueError for a QMC file or a window the file lacks."""
-    from .stats import finished_values
+    from .stats import check_window_samples, finished_values
     if ds.attrs.get("sampler") == "qmc":
         raise ValueError(f"{event.text!r}: an exceedance probability needs independent realisations; "
                          "a scrambled Sobol' (QMC) file's points are not, so its Clopper-Pearson "
                          "interval would not hold (use a Monte Carlo ensemble, --sampler mc)")
     if event.window != "whole" and "window" not in ds.dims:
         raise ValueError(f"{event.text!r}: the file has no analysis windows; drop '/{event.window}'")
+    try:
+        check_window_samples(ds, event.window)
+    except ValueError as exc:
+        raise ValueError(f"{event.text!r}: {exc}") from None
     values = finished_values(ds, "max_abs_error", event.window)
     return values.sel(quantity=event.quantity, direction=list(event.directions)).max("direction").values
 

@@ -32,7 +32,7 @@ from .exceedance import Event, event_values, one_sided_cp
 from .spec import PF, Spec
 from ..vocabulary import CONFIDENCE, QUANTILES, WINDOWS
 from .estimators import QUANTILE_DECISION_CAP, bound_level, interval_floor, no_interval_at, quantile_decision_n
-from .stats import ensemble_stats, finished_values
+from .stats import check_window_samples, ensemble_stats, finished_values
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
            "verdicts_with_note", "allowed_exceedances", "overall", "judge", "judge_all", "verdicts_json"]
@@ -293,6 +293,11 @@ def judge_all(specs: list[Spec], ds, confidence: float = CONFIDENCE) -> list[Ver
     if not specs:
         return []
     check_confidence(confidence)
+    for s in specs:
+        try:
+            check_window_samples(ds, s.window or "whole")
+        except ValueError as exc:
+            raise ValueError(f"--require {s.text!r}: {exc}") from None
     bounds = ensemble_stats(ds, confidence, window=None, one_sided=True)
     exact = _draws_nothing(ds)
     return [_exact(v, s, ds) if exact else v for s in specs

@@ -31,6 +31,15 @@ def windows_of(ds: xr.Dataset) -> list[str]:
     return [str(w) for w in ds["window"].values] if "window" in ds.dims else []
 
 
+def check_window_samples(ds: xr.Dataset, window: str) -> None:
+    """ValueError if ``window`` of a file holds no sample: its startup when steady_after_s <= settle_time_s
+    (every statistic there would be NaN, and a probability or verdict a claim about nothing)."""
+    after, settle = float(ds.attrs.get("steady_after_s", np.inf)), float(ds.attrs.get("settle_time_s", 0.0))
+    if window == "startup" and after <= settle:
+        raise ValueError(f"the file's startup window is empty (its scene's steady_after_s {after:g} s <= "
+                         f"settle_time_s {settle:g} s): choose the steady or whole window")
+
+
 def in_window(ds: xr.Dataset, window: str = "whole") -> xr.Dataset:
     """``ds`` with the summaries of analysis window ``window`` (whole, startup, steady), the window
     dimension dropped; a Dataset without windows is returned as it is.  ValueError names an unknown
@@ -177,7 +186,7 @@ def _rqmc_attrs(replicates: int, confidence: float, stopped_by_width: bool) -> d
 
 def _attrs(ds, n: int, failed: int, confidence: float, stopped_by_width: bool) -> dict:
     needed = {k: min_n_for_quantile(p, bound_level(k, confidence, stopped_by_width)) for k, p in QUANTILES.items()}
-    steady = {"steady_after_s": ds.attrs["steady_after_s"]} if "steady_after_s" in ds.attrs else {}
+    steady = {k: ds.attrs[k] for k in ("steady_after_s", "settle_time_s") if k in ds.attrs}
     return {**_provenance(ds, confidence), **steady, "n_finished": n, "n_failed": failed,
             "confidence": confidence,
             "interval_mean": f"union of Student t and Hall (1992) skewness-corrected t; NaN for "
@@ -259,13 +268,13 @@ def format_stats(sds: xr.Dataset) -> str:
     rad/s, rad/s^2): per quantity, direction and variable the estimates, then the lower and upper
     confidence bounds ('-' where none is given, with the reason below the table); one table per
     analysis window, labelled, when the statistics have several."""
-    from ..files.records import window_label
+    from ..files.records import file_window_label
     if "window" not in sds.dims:
         return "\n".join(_table_lines(sds) + ["notes:"] + [f"  {t}" for t in _missing_notes(sds)])
     lines = []
     for i, w in enumerate(windows_of(sds)):
         body = _table_lines(in_window(sds, w))
-        lines += ([] if i else body[:1]) + [f"window: {window_label(w, float(sds.attrs['steady_after_s']))}"]
+        lines += ([] if i else body[:1]) + [f"window: {file_window_label(w, sds.attrs)}"]
         lines += body[1:]
     return "\n".join(lines + ["notes:"] + [f"  {t}" for t in _missing_notes(sds)])
 

@@ -157,7 +157,7 @@ def error_summary(ds) -> dict:
     under ``max_abs_error``/``mean_abs_error``, the startup and steady windows under
     ``max_abs_error_by_window``/``mean_abs_error_by_window`` ({window: {quantity: {direction: value}}})."""
     from .stats import in_window
-    out = {"steady_after_s": float(ds.attrs["steady_after_s"])}
+    out = {"steady_after_s": float(ds.attrs["steady_after_s"]), "settle_time_s": float(ds.attrs["settle_time_s"])}
     for name in ("max_abs_error", "mean_abs_error"):
         out[name] = _table(in_window(ds, "whole")[name])
         out[f"{name}_by_window"] = {w: _table(in_window(ds, w)[name]) for w in ("startup", "steady")}
@@ -180,7 +180,7 @@ def contact_peaks(peak) -> dict:
 def format_errors(summary: dict) -> str:
     """Table of :func:`error_summary` in the paper's display units: the whole run's maxima and means,
     then the maxima of the startup and steady windows."""
-    from ..files.records import window_label
+    from ..files.records import file_window_label
     head = f"{'':<39s}" + "".join(f"{d:>11s}" for d in DIRECTIONS)
     rows = [("max_abs_error", "whole", summary["max_abs_error"]),
             ("mean_abs_error", "whole", summary["mean_abs_error"])]
@@ -188,8 +188,8 @@ def format_errors(summary: dict) -> str:
     lines = [head]
     for stat, window, table in rows:
         if window == "startup":
-            lines.append(f"maxima per window, {window_label('startup', summary['steady_after_s'])} and "
-                         f"{window_label('steady', summary['steady_after_s'])}:")
+            lines.append(f"maxima per window, {file_window_label('startup', summary)} and "
+                         f"{file_window_label('steady', summary)}:")
         for q, vals in table.items():
             units = [display_unit(q, d) for d in DIRECTIONS]
             label = f"{stat.split('_')[0]} |{q[:5]}| [{units[0][1]}; {units[3][1]}]"

@@ -8,6 +8,7 @@ from ..scenes.catalogue import find_scene
 from .messages import interrupted, note_loaded_joints, warn_oversubscription
 from .options import (add_confidence, add_model, add_parents, add_scene, add_seed, add_workers, positive_float,
                       realisations)
+from .requirements import known_windows
 
 
 def add_parser(sub) -> None:
@@ -43,6 +44,7 @@ def main(args) -> int:
         raise SpecError(str(exc).replace("--require", "--spec", 1)) from None
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
+    known_windows(specs, level.scene, "--spec")
     folder = check_output_folder(args.output or f"budget_{level.scene.name}_{level.model}", args.parents)
     request = {"scene": text_identity(level.scene.source_text), "--model": level.model, "--spec": args.spec,
                "-n": args.n, "--seed": args.seed, "--confidence": args.confidence, "--tolerance": args.tolerance}

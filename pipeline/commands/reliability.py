@@ -13,6 +13,7 @@ from ..vocabulary import OptionError, window_words
 from .messages import interrupted, loaded_joints_meanwhile
 from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers,
                       evaluations, fraction)
+from .requirements import known_windows
 
 
 def add_parser(sub) -> None:
@@ -72,6 +73,7 @@ def _settings(args):
         raise OptionError("-n: with --method mc --cov the realisations are added until the CoV target; cap them "
                           "with --budget")
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
+    known_windows([event], level.scene, "--event")
     input_dimension(level.scene, level.model, args.config)   # ReliabilityError: no random inputs
     return event, level
 

@@ -15,12 +15,19 @@ def requirements(args) -> list:
     return parse_specs(args.require)
 
 
-def known_windows(specs: list) -> None:
-    """A --require or --until naming a window the files do not have is a one-line error before any work."""
+def known_windows(specs: list, scene=None, flag: str | None = None) -> None:
+    """A --require or --until (or ``flag``'s specs or events) naming a window the files do not have, or
+    one that holds no output sample of ``scene``, is a one-line error before any work."""
+    from ..files.records import check_window
     for s in specs:
+        said = flag or ("--until" if hasattr(s, "relative") else "--require")
         if s.window is not None and s.window not in WINDOWS:
-            flag = "--until" if hasattr(s, "relative") else "--require"
-            raise OptionError(f"{flag} {s.text!r}: unknown window {s.window!r}; choose one of {', '.join(WINDOWS)}")
+            raise OptionError(f"{said} {s.text!r}: unknown window {s.window!r}; choose one of {', '.join(WINDOWS)}")
+        if scene is not None:
+            try:
+                check_window(scene, s.window or "whole")
+            except ValueError as exc:
+                raise OptionError(f"{said} {s.text!r}: {str(exc).split(': ', 1)[1]}") from None
 
 
 def judge(ds, specs: list, confidence: float = CONFIDENCE) -> list:

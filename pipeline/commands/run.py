@@ -75,6 +75,7 @@ def main(args) -> int:
     known_windows(specs + targets)
     cluster = resolve_cluster(args.workers, args.scheduler, args.worker_timeout)
     level = level_settings(args)
+    known_windows(specs + targets, level.scene)
     _refuse_clearance_free_default(args, level)
     replicates = resolve_replicates(args.sampler, args.replicates, args.n, level)
     check_cap(targets, args.n, replicates)

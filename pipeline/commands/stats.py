@@ -20,10 +20,10 @@ def add_parser(sub) -> None:
     add_parents(p)
     add_confidence(p, "confidence of the two-sided intervals, in (0, 1), and of each one-sided bound "
                       "a --require is decided on, then above 0.5")
-    p.add_argument("--window", help="analysis window: whole, startup (t < the scene's "
-                                    "steady_after_s) or steady; also the window of a --require "
-                                    "without '/WINDOW' (default: every window shown, --require "
-                                    "judged on the whole run)")
+    p.add_argument("--window", metavar="{whole,startup,steady}",
+                   help="analysis window: whole, startup (t < the scene's steady_after_s) or steady, each "
+                        "from its settle_time_s on; also the window of a --require without '/WINDOW' "
+                        "(default: every window shown, --require judged on the whole run)")
     add_require(p)
     p.add_argument("--event", action="append", metavar="EVENT",
                    help="also print the probability that a realisation's maximum |error| exceeds a limit, "
@@ -107,10 +107,14 @@ def _probabilities(ds, events: list, confidence: float) -> list:
 def _window_of(sds, window: str):
     """The statistics of analysis window ``window`` only (dimension kept); an unknown window, or a
     file without windows, is an OptionError naming it."""
-    from ..analysis.stats import windows_of
+    from ..analysis.stats import check_window_samples, windows_of
     if window not in windows_of(sds):
         raise OptionError(f"--window: unknown window {window!r}; the file has "
                           f"{', '.join(windows_of(sds)) or 'no analysis windows'}")
+    try:
+        check_window_samples(sds, window)
+    except ValueError as exc:
+        raise OptionError(f"--window {window}: {exc}") from None
     return sds.sel(window=[window])
 
 

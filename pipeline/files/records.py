@@ -85,10 +85,20 @@ def window_summaries(result, settle: float = 0.0, steady_after: float = 0.0
     return peak, mean
 
 
-def window_label(window: str, steady_after: float) -> str:
-    """How a window reads in tables and figures, e.g. 'steady (t >= 0.5 s)'."""
-    return {"whole": "whole run", "startup": f"startup (t < {steady_after:g} s)",
-            "steady": f"steady (t >= {steady_after:g} s)"}[window]
+def window_label(window: str, steady_after: float, settle: float = 0.0) -> str:
+    """How a window reads in tables and figures, e.g. 'steady (t >= 0.5 s)': the times it covers, s,
+    with the scene's settle_time_s ``settle`` left out of every window."""
+    if window == "startup" and steady_after <= settle:
+        return f"startup (empty: steady_after_s {steady_after:g} s <= settle_time_s {settle:g} s)"
+    after = f" (t >= {settle:g} s)" if settle > 0 else ""
+    since = f"{settle:g} s <= " if settle > 0 else ""
+    return {"whole": f"whole run{after}", "startup": f"startup ({since}t < {steady_after:g} s)",
+            "steady": f"steady (t >= {max(steady_after, settle):g} s)"}[window]
+
+
+def file_window_label(window: str, attrs) -> str:
+    """:func:`window_label` of a file's (or a summary's) ``steady_after_s`` and ``settle_time_s``."""
+    return window_label(window, float(attrs.get("steady_after_s", np.nan)), float(attrs.get("settle_time_s", 0.0)))
 
 
 def check_window(scene, window: str) -> None:
@@ -98,12 +108,12 @@ def check_window(scene, window: str) -> None:
         raise ValueError(f"--window {window}: choose one of {', '.join(WINDOWS)}")
     sim = scene.simulation
     if not window_masks(scene.times, sim.settle_time, sim.steady_after)[WINDOWS.index(window)].any():
-        raise ValueError(f"--window {window}: the scene's {window_label(window, sim.steady_after)} "
-                         f"window holds no sample after settle_time_s = {sim.settle_time:g} s")
+        raise ValueError(f"--window {window}: the scene's {window_label(window, sim.steady_after, sim.settle_time)} "
+                         "window holds no sample of the output grid")
 
 
 _WINDOW_ATTRS = {"long_name": "analysis window: whole run, startup t < steady_after_s, "
-                              "steady t >= steady_after_s (global attribute, s)"}
+                              "steady t >= steady_after_s (global attributes, s; each from settle_time_s on)"}
 
 
 def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elements: int,

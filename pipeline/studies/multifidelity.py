@@ -60,7 +60,7 @@ from rss6core import FINISHED, models_with
 
 from ..analysis.estimators import BOUNDS, MIN_N_MEAN, mean_interval
 from ..analysis.stats import in_window
-from ..files.records import window_label
+from ..files.records import file_window_label
 from ..vocabulary import CONFIDENCE, SUMMARIES
 
 __all__ = ["MIN_N_MF", "MF_WIDENING", "width_cost", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
@@ -247,7 +247,7 @@ def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float =
     With a cost ratio (one high realisation over one low one) also the cost-optimal M/N and the
     cost relative to plain MC for the same interval width; with a relative half-width ``width``
     too, the realisations each method needs to reach it; all in analysis window ``window``."""
-    steady_after = float(high.attrs.get("steady_after_s", 0.0))
+    where = {"window": window, "analysis_window": file_window_label(window, high.attrs)}
     high, low = in_window(high, window), in_window(low, window)
     _check_pairing(high, low, *sources)
     data = {}
@@ -263,7 +263,6 @@ def multifidelity_dataset(high: xr.Dataset, low: xr.Dataset, confidence: float =
         for name in SUMMARIES:
             ds = ds.assign(_costs(ds, paired_values(high, low, name)[0], name, cost_high_over_low,
                                   width, confidence))
-    where = {"window": window, "analysis_window": window_label(window, steady_after)}
     return ds.assign_attrs(_attrs(high, low, confidence, sources, n_pairs, cost_high_over_low,
                                   width) | where)
 

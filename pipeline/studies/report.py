@@ -31,7 +31,7 @@ from ..analysis.estimators import min_n_for_quantile
 from ..analysis.stats import ensemble_stats, in_window
 from ..files.opening import open_ensemble
 from ..files.reading import load_netcdf
-from ..files.records import run_dataset, window_label
+from ..files.records import file_window_label, run_dataset
 from ..files.schema import EnsembleFileError, display_unit
 from ..files.writing import write_netcdf
 from ..vocabulary import CONFIDENCE, DIRECTIONS, FINISHED, QUANTILES
@@ -352,12 +352,12 @@ def _family_table(st: dict) -> list[str]:
     return _table(head + ["elastic (no clearance)"], rows)
 
 
-def _window_table(sds, t_s: float) -> list[str]:
+def _window_table(sds, attrs) -> list[str]:
     """Medians [95 % CI] of the contact level's per-realisation summaries in the startup and steady
-    windows and over the whole run, from its statistics by window ``sds``; ``t_s``: the boundary, s."""
+    windows and over the whole run, from its statistics by window ``sds``; ``attrs``: its file's."""
     windows = ("startup", "steady", "whole")
     head = ["statistic (per realisation)", "dir", "unit"] + [
-        f"{window_label(w, t_s)}: median [95 % CI]" for w in windows] + ["steady: 5 % - 95 % quantile"]
+        f"{file_window_label(w, attrs)}: median [95 % CI]" for w in windows] + ["steady: 5 % - 95 % quantile"]
     rows, steady = [], in_window(sds, "steady")
     for stat, q, d in _ROWS:
         f, unit = display_unit(q, d)
@@ -438,7 +438,7 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
     start = parse_scene(contact.attrs["scene_toml"]).simulation.contact_start
     md += ["", "### Start-up and steady operation (contact level)", "",
            text.WINDOWS_PARAGRAPH.format(steady_after=t_s) + " " + text.START[start], ""]
-    md += _window_table(by_window, t_s)
+    md += _window_table(by_window, contact.attrs)
     md += ["", "### Where we differ from the paper, and why", ""]
     return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"]), by_window, start, t_s) + [""]
 

@@ -281,7 +281,8 @@ def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int
         data[f"{name}_sobol"] = (("index", "bound", "group", "quantity", "direction"), values, {
             "long_name": f"Sobol' index of the per-realisation {what} over time of |platform pose "
                          "error| with respect to an input group", "units": "1",
-            "analysis_window": window_label(window, scene.simulation.steady_after)})
+            "analysis_window": window_label(window, scene.simulation.steady_after,
+                                             scene.simulation.settle_time)})
     design = [r.design.name for r in results for _ in r.design.groups]
     data["group_design"] = (("group",), np.array(design, dtype=object),
                             {"long_name": "grouping the index belongs to (families or joints)"})
