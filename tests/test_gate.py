@@ -314,6 +314,25 @@ def test_a_long_spec_keeps_its_direction_and_every_row_names_its_window():
     assert [r.split()[:3] for r in rows] == [[text, d, "whole"] for d in "xyz"] + [[longer, d, "steady"] for d in "xyz"]
 
 
+def test_a_number_that_rounds_to_its_limit_is_printed_with_the_digits_that_tell_them_apart():
+    """An estimate of 1.0003 mm against a 1 mm limit read '1 <= 1 mm fail': the table now widens the digits
+    of an estimate or bound that 4 would round onto the limit, and no other number's."""
+    x = _symmetric(100, 1e-4, 2e-5)
+    (v,) = judge_all([parse_spec("displacement:x<=1mm@q95")], _ensemble(x))
+    v = dataclasses.replace(v, estimate=1.0003056e-3, lower=1.00002e-3, upper=1.2e-3, outcome="fail")
+    (row,) = format_verdicts([v]).splitlines()[2:-1]
+    assert row.split()[3:8] == ["1.0003", "[1.00002,", "1.2]", "<=", "1"], row
+    exact = dataclasses.replace(v, estimate=1e-3)
+    assert format_verdicts([exact]).splitlines()[2].split()[3] == "1"
+
+
+def test_the_table_says_where_a_means_or_stds_bound_is_wider_than_one_sided():
+    x = _symmetric(100, 1e-4, 2e-5)
+    for statistic, wider in (("q95", False), ("mean", True), ("std", True)):
+        verdicts = judge_all([parse_spec(f"displacement:x<=1mm@{statistic}")], _ensemble(x))
+        assert ("a mean's or std's wider" in format_verdicts(verdicts).splitlines()[0]) == wider
+
+
 def test_the_rule_and_its_confidence_are_stated():
     ds = _ensemble(_symmetric(100, 1e-4, 2e-5))
     (q,) = verdicts_json(judge(parse_spec("displacement:x<=0.2mm@q95"), ds))

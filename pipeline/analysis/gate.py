@@ -41,7 +41,8 @@ OUTCOMES = ("pass", "undecided", "fail")
 EXIT_CODES = {"pass": 0, "fail": 1, "undecided": 3}
 UPPER_LIMITS = ("<=", "<")
 BOUND_METHODS = {"quantile": "exact binomial order statistics, distribution-free",
-                 "mean": "union of Student t and Hall's skewness-corrected t",
+                 "mean": "union of Student t and Hall's skewness-corrected t, two-sided on the side the sample "
+                         "skewness points to",
                  "std": "those of the two-sided (widened) Bonett interval",
                  "qmc": "Student t over the randomised-QMC replicates",
                  PF: "exact Clopper-Pearson binomial bounds"}
@@ -345,8 +346,16 @@ def exit_code(verdicts: list[Verdict], undecided: str | None = None) -> int:
     return EXIT_CODES[worst]
 
 
-def _num(value: float | None, factor: float) -> str:
-    return "-" if value is None else f"{value / factor:.4g}"
+def _num(value: float | None, factor: float, limit: float | None = None) -> str:
+    """``value`` in the spec's unit to 4 significant digits, or as many more (up to 12) as tell it from
+    ``limit``: a bound of 1.0003 mm against a 1 mm limit must not read '1'."""
+    if value is None:
+        return "-"
+    for digits in range(4, 13):
+        text = f"{value / factor:.{digits}g}"
+        if limit is None or value == limit or text != f"{limit / factor:.{digits}g}":
+            return text
+    return text
 
 
 def start_up_note(verdicts: list[Verdict], ds) -> str | None:
@@ -379,20 +388,23 @@ def format_verdicts(verdicts: list[Verdict]) -> str:
     width = max(40, 1 + max(len(v.spec) for v in verdicts))
     conf = f"{100 * verdicts[0].confidence:g} %"
     failed = verdicts[0].n_failed
+    wider = any(v.statistic in ("mean", "std") for v in verdicts)
     rule = ("exact: every realisation is the same run, whose value decides" if all(v.rule == EXACT_RULE
-            for v in verdicts) else f"one-sided {conf} bounds: fail when the bound on the limit's side violates it, "
-            "pass when the other bound meets it")
+            for v in verdicts) else f"one-sided {conf} bounds" + (
+            " (a mean's or std's wider where a one-sided one falls short of its label: docs/ensembles.md)"
+            if wider else "") + ": fail when the bound on the limit's side violates it, pass when the other "
+            "bound meets it")
     lines = [f"requirements ({rule}; n = {verdicts[0].n} finished realisations"
              + (f"; {failed} failed, so a limit they meet is undecided" if failed else "")
              + "; estimate and bounds in the unit of the spec's limit)",
              f"{'spec':<{width}s}{'dir':<4s}{'window':<9s}{'estimate':>11s}{'bounds':>24s}{'limit':>14s}  "
              f"{'verdict':<10s}n to decide"]
     for v in verdicts:
-        bounds = f"[{_num(v.lower, v.factor)}, {_num(v.upper, v.factor)}]"
+        bounds = f"[{_num(v.lower, v.factor, v.limit)}, {_num(v.upper, v.factor, v.limit)}]"
         need = "" if v.outcome != "undecided" else (str(v.n_needed) if v.n_needed else "-")
-        lines.append(f"{v.spec:<{width}s}{v.direction:<4s}{v.window or 'whole':<9s}{_num(v.estimate, v.factor):>11s}"
-                     f"{bounds:>24s}{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  "
-                     f"{v.outcome:<10s}{need}")
+        estimate = _num(v.estimate, v.factor, v.limit)
+        lines.append(f"{v.spec:<{width}s}{v.direction:<4s}{v.window or 'whole':<9s}{estimate:>11s}{bounds:>24s}"
+                     f"{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  {v.outcome:<10s}{need}")
     counts = ", ".join(f"{sum(v.outcome == o for v in verdicts)} {o}" for o in OUTCOMES)
     lines.append(f"verdict: {overall(verdicts)} ({counts})")
     return "\n".join(lines)
