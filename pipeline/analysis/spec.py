@@ -138,7 +138,8 @@ def _statistic(text: str, token: str) -> tuple[str, str, str | None]:
         raise _fail(text, "statistic 'max' has no confidence interval (the sample maximum estimates "
                           "no population parameter); bound a quantile such as q99 instead")
     if stat not in REQUIRABLE:
-        raise _fail(text, f"unknown statistic {stat!r} (choose from {', '.join(REQUIRABLE)})")
+        raise _fail(text, f"unknown statistic {stat!r} (choose from {', '.join(REQUIRABLE)}, or pf<=P for the "
+                          "probability of exceeding the limit)")
     if measure not in MEASURES:
         raise _fail(text, f"unknown measure {measure!r} after ':' (choose from max, mean)")
     if "/" in token and window is None:
