@@ -61,7 +61,8 @@ def check_step_count(duration: float, dt: float) -> int:
     Counted, not built: the grid it guards may not fit in memory."""
     steps = _steps(duration, dt)
     if not MIN_STEPS <= steps <= MAX_STEPS:
-        raise ValueError(f"time step {dt!r} s gives {steps} steps over the duration {duration!r} s; a run takes "
+        count = f"{steps}" if steps < 1e15 else f"about {float(steps):.3g}"
+        raise ValueError(f"time step {dt!r} s gives {count} steps over the duration {duration!r} s; a run takes "
                          f"{MIN_STEPS} to {MAX_STEPS} steps")
     return steps
 

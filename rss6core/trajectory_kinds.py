@@ -183,8 +183,8 @@ def via_points(table: dict) -> ViaPoints:
     late = np.flatnonzero(~(times[1:] > times[:-1] + dwell[:-1]))
     if late.size:
         i = int(late[0]) + 1
-        raise TrajectoryError(f"[trajectory] times_s[{i}]: {times[i]!r} s is not after point {i - 1}'s dwell "
-                              f"ends ({times[i - 1]!r} + {dwell[i - 1]!r} s)")
+        raise TrajectoryError(f"[trajectory] times_s[{i}]: {float(times[i])!r} s is not after point {i - 1}'s "
+                              f"dwell ends ({float(times[i - 1])!r} + {float(dwell[i - 1])!r} s)")
     poses = np.concatenate([positions, np.radians(angles)], axis=1)
     return ViaPoints(_frozen(times), _frozen(poses), _frozen(dwell), float(times[-1] + dwell[-1]))
 

@@ -110,6 +110,13 @@ def test_a_run_takes_ten_to_a_million_steps(paper_text, step, steps):
     parse_scene(_edit(paper_text, "time_step_s = 1.0e-3", "time_step_s = 0.2"))   # 10 steps: the least
 
 
+def test_a_step_count_too_large_to_read_is_rounded_in_its_message(paper_text):
+    """1e-300 s gave a 301-digit step count in the one-line error."""
+    with pytest.raises(SceneError, match=r"gives about 2e\+300 steps over the duration 2.0 s") as err:
+        parse_scene(_edit(paper_text, "time_step_s = 1.0e-3", "time_step_s = 1.0e-300"))
+    assert len(str(err.value)) < 200
+
+
 def test_tube_inner_diameter_below_outer(paper_text):
     with pytest.raises(SceneError, match=r"\[rod_section\] inner_diameter_m"):
         parse_scene(_edit(paper_text, "inner_diameter_m = 0.010", "inner_diameter_m = 0.030"))
