@@ -137,7 +137,8 @@ def test_unreachable_poses_are_masked_not_an_error(tmp_path, capsys):
         assert np.all(lower <= q95) and np.all(q95 <= upper) and np.all(upper <= ds[f"max_sampled_{family}"].values[
             :, reachable]) and np.all(lower < upper)
     assert ds.attrs["seed"] == 3 and ds.attrs["n_draws"] == 100 and ds["platform_n1"].attrs["units"] == "rad"
-    assert "reachable: " in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "reachable: " in printed and "point estimate" not in printed   # 100 draws: q95 has its interval
     assert sorted(p.name for p in out.glob("*.png")) == sorted(f"workspace_map_{d}.png"
                                                                for d in ("x", "y", "z", "rx", "ry", "rz"))
 
@@ -146,13 +147,18 @@ def test_the_heat_maps_are_legible_and_mask_the_unreachable(smoke):
     """tests/test_figures.py's legibility check on all six figures of a map with unreachable poses,
     whose grey cells are masked values of the colour mesh, explained in the legend."""
     from pipeline.analysis.map_plots import map_figures
-    from pipeline.studies.workspace_map import GridAxis, workspace_map
+    from pipeline.studies.workspace_map import GridAxis, map_table, workspace_map
     ds = workspace_map(smoke, (GridAxis("y", -0.05, 0.05, 4), GridAxis("z", -0.9, -0.35, 5)), 40, 2)
     figs = map_figures(ds)
     mesh = figs["workspace_map_x.png"].axes[0].collections[0]
     assert np.array_equal(np.ma.getmaskarray(mesh.get_array()).ravel(), ~ds["reachable"].values.astype(bool).ravel())
     assert "unreachable" in [t.get_text() for t in figs["workspace_map_x.png"].legends[0].get_texts()]
     assert figs["workspace_map_rz.png"].axes[1].get_xlabel() == "platform position y [mm]"
+    # 40 draws: below the 59 of the q95's 95 % interval, the q95 panel and the table say what it is
+    assert "q95 from 40 draws per pose: a point estimate" in figs["workspace_map_x.png"].axes[1].get_title()
+    assert "point estimate" not in figs["workspace_map_x.png"].axes[0].get_title()
+    assert map_table(ds).splitlines()[-1] == ("q95 from 40 draws per pose: a point estimate without its 95 % "
+                                              "interval, which needs n >= 59 (-n)")
     _sibling("test_figures").assert_legible(figs)
 
 

@@ -36,6 +36,8 @@ def _fixed_pose(ds) -> str:
 def direction_map_figure(ds, direction: str):
     """The worst case and the q95 of |error| in ``direction`` over the grid, side by side."""
     from matplotlib.patches import Patch
+
+    from ..studies.workspace_map import q95_caveat
     family = _family(direction)
     rows, columns = ds["reachable"].dims
     (fa, ua), (fb, ub) = _axis_display(ds, columns), _axis_display(ds, rows)
@@ -51,8 +53,9 @@ def direction_map_figure(ds, direction: str):
         ax.plot(ds[f"path_{columns}"].values * fa, ds[f"path_{rows}"].values * fb, color="w", lw=1.6)
         ax.plot(ds[f"path_{columns}"].values * fa, ds[f"path_{rows}"].values * fb, color="k", lw=0.8,
                 label="trajectory (projected on these two axes)")
+        caveat = q95_caveat(ds) if field == "q95" else None
         ax.set(xlabel=f"{ds[columns].attrs['long_name']} [{ua}]", ylabel=f"{ds[rows].attrs['long_name']} [{ub}]",
-               title=what)
+               title="\n".join([what] + textwrap.wrap(f"({caveat})".replace(" %", "\u00a0%"), 60) if caveat else [what]))
         ax.title.set_fontsize(10)
     handles = [axes[0].get_legend_handles_labels()[0][0]]
     if not ds["reachable"].values.all():
