@@ -118,6 +118,9 @@ def test_refusals_in_one_line(configs, tmp_path, capsys):
     costs = tmp_path / "costs.toml"
     costs.write_text('[revolute_radial]\n"H9/d9" = 3.0\n"H11/c11" = 2.0\n')
     _refused(base + ["--classes", "H9/d9,H11/c11", "--costs", str(costs)], capsys, "spherical_C", "H9/d9")
+    _refused(base + ["--costs", str(tmp_path / "none.toml")], capsys, "none.toml: No such file or directory (a TOML")
+    (tmp_path / "bad.toml").write_text("[revolute_radial\n")
+    _refused(base + ["--costs", str(tmp_path / "bad.toml")], capsys, "bad.toml: not TOML")
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
 
 

@@ -79,8 +79,10 @@ class Allocation:
 def _read_costs(path) -> dict:
     try:
         data = tomllib.loads(Path(path).read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise AllocationError(f"--costs {path}: {exc}") from None
+    except OSError as exc:
+        raise AllocationError(f"--costs {path}: {exc.strerror or exc} (a TOML file of costs)") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise AllocationError(f"--costs {path}: not TOML: {exc}") from None
     classes = data.get("classes", {})
     tables = {key: data[key] for key in (*ALLOCATED, "classes") if key in data}
     tables |= {f"classes.{family}": table for family, table in classes.items()} if isinstance(classes, dict) else {}
