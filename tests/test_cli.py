@@ -229,3 +229,16 @@ def test_the_rss6_executable_runs_its_exit_handlers_flushes_and_exits_with_the_c
     assert out.returncode == 2
     assert out.stdout.splitlines() == ["buffered line", "handler ran"]
     assert out.stderr.startswith("rss6: error:") and "no_such_file.nc" in out.stderr
+
+
+def test_every_options_help_states_its_default():
+    """The README: "every command's -h gives each option's default" (stats -o and --event, reliability
+    --cov and --plot gave none). Flags, required options and those with choices shown are exempt."""
+    import argparse
+
+    from pipeline.cli import build_parser
+    subparsers = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    silent = [f"{name} {a.option_strings[-1]}" for name, parser in subparsers.choices.items() for a in parser._actions
+              if a.option_strings and not isinstance(a, (argparse._HelpAction, argparse._StoreTrueAction))
+              and not a.required and "default" not in (a.help or "")]
+    assert silent == []

@@ -54,8 +54,9 @@ def direction_map_figure(ds, direction: str):
         ax.plot(ds[f"path_{columns}"].values * fa, ds[f"path_{rows}"].values * fb, color="k", lw=0.8,
                 label="trajectory (projected on these two axes)")
         caveat = q95_caveat(ds) if field == "q95" else None
+        title = [what] + (textwrap.wrap(f"({caveat})".replace(" %", "\u00a0%"), 60) if caveat else [])
         ax.set(xlabel=f"{ds[columns].attrs['long_name']} [{ua}]", ylabel=f"{ds[rows].attrs['long_name']} [{ub}]",
-               title="\n".join([what] + textwrap.wrap(f"({caveat})".replace(" %", "\u00a0%"), 60) if caveat else [what]))
+               title="\n".join(title))
         ax.title.set_fontsize(10)
     handles = [axes[0].get_legend_handles_labels()[0][0]]
     if not ds["reachable"].values.all():

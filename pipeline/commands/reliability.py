@@ -35,7 +35,7 @@ def add_parser(sub) -> None:
     p.add_argument("--cov", type=fraction, metavar="C",
                    help="a CoV target in (0, 1): mc adds realisations (blocks of 1000), subset doubles N (a fresh "
                         "run each time), until the estimated CoV is at most C or --budget would be exceeded "
-                        "(exit 0 either way; status 'budget' if not met)")
+                        "(exit 0 either way; status 'budget' if not met) (default: none: a run of size -n)")
     p.add_argument("--budget", type=evaluations, metavar="E",
                    help="with --cov: evaluations at most, over all runs (default 20000 subset, 200000 mc)")
     p.add_argument("-p0", "--p0", type=float, default=0.1,
@@ -50,7 +50,7 @@ def add_parser(sub) -> None:
                    help="continue an interrupted run from OUTPUT.checkpoint.nc (the same command otherwise): the "
                         "result is that of an uninterrupted run; without it, a checkpoint left there is refused")
     p.add_argument("--plot", metavar="PNG", help="also write a figure: the levels' thresholds against the limit, "
-                                                 "and the inputs' shift among the failing evaluations")
+                                                 "and the inputs' shift among the failing evaluations (default: none)")
     p.set_defaults(main=main)
 
 

@@ -16,7 +16,8 @@ def add_parser(sub) -> None:
     p.add_argument("--quantity", help="displacement, velocity or acceleration (default: all)")
     p.add_argument("--direction", help="x, y, z, rx, ry or rz (default: all)")
     add_json(p)
-    p.add_argument("-o", "--output", help="also write the statistics Dataset to this new netCDF file")
+    p.add_argument("-o", "--output", help="also write the statistics Dataset to this new netCDF file (default: "
+                                          "none, print only)")
     add_parents(p)
     add_confidence(p, "confidence of the two-sided intervals, in (0, 1), and of each one-sided bound "
                       "a --require is decided on, then above 0.5")
@@ -29,7 +30,8 @@ def add_parser(sub) -> None:
                    help="also print the probability that a realisation's maximum |error| exceeds a limit, "
                         "QUANTITY:DIRECTIONS>VALUE UNIT[/WINDOW], e.g. 'displacement:z>0.1mm', or "
                         "'displacement:x,y,z>0.05mm' for any of them (repeatable): k/n and its exact "
-                        "Clopper-Pearson interval at --confidence (not for --sampler qmc files)")
+                        "Clopper-Pearson interval at --confidence (not for --sampler qmc files) "
+                        "(default: none)")
     p.set_defaults(main=main)
 
 
