@@ -132,7 +132,7 @@ def _main(argv: list[str] | None) -> int:
     try:
         return args.main(args)
     except (UserError, SceneError) as exc:
-        print(f"rss6: error: {exc}", file=sys.stderr)
+        print(f"rss6 {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # the reader went away (rss6 stats F | head): stop quietly
         import os

@@ -228,7 +228,7 @@ def test_the_rss6_executable_runs_its_exit_handlers_flushes_and_exits_with_the_c
                          env=buffered)
     assert out.returncode == 2
     assert out.stdout.splitlines() == ["buffered line", "handler ran"]
-    assert out.stderr.startswith("rss6: error:") and "no_such_file.nc" in out.stderr
+    assert out.stderr.startswith("rss6 stats: error:") and "no_such_file.nc" in out.stderr
 
 
 def test_every_options_help_states_its_default():

@@ -248,7 +248,7 @@ def test_stats_of_an_output_whose_run_stopped_names_its_parts(tmp_path, capsys):
                     "rerun the command")
     Path(str(out) + ".parts").rmdir()
     assert main(["stats", str(out)]) == 2
-    assert capsys.readouterr().err.strip() == f"rss6: error: {out}: no such file"
+    assert capsys.readouterr().err.strip() == f"rss6 stats: error: {out}: no such file"
 
 
 def test_lock_is_released_by_its_owner_only(tmp_path):

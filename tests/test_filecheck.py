@@ -149,7 +149,7 @@ def test_wrong_file_is_one_line_and_exit_2(good, tmp_path, capsys, case):
         open_ensemble(bad)
     assert main(["stats", str(bad)]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith(f"rss6: error: {bad}: ") and "Traceback" not in err
+    assert len(err.splitlines()) == 1 and err.startswith(f"rss6 stats: error: {bad}: ") and "Traceback" not in err
 
 
 def test_the_untampered_file_and_failed_runs_with_nan_are_accepted(good, tmp_path, capsys):
@@ -208,7 +208,7 @@ def test_resuming_a_file_of_another_rss6_version_is_refused(good, tmp_path, caps
     capsys.readouterr()
     assert main(["run", str(SMOKE), "-n", "8", "--model", "quasi-static", "--workers", "1", "-o", str(old)]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith(f"rss6: error: {old}: written by rss6 9.9.9, this is "
+    assert len(err.splitlines()) == 1 and err.startswith(f"rss6 run: error: {old}: written by rss6 9.9.9, this is "
                                                          f"rss6 {__version__}") and "another -o" in err
     assert old.read_bytes() == before and not (tmp_path / "old.nc.parts").exists()
 

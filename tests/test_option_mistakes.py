@@ -213,7 +213,8 @@ def test_report_checks_every_scene_before_it_makes_a_folder(configs, tmp_path, c
 def test_a_folder_given_as_a_file_is_named_as_a_folder(command, tmp_path, capsys):
     """As rss6 run says it, not netCDF's "Unknown file format" (bad-input audit)."""
     assert main([command, str(tmp_path)]) == 2
-    assert capsys.readouterr().err.strip() == f"rss6: error: {tmp_path}: is a folder; give an rss6 netCDF file"
+    assert capsys.readouterr().err.strip() == (f"rss6 {command}: error: {tmp_path}: is a folder; give an rss6 "
+                                               "netCDF file")
 
 
 def test_a_file_of_another_kind_is_named_by_what_wrote_it(tmp_path, small_file, capsys):

@@ -161,7 +161,7 @@ def test_scheduler_without_any_worker_stops_after_the_timeout(tmp_path):
         _stop(scheduler)
     line = _error_line(proc.stderr)
     assert proc.returncode == 2, proc.stderr
-    assert line == (f"rss6: error: the dask scheduler at {address} has had no workers for 3 s "
+    assert line == (f"rss6 run: error: the dask scheduler at {address} has had no workers for 3 s "
                     "(--worker-timeout 3)"), line
     assert elapsed > 3, elapsed   # it waited out --worker-timeout (no upper bound: that is the machine's speed)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scheduler.log"]   # no lock, no parts
@@ -190,4 +190,4 @@ def test_report_on_an_unavailable_scheduler_is_one_line_and_exit_2(tmp_path, wor
     line = _error_line(proc.stderr)
     assert proc.returncode == 2, proc.stderr
     why = "cannot reach the dask scheduler" if workers == "unreachable" else "no workers for 3 s"
-    assert line.startswith("rss6: error: ") and address in line and why in line, line
+    assert line.startswith("rss6 report: error: ") and address in line and why in line, line

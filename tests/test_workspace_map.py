@@ -243,5 +243,5 @@ def test_a_grid_the_robot_reaches_nowhere_is_one_line_and_exit_2(tmp_path, capsy
     out = tmp_path / "map"
     assert main(["map", "smoke", "--grid", "x:-2:-1:3", "--grid", "y:-2:-1:3", "-n", "4", "-o", str(out)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == ("rss6: error: --grid x:-2:-1:3 --grid y:-2:-1:3: the robot reaches none of its 9 poses; choose "
+    assert err == ("rss6 map: error: --grid x:-2:-1:3 --grid y:-2:-1:3: the robot reaches none of its 9 poses; choose "
                    "a grid inside the workspace (rss6 check prints the trajectory's)") and not out.exists()

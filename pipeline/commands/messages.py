@@ -22,9 +22,10 @@ def interrupted(kept: str | None, again: str = AGAIN) -> int:
     return 130
 
 
-def scheduler_lost(exc, kept: str, resumable: bool = True) -> int:
-    """Exit code 2 after the scheduler went away, with one line and what was kept."""
-    print(f"rss6: error: {exc}" + (f"; {continue_line(kept)}" if resumable else ""), file=sys.stderr)
+def scheduler_lost(command: str, exc, kept: str, resumable: bool = True) -> int:
+    """Exit code 2 after the scheduler went away, with one line (``rss6 COMMAND: error: ...``, as every
+    error of a command) and what was kept."""
+    print(f"rss6 {command}: error: {exc}" + (f"; {continue_line(kept)}" if resumable else ""), file=sys.stderr)
     return 2
 
 

@@ -81,13 +81,13 @@ def main(args) -> int:
         try:
             data.append(_level_ensemble(args, scene, level, n, path, cluster))
         except SchedulerUnavailable as exc:
-            return scheduler_lost(exc, kept)
+            return scheduler_lost("multifidelity", exc, kept)
         except KeyboardInterrupt:
             return interrupted(kept)
     try:
         mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio, args.width, args.window).load()
     except ValueError as exc:   # too few finished pairs
-        print(f"rss6: error: {files[0]}: {exc}", file=sys.stderr)
+        print(f"rss6 multifidelity: error: {files[0]}: {exc}", file=sys.stderr)
         return 1
     finally:
         for level_data in data:

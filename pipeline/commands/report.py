@@ -65,7 +65,7 @@ def main(args) -> int:
     try:
         path = write_report(args.configs, args.output, plan, args.data)
     except SchedulerUnavailable as exc:
-        return scheduler_lost(exc, kept)
+        return scheduler_lost("report", exc, kept)
     except KeyboardInterrupt:
         return interrupted(kept)
     print(f"wrote {path}")

@@ -88,7 +88,7 @@ def main(args) -> int:
     try:
         outcome, until = _compute(args, spec, targets, output, cluster, annotator(specs, verdicts))
     except SchedulerUnavailable as exc:
-        return scheduler_lost(exc, kept, parts_dir(output).exists())
+        return scheduler_lost("run", exc, kept, parts_dir(output).exists())
     except KeyboardInterrupt:
         return interrupted(kept if parts_dir(output).exists() else None)
     return _report(args, level, outcome, until, output, specs, verdicts, note)
