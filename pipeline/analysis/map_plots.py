@@ -6,10 +6,10 @@ import textwrap
 
 import numpy as np
 
-from ..vocabulary import DIRECTIONS, FAMILIES
+from ..vocabulary import DIRECTIONS, FAMILIES, QUANTILES
 from .plot_common import figure_unit, plt
 
-__all__ = ["map_figures", "direction_map_figure"]
+__all__ = ["map_figures", "direction_map_figure", "q95_caveat"]
 
 _PANELS = (("worst_case", "worst case over every clearance state"), ("q95", "q95 over the drawn realisations"))
 
@@ -33,11 +33,21 @@ def _fixed_pose(ds) -> str:
     return ", ".join(out)
 
 
+def q95_caveat(ds) -> str | None:
+    """What a map's q95 is when its draws are too few for the q95's two-sided interval (None otherwise):
+    a sample quantile of so few draws is a rough point estimate, not a bound."""
+    from .estimators import min_n_for_quantile
+    n, confidence = int(ds.attrs["n_draws"]), float(ds.attrs["confidence"])
+    needed = min_n_for_quantile(QUANTILES["q95"], confidence)
+    if n >= needed:
+        return None
+    return (f"q95 from {n} draws per pose: a point estimate without its {100 * confidence:g} % interval, "
+            f"which needs n >= {needed} (-n)")
+
+
 def direction_map_figure(ds, direction: str):
     """The worst case and the q95 of |error| in ``direction`` over the grid, side by side."""
     from matplotlib.patches import Patch
-
-    from ..studies.workspace_map import q95_caveat
     family = _family(direction)
     rows, columns = ds["reachable"].dims
     (fa, ua), (fb, ub) = _axis_display(ds, columns), _axis_display(ds, rows)

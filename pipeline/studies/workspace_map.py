@@ -138,18 +138,6 @@ def _where(ds: xr.Dataset, values: np.ndarray) -> str:
     return ", ".join(out)
 
 
-def q95_caveat(ds: xr.Dataset) -> str | None:
-    """What a map's q95 is when its draws are too few for the q95's two-sided interval (None otherwise):
-    a sample quantile of so few draws is a rough point estimate, not a bound."""
-    from ..analysis.estimators import min_n_for_quantile
-    n, confidence = int(ds.attrs["n_draws"]), float(ds.attrs["confidence"])
-    needed = min_n_for_quantile(QUANTILES["q95"], confidence)
-    if n >= needed:
-        return None
-    return (f"q95 from {n} draws per pose: a point estimate without its {100 * confidence:g} % interval, "
-            f"which needs n >= {needed} (-n)")
-
-
 def map_table(ds: xr.Dataset) -> str:
     """Per direction the worst case and the q95 over the reachable grid (mm, mrad): range and where largest."""
     reachable = ds["reachable"].values.astype(bool)
@@ -167,6 +155,7 @@ def map_table(ds: xr.Dataset) -> str:
         lines.append(f"{d:4}{unit:6}{np.nanmin(worst) * factor:11.4g}{np.nanmax(worst) * factor:11.4g}  "
                      f"{_where(ds, worst):30}{np.nanmin(q95) * factor:10.4g}{np.nanmax(q95) * factor:10.4g}  "
                      f"{_where(ds, q95)}")
+    from ..analysis.map_plots import q95_caveat
     caveat = q95_caveat(ds)
     return "\n".join(lines + ([caveat] if caveat else []))
 
