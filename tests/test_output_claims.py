@@ -83,3 +83,14 @@ def test_a_stability_horizon_past_the_trajectory_is_refused_before_work(tmp_path
     _one_line_refusal(["stability", "paper", "--horizon", "5", "-o", str(tmp_path / "s")], capsys,
                       "--horizon 5", "2 s")
     assert not (tmp_path / "s").exists()
+
+
+def test_a_default_output_is_named_after_the_scene_file_not_its_name_key(configs, tmp_path, monkeypatch, capsys):
+    """A copy of smoke.toml saved as my.toml (its name key still "smoke") once defaulted to smoke_*.nc and
+    was refused there as another scene; the default name now comes from the file, a shipped name as given."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my.toml").write_text((configs / "smoke.toml").read_text() + "\n# my copy, to edit\n")
+    for config in ("smoke", "my.toml"):
+        assert main(["run", config, "-n", "2", "--model", "quasi-static", "--workers", "1"]) == 0
+    capsys.readouterr()
+    assert sorted(p.name for p in tmp_path.glob("*.nc")) == ["my_quasi-static.nc", "smoke_quasi-static.nc"]

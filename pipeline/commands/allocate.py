@@ -11,8 +11,8 @@ from ..scenes.catalogue import find_scene
 from ..studies.fits import DEFAULT_FITS
 from ..vocabulary import OptionError
 from .messages import interrupted, loaded_joints_meanwhile, warn_oversubscription
-from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, positive_int,
-                      realisations)
+from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, output_stem,
+                      positive_int, realisations)
 from .requirements import known_windows
 
 
@@ -89,7 +89,7 @@ def main(args) -> int:
         raise OptionError(f"--classes {args.classes!r}: names no fit; give ISO 286 fits, e.g. H7/g6,H9/e9")
     options = class_options(level.scene, fits, args.costs)
     check_request(level.ensemble_spec(args.seed), specs, args.n, args.confidence)
-    folder = check_output_folder(args.output or f"allocate_{level.scene.name}_{level.model}", args.parents)
+    folder = check_output_folder(args.output or f"allocate_{output_stem(args.config)}_{level.model}", args.parents)
     with claimed_output_folder(folder, "allocate", _request(args, level, fits)):
         warn_oversubscription(cluster.workers, None)
         try:

@@ -99,7 +99,15 @@ WINDOW_HELP = ("analysis window of the {what}: whole (t >= the scene's settle_ti
 
 def add_scene(p) -> None:
     p.add_argument("config", nargs="?", default="paper",
-                   help="scene TOML file or embedded scene name (default: paper)")
+                   help="scene TOML file or embedded scene name (default: paper); its name without .toml is "
+                        "the SCENE of a default output name")
+
+
+def output_stem(config: str) -> str:
+    """The SCENE of a default output name: the scene file's name without .toml, or the shipped scene's
+    name (a copy of paper.toml saved as my.toml writes my_..., not paper_..., whatever its name key)."""
+    from pathlib import Path
+    return Path(str(config)).stem
 
 
 def add_seed(p, what: str = "random seed") -> None:

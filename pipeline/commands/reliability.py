@@ -11,8 +11,8 @@ from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError, window_words
 from .messages import interrupted, loaded_joints_meanwhile
-from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers,
-                      evaluations, fraction)
+from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, evaluations,
+                      fraction, output_stem)
 from .requirements import known_windows
 
 
@@ -85,7 +85,7 @@ def main(args) -> int:
     from ..studies.reliability_checkpoint import Checkpoint, checkpoint_path
     event, level = _settings(args)
     cluster = resolve_cluster(args.workers)
-    output = check_new_output(args.output or f"{level.scene.name}_{level.model}_reliability.nc",
+    output = check_new_output(args.output or f"{output_stem(args.config)}_{level.model}_reliability.nc",
                               "rss6 reliability", args.parents)
     figure = check_new_output(args.plot, "rss6 reliability --plot", args.parents) if args.plot else None
     spec = level.ensemble_spec(args.seed)

@@ -13,7 +13,7 @@ from ..vocabulary import QUANTITIES, STORES, OptionError
 from .messages import (import_meanwhile, interrupted, loaded_joints_meanwhile, scheduler_lost,
                        warn_oversubscription)
 from .options import (LEVELS_HELP, add_level_settings, add_model, add_parents, add_require, add_scene, add_scheduler,
-                      add_seed, add_workers, int_at_least, positive_int, realisations)
+                      add_seed, add_workers, int_at_least, output_stem, positive_int, realisations)
 from .requirements import annotator, known_windows, requirements
 
 
@@ -79,7 +79,7 @@ def main(args) -> int:
     _refuse_clearance_free_default(args, level)
     replicates = resolve_replicates(args.sampler, args.replicates, args.n, level)
     check_cap(targets, args.n, replicates)
-    output = check_output_path(args.output or f"{level.scene.name}_{level.model}.nc", args.parents)
+    output = check_output_path(args.output or f"{output_stem(args.config)}_{level.model}.nc", args.parents)
     warn_oversubscription(cluster.workers, cluster.scheduler)
     import_meanwhile("distributed", "pipeline.analysis.gate")   # gate imports stats (scipy.stats)
     spec = level.ensemble_spec(args.seed, args.store, replicates)

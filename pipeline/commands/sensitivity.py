@@ -12,7 +12,7 @@ from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError
 from .messages import interrupted, warn_oversubscription
 from .options import (add_confidence, add_model, add_parents, add_scene, add_seed, add_window_choice, add_workers,
-                      int_at_least)
+                      int_at_least, output_stem)
 
 
 def add_parser(sub) -> None:
@@ -53,7 +53,7 @@ def main(args) -> int:
     from ..studies.sensitivity import format_joints, format_sensitivity, sensitivity
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
-    output = check_new_output(args.output or f"{level.scene.name}_{level.model}_sobol.nc", "rss6 sensitivity",
+    output = check_new_output(args.output or f"{output_stem(args.config)}_{level.model}_sobol.nc", "rss6 sensitivity",
                               args.parents)
     plots = Path(args.plots or output.with_name(output.stem + "_plots"))
     if args.plots and args.no_plots:
