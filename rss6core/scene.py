@@ -275,6 +275,19 @@ def _steady_after(value: float, duration: float, duration_key: str) -> float:
         raise SceneError(f"[simulation] steady_after_s: must be shorter than {duration_key} "
                          f"= {duration!r}, got {value!r}")
     return value
+def _check_startup_samples(settle: float, steady_after: float, dt: float) -> None:
+    """SceneError if a start-up window [settle, steady_after) is asked for (settle < steady_after) but holds
+    no sample k dt of the output grid (its maxima would be NaN in every finished realisation); the same
+    comparisons as the pipeline's window masks. steady_after <= settle asks for no start-up window."""
+    if steady_after <= settle:
+        return
+    first = max(0, int(np.ceil((settle - 1e-12) / dt)) - 1)
+    if not any(settle - 1e-12 <= k * dt < steady_after - 1e-12 for k in range(first, first + 3)):
+        raise SceneError(f"[simulation] steady_after_s: the start-up window [settle_time_s, steady_after_s) = "
+                         f"[{settle!r}, {steady_after!r}) s holds no output sample (time_step_s = {dt!r} s); put "
+                         "steady_after_s a step or more after settle_time_s, or at most settle_time_s for none")
+
+
 _SCHEMA: dict = {
     "name": _Key(str),
     "geometry": {
@@ -564,6 +577,7 @@ def _build(v: dict, text: str, source: str) -> Scene:
         raise SceneError(f"[simulation] settle_time_s: must be shorter than {where} "
                          f"= {duration!r}, got {v['simulation']['settle_time_s']!r}")
     v["simulation"]["steady_after_s"] = _steady_after(v["simulation"]["steady_after_s"], duration, where)
+    _check_startup_samples(v["simulation"]["settle_time_s"], v["simulation"]["steady_after_s"], dt)
     ratio = dt / v["simulation"]["contact_time_step_s"]
     if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
         raise SceneError(f"[simulation] contact_time_step_s: must divide time_step_s = {dt!r} "

@@ -223,3 +223,19 @@ def test_an_empty_startup_window_is_refused_for_every_claim_before_work(smoke, t
     refused(["stats", str(out), "--window", "startup"], "--window startup", "startup window is empty")
     assert main(["stats", str(out), "--window", "steady"]) == 0
     assert "window: steady (t >= 0.15 s)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("settle, steady_after, holds", [(0.3002, 0.3008, False), (0.3002, 0.301, False),
+                                                        (0.3, 0.3005, True), (0.3, 0.301, True), (0.4, 0.3, None)])
+def test_a_startup_window_between_two_output_samples_is_refused_by_the_scene(paper_text, settle, steady_after, holds):
+    """[settle, steady_after) inside one 1 ms output step held no sample: the run computed every realisation,
+    then refused its own file for NaN maxima. Now the scene names the key; holds None: no start-up asked."""
+    text = paper_text.replace("time_step_s = 1.0e-3", f"time_step_s = 1.0e-3\nsettle_time_s = {settle}\n"
+                                                       f"steady_after_s = {steady_after}", 1)
+    if holds is False:
+        with pytest.raises(SceneError, match=r"\[simulation\] steady_after_s: the start-up window .* holds no output"):
+            parse_scene(text)
+        return
+    scene = parse_scene(text)
+    startup = window_masks(scene.times, settle, steady_after)[WINDOWS.index("startup")]
+    assert startup.any() == bool(holds)
