@@ -18,7 +18,7 @@ from rss6core import (MODELS, Integrator, build_elastic_model, default_integrato
 
 from ..files.records import error_summaries
 from ..vocabulary import FINISHED
-from .setting import Setting, _adaptive, _contact_step, _dividing, measure, relative_errors
+from .setting import Setting, _adaptive, _contact_step, _dividing, load_compiled_kernels, measure, relative_errors
 
 __all__ = ["stability", "write_stability", "stability_figure"]
 
@@ -81,6 +81,7 @@ def stability(scene, tolerance: float = 0.05, n: int = 2, seed: int = 0, horizon
                                     f", Craig-Bampton {reduced.beam.link_modes} modes"))
     sweep(scene, "paper", ig_paper, steps(T, [f * dt["paper"] for f in (2.0, 1.0, 0.5, 0.25)]))
     contact_steps = sorted({_contact_step(scene, f * dt["contact"]) for f in (8.0, 4.0, 2.0, 1.0, 0.5)})
+    load_compiled_kernels(short, [Setting("contact", ig_contact, contact_steps[-1], el)], seed)
     for ig in (ig_contact, "newmark"):
         for scale in (1.0, 10.0):
             sweep(short, "contact", ig, contact_steps, scale)

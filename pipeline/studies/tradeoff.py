@@ -16,7 +16,8 @@ from rss6core import MODELS, BeamTheory, default_integrator, default_time_step, 
 
 from ..files.schema import MIXED_UNITS, _unit_table
 from ..vocabulary import DIRECTIONS, QUANTITIES
-from .setting import TRADEOFF_STATISTICS, Setting, _adaptive, _contact_step, _scene_for, measure, relative_errors
+from .setting import (TRADEOFF_STATISTICS, Setting, _adaptive, _contact_step, _scene_for, load_compiled_kernels,
+                      measure, relative_errors)
 
 __all__ = ["default_settings", "tradeoff", "pareto_front", "recommend", "write_tradeoff", "tradeoff_figure"]
 
@@ -95,6 +96,7 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
     reference = reference or settings[-1]
     if reference not in settings:
         settings = list(settings) + [reference]
+    load_compiled_kernels(scene, settings, seed)
     runs = _measure_all(scene, settings, n, seed, log)
     check = _refine(reference)
     fine = measure(scene, check, n, seed)
