@@ -11,9 +11,9 @@ from pipeline.files.schema import EnsembleFileError
 SPEC = "displacement:x,y,z<=0.1mm@q95"
 
 
-def claim_output_folder(folder, command: str, request: dict) -> None:
+def claim_output_folder(folder, command: str, request: dict, answers: tuple = ()) -> None:
     """Claim ``folder`` for ``request`` and write an output in it."""
-    with claimed_output_folder(folder, command, request):
+    with claimed_output_folder(folder, command, request, answers):
         (folder / f"{command}.out").write_text("answer")
 
 
@@ -32,6 +32,19 @@ def test_a_folder_answers_one_request_and_names_what_another_changes(tmp_path):
     (tmp_path / "f" / "rss6_allocate_request.json").write_text("{")
     with pytest.raises(EnsembleFileError, match=r"rss6_allocate_request.json: unreadable"):
         claim_output_folder(tmp_path / "f", "allocate", request)
+
+
+def test_a_folder_holding_answers_without_their_record_is_refused(tmp_path):
+    """A deleted record let another request overwrite the folder's answer (map, tradeoff, budget exit 0;
+    allocate rewrote its scene, then failed): answers without a record are refused; other files are not."""
+    (tmp_path / "notes.txt").write_text("the user's")
+    claim_output_folder(tmp_path, "budget", {"-n": 4}, ("*_budget.toml",))   # unrelated files: claimed
+    (tmp_path / "paper_budget.toml").write_text("the answer")
+    (tmp_path / "rss6_budget_request.json").unlink()
+    with pytest.raises(EnsembleFileError, match=r"holds rss6 budget's outputs \(paper_budget.toml\) but no "
+                                                r"rss6_budget_request.json"):
+        claim_output_folder(tmp_path, "budget", {"-n": 8}, ("*_budget.toml",))
+    assert (tmp_path / "paper_budget.toml").read_text() == "the answer"
 
 
 def test_a_request_that_fails_before_writing_anything_claims_nothing(tmp_path):
@@ -77,6 +90,9 @@ def test_map_into_the_folder_of_another_map_is_refused(tmp_path, capsys):
     _one_line_refusal(["map", "smoke", "-n", "8", "-o", str(folder)], capsys, "-n 4 there, 8 now")
     assert (folder / "workspace_map.nc").read_bytes() == before
     assert json.loads((folder / "rss6_map_request.json").read_text())["-n"] == 4
+    (folder / "rss6_map_request.json").unlink()
+    _one_line_refusal(["map", "smoke", "-n", "8", "-o", str(folder)], capsys, "workspace_map.nc", "but no")
+    assert (folder / "workspace_map.nc").read_bytes() == before
 
 
 def test_a_stability_horizon_past_the_trajectory_is_refused_before_work(tmp_path, capsys):

@@ -90,7 +90,8 @@ def main(args) -> int:
     options = class_options(level.scene, fits, args.costs)
     check_request(level.ensemble_spec(args.seed), specs, args.n, args.confidence)
     folder = check_output_folder(args.output or f"allocate_{output_stem(args.config)}_{level.model}", args.parents)
-    with claimed_output_folder(folder, "allocate", _request(args, level, fits)):
+    answers = ("allocation.nc", "*_allocated.toml")
+    with claimed_output_folder(folder, "allocate", _request(args, level, fits), answers):
         warn_oversubscription(cluster.workers, None)
         try:
             spec = level.ensemble_spec(args.seed)

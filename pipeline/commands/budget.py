@@ -48,7 +48,7 @@ def main(args) -> int:
     folder = check_output_folder(args.output or f"budget_{output_stem(args.config)}_{level.model}", args.parents)
     request = {"scene": text_identity(level.scene.source_text), "--model": level.model, "--spec": args.spec,
                "-n": args.n, "--seed": args.seed, "--confidence": args.confidence, "--tolerance": args.tolerance}
-    with claimed_output_folder(folder, "budget", request):
+    with claimed_output_folder(folder, "budget", request, ("*_budget.toml",)):
         warn_oversubscription(cluster.workers, None)
         try:
             b = budget(level.ensemble_spec(args.seed), specs, args.n, folder, args.confidence, cluster.workers,

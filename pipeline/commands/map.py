@@ -80,7 +80,7 @@ def main(args) -> int:
     check_output_folder(args.output, args.parents)
     request = {"scene": text_identity(scene.source_text), "--model": args.model, "-n": args.n, "--seed": args.seed,
                "--grid": [g.option() for g in args.grid] if args.grid else None}
-    with claimed_output_folder(args.output, "map", request):
+    with claimed_output_folder(args.output, "map", request, ("workspace_map.nc",)):
         print(f"rss6 map: scene {scene.name}, {args.model} level, {args.n} drawn realisations (seed {args.seed})",
               flush=True)
         ds = workspace_map(scene, tuple(args.grid) if args.grid else None, args.n, args.seed, args.model)

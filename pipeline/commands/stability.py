@@ -24,7 +24,8 @@ def main(args) -> int:
         raise OptionError(f"--horizon {args.horizon:g}: longer than the scene's trajectory "
                           f"({scene.trajectory.duration:g} s); give at most that")
     check_output_folder(args.output, args.parents)
-    with claimed_output_folder(args.output, "stability", study_request(scene, args, **{"--horizon": args.horizon})):
+    with claimed_output_folder(args.output, "stability", study_request(scene, args, **{"--horizon": args.horizon}),
+                               ("stability.nc", "stability.csv")):
         print(f"rss6 stability: {scene.name}, tolerance {100 * args.tolerance:g} %")
         ds = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
         write_stability(ds, args.output)

@@ -17,7 +17,7 @@ def main(args) -> int:
     from ..studies.tradeoff import tradeoff, write_tradeoff
     scene = find_scene(args.config)
     check_output_folder(args.output, args.parents)
-    with claimed_output_folder(args.output, "tradeoff", study_request(scene, args)):
+    with claimed_output_folder(args.output, "tradeoff", study_request(scene, args), ("tradeoff.nc", "tradeoff.csv")):
         print(f"rss6 tradeoff: {scene.name}, {args.n} realisations per setting (seed {args.seed})")
         ds = tradeoff(scene, args.n, args.seed)
     change = float(ds["reference_change"].max())

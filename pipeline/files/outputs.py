@@ -63,13 +63,14 @@ def check_output_folder(path, create_parents: bool = False, option: str = "-o") 
 
 
 @contextmanager
-def claimed_output_folder(folder: Path, command: str, request: dict):
+def claimed_output_folder(folder: Path, command: str, request: dict, answers: tuple[str, ...] = ()):
     """Record in ``folder`` the request whose outputs it holds (``rss6_COMMAND_request.json``: the
     scene's sha256 and every option that changes them, keyed by the option's name), or refuse,
     before any work, a folder holding ``command``'s outputs for another request: a rerun of the same
     request resumes or rewrites the same files, and another one overwrites no finished answer. A
-    body that ends in an exception before writing anything in the folder takes the record (and a
-    folder it made) back."""
+    folder holding the command's ``answers`` (file name patterns) without a record is refused too
+    (its record deleted, or written by an rss6 that kept none). A body that ends in an exception
+    before writing anything in the folder takes the record (and a folder it made) back."""
     folder = Path(folder)
     path = folder / f"rss6_{command}_request.json"
     request = json.loads(json.dumps(request))   # as it reads back (tuples as lists)
@@ -77,6 +78,11 @@ def claimed_output_folder(folder: Path, command: str, request: dict):
         _refuse_another_request(folder, path, command, request)
         yield folder
         return
+    held = sorted(p.name for pattern in answers for p in folder.glob(pattern)) if folder.is_dir() else []
+    if held:
+        raise EnsembleFileError(f"{folder}: holds rss6 {command}'s outputs ({', '.join(held)}) but no {path.name}, "
+                                "the record of the request they answer (deleted, or never written by an older rss6); "
+                                f"choose another -o, or remove them to replace them")
     made = not folder.exists()
     folder.mkdir(parents=True, exist_ok=True)
     before = set(folder.iterdir())
