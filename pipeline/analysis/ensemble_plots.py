@@ -59,13 +59,12 @@ def _histograms(ds, q: str, finished, sds):
     units, res = family_units(q, *peaks.values()), resolutions(ds, q)
     fig, axes = plt.subplots(2 * len(peaks), 3, figsize=(13, 1 + 5.5 * len(peaks)), constrained_layout=True)
     fig.suptitle(figure_title(f"per-realisation max |{q} error| per analysis window", ds, int(finished.sum())))
-    t_s = float(ds.attrs.get("steady_after_s", np.nan))
     for i, (w, peak) in enumerate(peaks.items()):
         for k, (ax, d) in enumerate(zip(axes.ravel()[6 * i:6 * i + 6], DIRECTIONS)):
             panel = _Panel(q, d, w, i, units[d], res[d], file_window_label(w, ds.attrs))
             _histogram_panel(ax, peak[:, k], in_window(sds, w)["max_abs_error"].sel(
                 statistic="q95", quantity=q, direction=d), panel)
-    fig.supxlabel(_histogram_key(t_s, sds), fontsize=9)
+    fig.supxlabel(_histogram_key(ds, sds), fontsize=9)
     return fig
 
 
@@ -141,12 +140,14 @@ def _mark_q95(ax, cell, f: float, i: int, window: str) -> None:
     ax.axvline(est, color=f"C{i}", lw=1.2, ls="--", label=text, gid=f"q95 {window}")
 
 
-def _histogram_key(t_s: float, sds) -> str:
+def _histogram_key(ds, sds) -> str:
     """The line under the histograms: the windows' time spans and what the marks are."""
     conf = f"{100 * float(sds.attrs['confidence']):g} %"
     marks = (f"solid: mean; dashed: q95 estimate; bar: its {conf} interval, where rss6 stats gives one "
              f"(from n = {int(sds.attrs['min_n_q95'])})")
-    return f"startup: t < {t_s:g} s; steady: t >= {t_s:g} s; {marks}" if np.isfinite(t_s) else marks
+    if "steady_after_s" not in ds.attrs:
+        return marks
+    return f"{file_window_label('startup', ds.attrs)}; {file_window_label('steady', ds.attrs)}; {marks}"
 
 
 def _convergence(ds, q: str, finished, confidence: float = CONFIDENCE):

@@ -50,7 +50,7 @@ ACCELERATION = (
     "- **Maximum acceleration (z).** Paper {paper_a:.4g} mm/s^2; our `paper` level "
     "{paper_level_a:.3g} mm/s^2 (white-noise offsets over a step squared), our contact level "
     "{contact_a:.3g} mm/s^2 over the whole run: {startup_a:.3g} mm/s^2 in start-up and "
-    "{steady_a:.3g} mm/s^2 in steady operation (t >= {steady_after:g} s, medians of the "
+    "{steady_a:.3g} mm/s^2 in steady operation ({steady}, medians of the "
     "per-realisation maxima). {start} An impact's peak depends on the contact stiffness and on "
     "resolving it in time, which is why the contact level halves its step where an impact needs it "
     "(docs/guide.md, 'Speed and accuracy': a fixed step fine enough for these peaks would have to be fine "
@@ -71,6 +71,8 @@ START_PEAKS = {
               "platform acceleration follows the impact force."),
     "equilibrium": ("Started at rest on the static contact equilibrium, no joint falls onto its wall "
                     "at start-up."),
+    "settled": ("This scene leaves t < {settle:g} s (`settle_time_s`) out of every window, where the joints "
+                "settle from their initial state: its start-up peaks are what remains after that time."),
 }
 
 START = {
@@ -83,11 +85,13 @@ START = {
     "equilibrium": ("This scene's contact level starts at rest on the static contact equilibrium "
                     "(`contact_start = \"equilibrium\"`): no start-up impacts, and the realisations "
                     "differ by their drawn clearance sizes."),
+    "settled": ("This scene leaves t < {settle:g} s (`settle_time_s`) out of every window, the start-up window "
+                "included: it holds what remains of the settling after that time."),
 }
 
 WINDOWS_PARAGRAPH = (
-    "The same statistics in the two analysis windows: startup, t < {steady_after:g} s, while the "
-    "joints settle from their initial state, and steady, t >= {steady_after:g} s (the scene's "
+    "The same statistics in the two analysis windows: startup, {startup}, while the "
+    "joints settle from their initial state, and steady, {steady} (the scene's "
     "`steady_after_s`; by default the time from which the paper scene's contact-level errors repeat "
     "period after period within 5 %, docs/model.md section 6); the envelope figures mark the "
     "boundary, and, dashed, each window's largest stored maximum where it exceeds the envelope "
