@@ -228,3 +228,21 @@ def test_cli_runs_resumes_and_writes_json(tmp_path, capsys):
     assert js["window"] == "whole" and js["analysis_window"] == "whole run"
     assert js["mean_abs_error"]["velocity"]["z"]["correlation"] is not None
     xr.testing.assert_identical(load_netcdf(out).drop_attrs(), first.drop_attrs())
+
+
+def test_an_answer_to_another_request_is_refused_not_overwritten(tmp_path):
+    """A rerun with another --low-n, --window or --confidence rewrote F.nc with exit 0; now a file there must
+    record the same request (its rss6_request attribute) or it is refused, naming what differs."""
+    import json as json_module
+
+    from pipeline.studies.multifidelity import HISTORY, REQUEST_ATTR, check_multifidelity_output
+    request = {"scene": "a1", "-n": 32, "--low-n": 64, "--window": "whole"}
+    out = tmp_path / "F.nc"
+    assert check_multifidelity_output(out, request) == out   # none there yet
+    xr.Dataset(attrs={"history": f"{HISTORY} smoke", REQUEST_ATTR: json_module.dumps(request)}).to_netcdf(out)
+    assert check_multifidelity_output(out, dict(request)) == out
+    with pytest.raises(EnsembleFileError, match=r"another rss6 multifidelity request \(--low-n 64 there, 32 now\)"):
+        check_multifidelity_output(out, request | {"--low-n": 32})
+    xr.Dataset(attrs={"history": f"{HISTORY} smoke"}).to_netcdf(out)
+    with pytest.raises(EnsembleFileError, match=r"\(it records none\)"):
+        check_multifidelity_output(out, request)

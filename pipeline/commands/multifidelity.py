@@ -62,7 +62,7 @@ def _check_levels(args) -> None:
 def main(args) -> int:
     from ..files.records import check_window
     from ..files.writing import write_netcdf
-    from ..studies.multifidelity import (check_multifidelity_output, format_multifidelity, level_paths,
+    from ..studies.multifidelity import (REQUEST_ATTR, check_multifidelity_output, format_multifidelity, level_paths,
                                          multifidelity_dataset, to_json)
     _check_levels(args)
     cluster = resolve_cluster(args.workers, args.scheduler)
@@ -71,7 +71,8 @@ def main(args) -> int:
         check_window(scene, args.window)
     except ValueError as exc:
         raise OptionError(str(exc)) from None
-    output = check_multifidelity_output(args.output, args.parents)
+    request = _request(args, scene)
+    output = check_multifidelity_output(args.output, request, args.parents)
     warn_oversubscription(cluster.workers, cluster.scheduler)
     from ..ensemble.cluster import SchedulerUnavailable
     from ..ensemble.run import parts_dir
@@ -92,13 +93,21 @@ def main(args) -> int:
     finally:
         for level_data in data:
             level_data.close()
-    write_netcdf(mds, output)
+    write_netcdf(mds.assign_attrs({REQUEST_ATTR: json.dumps(request, sort_keys=True)}), output)
     if args.json:
         print(json.dumps(to_json(mds), indent=2, allow_nan=False))
     else:
         print(f"wrote {output} (also the means of mean_abs_error; --json prints both)")
         print(format_multifidelity(mds))
     return 0
+
+
+def _request(args, scene) -> dict:
+    """What the multi-fidelity file answers (:func:`check_multifidelity_output`)."""
+    from ..files.outputs import text_identity
+    return {"scene": text_identity(scene.source_text), "--high": args.high, "--low": args.low, "-n": args.n,
+            "--low-n": args.low_n, "--seed": args.seed, "--confidence": args.confidence, "--window": args.window,
+            "--cost-ratio": args.cost_ratio, "--width": args.width}
 
 
 def _level_ensemble(args, scene, level: str, n: int, path, cluster):

@@ -106,12 +106,18 @@ def _refuse_another_request(folder: Path, path: Path, command: str, request: dic
     except (OSError, ValueError):
         raise EnsembleFileError(f"{path}: unreadable; it records which request the folder's outputs answer, "
                                 "so choose another -o, or remove the folder to replace them") from None
-    changed = [key for key in request | held if request.get(key) != held.get(key)]
-    if changed:
-        said = "; ".join("another scene text" if key == "scene" else
-                         f"{key} {_said(held.get(key))} there, {_said(request.get(key))} now" for key in changed)
+    said = request_changes(held, request)
+    if said:
         raise EnsembleFileError(f"{folder}: holds rss6 {command}'s outputs for another request ({said}); "
                                 f"choose another -o, or remove {folder} to replace them")
+
+
+def request_changes(held: dict, request: dict) -> str:
+    """Each option ``request`` changes against the ``held`` record, in words ('' for none)."""
+    request = json.loads(json.dumps(request))   # as a record reads back (tuples as lists)
+    changed = [key for key in request | held if request.get(key) != held.get(key)]
+    return "; ".join("another scene text" if key == "scene" else
+                     f"{key} {_said(held.get(key))} there, {_said(request.get(key))} now" for key in changed)
 
 
 def _said(value) -> str:

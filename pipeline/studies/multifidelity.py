@@ -412,25 +412,35 @@ def format_multifidelity(mds: xr.Dataset, name: str = "max_abs_error") -> str:
     return "\n".join(lines + ["notes:"] + [f"  {t}" for t in notes])
 
 
-def check_multifidelity_output(path, create_dirs: bool = False):
-    """The output F.nc checked before any work: a file there must be an earlier multi-fidelity file
-    (a rerun resumes the two ensembles and rewrites it); any other file is refused, not overwritten."""
+def check_multifidelity_output(path, request: dict, create_dirs: bool = False):
+    """The output F.nc checked before any work: a file there must be an earlier multi-fidelity file of
+    the same ``request`` (its ``rss6_request`` attribute: a rerun resumes the two ensembles and rewrites
+    it); any other file, or one answering another request, is refused, not overwritten."""
+    import json
+
     import netCDF4
 
-    from ..files.outputs import check_output_path
+    from ..files.outputs import check_output_path, request_changes
     from ..files.schema import EnsembleFileError
     path = check_output_path(path, create_dirs)
-    if path.exists():
-        try:
-            with netCDF4.Dataset(path) as nc:
-                lines = str(getattr(nc, "history", "")).splitlines()
-            ours = bool(lines) and lines[-1].startswith(HISTORY)   # the last line: its own
-        except OSError:
-            ours = False
-        if not ours:
-            raise EnsembleFileError(f"{path}: exists and is not an rss6 multi-fidelity file; rss6 "
-                                    "multifidelity does not overwrite it (remove it or choose another -o)")
+    if not path.exists():
+        return path
+    try:
+        with netCDF4.Dataset(path) as nc:
+            lines, held = str(getattr(nc, "history", "")).splitlines(), getattr(nc, REQUEST_ATTR, None)
+    except OSError:
+        lines, held = [], None
+    if not (lines and lines[-1].startswith(HISTORY)):   # the last line: its own
+        raise EnsembleFileError(f"{path}: exists and is not an rss6 multi-fidelity file; rss6 "
+                                "multifidelity does not overwrite it (remove it or choose another -o)")
+    said = "it records none" if held is None else request_changes(json.loads(held), request)
+    if said:
+        raise EnsembleFileError(f"{path}: holds the answer to another rss6 multifidelity request ({said}); "
+                                "choose another -o, or remove it to replace it")
     return path
+
+
+REQUEST_ATTR = "rss6_request"   # the options a multi-fidelity file answers, JSON (check_multifidelity_output)
 
 
 def level_paths(output) -> tuple:
