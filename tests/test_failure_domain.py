@@ -97,3 +97,7 @@ def test_reliability_prints_what_fails_and_draws_its_figure(tmp_path, capsys):
     assert len(fd["inputs"]) == z.shape[1] == 78
     rows = {r["input"]: r for r in fd["most_probable"]["inputs"]}
     assert rows["C_size (legs 1-6)"]["units"] == "m" and len(rows["|e_B| (legs 1-6)"]["values"]) == 6
+    # the same figure again, to another -o: refused by the option that named it (it said "another -o")
+    assert main(["reliability", "smoke", "--event", "displacement:z>0.2mm", "-n", "200", "--workers", "1",
+                 "-o", str(tmp_path / "t.nc"), "--plot", str(png)]) == 2
+    assert capsys.readouterr().err.strip().endswith("(remove it or choose another --plot)")

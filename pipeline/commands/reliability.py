@@ -87,7 +87,7 @@ def main(args) -> int:
     cluster = resolve_cluster(args.workers)
     output = check_new_output(args.output or f"{output_stem(args.config)}_{level.model}_reliability.nc",
                               "rss6 reliability", args.parents)
-    figure = check_new_output(args.plot, "rss6 reliability --plot", args.parents) if args.plot else None
+    figure = check_new_output(args.plot, "rss6 reliability", args.parents, "--plot") if args.plot else None
     spec = level.ensemble_spec(args.seed)
     options = f"--event '{event.text}' --method {args.method}" + (f" -n {args.n}" if args.n else "") + \
         (f" --p0 {args.p0:g}" if args.method == "subset" else "") + f" --seed {args.seed}" + \

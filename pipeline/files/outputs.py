@@ -136,13 +136,14 @@ def text_identity(text: str | bytes) -> str:
     return hashlib.sha256(text.encode() if isinstance(text, str) else text).hexdigest()
 
 
-def check_new_output(path, command: str, create_dirs: bool = False) -> Path:
+def check_new_output(path, command: str, create_dirs: bool = False, option: str = "-o") -> Path:
     """:func:`check_output_path`, and refuse an existing file: ``command`` (e.g. "rss6 stats") writes a
-    new file and overwrites none, so a second run on the same output loses nothing."""
+    new file and overwrites none, so a second run on the same output loses nothing; ``option``: the
+    option that named it."""
     path = check_output_path(path, create_dirs)
     if path.exists():
         raise EnsembleFileError(f"{path}: exists; {command} does not overwrite a file (remove it or "
-                                "choose another -o)")
+                                f"choose another {option})")
     return path
 
 
