@@ -133,6 +133,7 @@ def test_dataset_from_a_smoke_pair_and_pairing_check(configs):
     assert np.isnan(mean.sel(estimator="multifidelity", bound="lower")).all()
     assert mds.attrs["n_high"] == 3 and mds.attrs["n_low"] == 6
     assert "mean_abs_error_cost_ratio" in mds and "max_abs_error_plain_n_for_width" not in mds
+    assert "every size and cost column are point estimates from these 3 pairs" in format_multifidelity(mds)
     sized = multifidelity_dataset(high, low, CONF, cost_high_over_low=4.0, width=0.05)
     y = high["max_abs_error"].sel(window="whole").transpose("realization", ...).values  # all finished
     mf = sized["max_abs_error_mean"].sel(estimator="multifidelity", bound="estimate").values

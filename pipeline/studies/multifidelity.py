@@ -407,7 +407,8 @@ def format_multifidelity(mds: xr.Dataset, name: str = "max_abs_error") -> str:
                      f"{100 * a['relative_half_width']:g} % of the mean (normal approximation)")
     if a["n_high"] < MIN_N_MF:
         notes.append(f"MF: no {100 * a['confidence']:g} % interval below N = {MIN_N_MF} "
-                     f"(N = {a['n_high']} here)")
+                     f"(N = {a['n_high']} here); rho, VR, n_eq and every size and cost column are point "
+                     f"estimates from these {a['n_high']} pairs, without an interval")
     notes.append(f"MF bounds: {SKEWED_COVERAGE}")
     return "\n".join(lines + ["notes:"] + [f"  {t}" for t in notes])
 
