@@ -178,7 +178,7 @@ def test_the_reports_window_prose_follows_the_scenes_settle_time():
     """With settle_time_s > 0 the report said 'startup, t < 0.5 s' and called its start-up peaks impacts,
     which settle_time_s had left out of every window; the paper scene's text (settle 0) is unchanged."""
     from pipeline.studies import report_text as text
-    from pipeline.studies.report import _start_text, _window_times
+    from pipeline.studies.report_text import start_text as _start_text, window_times as _window_times
     paper, settled = {"steady_after_s": 0.75, "settle_time_s": 0.0}, {"steady_after_s": 0.5, "settle_time_s": 0.3}
     assert [_window_times(w, paper) for w in ("startup", "steady")] == ["t < 0.75 s", "t >= 0.75 s"]
     assert [_window_times(w, settled) for w in ("startup", "steady")] == ["0.3 s <= t < 0.5 s", "t >= 0.5 s"]

@@ -385,18 +385,6 @@ def _displacement_fields(scene, st: dict, paper_dx: float) -> dict:
             "contact_z": _stat(st["contact"], "max", "displacement", "z") * 1e3}
 
 
-def _window_times(window: str, attrs) -> str:
-    """The times a window of the file with ``attrs`` covers, as its label gives them: 't >= 0.75 s'."""
-    return file_window_label(window, attrs).removeprefix(f"{window} (").removesuffix(")")
-
-
-def _start_text(texts: dict, start: str, attrs) -> str:
-    """What the start-up window holds: the text of the contact level's ``start``, or, where the scene's
-    settle_time_s leaves the first moments out of every window, the text saying so."""
-    settle = float(attrs.get("settle_time_s", 0.0))
-    return texts["settled"].format(settle=settle) if settle > 0 else texts[start]
-
-
 def _explanations(scene, st: dict, dt: float, by_window, start: str) -> list[str]:
     """The physical reasons for the large differences from the paper, filled from this run's
     statistics (templates in pipeline.studies.report_text); ``dt``: the paper level's step, s;
@@ -419,8 +407,8 @@ def _explanations(scene, st: dict, dt: float, by_window, start: str) -> list[str
         startup, steady = (_stat(in_window(by_window, w), "max", "acceleration", "z") for w in ("startup", "steady"))
         out.append(text.ACCELERATION.format(paper_a=pa * 1e3, paper_level_a=la * 1e3, contact_a=ca * 1e3,
                                             startup_a=startup * 1e3, steady_a=steady * 1e3,
-                                            steady=_window_times("steady", by_window.attrs),
-                                            start=_start_text(text.START_PEAKS, start, by_window.attrs),
+                                            steady=text.window_times("steady", by_window.attrs),
+                                            start=text.start_text(text.START_PEAKS, start, by_window.attrs),
                                             family=fam, share=100 * share))
     return out
 
@@ -451,8 +439,8 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
     by_window = ensemble_stats(contact, window=None)
     start = parse_scene(contact.attrs["scene_toml"]).simulation.contact_start
     md += ["", "### Start-up and steady operation (contact level)", "",
-           text.WINDOWS_PARAGRAPH.format(**{w: _window_times(w, contact.attrs) for w in ("startup", "steady")})
-           + " " + _start_text(text.START, start, contact.attrs), ""]
+           text.WINDOWS_PARAGRAPH.format(**{w: text.window_times(w, contact.attrs) for w in ("startup", "steady")})
+           + " " + text.start_text(text.START, start, contact.attrs), ""]
     md += _window_table(by_window, contact.attrs)
     md += ["", "### Where we differ from the paper, and why", ""]
     return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"]), by_window, start) + [""]
