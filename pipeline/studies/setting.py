@@ -88,9 +88,8 @@ def measure(scene, setting: Setting, n: int, seed: int = 0) -> dict:
 
 def load_compiled_kernels(scene, settings, seed: int = 0) -> None:
     """Run one realisation of the cheapest (largest-step) setting whose level calls compiled kernels, untimed,
-    so that no timed setting pays numba's compile (minutes on an empty cache) or its load from the cache:
-    a first contact setting once cost 31 s per realisation against 0.13 s when its rerun found the kernel
-    loaded, and the cheapest setting within the tolerance changed between the two."""
+    so that no timed setting pays numba's compile (minutes on an empty cache) or its load from the cache,
+    which would make the first such setting look dear and could change the recommended one."""
     from rss6core import level_kernels
     compiled = [s for s in settings if level_kernels(s.model)]
     if compiled:
