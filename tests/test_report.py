@@ -119,6 +119,18 @@ def test_report_reuses_its_files_and_names_a_corrupt_one(configs, report, tmp_pa
         write_report([str(configs / "smoke.toml")], copy, ReportPlan(3, 2))
 
 
+@pytest.mark.slow   # reuses the report fixture's runs, then grows them by one realisation
+def test_a_report_after_a_larger_n_reads_the_first_n_as_its_command_says(configs, report, tmp_path):
+    """-n 4 grows the report's ensembles; -n 3 again wrote a document whose header said -n 3 and whose runs
+    said 4 finished. It now reads the first -n (--family-n) realisations: the -n 3 document again."""
+    copy = tmp_path / "grown"
+    shutil.copytree(report, copy)
+    argv = ["report", str(configs / "smoke.toml"), "-o", str(copy), "--family-n", "2"]
+    assert main(argv + ["-n", "4"]) == 0
+    assert main(argv + ["-n", "3"]) == 0
+    assert (copy / "results.md").read_text() == (report / "results.md").read_text().replace(str(report), str(copy))
+
+
 def test_kept_studies_are_the_text_from_the_marker_on(tmp_path):
     from pipeline.studies.report import KEPT_MARKER, kept_studies
     path = tmp_path / "results.md"

@@ -414,8 +414,12 @@ def _explanations(scene, st: dict, dt: float, by_window, start: str) -> list[str
 
 
 def _open_scene(config, data: Path, plan: ReportPlan, client) -> dict:
-    """The scene's files by role, run where missing (on ``client``) and opened into memory."""
-    return {k: (_open_run(p) if _one_run(k) else open_ensemble(p))
+    """The scene's files by role, run where missing (on ``client``) and opened into memory; of an ensemble
+    that an earlier, larger -n (--family-n) grew, only the first -n realisations, as the command says."""
+    def first(role, ds):
+        n = plan.family_n if role.startswith("only") else plan.n
+        return ds.sel(realization=ds["realization"].values < n)
+    return {k: (_open_run(p) if _one_run(k) else first(k, open_ensemble(p)))
             for k, p in run_scene(config, data, plan, client).items()}
 
 
