@@ -275,6 +275,8 @@ def _steady_after(value: float, duration: float, duration_key: str) -> float:
         raise SceneError(f"[simulation] steady_after_s: must be shorter than {duration_key} "
                          f"= {duration!r}, got {value!r}")
     return value
+
+
 def _check_startup_samples(settle: float, steady_after: float, dt: float) -> None:
     """SceneError if a start-up window [settle, steady_after) is asked for (settle < steady_after) but holds
     no sample k dt of the output grid (its maxima would be NaN in every finished realisation); the same

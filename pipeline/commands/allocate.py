@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 from rss6core import MODELS, model_level
 
@@ -60,11 +59,11 @@ def _specs(texts):
 
 def _request(args, level, fits: list[str]) -> dict:
     """What the allocation folder's answer depends on (:func:`claimed_output_folder`)."""
-    from ..files.outputs import text_identity
+    from ..files.outputs import sha256, text_identity
     return {"scene": text_identity(level.scene.source_text), "--model": level.model, "--spec": args.spec,
             "--per-joint": args.per_joint, "--classes": fits, "-n": args.n, "--seed": args.seed,
             "--confidence": args.confidence, "--max-ensembles": args.max_ensembles,
-            "--costs": text_identity(Path(args.costs).read_bytes()) if args.costs else None}
+            "--costs": sha256(args.costs) if args.costs else None}
 
 
 def main(args) -> int:

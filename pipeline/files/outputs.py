@@ -73,7 +73,6 @@ def claimed_output_folder(folder: Path, command: str, request: dict, answers: tu
     before writing anything in the folder takes the record (and a folder it made) back."""
     folder = Path(folder)
     path = folder / f"rss6_{command}_request.json"
-    request = json.loads(json.dumps(request))   # as it reads back (tuples as lists)
     if path.exists():
         _refuse_another_request(folder, path, command, request)
         yield folder
@@ -130,10 +129,10 @@ def _said(value) -> str:
     return str(value)
 
 
-def text_identity(text: str | bytes) -> str:
-    """What a request record holds of a scene's or an input file's text: its sha256 (any edit is
-    another request)."""
-    return hashlib.sha256(text.encode() if isinstance(text, str) else text).hexdigest()
+def text_identity(text: str) -> str:
+    """What a request record holds of a scene's text: its sha256 (any edit is another request; an input
+    file's: :func:`sha256` of its path)."""
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def check_new_output(path, command: str, create_dirs: bool = False, option: str = "-o") -> Path:
