@@ -22,7 +22,7 @@ from pipeline.analysis.resolution import CONTACT_ACCURACY
 from pipeline.analysis.run_plots import run_figures
 from pipeline.studies.report import LEVELS, error_figure, rigid_figure
 from pipeline.analysis.estimators import MIN_N_MEAN, estimates, min_n_for_quantile, running_mean_interval
-from pipeline.analysis.stats import ensemble_stats
+from pipeline.analysis.stats import ensemble_stats, in_window
 from pipeline.files.opening import open_ensemble
 from pipeline.files.records import window_masks
 from pipeline.files.writing import write_netcdf
@@ -619,6 +619,33 @@ def test_convergence_counts_are_integers_and_the_running_mean_shows_from_n_1(ful
         assert_legible({"few": few["convergence_velocity.png"], "outlier": figs["convergence_displacement.png"]})
     finally:
         for fig in list(few.values()) + list(figs.values()):
+            plt.close(fig)
+
+
+def test_the_interval_given_at_one_n_only_is_drawn_where_its_legend_says(full_ensemble):
+    """n = MIN_N_MEAN realisations: the running mean's interval exists at the last n only, so it is an
+    error bar spanning running_mean_interval's bounds there (a band over one n has no width), and the
+    legend's entry names it; at n = MIN_N_MEAN - 1 neither is drawn."""
+    ds = open_ensemble(full_ensemble).load()
+    figs = ensemble_figures(ds.isel(realization=slice(0, MIN_N_MEAN)))
+    fewer = ensemble_figures(ds.isel(realization=slice(0, MIN_N_MEAN - 1)))
+    try:
+        peak = in_window(ds, "whole")["max_abs_error"].sel(quantity="acceleration").transpose(
+            "realization", "direction").values[:MIN_N_MEAN]
+        units = family_units("acceleration", peak)
+        for k, ax in enumerate(figs["convergence_acceleration.png"].axes[:6]):
+            bars = [c for c in ax.containers if c.__class__.__name__ == "ErrorbarContainer"]
+            assert len(bars) == 1, ax.get_title()
+            segment = bars[0].lines[2][0].get_segments()[0]
+            _, (lo, hi) = running_mean_interval(peak[:, k] * units[ax.get_title()][0], 0.95)
+            assert segment[0, 0] == segment[1, 0] == MIN_N_MEAN
+            np.testing.assert_allclose(sorted(segment[:, 1]), [lo[-1], hi[-1]], rtol=1e-12)
+        legend = [t.get_text() for t in figs["convergence_acceleration.png"].axes[0].get_legend().get_texts()]
+        assert sorted(legend) == ["95 % interval", "running mean"]
+        for ax in fewer["convergence_acceleration.png"].axes[:6]:
+            assert not ax.containers and not ax.collections
+    finally:
+        for fig in list(figs.values()) + list(fewer.values()):
             plt.close(fig)
 
 

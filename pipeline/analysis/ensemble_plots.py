@@ -164,9 +164,7 @@ def _convergence(ds, q: str, finished, confidence: float = CONFIDENCE):
         f, unit = units[d]
         mean, (lo, hi) = running_mean_interval(peak[:, k] * f, confidence)
         has = np.isfinite(lo) & np.isfinite(hi) & iid
-        if has.any():
-            ax.fill_between(n[has], lo[has], hi[has], alpha=0.3, lw=0,
-                            label=f"{100 * confidence:g} % interval")
+        _interval(ax, n[has], mean[has], lo[has], hi[has], f"{100 * confidence:g} % interval")
         ax.plot(n, mean, lw=1.2, marker="." if n.size <= 30 else None, label="running mean")
         ax.set(xlabel="realisations n", ylabel=f"mean max |{d} error| [{unit}]", title=d)
         ax.set_xlim(0.5, n[-1] + 0.5)
@@ -176,6 +174,16 @@ def _convergence(ds, q: str, finished, confidence: float = CONFIDENCE):
         ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))   # counts
     axes[0].legend(fontsize=8, loc="best")
     return fig
+
+
+def _interval(ax, n, mean, lo, hi, label: str) -> None:
+    """The running mean's interval where it is given: a band over two or more n, an error bar at a
+    single n (the last, when n = MIN_N_MEAN), where a band would have no width to show."""
+    if n.size >= 2:
+        ax.fill_between(n, lo, hi, alpha=0.3, lw=0, label=label)
+    elif n.size == 1:
+        ax.errorbar(n, mean, yerr=[mean - lo, hi - mean], fmt="none", ecolor="C0", alpha=0.6, capsize=4,
+                    lw=2, label=label)
 
 
 def _convergence_range(mean, lo, hi) -> tuple[float, float]:
