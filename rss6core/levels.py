@@ -85,7 +85,8 @@ def check_uncertain_level(scene, model: str) -> None:
     if level.contact_joints and per_link:
         raise ValueError(f"[uncertain.{per_link[0]}] each = \"link\": the contact level takes one shared draw of "
                          "a link material (its kernel holds one crank and one rod matrix); set each = \"one\"")
-    if scene.uncertain and scene.simulation.quasi_static_eccentricity == "reaction" and level.draws_clearances:
+    closure = level.draws_clearances and not level.elastic_links   # the level that reads quasi_static_eccentricity
+    if scene.uncertain and scene.simulation.quasi_static_eccentricity == "reaction" and closure:
         raise ValueError("the quasi-static level's reaction eccentricities cannot take [uncertain.*] inputs "
                          "yet; set [simulation] quasi_static_eccentricity = \"drawn\"")
 

@@ -5,7 +5,9 @@ from scipy import stats
 
 from rss6core import SceneError, parse_scene
 from rss6core.clearance import realization_rng
+from rss6core.levels import MODEL_LEVELS, check_uncertain_level
 from rss6core.uncertain import TAIL, draw_inputs, input_rng, inputs_from_uniforms
+from pipeline.scenes.variant import scene_variant
 
 
 def _with(text: str, tables: str):
@@ -20,6 +22,18 @@ law = "uniform"
 low_m = -0.1e-3
 high_m = 0.1e-3
 """
+
+
+def test_reaction_eccentricities_with_uncertain_inputs_are_refused_only_where_they_are_read(paper_text):
+    """quasi_static_eccentricity = "reaction" is read by the quasi-static level alone, which cannot yet take
+    it with [uncertain.*] inputs: refused there in one line naming the key; every other level takes the scene
+    (the paper and contact levels were refused too, for a key they never read)."""
+    text = scene_variant(paper_text, {"simulation": {"quasi_static_eccentricity": "reaction"}}, add=True)
+    scene = _with(text, LENGTHS)
+    with pytest.raises(ValueError, match='quasi_static_eccentricity = "drawn"'):
+        check_uncertain_level(scene, "quasi-static")
+    for model in set(MODEL_LEVELS) - {"quasi-static"}:
+        check_uncertain_level(scene, model)
 
 
 def test_a_table_is_read_with_its_law_and_draw_count(paper_text):
