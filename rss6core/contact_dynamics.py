@@ -48,7 +48,7 @@ from .link_reduction import craig_bampton, reduce_pair
 from .contact_kernel import (ChunkArrays, Frame, Joints, Law, Layout, Levels, Records, Settings, State, System,
                              Out, advance_chunk, kernel_compiling, make_scratch, make_work, newton_step)
 from .contact_options import MAX_CONTACT_REFINEMENTS, TOL_DISPLACEMENT, TOL_VELOCITY
-from .contact_laws import coulomb_friction, hertz_stiffness, lankarani_nikravesh, poisson_ratio
+from .contact_laws import coulomb_friction, joint_stiffness, lankarani_nikravesh
 from .dynamics import inverse_dynamics, platform_inertia_world, rod_angular_motion
 from .elastic import quasi_static_state
 from .results import PEAK_WINDOWS, ContactBatch, time_grid
@@ -227,16 +227,11 @@ def _joints(scene, draws, laws=None) -> _Joints:
         if np.any(stack[name] <= 0.0):
             raise ValueError(f"the contact level needs positive clearances; [clearance] {key} is "
                              "zero (use the elastic level for ideal joints)")
-    ct, mat = scene.contact, scene.material
-    nu = poisson_ratio(mat.youngs_modulus, mat.shear_modulus)
-    E = mat.youngs_modulus
-
-    def k(r, size):
-        return ct.stiffness_scale * hertz_stiffness(r, r + size, E, nu, E, nu)
-
+    ct = scene.contact
     return _Joints(stack["radial_size"], stack["axial_size"], stack["size_C"], stack["size_B"],
-                   k(ct.journal_radius, stack["radial_size"]), k(ct.sphere_radius, stack["size_C"]),
-                   k(ct.sphere_radius, stack["size_B"]), stack["e_A"], stack["e_C"], stack["e_B"],
+                   joint_stiffness(scene, ct.journal_radius, stack["radial_size"]),
+                   joint_stiffness(scene, ct.sphere_radius, stack["size_C"]),
+                   joint_stiffness(scene, ct.sphere_radius, stack["size_B"]), stack["e_A"], stack["e_C"], stack["e_B"],
                    np.stack([law.friction for law in laws]), np.stack([law.restitution for law in laws]))
 
 

@@ -35,6 +35,15 @@ def hertz_stiffness(radius_inner, radius_outer, E_inner: float, nu_inner: float,
         return 4.0 / (3.0 * sigma) * np.sqrt(r_in * r_out / (r_out - r_in))
 
 
+def joint_stiffness(scene, radius: float, size):
+    """The scene's K_N of eq. 17 (N/m^1.5) for a ball or journal of ``radius`` (m) in a clearance of
+    ``size`` (m): :func:`hertz_stiffness` of two bodies of the scene's material, times its
+    ``[contact] stiffness_scale``; the one contact stiffness of every level."""
+    mat = scene.material
+    nu, E = poisson_ratio(mat.youngs_modulus, mat.shear_modulus), mat.youngs_modulus
+    return scene.contact.stiffness_scale * hertz_stiffness(radius, radius + size, E, nu, E, nu)
+
+
 def lankarani_nikravesh(delta, delta_dot, impact_speed, stiffness, exponent: float,
                         restitution: float):
     """Normal force F_N (N) of eq. 17 and its derivatives dF/d(delta), dF/d(delta_dot).

@@ -38,7 +38,7 @@ import numpy as np
 from .assembly import link_frames
 from .clearance import (SIZE_UNIFORMS, ClearanceDraw, clearances_from_uniforms, draw_clearances,
                         eccentricities_inside, realization_rng, uniform_dimension)
-from .contact_laws import hertz_stiffness, lankarani_nikravesh, poisson_ratio
+from .contact_laws import joint_stiffness, lankarani_nikravesh
 from .kinematics import rigid_motion
 from .quasi_static import CENTRAL_PAD, closure_matrix, padded_grid, time_derivatives
 from .results import SimulationResult
@@ -98,13 +98,11 @@ def paper_contact_forces(scene, draw, dt: float, restitution=None) -> np.ndarray
     if _inside(draw, w, size):
         return np.zeros((len(draw.e_A) - 2 * CENTRAL_PAD, len(size)))
     e_r = draw.e_A - np.einsum("tli,li->tl", draw.e_A, w)[..., None] * w
-    ct, mat = scene.contact, scene.material
-    nu = poisson_ratio(mat.youngs_modulus, mat.shear_modulus)
-    E = mat.youngs_modulus
+    ct = scene.contact
     rho = np.concatenate([np.linalg.norm(e_r, axis=-1), np.linalg.norm(draw.e_C, axis=-1),
                           np.linalg.norm(draw.e_B, axis=-1)], -1)
     radius = np.repeat([ct.journal_radius, ct.sphere_radius, ct.sphere_radius], 6)
-    K = hertz_stiffness(radius, radius + size, E, nu, E, nu)
+    K = joint_stiffness(scene, radius, size)
     rate = np.gradient(rho, dt, axis=0)[CENTRAL_PAD:-CENTRAL_PAD]
     rho = rho[CENTRAL_PAD:-CENTRAL_PAD]
     impact = np.maximum(np.max(rate, axis=0), ct.impact_speed_floor)

@@ -62,7 +62,7 @@ def _eq17(scene, draw, dt):
     ct, mat = scene.contact, scene.material
     nu = poisson_ratio(mat.youngs_modulus, mat.shear_modulus)
     radius = np.repeat([ct.journal_radius, ct.sphere_radius, ct.sphere_radius], 6)
-    K = hertz_stiffness(radius, radius + size, mat.youngs_modulus, nu, mat.youngs_modulus, nu)
+    K = ct.stiffness_scale * hertz_stiffness(radius, radius + size, mat.youngs_modulus, nu, mat.youngs_modulus, nu)
     rate = np.gradient(rho, dt, axis=0)[CENTRAL_PAD:-CENTRAL_PAD]
     rho = rho[CENTRAL_PAD:-CENTRAL_PAD]
     impact = np.maximum(rate.max(axis=0), ct.impact_speed_floor)
@@ -83,6 +83,19 @@ def test_paper_contact_forces_skip_eq17_only_where_nothing_penetrates(paper, sca
     np.testing.assert_array_equal(got, want)
     assert (want[:, 6:12] > 0).all() == (scale is not None and scale > 1.0)
     assert (want[:, 6:12] > 0).any() == (scale is not None and scale >= 1.0)   # on the wall: some
+
+
+def test_paper_contact_forces_take_the_scenes_stiffness_scale(paper):
+    """[contact] stiffness_scale = 2 doubles eq. 17's forces of spherical joints pushed 2 % beyond their
+    clearance, to the last bit (K enters linearly; a power of two scales exactly): the paper level's
+    contact stiffness is the contact level's (contact_laws.joint_stiffness), scale and all."""
+    stiff = dataclasses.replace(paper, contact=dataclasses.replace(paper.contact, stiffness_scale=2.0))
+    draw = paper_draw(paper, 0, 2, 200)
+    unit = draw.e_C / np.linalg.norm(draw.e_C, axis=-1, keepdims=True)
+    draw = dataclasses.replace(draw, e_C=unit * (1.02 * draw.size_C)[:, None])
+    plain = paper_contact_forces(paper, draw, 1e-3)
+    assert (plain[:, 6:12] > 0).all()
+    np.testing.assert_array_equal(paper_contact_forces(stiff, draw, 1e-3), 2.0 * plain)
 
 
 def test_window_reductions_of_scattered_samples_are_those_of_the_samples():
