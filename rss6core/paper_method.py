@@ -26,7 +26,7 @@ Where the method is ill-posed (measured in the tests and the README):
   like 1/dt and the acceleration error like 1/dt^2 as the step is refined, so
   those statistics measure the time step, not the robot;
 - the length-dependent matrices of eq. 34 (rho(t) = M_l / (l_c A)) change
-  stiffness by at most 3 dl/l (0.7 % for 0.25 mm on the 216 mm crank), which
+  stiffness by at most 3 dl/l (0.35 % for 0.25 mm on the 216 mm crank), which
   moves the elastic error by well under a micrometre; they are not rebuilt.
 """
 from __future__ import annotations
