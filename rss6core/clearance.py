@@ -201,8 +201,9 @@ UNIFORM_BLOCKS = SIZE_BLOCKS + ("A_radial_magnitude", "A_radial_angle", "A_axial
 
 
 def uniform_dimension(steps: int | None = None, scene=None) -> int:
-    """Most uniforms one draw uses: 4 x 6 sizes, then per joint and step radial, angle, axial,
-    and magnitude and two direction angles for C and for B (fewer where a law is degenerate); with
+    """Most uniforms one draw uses: 4 x 6 sizes, then the nine blocks of :data:`UNIFORM_BLOCKS` (A's
+    radial magnitude, angle and axial, C's and B's magnitude and two direction angles), each over every
+    step and leg (fewer where a law is degenerate); with
     a ``scene`` that has uncertain inputs, theirs after these (rss6core/uncertain.py)."""
     extra = 0 if scene is None else scene.uncertain.dimension
     return SIZE_UNIFORMS + 9 * 6 * (1 if steps is None else steps) + extra
