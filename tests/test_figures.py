@@ -163,6 +163,28 @@ def test_study_figures_are_legible():
     assert_legible(figs)
 
 
+def test_a_setting_with_failed_realisations_is_a_cross_off_the_front():
+    """quasi-static 1 ms with a failed realisation (undominated in cost otherwise): drawn as a cross, left off
+    the Pareto front's line and its side list, and the legend says why; the recommendation's speed-up is
+    printed to a tenth, as the command prints it."""
+    ds = _tradeoff_dataset()
+    ds["failed"].values[1] = 1
+    rec = recommend(ds, 0.05)
+    fig = tradeoff_figure(ds, 0.05, rec)
+    try:
+        ax = fig.axes[0]
+        front = ax.get_lines()[0]
+        assert front.get_label() == "Pareto front"
+        assert 0.02 not in front.get_xdata().tolist() and 0.01 in front.get_xdata().tolist()
+        assert "quasi-static 1 ms" not in fig.axes[1].texts[0].get_text()
+        texts = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert "some realisations failed (off the front)" in texts
+        assert f"cheapest within tolerance ({rec['speedup_vs_reference']:.1f}x cheaper)" in texts
+        assert_legible({"failed": fig})
+    finally:
+        plt.close(fig)
+
+
 def test_the_check_finds_overlaps_and_text_outside():
     """The helper itself: two texts on one spot, and a title far wider than the canvas."""
     fig, ax = plt.subplots(figsize=(4, 3))

@@ -110,6 +110,9 @@ def test_pareto_front_keeps_only_undominated_settings():
     cost = np.array([1.0, 2.0, 3.0, 4.0, 0.5])
     error = np.array([0.5, 0.6, 0.1, 0.05, 0.9])
     assert pareto_front(cost, error).tolist() == [4, 0, 2, 3]
+    # a setting with failed realisations (the cheapest, or the most accurate) is on no front
+    assert pareto_front(cost, error, [False, True, True, True, True]).tolist() == [4, 1, 2, 3]
+    assert pareto_front(cost, error, [True, True, True, False, True]).tolist() == [4, 0, 2]
 
 
 def test_relative_error_floor_and_recommendation():

@@ -187,12 +187,15 @@ def _attributes(scene, reference: Setting, check: Setting, fine: dict, n: int, s
             "settle_time_s": scene.simulation.settle_time}
 
 
-def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
-    """Indices of the settings no other setting beats in both cost and error, by cost."""
+def pareto_front(cost: np.ndarray, error: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
+    """Indices of the settings no other setting beats in both cost and error, by cost; only ``valid``
+    ones (default all) take part: a setting some of whose realisations failed has neither a cost nor
+    an error of the whole ensemble."""
     order = np.argsort(cost, kind="stable")
+    valid = np.ones(len(cost), bool) if valid is None else np.asarray(valid, bool)
     front, best = [], np.inf
     for i in order:
-        if error[i] < best:
+        if valid[i] and error[i] < best:
             front.append(i)
             best = error[i]
     return np.array(front, int)
@@ -265,17 +268,23 @@ def _plot_tradeoff(ds, path, tolerance, rec) -> None:
 
 
 def tradeoff_figure(ds, tolerance, rec):
-    """Cost against error of every setting; the Pareto front numbered and named in a side list."""
+    """Cost against error of every setting (a cross where some realisations failed); the Pareto front of
+    the others numbered and named in a side list."""
     from ..analysis.plot_common import plt   # the Agg backend, set once there
     cost = ds["seconds_per_realization"].values
     err = np.maximum(ds["max_relative_error"].values, 1e-6)
     labels, models = ds["setting"].values, ds["model"].values
     fig, (ax, side) = plt.subplots(1, 2, figsize=(13, 6.5), constrained_layout=True,
                                    gridspec_kw={"width_ratios": [2.2, 1]})
+    whole = ds["failed"].values == 0
     for m in dict.fromkeys(models):
-        sel = models == m
+        sel = (models == m) & whole
         ax.scatter(cost[sel], err[sel], color=_COLOURS.get(m, "grey"), label=m, zorder=3)
-    front = pareto_front(cost, err)
+        ax.scatter(cost[(models == m) & ~whole], err[(models == m) & ~whole], color=_COLOURS.get(m, "grey"),
+                   marker="x", zorder=3)
+    if not whole.all():
+        ax.scatter([], [], color="grey", marker="x", label="some realisations failed (off the front)")
+    front = pareto_front(cost, err, whole)
     ax.plot(cost[front], err[front], "k--", lw=1, label="Pareto front", zorder=2)
     ax.axhline(tolerance, color="grey", lw=0.8, ls=":", label=f"tolerance {100 * tolerance:g} %")
     ref = labels == ds.attrs["reference"]
@@ -284,7 +293,7 @@ def tradeoff_figure(ds, tolerance, rec):
     if rec["setting"]:
         i = labels == rec["setting"]
         ax.scatter(cost[i], err[i], s=160, facecolor="none", edgecolor="k", lw=1.5,
-                   label=f"cheapest within tolerance ({rec['speedup_vs_reference']:.0f}x cheaper)",
+                   label=f"cheapest within tolerance ({rec['speedup_vs_reference']:.1f}x cheaper)",
                    zorder=5)
     ax.set(xscale="log", yscale="log", xlabel="wall time per realisation, batched [s]",
            ylabel="max relative error of the ensemble statistics [1]")
