@@ -95,6 +95,18 @@ def test_per_joint_command_writes_a_joint_table(configs, tmp_path, capsys):
     assert out["total_cost"] == pytest.approx(sum(c["cost_per_joint"] for c in out["classes"]))
 
 
+def test_a_per_joint_allocation_after_a_per_family_one_has_a_default_folder_of_its_own(configs, tmp_path,
+                                                                                       monkeypatch, capsys):
+    """The README's two allocate commands one after the other, without -o: the per-joint one was refused as
+    another request in the per-family one's default folder; it now writes allocate_SCENE_MODEL_per-joint."""
+    monkeypatch.chdir(tmp_path)
+    argv = ["allocate", str(configs / "paper.toml"), "--spec", SPEC, "-n", str(N), "--classes", "H8/f7,H10/d10"]
+    assert main(argv) == 0 and main(argv + ["--per-joint"]) == 0
+    capsys.readouterr()
+    assert (tmp_path / "allocate_paper_quasi-static" / "allocation.nc").is_file()
+    assert (tmp_path / "allocate_paper_quasi-static_per-joint" / "allocation.nc").is_file()
+
+
 @pytest.mark.parametrize("model", ["paper", "contact"])
 def test_per_joint_is_refused_at_the_greedy_levels(configs, tmp_path, capsys, model):
     code = main(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "--per-joint", "--model", model,

@@ -39,7 +39,7 @@ def add_parser(sub) -> None:
     p.add_argument("-n", type=realisations, default=200,
                    help="realisations of the search and of the verification ensemble (default 200)")
     p.add_argument("-o", "--output", help="folder of the allocation file, scene and verification ensemble "
-                                          "(default: allocate_SCENE_MODEL); rerunning the same request resumes the "
+                                          "(default: allocate_SCENE_MODEL, with --per-joint allocate_SCENE_MODEL_per-joint); rerunning the same request resumes the "
                                           "ensemble, another request is refused")
     add_parents(p)
     add_seed(p)
@@ -88,7 +88,8 @@ def main(args) -> int:
         raise OptionError(f"--classes {args.classes!r}: names no fit; give ISO 286 fits, e.g. H7/g6,H9/e9")
     options = class_options(level.scene, fits, args.costs)
     check_request(level.ensemble_spec(args.seed), specs, args.n, args.confidence)
-    folder = check_output_folder(args.output or f"allocate_{output_stem(args.config)}_{level.model}", args.parents)
+    default = f"allocate_{output_stem(args.config)}_{level.model}" + ("_per-joint" if args.per_joint else "")
+    folder = check_output_folder(args.output or default, args.parents)
     answers = ("allocation.nc", "*_allocated.toml")
     with claimed_output_folder(folder, "allocate", _request(args, level, fits), answers):
         warn_oversubscription(cluster.workers, None)
