@@ -387,7 +387,8 @@ def _compute(spec: EnsembleSpec, chunks: list, manifest: PartsManifest, workers:
 def run_ensemble(spec: EnsembleSpec, n: int, output, workers: int = 2, scheduler: str | None = None,
                  chunk: int | None = None, progress: bool = True,
                  worker_timeout: float = WORKER_TIMEOUT_S, client=None):
-    """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset. ``client``:
+    """Run realisations 0..n-1 not yet stored in ``output``; return the merged Dataset, every realisation
+    the file holds (more than n where an earlier run stored more: ``.isel(realization=slice(n))``). ``client``:
     an open dask client to reuse (:func:`dask_client`), else a cluster is started for this call."""
     return ensemble(spec, n, output, workers, scheduler, chunk, progress,
                     worker_timeout=worker_timeout, client=client).dataset
