@@ -16,7 +16,7 @@ def test_readme_python_api_example_runs(tmp_path):
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "q95" in proc.stdout and "Traceback" not in proc.stderr
-    assert (tmp_path / "smoke_qs.nc").is_file() and not (tmp_path / "smoke_qs.nc.parts").exists()
+    assert (tmp_path / "smoke_api.nc").is_file() and not (tmp_path / "smoke_api.nc.parts").exists()
 
 
 def _block_after(text: str, marker: str) -> list[str]:
