@@ -7,7 +7,9 @@ argument: the tangential part of de + R omega x n, omega the ideal relative rota
 
 - the steady window's largest |acceleration error| per direction and its time;
 - per joint family, the legs whose sliding speed is inside eq. 18's ramp [v0, v1] (neither stuck
-  nor fully sliding) in the 20 ms before the ry peak, and the times they entered it;
+  nor fully sliding) in the 100 ms (LOOK_BACK) before the ry peak, and the times they entered it;
+- the joints losing or regaining contact, and the spherical joints whose sliding direction turns
+  fastest, in the same 100 ms;
 - the dominant frequencies of the ry and z acceleration error over 0.9-1.1 s (FFT of the 1 ms
   output, the 10 ms running mean removed, as docs/accelerations.md's burst amplitude) against the
   lowest natural frequencies of the elastic robot at t = 1 s with the joints rigid.

@@ -67,8 +67,8 @@ def main() -> None:
     args = p.parse_args()
     folder = Path(args.output or tempfile.mkdtemp(prefix="allocation_contact_")) / "allocate"
     cmd = ["allocate", "paper", "--model", "contact", "--spec", args.spec, "-n", str(args.n), "--max-ensembles",
-           str(args.max_ensembles), "--workers", str(args.workers), "--json", "-o", str(folder)]
-    print(f"rss6 {' '.join(cmd[:5])} '{args.spec}' {' '.join(cmd[6:-2])} -o DIR")
+           str(args.max_ensembles), "--workers", str(args.workers), "--json", "--parents", "-o", str(folder)]
+    print(f"rss6 {' '.join(cmd[:5])} '{args.spec}' {' '.join(cmd[6:-3])} -o DIR")
     print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, commit {_commit()}, "
           f"{os.cpu_count()} CPUs")
     load = os.getloadavg()[0]

@@ -32,6 +32,8 @@ def relative_differences(a: xr.Dataset, b: xr.Dataset) -> dict:
 
 def main(argv):
     from pipeline import labelled
+    if len(argv) != 2 or argv[0].startswith("-"):
+        raise SystemExit(__doc__)
     with xr.open_dataset(argv[0]) as a, xr.open_dataset(argv[1]) as b:
         diffs = relative_differences(labelled(a), labelled(b))
         only = sorted(set(a.variables) ^ set(b.variables))

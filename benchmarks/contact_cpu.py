@@ -24,6 +24,8 @@ from pathlib import Path
 for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[var] = "1"  # before numpy is imported: one core, as an ensemble worker has
 
+import numpy as np  # noqa: E402
+
 from rss6core import contact_dynamics, load_scene  # noqa: E402
 from rss6core.models import simulate_batch  # noqa: E402
 
@@ -35,7 +37,7 @@ class _Meter:
 
     def __init__(self):
         self.cpu = {"steps": 0.0, "precompute": 0.0, "fill": 0.0}
-        self.batch = None
+        self.batches = []       # every batch the steppers hand over (a realised robot's scene: one each)
 
     def timed(self, key, method):
         def wrapper(*args, **kwargs):
@@ -56,8 +58,8 @@ class _Meter:
         handover = contact_dynamics.ContactStepper.batch
 
         def keep(stepper):
-            self.batch = handover(stepper)
-            return self.batch
+            self.batches.append(handover(stepper))
+            return self.batches[-1]
         contact_dynamics.ContactStepper.batch = keep
 
 
@@ -66,23 +68,24 @@ def measure(realizations: int, config=CONFIG) -> dict:
     meter = _Meter()
     meter.install()
     simulate_batch(scene, "contact", realizations=[0])          # warm-up: numba's cache, imports
-    meter.cpu = dict.fromkeys(meter.cpu, 0.0)
+    meter.cpu, meter.batches = dict.fromkeys(meter.cpu, 0.0), []
     start = time.process_time()
     simulate_batch(scene, "contact", realizations=range(realizations))
     total = time.process_time() - start
-    b = meter.batch
+    steps, refined, iterations = (np.concatenate([getattr(b, f) for b in meter.batches])
+                                  for f in ("steps", "refined", "iterations"))
     fill = meter.cpu.pop("fill")
     meter.cpu["steps"] -= fill
     meter.cpu["precompute"] += fill
-    attempts = int(b.steps.sum() + b.refined.sum())
+    attempts = int(steps.sum() + refined.sum())
     return {"realizations": realizations, "cpu_s": total,
             "steps_cpu_s_per_realization": meter.cpu["steps"] / realizations,
             "precompute_cpu_s_per_batch": meter.cpu["precompute"],
             "other_cpu_s": total - meter.cpu["steps"] - meter.cpu["precompute"],
-            "accepted_steps": b.steps.tolist(), "refused_attempts": b.refined.tolist(),
-            "newton_updates": b.iterations.tolist(),
-            "newton_updates_per_attempt": float(b.iterations.sum() / attempts),
-            "status": sorted(set(b.status))}
+            "accepted_steps": steps.tolist(), "refused_attempts": refined.tolist(),
+            "newton_updates": iterations.tolist(),
+            "newton_updates_per_attempt": float(iterations.sum() / attempts),
+            "status": sorted({s for b in meter.batches for s in b.status})}
 
 
 def main(argv=None) -> int:

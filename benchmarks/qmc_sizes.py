@@ -59,8 +59,8 @@ def main(argv=None) -> None:
                           flush=True)
     print(f"median n to reach the half-width in the worst direction ({len(args.seeds)} seeds, n = {args.n} each):")
     for statistic, target in TARGETS.items():
-        mc, qmc = (int(np.median(needed[s, statistic])) for s in ("mc", "qmc"))
-        print(f"  {statistic} +-{100 * target:g} %: mc {mc}, qmc {qmc} (qmc / mc {qmc / mc:.2f})")
+        mc, qmc = (float(np.median(needed[s, statistic])) for s in ("mc", "qmc"))   # nan: no interval at this n
+        print(f"  {statistic} +-{100 * target:g} %: mc {mc:.0f}, qmc {qmc:.0f} (qmc / mc {qmc / mc:.2f})")
 
 
 if __name__ == "__main__":

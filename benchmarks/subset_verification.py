@@ -40,7 +40,7 @@ def main() -> None:
     args = p.parse_args()
     reps, n = args.reps, args.n
     print(f"N = {n}, p0 = 0.1, {reps} runs per case (a run without an estimate counts as not covering)")
-    print(f"{'case':<22s}{'bias':>8s}{'CoV obs':>9s}{'CoV rep':>9s}{'cover':>7s}{'evals':>7s}"
+    print(f"{'case':<24s}{'bias':>8s}{'CoV obs':>9s}{'CoV rep':>9s}{'cover':>7s}{'evals':>7s}"
           "  cover (uncorrelated CoV)")
     for name, (response, d, truth) in cases().items():
         runs = [subset_simulation(response, d, 0.0, SubsetSettings(n, seed=s)) for s in range(reps)]
@@ -48,7 +48,7 @@ def main() -> None:
         # the interval rss6 prints from N = MIN_N_INTERVAL on, computed at every N (below it rss6 withholds it)
         cover = np.mean([lo <= truth <= up for lo, up in (lognormal_interval(r.pf, r.cov_upper, 0.95) for r in runs)])
         bare = np.mean([lo <= truth <= up for lo, up in (lognormal_interval(r.pf, r.cov, 0.95) for r in runs)])
-        print(f"{name:<22s}{pf.mean() / truth - 1:>+8.3f}{pf.std(ddof=1) / truth:>9.3f}"
+        print(f"{name:<24s}{pf.mean() / truth - 1:>+8.3f}{pf.std(ddof=1) / truth:>9.3f}"
               f"{np.mean([r.cov for r in runs]):>9.3f}{cover:>7.3f}"
               f"{np.mean([r.n_evaluations for r in runs]):>7.0f}  {bare:.3f}")
 
