@@ -35,9 +35,9 @@ def hertz_stiffness(radius_inner, radius_outer, E_inner: float, nu_inner: float,
         return 4.0 / (3.0 * sigma) * np.sqrt(r_in * r_out / (r_out - r_in))
 
 
-def joint_stiffness(scene, radius: float, size):
-    """The scene's K_N of eq. 17 (N/m^1.5) for a ball or journal of ``radius`` (m) in a clearance of
-    ``size`` (m): :func:`hertz_stiffness` of two bodies of the scene's material, times its
+def joint_stiffness(scene, radius, size):
+    """The scene's K_N of eq. 17 (N/m^1.5) for balls or journals of ``radius`` (m) in clearances of
+    ``size`` (m; arrays broadcast): :func:`hertz_stiffness` of two bodies of the scene's material, times its
     ``[contact] stiffness_scale``; the one contact stiffness of every level."""
     mat = scene.material
     nu, E = poisson_ratio(mat.youngs_modulus, mat.shear_modulus), mat.youngs_modulus

@@ -39,8 +39,9 @@ def add_parser(sub) -> None:
     p.add_argument("-n", type=realisations, default=200,
                    help="realisations of the search and of the verification ensemble (default 200)")
     p.add_argument("-o", "--output", help="folder of the allocation file, scene and verification ensemble "
-                                          "(default: allocate_SCENE_MODEL, with --per-joint allocate_SCENE_MODEL_per-joint); rerunning the same request resumes the "
-                                          "ensemble, another request is refused")
+                                          "(default: allocate_SCENE_MODEL, with --per-joint "
+                                          "allocate_SCENE_MODEL_per-joint); rerunning the same request resumes "
+                                          "the ensemble, another request is refused")
     add_parents(p)
     add_seed(p)
     add_confidence(p, "confidence of the one-sided bounds the specs are judged on, above 0.5", above=0.5)
