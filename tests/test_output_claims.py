@@ -110,3 +110,39 @@ def test_a_default_output_is_named_after_the_scene_file_not_its_name_key(configs
         assert main(["run", config, "-n", "2", "--model", "quasi-static", "--workers", "1"]) == 0
     capsys.readouterr()
     assert sorted(p.name for p in tmp_path.glob("*.nc")) == ["my_quasi-static.nc", "smoke_quasi-static.nc"]
+
+
+def test_a_figure_folder_holds_one_files_figures(tmp_path, capsys):
+    """rss6 plot wrote a --store full file's envelopes, then a summary file's histograms over the first's into
+    the same folder: a mixed set. Replotting the same (grown) file rewrites its figures; another file is refused
+    in one line, exit 2, the folder as it was; so is a folder of figures without their record."""
+    files = {}
+    for name, store in (("full", "full"), ("summary", "summary")):
+        files[name] = tmp_path / f"{name}.nc"
+        assert main(["run", "smoke", "-n", "2", "--model", "quasi-static", "--store", store,
+                     "-o", str(files[name])]) == 0
+    figures = tmp_path / "figures"
+    assert main(["plot", str(files["full"]), "-o", str(figures)]) == 0
+    held = {p.name: p.read_bytes() for p in figures.iterdir()}
+    assert "envelope_displacement.png" in held and "rss6_plot_request.json" in held
+    assert main(["run", "smoke", "-n", "3", "--model", "quasi-static", "--store", "full",
+                 "-o", str(files["full"])]) == 0                     # grown: the same file, replotted
+    assert main(["plot", str(files["full"]), "-o", str(figures)]) == 0
+    held = {p.name: p.read_bytes() for p in figures.iterdir()}
+    capsys.readouterr()
+    assert main(["plot", str(files["summary"]), "-o", str(figures)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"rss6 plot: error: {figures}: holds rss6 plot's outputs")
+    assert f"file {files['full']} there, {files['summary']} now" in err
+    assert {p.name: p.read_bytes() for p in figures.iterdir()} == held
+    (figures / "rss6_plot_request.json").unlink()
+    assert main(["plot", str(files["full"]), "-o", str(figures)]) == 2
+    assert "but no rss6_plot_request.json" in capsys.readouterr().err
+
+
+def test_a_refusal_names_the_option_that_named_the_folder(tmp_path):
+    claim_output_folder(tmp_path / "charts", "sensitivity", {"file": "/a.nc"}, ("sobol_*.png",))
+    with pytest.raises(EnsembleFileError, match=r"choose another --plots, or remove"):
+        with claimed_output_folder(tmp_path / "charts", "sensitivity", {"file": "/b.nc"}, ("sobol_*.png",),
+                                   "--plots"):
+            pass

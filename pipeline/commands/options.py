@@ -3,6 +3,7 @@ parser (no shared base parser to remove options from), with their value types an
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from rss6core import CONTACT_STARTS, INTEGRATORS, MAX_ELEMENTS_PER_LINK, MODELS, MODEL_LEVELS
 
@@ -106,7 +107,6 @@ def add_scene(p) -> None:
 def output_stem(config: str) -> str:
     """The SCENE of a default output name: the scene file's name without .toml, or the shipped scene's
     name (a copy of paper.toml saved as my.toml writes my_..., not paper_..., whatever its name key)."""
-    from pathlib import Path
     return Path(str(config)).stem
 
 
@@ -184,6 +184,12 @@ def add_study_arguments(p, output: str, n: int, tolerance_help: str) -> None:
     p.add_argument("-n", type=realisations, default=n, help=f"realisations per setting (default {n})")
     add_seed(p)
     p.add_argument("--tolerance", type=positive_float, default=0.05, help=f"{tolerance_help} (default 0.05)")
+
+
+def figure_request(path) -> dict:
+    """What a figure folder answers (:func:`claimed_output_folder`): the file it was drawn from, by its
+    absolute path (a grown ensemble is replotted into the same folder; another file needs its own)."""
+    return {"file": str(Path(path).resolve())}
 
 
 def study_request(scene, args, **extra) -> dict:

@@ -1,6 +1,7 @@
 """rss6 sensitivity: Sobol' indices of the error statistics by joint family (and joint), SALib."""
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -12,7 +13,7 @@ from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError
 from .messages import interrupted, warn_oversubscription
 from .options import (add_confidence, add_model, add_parents, add_scene, add_seed, add_window_choice, add_workers,
-                      int_at_least, output_stem)
+                      figure_request, int_at_least, output_stem)
 
 
 def add_parser(sub) -> None:
@@ -47,7 +48,7 @@ def main(args) -> int:
     import shutil
     from ..analysis.sensitivity_plots import plot_sensitivity
     from ..ensemble.run import parts_dir
-    from ..files.outputs import OutputLock, check_new_output, check_output_folder
+    from ..files.outputs import OutputLock, check_new_output, check_output_folder, claimed_output_folder
     from ..files.reading import load_netcdf
     from ..files.writing import write_netcdf
     from ..studies.sensitivity import format_joints, format_sensitivity, sensitivity
@@ -62,7 +63,9 @@ def main(args) -> int:
         check_output_folder(plots, args.parents, "--plots")   # before the work, which the charts follow
     warn_oversubscription(cluster.workers, None)
     start, parts = time.perf_counter(), parts_dir(output)
-    with OutputLock(output):
+    charts = (contextlib.nullcontext() if args.no_plots else   # one file's charts per folder, claimed before the work
+              claimed_output_folder(plots, "sensitivity", figure_request(output), ("sobol_*.png",), "--plots"))
+    with charts, OutputLock(output):
         try:
             ds = sensitivity(level.ensemble_spec(args.seed), args.n, args.per_joint, args.confidence,
                              cluster.workers, window=args.window, parts=parts,
@@ -72,7 +75,7 @@ def main(args) -> int:
         write_netcdf(ds, output)
         if parts.exists():
             shutil.rmtree(parts)
-    paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
+        paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
     print(f"wrote {output} in {time.perf_counter() - start:.1f} s" + (f"; bar charts in {plots}/" if paths else ""))
     print(format_sensitivity(ds))
     if args.per_joint:

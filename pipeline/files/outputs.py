@@ -63,25 +63,26 @@ def check_output_folder(path, create_parents: bool = False, option: str = "-o") 
 
 
 @contextmanager
-def claimed_output_folder(folder: Path, command: str, request: dict, answers: tuple[str, ...] = ()):
+def claimed_output_folder(folder: Path, command: str, request: dict, answers: tuple[str, ...] = (),
+                          option: str = "-o"):
     """Record in ``folder`` the request whose outputs it holds (``rss6_COMMAND_request.json``: the
     scene's sha256 and every option that changes them, keyed by the option's name), or refuse,
-    before any work, a folder holding ``command``'s outputs for another request: a rerun of the same
-    request resumes or rewrites the same files, and another one overwrites no finished answer. A
-    folder holding the command's ``answers`` (file name patterns) without a record is refused too
-    (its record deleted, or written by an rss6 that kept none). A body that ends in an exception
-    before writing anything in the folder takes the record (and a folder it made) back."""
+    before any work, a folder (named by ``option``) holding ``command``'s outputs for another request:
+    a rerun of the same request resumes or rewrites the same files, and another one overwrites no
+    finished answer. A folder holding the command's ``answers`` (file name patterns) without a record
+    is refused too (its record deleted, or written by an rss6 that kept none). A body that ends in an
+    exception before writing anything in the folder takes the record (and a folder it made) back."""
     folder = Path(folder)
     path = folder / f"rss6_{command}_request.json"
     if path.exists():
-        _refuse_another_request(folder, path, command, request)
+        _refuse_another_request(folder, path, command, request, option)
         yield folder
         return
     held = sorted(p.name for pattern in answers for p in folder.glob(pattern)) if folder.is_dir() else []
     if held:
         raise EnsembleFileError(f"{folder}: holds rss6 {command}'s outputs ({', '.join(held)}) but no {path.name}, "
                                 "the record of the request they answer (deleted, or never written by an older rss6); "
-                                f"choose another -o, or remove them to replace them")
+                                f"choose another {option}, or remove them to replace them")
     made = not folder.exists()
     folder.mkdir(parents=True, exist_ok=True)
     before = set(folder.iterdir())
@@ -98,17 +99,17 @@ def claimed_output_folder(folder: Path, command: str, request: dict, answers: tu
         raise
 
 
-def _refuse_another_request(folder: Path, path: Path, command: str, request: dict) -> None:
+def _refuse_another_request(folder: Path, path: Path, command: str, request: dict, option: str) -> None:
     """EnsembleFileError unless the record ``path`` holds ``request``, naming each option it changes."""
     try:
         held = json.loads(path.read_text())
     except (OSError, ValueError):
         raise EnsembleFileError(f"{path}: unreadable; it records which request the folder's outputs answer, "
-                                "so choose another -o, or remove the folder to replace them") from None
+                                f"so choose another {option}, or remove the folder to replace them") from None
     said = request_changes(held, request)
     if said:
         raise EnsembleFileError(f"{folder}: holds rss6 {command}'s outputs for another request ({said}); "
-                                f"choose another -o, or remove {folder} to replace them")
+                                f"choose another {option}, or remove {folder} to replace them")
 
 
 def request_changes(held: dict, request: dict) -> str:
