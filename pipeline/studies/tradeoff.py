@@ -278,10 +278,9 @@ def tradeoff_figure(ds, tolerance, rec):
                                    gridspec_kw={"width_ratios": [2.2, 1]})
     whole = ds["failed"].values == 0
     for m in dict.fromkeys(models):
-        sel = (models == m) & whole
-        ax.scatter(cost[sel], err[sel], color=_COLOURS.get(m, "grey"), label=m, zorder=3)
-        ax.scatter(cost[(models == m) & ~whole], err[(models == m) & ~whole], color=_COLOURS.get(m, "grey"),
-                   marker="x", zorder=3)
+        level, colour = models == m, _COLOURS.get(m, "grey")
+        ax.scatter(cost[level & whole], err[level & whole], color=colour, label=m, zorder=3)
+        ax.scatter(cost[level & ~whole], err[level & ~whole], color=colour, marker="x", zorder=3)
     if not whole.all():
         ax.scatter([], [], color="grey", marker="x", label="some realisations failed (off the front)")
     front = pareto_front(cost, err, whole)
