@@ -242,3 +242,19 @@ def test_a_lost_manifests_chunk_with_changed_values_or_other_settings_is_refused
     assert main(_argv(configs, interrupted)) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "joints-0000000-0000255.nc" in err[0] and "families-" not in err[0], err
+
+
+def test_a_lost_manifests_chunk_without_checksums_is_refused(interrupted, configs, capsys):
+    """Without the manifest a chunk's own checksums are the only evidence that rss6 wrote its values: a
+    chunk without them is refused by name in one line (exit 2), as ``rss6 run`` refuses such a part."""
+    import netCDF4
+    from pipeline.files.schema import CHECKSUM
+    parts = _parts(interrupted)
+    (parts / "manifest.json").unlink()
+    part = parts / "joints-0000000-0000255.nc"
+    with netCDF4.Dataset(part, "a") as nc:
+        nc.delncattr(CHECKSUM)
+    assert main(_argv(configs, interrupted)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{part.name}: carries no checksums of its values" in err[0], err
+    assert "families-" not in err[0], err

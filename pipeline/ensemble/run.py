@@ -194,27 +194,13 @@ def _stored(output: Path, spec: EnsembleSpec, manifest: PartsManifest, summary_b
 
 
 def _checked_parts(manifest: PartsManifest, spec: EnsembleSpec, summary_block: int | None = None) -> list:
-    """Every stored part with its Dataset (histories on disk), after checking them all: the bad
-    ones are named together in one EnsembleFileError (:meth:`PartsManifest.refuse`). A part the
-    manifest vouches for is not read again for its checksums (its bytes were); one of a deleted or
-    unreadable manifest is, and is adopted if its values and identity hold."""
-    problems, parts = {}, []
-    for path in manifest.parts():
-        problems[path] = manifest.problem(path)
-        unvouched = manifest.adoptable(path)
-        if problems[path] is None or unvouched:
-            try:
-                ds = open_ensemble(path, lazy=True, verify=unvouched, summary_block=summary_block)
-                _check_identity(path, ds.attrs, spec)
-            except EnsembleFileError as exc:
-                problems[path] = str(exc).removeprefix(f"{path}: ")
-                continue
-            if unvouched:
-                manifest.adopt(path, ds)
-            problems[path] = None
-            parts.append((path, ds))
-    manifest.refuse(problems)
-    return parts
+    """Every stored part with its Dataset (histories on disk), each one an ensemble of ``spec``'s
+    identity (:meth:`PartsManifest.checked_parts`)."""
+    def open_part(path, verify: bool):
+        ds = open_ensemble(path, lazy=True, verify=verify, summary_block=summary_block)
+        _check_identity(path, ds.attrs, spec)
+        return ds
+    return manifest.checked_parts(open_part)
 
 
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks

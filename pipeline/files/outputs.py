@@ -14,6 +14,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+from ..vocabulary import UserError
 from .schema import EnsembleFileError
 from .writing import sigint_deferred, write_netcdf
 
@@ -321,6 +322,34 @@ class PartsManifest:
     def adoptable(self, path: Path) -> bool:
         """Whether part ``path`` is one the lost manifest would have listed (:meth:`adopt`)."""
         return self.lost and path.name not in self.entries
+
+    def checked_parts(self, open_part) -> list:
+        """Every stored part with its Dataset, after checking them all: the bad ones are named together
+        in one EnsembleFileError (:meth:`refuse`). ``open_part(path, verify)`` returns a part's Dataset
+        or raises UserError naming what is wrong with it. A part the manifest vouches for is not read
+        again for its checksums (its bytes were); one of a deleted or unreadable manifest is, and is
+        adopted (:meth:`adopt`) only if it carries them and they hold: with the manifest gone they are
+        the only evidence that rss6 wrote its values."""
+        problems, parts = {}, []
+        for path in self.parts():
+            problems[path] = self.problem(path)
+            unvouched = self.adoptable(path)
+            if problems[path] is not None and not unvouched:
+                continue
+            try:
+                ds = open_part(path, unvouched)
+            except UserError as exc:
+                problems[path] = str(exc).removeprefix(f"{path}: ")
+                continue
+            if unvouched and ds.encoding.get("rss6_unverified"):
+                problems[path] = "carries no checksums of its values"
+                continue
+            if unvouched:
+                self.adopt(path, ds)
+            problems[path] = None
+            parts.append((path, ds))
+        self.refuse(problems)
+        return parts
 
     def problem(self, path: Path) -> str | None:
         """Why part ``path`` cannot be used (not listed in the manifest, or its bytes changed since it

@@ -29,9 +29,7 @@ def parts_manifest(spec, n: int, per_joint: bool, window: str, folder) -> PartsM
                   "seed": int(spec.seed), "n_base_samples": n, "per_joint": per_joint, "window": window,
                   "designs": ["families"] + (["joints"] if per_joint else []), "rss6_version": __version__}
     manifest = PartsManifest(folder, provenance, index="row", items="rows", settings=PART_SETTINGS)
-    problems = {path: manifest.problem(path) for path in manifest.parts()}
-    manifest.refuse({path: _adopted(manifest, path) if why and manifest.adoptable(path) else why
-                     for path, why in problems.items()})
+    manifest.checked_parts(lambda path, verify: _chunk(path, verify, provenance))
     return manifest
 
 
@@ -40,19 +38,12 @@ def _provenance_text(provenance: dict) -> str:
     return json.dumps(provenance, sort_keys=True)
 
 
-def _adopted(manifest: PartsManifest, path) -> str | None:
-    """Vouch for chunk ``path`` of a deleted or unreadable manifest (None) if its values match their own
-    checksums and it was made with the manifest's settings; otherwise why not."""
-    try:
-        ds = load_netcdf(path)
-    except UserError as exc:
-        return str(exc).removeprefix(f"{path}: ")
-    if ds.encoding.get("rss6_unverified"):
-        return "carries no checksums of its values"
-    if ds.attrs.get("provenance") != _provenance_text(manifest.provenance):
-        return f"made with other settings ({PART_SETTINGS})"
-    manifest.adopt(path, ds)
-    return None
+def _chunk(path, verify: bool, provenance: dict) -> xr.Dataset:
+    """Stored chunk ``path`` if it was made with the run's ``provenance``; UserError otherwise."""
+    ds = load_netcdf(path, verify=verify)
+    if ds.attrs.get("provenance") != _provenance_text(provenance):
+        raise UserError(f"{path}: made with other settings ({PART_SETTINGS})")
+    return ds
 
 
 @dataclass(frozen=True)
