@@ -206,7 +206,7 @@ def test_cli_empty_window_is_refused_before_work(smoke, tmp_path, capsys):
     out = tmp_path / "F.nc"
     assert main(["multifidelity", str(config), "--high", "paper", "--window", "startup", "-o", str(out)]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "--window startup" in err and "no sample" in err, err
+    assert len(err.splitlines()) == 1 and "--window startup" in err and "startup window is empty" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["nostartup.toml"]
 
 

@@ -210,7 +210,8 @@ def test_an_empty_window_is_refused_before_any_work(smoke, tmp_path, capsys):
     out = tmp_path / "x.nc"
     code = main_code(["sensitivity", str(config), "--window", "startup", "-o", str(out), "--no-plots"])
     err = capsys.readouterr().err.strip()
-    assert code == 2 and len(err.splitlines()) == 1 and "--window startup" in err and "no sample" in err, err
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert "--window startup" in err and "startup window is empty" in err, err
     assert not out.exists()
 
 

@@ -214,7 +214,7 @@ def test_an_empty_startup_window_is_refused_for_every_claim_before_work(smoke, t
         assert len(err) == 1 and all(w in err[0] for w in words), err
 
     refused(["run", str(scene), "-n", "4", "--model", "quasi-static", "-o", str(out), *startup_spec],
-            "--require", "startup (empty")
+            "--require", "startup window is empty")
     assert not out.exists()
     assert main(["run", str(scene), "-n", "4", "--model", "quasi-static", "-o", str(out)]) == 0
     capsys.readouterr()

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
+from ..files.records import empty_window, file_window_bounds
 from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
 from .estimators import (BOUNDS, MAX_NOTE, MIN_N_MEAN, MIN_N_STD, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
@@ -32,12 +33,11 @@ def windows_of(ds: xr.Dataset) -> list[str]:
 
 
 def check_window_samples(ds: xr.Dataset, window: str) -> None:
-    """ValueError if ``window`` of a file holds no sample: its startup when steady_after_s <= settle_time_s
-    (every statistic there would be NaN, and a probability or verdict a claim about nothing)."""
-    after, settle = float(ds.attrs.get("steady_after_s", np.inf)), float(ds.attrs.get("settle_time_s", 0.0))
-    if window == "startup" and after <= settle:
-        raise ValueError(f"the file's startup window is empty (its scene's steady_after_s {after:g} s <= "
-                         f"settle_time_s {settle:g} s): choose the steady or whole window")
+    """ValueError if ``window`` of a file holds no sample (:func:`.records.empty_window`): every statistic
+    there would be NaN, and a probability or verdict a claim about nothing."""
+    empty = empty_window(window, *file_window_bounds(ds.attrs))
+    if empty:
+        raise ValueError(empty)
 
 
 def in_window(ds: xr.Dataset, window: str = "whole") -> xr.Dataset:

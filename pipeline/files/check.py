@@ -16,7 +16,7 @@ from rss6core import INTEGRATORS, MODELS, STATUSES, SceneError, model_level, mod
 
 from ..vocabulary import DIRECTIONS, FINISHED, QUANTITIES, STORES, SUMMARIES, WINDOWS
 from .reading import SUMMARY_BLOCK
-from .records import INPUT_COORDS
+from .records import INPUT_COORDS, empty_window
 from .schema import ENSEMBLE_ATTRS, MIXED_UNITS, PROVENANCE, EnsembleFileError, _unit_table
 
 __all__ = ["check_ensemble", "check_run"]
@@ -84,7 +84,7 @@ def _values(ds, path, finished: np.ndarray) -> None:
     """No negative or infinite value anywhere; finite values in every finished realisation and
     window (the startup window is empty, hence NaN, when steady_after_s <= settle_time_s)."""
     settle, steady_after = _window_bounds(ds, path)
-    windows = [w for w in WINDOWS if w != "startup" or steady_after > settle]
+    windows = [w for w in WINDOWS if not empty_window(w, settle, steady_after)]
     for name in SUMMARIES:
         x = ds[name].transpose("realization", ...).values
         with np.errstate(invalid="ignore"):

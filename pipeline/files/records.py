@@ -88,7 +88,7 @@ def window_summaries(result, settle: float = 0.0, steady_after: float = 0.0
 def window_label(window: str, steady_after: float, settle: float = 0.0) -> str:
     """How a window reads in tables and figures, e.g. 'steady (t >= 0.5 s)': the times it covers, s,
     with the scene's settle_time_s ``settle`` left out of every window."""
-    if window == "startup" and steady_after <= settle:
+    if empty_window(window, settle, steady_after):
         return f"startup (empty: steady_after_s {steady_after:g} s <= settle_time_s {settle:g} s)"
     after = f" (t >= {settle:g} s)" if settle > 0 else ""
     since = f"{settle:g} s <= " if settle > 0 else ""
@@ -96,20 +96,35 @@ def window_label(window: str, steady_after: float, settle: float = 0.0) -> str:
             "steady": f"steady (t >= {max(steady_after, settle):g} s)"}[window]
 
 
+def file_window_bounds(attrs) -> tuple[float, float]:
+    """A file's (or a summary's) settle_time_s and steady_after_s (s); 0 and NaN where it lacks them."""
+    return float(attrs.get("settle_time_s", 0.0)), float(attrs.get("steady_after_s", np.nan))
+
+
 def file_window_label(window: str, attrs) -> str:
     """:func:`window_label` of a file's (or a summary's) ``steady_after_s`` and ``settle_time_s``."""
-    return window_label(window, float(attrs.get("steady_after_s", np.nan)), float(attrs.get("settle_time_s", 0.0)))
+    settle, steady_after = file_window_bounds(attrs)
+    return window_label(window, steady_after, settle)
+
+
+def empty_window(window: str, settle: float, steady_after: float) -> str | None:
+    """Why analysis ``window`` holds no output sample, or None. The one empty window rss6 allows is the
+    startup of a scene whose steady_after_s <= settle_time_s (s): the scene's checks keep every other
+    window filled (rss6core.scene: steady_after_s < the duration, a start-up window holds a sample)."""
+    if window == "startup" and steady_after <= settle:
+        return (f"the startup window is empty (steady_after_s {steady_after:g} s <= settle_time_s {settle:g} s): "
+                "choose the steady or whole window")
+    return None
 
 
 def check_window(scene, window: str) -> None:
     """ValueError (naming --window) unless ``window`` is one of WINDOWS and holds output samples of
-    ``scene`` (an ensemble's statistics over an empty window would all be NaN)."""
+    ``scene`` (:func:`empty_window`; an ensemble's statistics over an empty window would all be NaN)."""
     if window not in WINDOWS:
         raise ValueError(f"--window {window}: choose one of {', '.join(WINDOWS)}")
-    sim = scene.simulation
-    if not window_masks(scene.times, sim.settle_time, sim.steady_after)[WINDOWS.index(window)].any():
-        raise ValueError(f"--window {window}: the scene's {window_label(window, sim.steady_after, sim.settle_time)} "
-                         "window holds no sample of the output grid")
+    empty = empty_window(window, scene.simulation.settle_time, scene.simulation.steady_after)
+    if empty:
+        raise ValueError(f"--window {window}: {empty}")
 
 
 _WINDOW_ATTRS = {"long_name": "analysis window: whole run, startup t < steady_after_s, "
