@@ -51,7 +51,11 @@ def kernels_to_compile(model: str) -> list[str]:
 def kernel_cache_folder() -> str:
     """Where numba keeps the compiled kernels (``NUMBA_CACHE_DIR``, else beside the source)."""
     from . import contact_kernel
-    return str(contact_kernel.advance_chunk._cache._cache_path)
+    try:
+        return str(contact_kernel.advance_chunk._cache._cache_path)   # numba's own choice (internal)
+    except AttributeError:   # a numba without that internal: its documented rule
+        import numba
+        return numba.config.CACHE_DIR or os.path.join(os.path.dirname(contact_kernel.__file__), "__pycache__")
 
 
 def load_draw_kernels() -> float:
