@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .clearance import CLEARANCE_RADII
+from .frozen import frozen_array
 from .kinematics import RigidMotion, crank_points, forward_kinematics, leg_jacobian, platform_joints, rigid_motion
 from .trajectory import PlatformMotion, euler_rate_matrix, euler_rate_matrix_dot, rotation
 
@@ -31,16 +32,10 @@ GEOMETRY_KEYS = {"geometry.crank_length_m": "crank_length", "geometry.rod_length
                  "geometry.actuator_offsets_deg": "actuator_offsets"}
 
 
-def _frozen(values) -> np.ndarray:
-    out = np.array(values, dtype=float)
-    out.flags.writeable = False
-    return out
-
-
 def realised_geometry(geometry, inputs):
     """The scene's ``geometry`` with the drawn values of ``inputs`` (an :class:`.uncertain.InputDraw`):
     per leg or joint (6,) where drawn so, (1,) for one shared draw; the nominal elsewhere."""
-    changes = {field: _frozen(inputs.realised(key)) for key, field in GEOMETRY_KEYS.items()
+    changes = {field: frozen_array(inputs.realised(key)) for key, field in GEOMETRY_KEYS.items()
                if inputs.realised(key) is not None}
     return dataclasses.replace(geometry, **changes)
 
@@ -50,7 +45,7 @@ def realised_clearances(scene, inputs):
     [clearance] values: the clearance draw then takes them as the nominal sizes (no band: the
     parser refuses a band on a drawn family), so its eccentricities scale with them.  The scene
     itself when no size is drawn."""
-    changes = {family.removesuffix("_m"): _frozen(inputs.realised(f"clearance.{family}"))
+    changes = {family.removesuffix("_m"): frozen_array(inputs.realised(f"clearance.{family}"))
                for family in CLEARANCE_RADII if inputs.realised(f"clearance.{family}") is not None}
     return dataclasses.replace(scene, clearance=dataclasses.replace(scene.clearance, **changes)) if changes else scene
 
@@ -68,7 +63,7 @@ def realised_scene(scene, inputs):
             E * (mat.shear_modulus / mat.youngs_modulus)),
         density=mat.density if rho is None else _scalar_or_links(rho))
     platform = dataclasses.replace(plat, mass=plat.mass if mass is None else float(mass[0]),
-                                   inertia=plat.inertia if inertia is None else _frozen(inertia))
+                                   inertia=plat.inertia if inertia is None else frozen_array(inertia))
     return dataclasses.replace(scene, geometry=realised_geometry(scene.geometry, inputs), material=material,
                                platform=platform)
 
@@ -76,7 +71,7 @@ def realised_scene(scene, inputs):
 def _scalar_or_links(values):
     """One shared draw as a scalar (a scene's type), twelve per-link draws as a frozen (12,) array."""
     values = np.asarray(values, float)
-    return float(values[0]) if values.size == 1 else _frozen(values)
+    return float(values[0]) if values.size == 1 else frozen_array(values)
 
 
 def scene_is_nominal(scene, realised) -> bool:

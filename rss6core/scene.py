@@ -22,6 +22,7 @@ import numpy as np
 from .beam import BEAM_THEORIES, MASS_MODELS, BeamTheory
 from .clearance import CLEARANCE_RADII, RELATIVE_BAND_REACH, SizeBand
 from .contact_options import CONTACT_STARTS, MAX_CONTACT_REFINEMENTS
+from .frozen import frozen_array
 from .integrators import INTEGRATORS
 from .kinematics import WorkspaceError, check_workspace
 from .link_reduction import max_link_modes
@@ -43,12 +44,6 @@ __all__ = [
 
 class SceneError(ValueError):
     """A scene file that cannot describe a physical robot; the message names the key."""
-
-
-def _frozen(values) -> np.ndarray:
-    arr = np.array(values, dtype=float)
-    arr.flags.writeable = False
-    return arr
 
 
 def _per_leg(value) -> np.ndarray:
@@ -77,29 +72,29 @@ class Geometry:
     platform_angles: np.ndarray    # beta_i, rad
     crank_length: float            # L_ac, m (or per leg)
     rod_length: float              # L_cb, m (or per leg)
-    actuator_offsets: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(6)))  # rad, true - commanded
+    actuator_offsets: np.ndarray = field(default_factory=lambda: frozen_array(np.zeros(6)))  # rad, true - commanded
 
     @cached_property
     def a(self) -> np.ndarray:
         """Base joint centres a_i = R1 [cos theta_i, sin theta_i, 0] (6, 3), m."""
         th = self.base_angles
-        return _frozen(_per_leg(self.base_radius) * np.stack([np.cos(th), np.sin(th), 0 * th], -1))
+        return frozen_array(_per_leg(self.base_radius) * np.stack([np.cos(th), np.sin(th), 0 * th], -1))
 
     @cached_property
     def p(self) -> np.ndarray:
         """Platform joint centres in the platform frame n_i* (6, 3), m."""
         be = self.platform_angles
-        return _frozen(_per_leg(self.platform_radius) * np.stack([np.cos(be), np.sin(be), 0 * be], -1))
+        return frozen_array(_per_leg(self.platform_radius) * np.stack([np.cos(be), np.sin(be), 0 * be], -1))
 
     @cached_property
     def k(self) -> np.ndarray:
         """Leg mounting rotations k_i = Rz(u_i) (6, 3, 3), eq. 2."""
-        return _frozen(_rot_z(self.base_angles))
+        return frozen_array(_rot_z(self.base_angles))
 
     @cached_property
     def w(self) -> np.ndarray:
         """Revolute axes w_i = [-sin u_i, cos u_i, 0] (6, 3)."""
-        return _frozen(self.k[:, :, 1])
+        return frozen_array(self.k[:, :, 1])
 
 
 @dataclass(frozen=True)
@@ -385,8 +380,8 @@ def _trajectory(table) -> Sinusoid | ViaPoints | SampledPoses:
         return file_trajectory(table)
     tr = _read_table(table, _SINUSOID, ("trajectory",))
     deg = np.radians
-    return Sinusoid(tr["frequency_Hz"], _frozen(tr["position_offset_m"] + list(deg(tr["angle_offset_deg"]))),
-                    _frozen(tr["position_amplitude_m"] + list(deg(tr["angle_amplitude_deg"]))), tr["duration_s"])
+    return Sinusoid(tr["frequency_Hz"], frozen_array(tr["position_offset_m"] + list(deg(tr["angle_offset_deg"]))),
+                    frozen_array(tr["position_amplitude_m"] + list(deg(tr["angle_amplitude_deg"]))), tr["duration_s"])
 
 
 _BAND = {"law": _Key(str, choices=("normal", "uniform")), "low_m": _Key(float, check=_NONNEG),
@@ -587,14 +582,14 @@ def _build(v: dict, text: str, source: str) -> Scene:
     deg = np.radians
     return Scene(
         name=v["name"],
-        geometry=Geometry(g["base_radius_m"], _frozen(deg(g["base_angles_deg"])),
-                          g["platform_radius_m"], _frozen(deg(g["platform_angles_deg"])),
-                          g["crank_length_m"], g["rod_length_m"], _frozen(deg(g["actuator_offsets_deg"]))),
+        geometry=Geometry(g["base_radius_m"], frozen_array(deg(g["base_angles_deg"])),
+                          g["platform_radius_m"], frozen_array(deg(g["platform_angles_deg"])),
+                          g["crank_length_m"], g["rod_length_m"], frozen_array(deg(g["actuator_offsets_deg"]))),
         crank_section=RectangleSection(v["crank_section"]["axial_width_m"],
                                        v["crank_section"]["height_m"]),
         rod_section=rod,
         material=mat,
-        platform=Platform(v["platform"]["mass_kg"], _frozen(v["platform"]["inertia_kg_m2"])),
+        platform=Platform(v["platform"]["mass_kg"], frozen_array(v["platform"]["inertia_kg_m2"])),
         gravity=v["environment"]["gravity_m_s2"],
         trajectory=tr,
         simulation=Simulation(**{k.removesuffix("_s").removesuffix("_m"): val

@@ -21,6 +21,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from .frozen import frozen_array
+
 __all__ = ["TRAJECTORY_KINDS", "TrajectoryError", "Sinusoid", "ViaPoints", "SampledPoses", "via_points",
            "sampled_poses", "check_keys"]
 
@@ -31,12 +33,6 @@ _REST = [(1, np.zeros(6)), (2, np.zeros(6))]
 
 class TrajectoryError(ValueError):
     """A [trajectory] table or pose CSV that does not describe a motion; the message names key or row."""
-
-
-def _frozen(values) -> np.ndarray:
-    arr = np.array(values, dtype=float)
-    arr.flags.writeable = False
-    return arr
 
 
 @dataclass(frozen=True)
@@ -186,10 +182,10 @@ def via_points(table: dict) -> ViaPoints:
         raise TrajectoryError(f"[trajectory] times_s[{i}]: {float(times[i])!r} s is not after point {i - 1}'s "
                               f"dwell ends ({float(times[i - 1])!r} + {float(dwell[i - 1])!r} s)")
     poses = np.concatenate([positions, np.radians(angles)], axis=1)
-    return ViaPoints(_frozen(times), _frozen(poses), _frozen(dwell), float(times[-1] + dwell[-1]))
+    return ViaPoints(frozen_array(times), frozen_array(poses), frozen_array(dwell), float(times[-1] + dwell[-1]))
 
 
 def sampled_poses(times: np.ndarray, poses_deg: np.ndarray, sha256: str = "") -> SampledPoses:
     """The file kind from checked samples: times (N,) s and poses (N, 6) in m and degrees."""
     poses = np.concatenate([poses_deg[:, :3], np.radians(poses_deg[:, 3:])], axis=1)
-    return SampledPoses(_frozen(times), _frozen(poses), float(times[-1]), sha256)
+    return SampledPoses(frozen_array(times), frozen_array(poses), float(times[-1]), sha256)

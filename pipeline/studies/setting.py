@@ -23,7 +23,7 @@ from ..analysis.estimators import estimates
 from ..files.records import error_summaries
 from ..vocabulary import FINISHED
 
-__all__ = ["Setting", "TRADEOFF_STATISTICS", "measure", "relative_errors"]
+__all__ = ["Setting", "TRADEOFF_STATISTICS", "measure", "refined", "relative_errors"]
 
 TRADEOFF_STATISTICS = ("mean", "q95")
 RELATIVE_FLOOR = 1e-3
@@ -116,7 +116,7 @@ def _contact_step(scene, h: float) -> float:
     return _dividing(dt, h) if h <= dt else dt * round(h / dt)
 
 
-def _refine(setting: Setting) -> Setting:
+def refined(setting: Setting) -> Setting:
     """Step halved and mesh doubled; an adaptive step's tolerance / 8 as well, since the local
     error estimate it bounds scales as h^3 where the acceleration is smooth."""
     return dataclasses.replace(setting, dt=setting.dt / 2, elements=2 * setting.elements,

@@ -17,16 +17,9 @@ from rss6core import MODELS, BeamTheory, default_integrator, default_time_step, 
 from ..files.schema import MIXED_UNITS, _unit_table
 from ..vocabulary import DIRECTIONS, QUANTITIES
 from .setting import (TRADEOFF_STATISTICS, Setting, _adaptive, _contact_step, _scene_for, load_compiled_kernels,
-                      measure, relative_errors)
+                      measure, refined, relative_errors)
 
 __all__ = ["default_settings", "tradeoff", "pareto_front", "recommend", "write_tradeoff", "tradeoff_figure"]
-
-
-def _refine(setting: Setting) -> Setting:
-    """Step halved and mesh doubled; an adaptive step's tolerance / 8 as well, since the local
-    error estimate it bounds scales as h^3 where the acceleration is smooth."""
-    return dataclasses.replace(setting, dt=setting.dt / 2, elements=2 * setting.elements,
-                               tolerance=setting.tolerance / 8)
 
 
 def default_settings(scene) -> tuple[list[Setting], Setting]:
@@ -98,7 +91,7 @@ def tradeoff(scene, n: int, seed: int = 0, settings=None, reference: Setting | N
         settings = list(settings) + [reference]
     load_compiled_kernels(scene, settings, seed)
     runs = _measure_all(scene, settings, n, seed, log)
-    check = _refine(reference)
+    check = refined(reference)
     fine = measure(scene, check, n, seed)
     log(f"  reference check ({check.label}): {fine['seconds_per_realization']:.3g} s per realisation")
     ds = xr.Dataset(_setting_variables(scene, settings, runs)
