@@ -170,6 +170,16 @@ def dask_client(workers: int = 2, scheduler: str | None = None):
             cluster.close()
 
 
+@contextlib.contextmanager
+def optional_client(workers: int):
+    """:func:`dask_client` on ``workers`` local processes, or None (work in this process) for one."""
+    if workers <= 1:
+        yield None
+        return
+    with dask_client(workers) as client:
+        yield client
+
+
 def _client(workers: int, scheduler: str | None):
     from dask.distributed import Client
     if scheduler:

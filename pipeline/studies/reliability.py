@@ -11,7 +11,6 @@ workers of pipeline.ensemble.cluster when a batch is large.
 """
 from __future__ import annotations
 
-import contextlib
 import re
 from dataclasses import dataclass
 
@@ -24,7 +23,7 @@ from rss6core import (FINISHED, SIZE_UNIFORMS, UNIFORM_BLOCKS, clearances_from_n
 
 from ..analysis.exceedance import Event, clopper_pearson
 from ..analysis.subset import SubsetSettings, subset_simulation
-from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client, results_as_finished
+from ..ensemble.cluster import WORKER_TIMEOUT_S, optional_client, results_as_finished
 from ..files.records import window_summaries
 from ..files.writing import sigint_deferred
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
@@ -281,16 +280,6 @@ def _subset_to_cov(spec, event: Event, dimension: int, settings: SubsetSettings,
         settings = replace(settings, n_per_level=2 * settings.n_per_level)
 
 
-@contextlib.contextmanager
-def _client(workers: int):
-    """A dask client on ``workers`` local processes; None (this process) for one."""
-    if workers <= 1:
-        yield None
-        return
-    with dask_client(workers) as client:
-        yield client
-
-
 def reliability(spec, event: Event, method: str = "subset", n: int | None = None, p0: float = 0.1,
                 confidence: float = CONFIDENCE, workers: int = 1, checkpoint=None, cov_target: float | None = None,
                 budget: int | None = None) -> Estimate:
@@ -301,7 +290,7 @@ def reliability(spec, event: Event, method: str = "subset", n: int | None = None
     target or the ``budget`` of evaluations (default DEFAULT_BUDGET) would be exceeded."""
     dimension = input_dimension(spec.scene(), spec.model, spec.source)
     budget = budget or DEFAULT_BUDGET[method]
-    with _client(workers) as client:
+    with optional_client(workers) as client:
         if method == "mc":
             return _monte_carlo(spec, event, dimension, budget if cov_target else n or 20000, spec.seed, confidence,
                                 client, checkpoint, cov_target)

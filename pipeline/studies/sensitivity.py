@@ -19,7 +19,6 @@ a rerun of the same command evaluates only the rows still missing.
 """
 from __future__ import annotations
 
-import contextlib
 import warnings
 from dataclasses import dataclass
 
@@ -30,7 +29,7 @@ from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_n
                       inputs_from_uniforms, MODELS, model_level, models_with, prepare_level, realised_clearances,
                       size_band)
 
-from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client, results_as_finished
+from ..ensemble.cluster import WORKER_TIMEOUT_S, optional_client, results_as_finished
 from ..files.records import check_window, window_label, window_summaries
 from ..files.schema import JOINTS, _provenance, _unit_table, command_line
 from ..files.writing import sigint_deferred
@@ -219,16 +218,6 @@ def _evaluate_rows(spec, inputs, u, rows: slice, window):   # a dask task: (rows
     return rows, _evaluate_chunk(spec, inputs, u, window)
 
 
-@contextlib.contextmanager
-def _client(workers: int):
-    """A dask client on a local cluster of ``workers`` processes; None (this process) for one."""
-    if workers == 1:
-        yield None
-        return
-    with dask_client(workers) as client:
-        yield client
-
-
 # --- analysis -----------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -369,7 +358,7 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFI
     inputs = clearance_inputs(scene)
     manifest = parts_manifest(spec, n, per_joint, window, parts) if parts else None
     results = []
-    with _client(workers) as client:
+    with optional_client(workers) as client:
         for design in designs(inputs, per_joint):
             u = sample_design(design, n, spec.seed)
             rows = RowParts(manifest, design.name) if manifest else None
