@@ -185,5 +185,7 @@ def format_exceedance(results: list[Exceedance]) -> str:
 def exceedance_json(results: list[Exceedance]) -> list[dict]:
     """Plain dicts for ``--json`` (NaN as None)."""
     from dataclasses import asdict
-    return [{k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(r).items()}
+
+    from .stats import json_number
+    return [{k: (json_number(v) if isinstance(v, float) else v) for k, v in asdict(r).items()}
             for r in results]

@@ -101,11 +101,10 @@ def format_failure_domain(fd: FailureDomain, physical: list | None = None, shown
 
 def failure_domain_json(fd: FailureDomain, physical: list | None = None) -> dict:
     """The failure domain as strict JSON (None for a NaN std)."""
-    def number(v):
-        return float(v) if np.isfinite(v) else None
+    from .stats import json_number
     return {"level": fd.level, "failing": fd.failing,
             "families": [{"family": g, "shift": s, "inputs": n} for g, s, n in fd.group_shifts()],
-            "inputs": [{"input": label, "family": g, "mean": number(m), "std": number(s)}
+            "inputs": [{"input": label, "family": g, "mean": json_number(m), "std": json_number(s)}
                        for label, g, m, s in zip(fd.labels, fd.groups, fd.mean, fd.std)],
             "most_probable": {"evaluation": fd.most_probable, "norm": float(np.linalg.norm(fd.most_probable_z)),
                               "z": {label: float(v) for label, v in zip(fd.labels, fd.most_probable_z)},

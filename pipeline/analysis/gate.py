@@ -32,7 +32,7 @@ from .exceedance import Event, event_values, one_sided_cp
 from .spec import PF, Spec
 from ..vocabulary import CONFIDENCE, QUANTILES, WINDOWS
 from .estimators import QUANTILE_DECISION_CAP, bound_level, interval_floor, no_interval_at, quantile_decision_n
-from .stats import check_window_samples, ensemble_stats, finished_values
+from .stats import check_window_samples, ensemble_stats, finished_values, json_number
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
            "verdicts_with_note", "allowed_exceedances", "overall", "judge", "judge_all", "verdicts_json"]
@@ -246,8 +246,7 @@ def _judge(spec: Spec, ds, bounds) -> list[Verdict]:
         outcome, need, reason = _decision(spec, ev, n, failed, at, replicates)
         out.append(Verdict(spec.text, spec.quantity, d, spec.statistic, spec.measure, spec.window or "whole",
                            spec.op, spec.limit, spec.unit, spec.factor, ev.estimate,
-                           ev.lower if np.isfinite(ev.lower) else None,
-                           ev.upper if np.isfinite(ev.upper) else None,
+                           json_number(ev.lower), json_number(ev.upper),
                            confidence, n, failed, outcome, need, reason, rule))
     return out
 

@@ -59,7 +59,7 @@ from scipy import stats as sps
 from rss6core import FINISHED, models_with
 
 from ..analysis.estimators import BOUNDS, MIN_N_MEAN, mean_interval
-from ..analysis.stats import in_window
+from ..analysis.stats import in_window, json_number
 from ..files.records import file_window_label
 from ..vocabulary import CONFIDENCE, SUMMARIES
 
@@ -334,11 +334,6 @@ def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
 
 # --- output ------------------------------------------------------------------------
 
-def _number(v):
-    v = float(v)
-    return v if np.isfinite(v) else None
-
-
 def to_json(mds: xr.Dataset) -> dict:
     """Strict-JSON view (None for a missing number), SI units:
     {variable: {quantity: {direction: {field: value}}}} plus the attributes."""
@@ -349,10 +344,10 @@ def to_json(mds: xr.Dataset) -> dict:
                           "low_n_for_width") if f"max_abs_error_{f}" in mds]
     for name in SUMMARIES:
         out[name] = {str(q): {str(d): {
-            **{f"{e}_{b}": _number(mds[f"{name}_mean"].sel(estimator=e, bound=b, quantity=q,
+            **{f"{e}_{b}": json_number(mds[f"{name}_mean"].sel(estimator=e, bound=b, quantity=q,
                                                           direction=d))
                for e in ESTIMATORS for b in BOUNDS},
-            **{f: _number(mds[f"{name}_{f}"].sel(quantity=q, direction=d)) for f in fields}}
+            **{f: json_number(mds[f"{name}_{f}"].sel(quantity=q, direction=d)) for f in fields}}
             for d in mds.direction.values} for q in mds.quantity.values}
     return out
 
