@@ -7,12 +7,19 @@ from __future__ import annotations
 
 from rss6core import FINISHED
 
-__all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "WINDOWS", "window_words", "QUANTILES", "STATISTICS", "REQUIRABLE",
-           "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "UserError", "OptionError"]
+__all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "family_of", "WINDOWS", "window_words", "QUANTILES", "STATISTICS",
+           "REQUIRABLE", "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "UserError", "OptionError"]
 
 QUANTITIES = ("displacement", "velocity", "acceleration")   # of the platform's pose error
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")             # translations (m), rotations (rad)
 FAMILIES = {"translation": DIRECTIONS[:3], "rotation": DIRECTIONS[3:]}   # one unit each
+
+
+def family_of(direction: str) -> str:
+    """The family of ``direction`` (a key of FAMILIES): 'translation' (m) or 'rotation' (rad)."""
+    return next(f for f, members in FAMILIES.items() if direction in members)
+
+
 WINDOWS = ("whole", "startup", "steady")   # analysis windows: [settle, T], [settle, t_s), [max(settle, t_s), T]
 
 

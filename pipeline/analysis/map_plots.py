@@ -6,21 +6,17 @@ import textwrap
 
 import numpy as np
 
-from ..vocabulary import DIRECTIONS, FAMILIES, QUANTILES
+from ..vocabulary import DIRECTIONS, QUANTILES, family_of
 from .plot_common import figure_unit, plt
 
-__all__ = ["map_figures", "direction_map_figure", "q95_caveat"]
+__all__ = ["map_figures", "direction_map_figure", "q95_caveat", "axis_display"]
 
 _PANELS = (("worst_case", "worst case over every clearance state"), ("q95", "q95 over the drawn realisations"))
 
 
-def _axis_display(ds, dim: str) -> tuple[float, str]:
+def axis_display(ds, dim: str) -> tuple[float, str]:
     """Display factor from SI and unit of a grid axis: mm for positions, deg for angles."""
     return (1e3, "mm") if ds[dim].attrs["units"] == "m" else (180.0 / np.pi, "deg")
-
-
-def _family(direction: str) -> str:
-    return next(f for f, members in FAMILIES.items() if direction in members)
 
 
 def _fixed_pose(ds) -> str:
@@ -28,7 +24,7 @@ def _fixed_pose(ds) -> str:
     out = []
     for name, coord in ds.coords.items():
         if str(name).startswith("platform_") and coord.ndim == 0:
-            factor, unit = _axis_display(ds, name)
+            factor, unit = axis_display(ds, name)
             out.append(f"{str(name).removeprefix('platform_')} = {round(float(coord) * factor, 3) + 0.0:g} {unit}")
     return ", ".join(out)
 
@@ -48,9 +44,9 @@ def q95_caveat(ds) -> str | None:
 def direction_map_figure(ds, direction: str):
     """The worst case and the q95 of |error| in ``direction`` over the grid, side by side."""
     from matplotlib.patches import Patch
-    family = _family(direction)
+    family = family_of(direction)
     rows, columns = ds["reachable"].dims
-    (fa, ua), (fb, ub) = _axis_display(ds, columns), _axis_display(ds, rows)
+    (fa, ua), (fb, ub) = axis_display(ds, columns), axis_display(ds, rows)
     x, y = ds[columns].values * fa, ds[rows].values * fb
     worst = ds[f"worst_case_{family}"].sel({family: direction}).values
     scale, unit = figure_unit("displacement", direction, worst[np.isfinite(worst)])

@@ -240,8 +240,9 @@ def _json_table(var: xr.DataArray) -> dict:
                      for d in var.direction.values} for q in var.quantity.values}
 
 
-def _cell(value: float, factor: float) -> str:
-    return f"{value * factor:11.4g}" if np.isfinite(value) else f"{'-':>11s}"
+def table_cell(value: float, factor: float = 1.0, width: int = 11) -> str:
+    """A number of a printed table in display units (``value`` SI times ``factor``), a dash where it is missing."""
+    return f"{value * factor:{width}.4g}" if np.isfinite(value) else f"{'-':>{width}s}"
 
 
 def _missing_notes(sds: xr.Dataset) -> list[str]:
@@ -297,5 +298,5 @@ def _table_lines(sds: xr.Dataset) -> list[str]:
                     head = f"{q:<13s}{d:<4s}{name.split('_')[0]:<5s}{unit:<8s}" if b == "estimate" \
                         else " " * 30
                     lines.append(head + f"{b:<9s}" + "".join(
-                        _cell(float(v.sel(statistic=s, bound=b)), f) for s in STATISTICS))
+                        table_cell(float(v.sel(statistic=s, bound=b)), f) for s in STATISTICS))
     return lines

@@ -59,7 +59,7 @@ from scipy import stats as sps
 from rss6core import FINISHED, models_with
 
 from ..analysis.estimators import BOUNDS, MIN_N_MEAN, mean_interval
-from ..analysis.stats import in_window, json_number
+from ..analysis.stats import in_window, json_number, table_cell
 from ..files.records import file_window_label
 from ..vocabulary import CONFIDENCE, SUMMARIES
 
@@ -352,10 +352,6 @@ def to_json(mds: xr.Dataset) -> dict:
     return out
 
 
-def _cell(value: float, factor: float = 1.0, width: int = 10) -> str:
-    return f"{value * factor:{width}.4g}" if np.isfinite(value) else f"{'-':>{width}s}"
-
-
 _WIDTH_COLUMNS = {"plain_n_for_width": "n MC", "high_n_for_width": "N MF", "low_n_for_width": "M MF"}
 
 
@@ -372,8 +368,8 @@ def _row(mds: xr.Dataset, name: str, q, d) -> str:
 
     def at(field):
         return float(mds[f"{name}_{field}"].sel(quantity=q, direction=d))
-    cells = "".join(_cell(float(m.sel(estimator=e, bound=b)), f) for e in ESTIMATORS for b in BOUNDS)
-    extra = "".join(_cell(at(k), 1, 11) for k in _extra_columns(mds, name))
+    cells = "".join(table_cell(float(m.sel(estimator=e, bound=b)), f, 10) for e in ESTIMATORS for b in BOUNDS)
+    extra = "".join(table_cell(at(k)) for k in _extra_columns(mds, name))
     return (f"{q:<13s}{d:<4s}{unit:<8s}{cells}{at('correlation'):7.2f}"
             f"{at('variance_reduction'):7.2f}{at('equivalent_n'):8.0f}{extra}")
 

@@ -16,7 +16,7 @@ from rss6core import (drawn_eccentricities, models_with, rigid_motion, sampled_e
 
 from ..analysis.estimators import quantile_estimates, quantile_interval
 from ..files.error_map import POSE_AXES, error_map_dataset
-from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTILES
+from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTILES, family_of
 
 __all__ = ["MAP_MODELS", "GridAxis", "DEFAULT_COUNT", "DEFAULT_DRAWS", "PAD", "MIN_PAD", "USER_UNITS",
            "default_grid", "workspace_map", "map_table", "write_map"]
@@ -130,10 +130,11 @@ def _attributes(scene, axes, sizes, draws: int, seed: int, model: str) -> dict:
 def _where(ds: xr.Dataset, values: np.ndarray) -> str:
     """The grid pose of the largest finite value, in mm or deg."""
     rows, columns = np.unravel_index(np.nanargmax(values), values.shape)
+    from ..analysis.map_plots import axis_display
     b, a = ds["reachable"].dims
     out = []
     for dim, k in ((a, columns), (b, rows)):
-        factor, unit = (1e3, "mm") if ds[dim].attrs["units"] == "m" else USER_UNITS["rad"]
+        factor, unit = axis_display(ds, dim)
         out.append(f"{dim.removeprefix('platform_')} = {round(float(ds[dim][k]) * factor, 6) + 0.0:.4g} {unit}")
     return ", ".join(out)
 
@@ -145,7 +146,7 @@ def map_table(ds: xr.Dataset) -> str:
              f"{'dir':4}{'unit':6}{'worst min':>11}{'worst max':>11}  {'where largest':30}"
              f"{'q95 min':>10}{'q95 max':>10}  where largest"]
     for d in DIRECTIONS:
-        family = "translation" if d in ("x", "y", "z") else "rotation"
+        family = family_of(d)
         factor, unit = 1e3, ("mm" if family == "translation" else "mrad")
         worst = ds[f"worst_case_{family}"].sel({family: d}).values
         q95 = ds[f"q95_{family}"].sel({family: d}).values
