@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SimulationResult", "ContactBatch", "time_grid", "check_step_count", "PEAK_WINDOWS"]
+__all__ = ["SimulationResult", "ContactBatch", "time_grid", "check_step_count", "whole_steps", "PEAK_WINDOWS"]
 
 PEAK_WINDOWS = ("startup", "steady")   # axis 0 of the peaks: t < steady_after, t >= steady_after
 
@@ -59,7 +59,7 @@ def check_step_count(duration: float, dt: float) -> int:
     does not divide the duration or gives fewer than MIN_STEPS or more than MAX_STEPS steps (the run's
     histories and derivatives need a few samples; each step holds arrays for every realisation).
     Counted, not built: the grid it guards may not fit in memory."""
-    steps = _steps(duration, dt)
+    steps = whole_steps(duration, dt)
     if not MIN_STEPS <= steps <= MAX_STEPS:
         count = f"{steps}" if steps < 1e15 else f"about {float(steps):.3g}"
         raise ValueError(f"time step {dt!r} s gives {count} steps over the duration {duration!r} s; a run takes "
@@ -69,14 +69,15 @@ def check_step_count(duration: float, dt: float) -> int:
 
 def time_grid(duration: float, dt: float) -> np.ndarray:
     """t_k = k dt on [0, duration]; dt must divide the duration."""
-    return np.arange(_steps(duration, dt) + 1) * dt
+    return np.arange(whole_steps(duration, dt) + 1) * dt
 
 
-def _steps(duration: float, dt: float) -> int:
-    """How many steps of ``dt`` make ``duration`` (s), or ValueError where dt does not divide it."""
+def whole_steps(duration: float, dt: float, at_least: int = 0) -> int:
+    """How many steps of ``dt`` make ``duration`` (s), or ValueError where dt does not divide it into
+    at least ``at_least`` of them."""
     if not dt > 0:
         raise ValueError(f"time step must be positive, got {dt!r}")
     n = duration / dt
-    if abs(n - round(n)) > 1e-6 * max(1.0, n):
+    if abs(n - round(n)) > 1e-6 * max(1.0, n) or round(n) < at_least:
         raise ValueError(f"time step {dt!r} s does not divide the duration {duration!r} s")
     return int(round(n))

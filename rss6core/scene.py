@@ -28,7 +28,7 @@ from .kinematics import WorkspaceError, check_workspace
 from .link_reduction import max_link_modes
 from .levels import MODELS
 from .pose_csv import file_trajectory, with_pose_samples
-from .results import check_step_count
+from .results import check_step_count, whole_steps
 from .sections import RectangleSection, TubeSection
 from .uncertain import UncertainInputError, UncertainInputs, parse_uncertain
 from .trajectory_kinds import TRAJECTORY_KINDS, SampledPoses, Sinusoid, TrajectoryError, ViaPoints, via_points
@@ -562,10 +562,6 @@ def _build(v: dict, text: str, source: str) -> Scene:
     if ct["stick_velocity_m_s"] >= ct["slip_velocity_m_s"]:
         raise SceneError("[contact] stick_velocity_m_s: must be smaller than slip_velocity_m_s")
     dt, duration = v["simulation"]["time_step_s"], tr.duration
-    steps = duration / dt
-    if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
-        raise SceneError(f"[simulation] time_step_s: {dt!r} does not divide "
-                         f"{where} = {duration!r} into whole steps")
     try:
         check_step_count(duration, dt)
     except ValueError as exc:
@@ -575,10 +571,11 @@ def _build(v: dict, text: str, source: str) -> Scene:
                          f"= {duration!r}, got {v['simulation']['settle_time_s']!r}")
     v["simulation"]["steady_after_s"] = _steady_after(v["simulation"]["steady_after_s"], duration, where)
     _check_startup_samples(v["simulation"]["settle_time_s"], v["simulation"]["steady_after_s"], dt)
-    ratio = dt / v["simulation"]["contact_time_step_s"]
-    if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
+    try:
+        whole_steps(dt, v["simulation"]["contact_time_step_s"], at_least=1)
+    except ValueError:
         raise SceneError(f"[simulation] contact_time_step_s: must divide time_step_s = {dt!r} "
-                         "into whole steps")
+                         "into whole steps") from None
     deg = np.radians
     return Scene(
         name=v["name"],

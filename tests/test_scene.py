@@ -95,7 +95,8 @@ def test_unreachable_trajectory_names_leg_and_time(paper_text):
 
 
 def test_time_step_must_divide_duration(paper_text):
-    with pytest.raises(SceneError, match=r"\[simulation\] time_step_s: .* whole steps"):
+    said = r"\[simulation\] time_step_s: time step 0.003 s does not divide the duration 2.0 s"
+    with pytest.raises(SceneError, match=said):
         parse_scene(_edit(paper_text, "time_step_s = 1.0e-3", "time_step_s = 3.0e-3"))
 
 
