@@ -8,8 +8,8 @@ import pytest
 import xarray as xr
 from scipy import stats as sps
 
-from pipeline.analysis.exceedance import (EventError, clopper_pearson, exceedance, format_exceedance,
-                                          one_sided_cp, parse_event)
+from pipeline.analysis.estimators import clopper_pearson, one_sided_cp
+from pipeline.analysis.exceedance import EventError, exceedance, format_exceedance, parse_event
 from pipeline.analysis.gate import exit_code, judge
 from pipeline.analysis.spec import SpecError, parse_spec
 from pipeline.cli import main

@@ -92,10 +92,10 @@ from functools import lru_cache
 import numpy as np
 from scipy import stats as sps
 
-from ..vocabulary import QUANTILES, STATISTICS
+from ..vocabulary import CONFIDENCE, QUANTILES, STATISTICS
 
 __all__ = ["BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "STD_WIDENING", "UNTIL_WIDENING", "MIN_POINTS_RQMC", "MAX_NOTE",
-           "QUANTILE_DECISION_CAP",
+           "QUANTILE_DECISION_CAP", "clopper_pearson", "one_sided_cp",
            "quantile_ranks", "min_n_for_quantile", "quantile_estimates", "quantile_interval", "BoundRanks",
            "one_sided_ranks", "quantile_bounds", "quantile_decision_n", "mean_interval", "mean_bounds",
            "running_mean_interval", "std_interval", "estimates", "one_sided_bounds", "stopped_level", "bound_level",
@@ -414,3 +414,19 @@ def no_interval_at(statistic: str, confidence: float, n: int, replicates: int | 
     if n >= floor:
         return None
     return f"{statistic} has no {100 * confidence:g} % interval below n = {floor} (-n {n}); raise -n"
+
+
+def clopper_pearson(k, n, confidence: float = CONFIDENCE) -> tuple:
+    """Two-sided exact (Clopper-Pearson) interval of a binomial proportion from k of n: each bound a
+    one-sided bound at (1 + confidence) / 2; 0 and 1 at k = 0 and k = n."""
+    return one_sided_cp(k, n, (1 + confidence) / 2)
+
+
+def one_sided_cp(k, n, confidence: float = CONFIDENCE) -> tuple:
+    """One-sided exact bounds (lower, upper) of a binomial proportion, each at ``confidence``:
+    lower = Beta(1 - c; k, n - k + 1), upper = Beta(c; k + 1, n - k) (Clopper and Pearson 1934)."""
+    k, n = np.asarray(k, float), np.asarray(n, float)
+    with np.errstate(invalid="ignore"):
+        lower = np.where(k > 0, sps.beta.ppf(1 - confidence, k, n - k + 1), 0.0)
+        upper = np.where(k < n, sps.beta.ppf(confidence, k + 1, n - k), 1.0)
+    return lower, upper

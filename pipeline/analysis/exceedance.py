@@ -15,13 +15,13 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats as sps
 
 from ..vocabulary import CONFIDENCE, WINDOWS, window_words
+from .estimators import clopper_pearson
 from .spec import SpecError, _NUMBER, _limit, _subject, _unit_factor
 
-__all__ = ["Event", "Exceedance", "EventError", "parse_event", "clopper_pearson", "one_sided_cp",
-           "exceedance", "format_exceedance", "exceedance_json", "union_words"]
+__all__ = ["Event", "Exceedance", "EventError", "parse_event", "exceedance", "format_exceedance", "exceedance_json",
+           "union_words"]
 
 _PER_SECOND = {"s", "s^2", "s2", "s**2"}   # unit tails after '/' that are no window
 
@@ -96,22 +96,6 @@ def parse_event(text: str, flag: str = "--event") -> Event:
     except SpecError as exc:       # the spec grammar's message, under this flag
         raise EventError(str(exc).replace("--require", flag, 1)) from None
     return Event(text, quantity, tuple(directions), limit * factor, m.group(2).strip(), factor, window)
-
-
-def clopper_pearson(k, n, confidence: float = CONFIDENCE) -> tuple:
-    """Two-sided exact (Clopper-Pearson) interval of a binomial proportion from k of n: each bound a
-    one-sided bound at (1 + confidence) / 2; 0 and 1 at k = 0 and k = n."""
-    return one_sided_cp(k, n, (1 + confidence) / 2)
-
-
-def one_sided_cp(k, n, confidence: float = CONFIDENCE) -> tuple:
-    """One-sided exact bounds (lower, upper) of a binomial proportion, each at ``confidence``:
-    lower = Beta(1 - c; k, n - k + 1), upper = Beta(c; k + 1, n - k) (Clopper and Pearson 1934)."""
-    k, n = np.asarray(k, float), np.asarray(n, float)
-    with np.errstate(invalid="ignore"):
-        lower = np.where(k > 0, sps.beta.ppf(1 - confidence, k, n - k + 1), 0.0)
-        upper = np.where(k < n, sps.beta.ppf(confidence, k + 1, n - k), 1.0)
-    return lower, upper
 
 
 @dataclass(frozen=True)

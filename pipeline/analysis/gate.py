@@ -28,10 +28,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .exceedance import Event, event_values, one_sided_cp
+from .exceedance import Event, event_values
 from .spec import PF, Spec
 from ..vocabulary import CONFIDENCE, QUANTILES, WINDOWS
-from .estimators import QUANTILE_DECISION_CAP, bound_level, interval_floor, no_interval_at, quantile_decision_n
+from .estimators import (QUANTILE_DECISION_CAP, bound_level, interval_floor, no_interval_at, one_sided_cp,
+                         quantile_decision_n)
 from .stats import check_window_samples, ensemble_stats, finished_values, json_number
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",

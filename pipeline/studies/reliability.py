@@ -21,7 +21,8 @@ from scipy import stats as sps
 from rss6core import (FINISHED, SIZE_UNIFORMS, UNIFORM_BLOCKS, clearances_from_named_uniforms, clearances_from_uniforms,
                       inputs_from_uniforms, model_level, prepare_level, size_band, uniform_dimension)
 
-from ..analysis.exceedance import Event, clopper_pearson
+from ..analysis.estimators import clopper_pearson
+from ..analysis.exceedance import Event
 from ..analysis.subset import SubsetSettings, subset_simulation
 from ..ensemble.cluster import WORKER_TIMEOUT_S, optional_client, results_as_finished
 from ..files.records import window_summaries
