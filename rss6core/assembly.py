@@ -398,7 +398,7 @@ def link_loads(model: ElasticModel, motion: RigidMotion, scene, crank: np.ndarra
                                   -motion.alpha_ddot[..., None] * e, model.crank_M_full)
     # rod: rigid acceleration is linear along the rod, c'' + s (b'' - c'')
     f_rod = _affine_nodal_loads(rod, g - motion.c_ddot, motion.c_ddot - motion.b_ddot,
-                                -rod_angular_motion(motion)[2], model.rod_M_full)
+                                -rod_angular_motion(motion).alpha, model.rod_M_full)
     pm = motion.platform
     f_platform = np.concatenate([model.platform_mass * (g - pm.a),
                                  -euler_moment(platform_inertia, pm.omega, pm.omega_dot)], -1)

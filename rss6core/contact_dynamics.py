@@ -357,7 +357,7 @@ class _Chunk:
         self.J[rows] = platform_point_map(motion.r)
         self.Rc[rows], self.Rr[rows] = Rc, Rr
         w_crank = motion.alpha_dot[..., None] * crank_axes(scene.geometry)[None]
-        w_rod = rod_angular_motion(motion)[1]
+        w_rod = rod_angular_motion(motion).omega
         self.omega[rows] = np.stack([w_crank, w_rod - w_crank, w_rod - motion.platform.omega[:, None, :]], -2)
         self.offset[rows] = at.error
 

@@ -17,7 +17,7 @@ import numpy as np
 from .kinematics import RigidMotion, crank_axes
 from .sections import crank_inertia, rod_inertia
 
-__all__ = ["RigidLoads", "inverse_dynamics", "rod_angular_motion", "mechanical_energy",
+__all__ = ["RigidLoads", "RodMotion", "inverse_dynamics", "rod_angular_motion", "mechanical_energy",
            "platform_inertia_world", "euler_moment"]
 
 
@@ -38,12 +38,21 @@ class RigidLoads:
     force_B: np.ndarray    # (T, 6, 3) N
 
 
-def rod_angular_motion(m: RigidMotion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rod unit vector u = (c - b)/L, angular velocity u x d'/L and acceleration u x d''/L (no spin)."""
+@dataclass(frozen=True)
+class RodMotion:
+    """The rigid rods' rotation (T, 6, 3): unit vector u = (c - b)/L, angular velocity u x d'/L (rad/s)
+    and angular acceleration u x d''/L (rad/s^2), without spin about u."""
+    direction: np.ndarray
+    omega: np.ndarray
+    alpha: np.ndarray
+
+
+def rod_angular_motion(m: RigidMotion) -> RodMotion:
+    """The rods' :class:`RodMotion` along the rigid motion ``m``."""
     d = m.c - m.b
     L = np.linalg.norm(d, axis=-1, keepdims=True)
     u = d / L
-    return u, np.cross(u, m.c_dot - m.b_dot) / L, np.cross(u, m.c_ddot - m.b_ddot) / L
+    return RodMotion(u, np.cross(u, m.c_dot - m.b_dot) / L, np.cross(u, m.c_ddot - m.b_ddot) / L)
 
 
 def platform_inertia_world(principal: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -65,7 +74,8 @@ def inverse_dynamics(scene, m: RigidMotion) -> RigidLoads:
     crank, rod = crank_inertia(scene), rod_inertia(scene)
     L = _per_leg(geo.rod_length)
     rod_mass, crank_mass = _per_leg(rod.mass), _per_leg(crank.mass)
-    u, _, wd_rod = rod_angular_motion(m)
+    rods = rod_angular_motion(m)
+    u, wd_rod = rods.direction, rods.alpha
     a_rod = 0.5 * (m.c_ddot + m.b_ddot)
     # rod moment balance about C: (b - c) x F = I_t w' + (g - c) x m (a_g - g), F on rod at B
     m_req = _per_leg(rod.inertia[1]) * wd_rod + np.cross(-0.5 * L * u, rod_mass * (a_rod - g))
@@ -100,7 +110,7 @@ def mechanical_energy(scene, m: RigidMotion) -> tuple[np.ndarray, np.ndarray]:
     g = scene.gravity_vector
     crank, rod = crank_inertia(scene), rod_inertia(scene)
     pm = m.platform
-    _, w_rod, _ = rod_angular_motion(m)
+    w_rod = rod_angular_motion(m).omega
     v_rod = 0.5 * (m.c_dot + m.b_dot)
     Ip = platform_inertia_world(scene.platform.inertia, pm.R)
     kinetic = (0.5 * crank.inertia[1] * np.sum(m.alpha_dot ** 2, axis=1)

@@ -176,8 +176,8 @@ class Level:
             return self._failed_kinematics(exc, inputs)
         geometric = [np.zeros_like(self.motion.platform.pose)] * 3 if nominal else motion_error(real, self.motion)
         if not model_level(self.model).draws_clearances:
-            status, message, steps = check_history(geometric[0], real.t, "geometric displacement error")
-            return SimulationResult(real.t, *geometric, status, message, steps, inputs=inputs)
+            outcome = check_history(geometric[0], real.t, "geometric displacement error")
+            return SimulationResult(real.t, *geometric, outcome.status, outcome.message, outcome.steps, inputs=inputs)
         result = quasi_static_result(self.scene, real, draw, self.scene.simulation.quasi_static_eccentricity)
         return dataclasses.replace(result if nominal else _plus(result, geometric), inputs=inputs)
 

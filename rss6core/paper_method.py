@@ -42,7 +42,7 @@ from .contact_laws import joint_stiffness, lankarani_nikravesh
 from .kinematics import rigid_motion
 from .quasi_static import CENTRAL_PAD, closure_matrix, padded_grid, time_derivatives
 from .results import SimulationResult
-from .status import FINISHED, check_history
+from .status import FINISHED, Outcome, check_history
 
 __all__ = ["PaperClosure", "paper_contact_forces", "paper_draw", "paper_result", "output_step", "END_TAG"]
 
@@ -159,8 +159,8 @@ def paper_result(elastic: SimulationResult, closure: PaperClosure, draw, force, 
     draw an ensemble file records."""
     d, v, a = closure.error(draw)
     d, v, a = elastic.displacement + d, elastic.velocity + v, elastic.acceleration + a
-    status, message, steps = elastic.status, elastic.message, elastic.steps
-    if status == FINISHED:
-        status, message, steps = check_history(d, elastic.t, "paper-level displacement error")
-    return SimulationResult(elastic.t, d, v, a, status, message, steps,
+    outcome = Outcome(elastic.status, elastic.message, elastic.steps)
+    if outcome.status == FINISHED:
+        outcome = check_history(d, elastic.t, "paper-level displacement error")
+    return SimulationResult(elastic.t, d, v, a, outcome.status, outcome.message, outcome.steps,
                             contact_force_peak=force.max(0), draw=stored_draw)

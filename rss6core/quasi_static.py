@@ -81,8 +81,8 @@ def quasi_static_result(scene, motion: RigidMotion, draw: ClearanceDraw, mode: s
     """One realisation's result; failed where the error is not finite or beyond the divergence
     limit (a near-singular closure, or clearances no linearisation can carry)."""
     d, v, a = quasi_static_error(scene, motion, draw, mode)
-    status, message, steps = check_history(d, motion.t, "quasi-static displacement error")
-    return SimulationResult(motion.t, d, v, a, status, message, steps, draw=draw)
+    outcome = check_history(d, motion.t, "quasi-static displacement error")
+    return SimulationResult(motion.t, d, v, a, outcome.status, outcome.message, outcome.steps, draw=draw)
 
 
 def uniform_step(t: np.ndarray) -> float | None:

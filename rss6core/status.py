@@ -6,10 +6,12 @@ and step) and with which step size, in the same words at every level:
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 __all__ = ["FINISHED", "FAILED", "STATUSES", "DIVERGENCE_LIMIT", "NEWTON_FAILED", "DIVERGED",
-           "failure_message", "diverged", "check_history", "contact_failure"]
+           "failure_message", "diverged", "Outcome", "check_history", "contact_failure"]
 
 FINISHED = "finished"
 FAILED = "failed"
@@ -33,20 +35,28 @@ def diverged(quantity: str, size: float, limit: float) -> str:
     return f"{quantity} {size:.3g} exceeds the {limit:g} m divergence limit or is not finite"
 
 
-def check_history(d: np.ndarray, t: np.ndarray, quantity: str,
-                  limit: float = DIVERGENCE_LIMIT) -> tuple[str, str, int]:
-    """(status, message, steps) of a history d (T, ...) on the grid t: failed at the first sample
-    that is not finite or reaches ``limit``; steps counts the sound steps before it."""
+@dataclass(frozen=True)
+class Outcome:
+    """How a run ended: its status (one of STATUSES), the failure message ('' when finished) and the
+    steps it completed soundly."""
+    status: str
+    message: str
+    steps: int
+
+
+def check_history(d: np.ndarray, t: np.ndarray, quantity: str, limit: float = DIVERGENCE_LIMIT) -> Outcome:
+    """The :class:`Outcome` of a history d (T, ...) on the grid t: failed at the first sample that is not
+    finite or reaches ``limit``; its steps count the sound steps before it."""
     magnitude = np.abs(d)
     if magnitude.max(initial=0.0) < limit:           # the usual case in one contiguous pass (NaN fails it)
-        return FINISHED, "", len(t) - 1
+        return Outcome(FINISHED, "", len(t) - 1)
     size = magnitude.reshape(len(t), -1).max(-1)
     bad = ~(size < limit)                            # nan compares false: bad
     if not bad.any():
-        return FINISHED, "", len(t) - 1
+        return Outcome(FINISHED, "", len(t) - 1)
     k = int(np.argmax(bad))
     h = float(t[1] - t[0]) if len(t) > 1 else 0.0
-    return FAILED, failure_message(diverged(quantity, size[k], limit), t[k], k, h), max(k - 1, 0)
+    return Outcome(FAILED, failure_message(diverged(quantity, size[k], limit), t[k], k, h), max(k - 1, 0))
 
 
 def contact_failure(code: int, t: float, step: int, h: float, size: float, limit: float,

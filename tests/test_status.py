@@ -41,7 +41,8 @@ def test_rigid_level_reports_as_a_level_that_steps(smoke, dt):
     assert elastic.status == FINISHED
     assert np.array_equal(rigid.t, elastic.t) and rigid.t[1] == pytest.approx(dt)
     assert (rigid.status, rigid.message, rigid.steps) == (elastic.status, elastic.message, elastic.steps)
-    assert (rigid.status, rigid.message, rigid.steps) == check_history(rigid.displacement, rigid.t, "rigid")
+    outcome = check_history(rigid.displacement, rigid.t, "rigid")
+    assert (rigid.status, rigid.message, rigid.steps) == (outcome.status, outcome.message, outcome.steps)
     assert not any(np.any(q) for q in (rigid.displacement, rigid.velocity, rigid.acceleration))
 
 
@@ -100,5 +101,6 @@ def test_check_history_fails_at_the_first_sample_that_reaches_the_limit_or_is_no
     t = np.arange(8) * 1e-3
     d = np.full((8, 6), 1e-6)
     d[4, 2] = value
-    status, _, steps = check_history(d, t, "test", limit=1.0)
+    outcome = check_history(d, t, "test", limit=1.0)
+    status, steps = outcome.status, outcome.steps
     assert (status, steps) == ((FINISHED, 7) if step is None else (FAILED, step))
