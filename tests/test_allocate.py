@@ -52,7 +52,8 @@ def exhaustive(paper):
 def test_allocation_is_the_exhaustive_optimum(paper, exhaustive):
     options, best, optima, _ = exhaustive
     specs = [parse_spec(SPEC)]
-    combo, judged, _ = search(responses(paper, specs, N), options, specs, paper.scene(), 0.95)
+    found = search(responses(paper, specs, N), options, specs, paper.scene(), 0.95)
+    combo, judged = found.combo, found.judged
     assert _cost(combo) == pytest.approx(best)
     assert combo in optima and 1 <= judged <= 27
 
@@ -149,7 +150,7 @@ def test_a_named_class_from_the_costs_file_is_offered_and_chosen(paper, tmp_path
     options = class_options(paper.scene(), SMALL, path)
     assert [c.name for c in options["spherical_B"]] == [*SMALL, "grade1"]
     assert [c.cost for c in options["revolute_radial"]] == pytest.approx([3.0, 2.7, 2.4])
-    combo, _, _ = search(responses(paper, specs, N), options, specs, paper.scene(), 0.95)
+    combo = search(responses(paper, specs, N), options, specs, paper.scene(), 0.95).combo
     assert combo[2].name == "grade1" and (combo[2].low, combo[2].high) == (0.005e-3, 0.02e-3)
 
 
@@ -274,7 +275,7 @@ def test_a_pf_spec_is_searched_on_the_gates_rule(paper):
     assert allowed_exceedances(specs[0], N, 0.95) == 1
     options = class_options(paper.scene(), SMALL)
     res = responses(paper, specs, N)
-    combo, _, _ = search(res, options, specs, paper.scene(), 0.95)
+    combo = search(res, options, specs, paper.scene(), 0.95).combo
     ranked = {f: list(options[f]) for f in ALLOCATED}
     neighbours = [combo[:k] + (ranked[f][i],) + combo[k + 1:] for k, f in enumerate(ALLOCATED)
                   for i in (ranked[f].index(combo[k]) - 1, ranked[f].index(combo[k]) + 1) if 0 <= i < len(ranked[f])]

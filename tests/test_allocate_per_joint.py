@@ -47,7 +47,8 @@ def test_per_joint_optimum_equals_a_brute_force_of_simulations(paper, joint_res,
     answer has the least passing cost, and a passing combination mixes the two revolute classes."""
     specs, scene = [parse_spec(SPEC)], paper.scene()
     options = _two_revolute_classes(scene)
-    combo, _, method, family = joint_search(joint_res, options, specs, scene, 0.95)
+    found = joint_search(joint_res, options, specs, scene, 0.95)
+    combo, method, family = found.combo, found.method, found.family_combo
     assert "exhaustive" in method
     costs = {}
     for k, revolute in enumerate(itertools.product(*[options["revolute_radial"]] * 6)):
@@ -66,7 +67,8 @@ def test_greedy_per_joint_is_locally_least_cost(paper, joint_res):
     optimum, and no single joint moved to its next strictly cheaper class still passes."""
     specs, scene = [parse_spec(SPEC)], paper.scene()
     options = class_options(scene)
-    combo, judged, method, family = joint_search(joint_res, options, specs, scene, 0.95)
+    found = joint_search(joint_res, options, specs, scene, 0.95)
+    combo, judged, method, family = found.combo, found.judged, found.method, found.family_combo
     assert "greedy" in method and judged > 0
     assert all(np.all(s.holds(u)) for s, u in zip(specs, joint_uppers(joint_res, combo, specs, scene, 0.95)))
     assert sum(c.cost for c in combo) <= 6 * sum(c.cost for c in family) + 1e-9

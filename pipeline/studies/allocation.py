@@ -38,7 +38,8 @@ __all__ = ["ALLOCATED", "DEFAULT_FITS", "ClassOption", "Allocation", "Allocation
            "Responses", "responses", "spec_uppers", "error_uppers", "search", "allocate", "allocated_scene",
            "check_request",
            "cost_of", "cheapest_uniform", "unit_eccentricity", "family_draw", "fixed_draw", "cells_history",
-           "probe_scene", "PROBE_LOW", "PROBE_HIGH", "allowed_exceedances", "pf_order_statistic", "out_of_reach"]
+           "probe_scene", "PROBE_LOW", "PROBE_HIGH", "allowed_exceedances", "pf_order_statistic", "out_of_reach",
+           "Search", "unreachable"]
 
 ALLOCATED = ("revolute_radial", "spherical_C", "spherical_B")   # families given fit classes
 RADII = {"revolute_radial": "journal_radius", "spherical_C": "sphere_radius", "spherical_B": "sphere_radius"}
@@ -307,23 +308,37 @@ def out_of_reach(spec: Spec, best: float, n: int, confidence: float) -> Allocati
                            f"or relax the spec")
 
 
+def unreachable(specs: list[Spec], best: list, n: int, confidence: float) -> AllocationError:
+    """:func:`out_of_reach` for the spec whose best attainable bound is farthest above its limit."""
+    worst = max(range(len(specs)), key=lambda i: best[i] / specs[i].limit)
+    return out_of_reach(specs[worst], best[worst], n, confidence)
+
+
 def cost_of(combo) -> float:
     """Total cost of a class per family, six joints a family."""
     return 6.0 * sum(c.cost for c in combo)
 
 
 
-def search(res: Responses, options: dict, specs: list[Spec], scene, confidence: float):
-    """(least-cost combo, combinations judged, best attainable upper per spec) by exhaustive search in
-    rising cost; the combo is None if none meets every spec."""
+@dataclass(frozen=True)
+class Search:
+    """What a class search found: the least-cost combo (None if none meets every spec), how many
+    combinations it judged and the best attainable upper bound per spec (SI)."""
+    combo: tuple | None
+    judged: int
+    best: list
+
+
+def search(res: Responses, options: dict, specs: list[Spec], scene, confidence: float) -> Search:
+    """The least-cost class per family by exhaustive search in rising cost (:class:`Search`)."""
     combos = sorted(itertools.product(*(options[f] for f in ALLOCATED)), key=cost_of)
     best = [np.inf] * len(specs)
     for k, combo in enumerate(combos, 1):
         uppers = spec_uppers(res, combo, specs, scene, confidence)
         best = [min(b, float(np.max(u))) for b, u in zip(best, uppers)]
         if all(bool(np.all(s.holds(u))) for s, u in zip(specs, uppers)):
-            return combo, k, best
-    return None, len(combos), best
+            return Search(combo, k, best)
+    return Search(None, len(combos), best)
 
 
 def cheapest_uniform(res: Responses, options: dict, specs: list[Spec], scene, confidence: float):
@@ -358,10 +373,10 @@ def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: 
         raise ValueError(f"the {spec.model} level is not linear in the clearances: use greedy_allocate")
     scene = spec.scene()
     res = responses(spec, specs, n)
-    combo, judged, best = search(res, options, specs, scene, confidence)
+    found = search(res, options, specs, scene, confidence)
+    combo = found.combo
     if combo is None:
-        worst = max(range(len(specs)), key=lambda i: best[i] / specs[i].limit)
-        raise out_of_reach(specs[worst], best[worst], n, confidence)
+        raise unreachable(specs, found.best, n, confidence)
     uniform = cheapest_uniform(res, options, specs, scene, confidence)
     predicted = {s.text: float(np.max(u)) for s, u in zip(specs, spec_uppers(res, combo, specs, scene, confidence))}
     folder = Path(folder)
@@ -371,5 +386,5 @@ def allocate(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: 
     scene_path.write_text(text)
     path = folder / f"{scene.name}_{spec.model}_allocated.nc"
     verdicts = run_trial(spec, text, combo, specs, n, path, confidence, workers).verdicts
-    return Allocation(combo, cost_of(combo), uniform, None if uniform is None else cost_of(uniform), judged,
+    return Allocation(combo, cost_of(combo), uniform, None if uniform is None else cost_of(uniform), found.judged,
                       verdicts, predicted, path, scene_path)

@@ -32,10 +32,10 @@ from ..files.records import chunk_dataset, finish_ensemble
 from ..files.writing import write_netcdf
 from .allocation import (ALLOCATED, PROBE_LOW, Allocation, Responses,
                          cells_history, check_request, cheapest_uniform, cost_of, error_uppers, family_draw,
-                         fixed_draw, out_of_reach, probe_scene, search, unit_eccentricity)
+                         fixed_draw, probe_scene, search, unit_eccentricity, unreachable)
 
 __all__ = ["EXHAUSTIVE_LIMIT", "JOINT_LETTERS", "JointResponses", "joint_labels", "joint_responses", "joint_uppers",
-           "joint_search", "verify_per_joint", "allocate_per_joint"]
+           "JointSearch", "joint_search", "verify_per_joint", "allocate_per_joint"]
 
 EXHAUSTIVE_LIMIT = 4096          # per-joint combinations judged one by one at most
 JOINT_LETTERS = {"revolute_radial": "A", "spherical_C": "C", "spherical_B": "B"}
@@ -144,20 +144,29 @@ def _greedy(res, options, specs, scene, confidence, start):
         combo = best[1]
 
 
-def joint_search(res: JointResponses, options: dict, specs: list[Spec], scene, confidence: float):
-    """(per-joint combo, combinations judged, method, per-family combo): exhaustive if at most
-    EXHAUSTIVE_LIMIT combinations, else greedy from the per-family optimum (module doc)."""
-    family_combo, judged, best = search(res.family(), options, specs, scene, confidence)
-    if family_combo is None:
-        worst = max(range(len(specs)), key=lambda i: best[i] / specs[i].limit)
-        raise out_of_reach(specs[worst], best[worst], res.u.shape[1], confidence)
+@dataclass(frozen=True)
+class JointSearch:
+    """What the per-joint search found: the combo (a class per joint), the combinations judged (the
+    per-family search's included), how (exhaustive or greedy) and the per-family optimum it began from."""
+    combo: tuple
+    judged: int
+    method: str
+    family_combo: tuple
+
+
+def joint_search(res: JointResponses, options: dict, specs: list[Spec], scene, confidence: float) -> JointSearch:
+    """The least-cost class per joint: exhaustive if at most EXHAUSTIVE_LIMIT combinations, else greedy
+    from the per-family optimum (module doc; :class:`JointSearch`)."""
+    family = search(res.family(), options, specs, scene, confidence)
+    if family.combo is None:
+        raise unreachable(specs, family.best, res.u.shape[1], confidence)
     if math.prod(len(options[f]) ** 6 for f in ALLOCATED) <= EXHAUSTIVE_LIMIT:
         combo, k = _exhaustive(res, options, specs, scene, confidence)
-        return combo, judged + k, "exact linear scaling, per joint (exhaustive)", family_combo
-    start = tuple(c for c in family_combo for _ in range(6))
+        return JointSearch(combo, family.judged + k, "exact linear scaling, per joint (exhaustive)", family.combo)
+    start = tuple(c for c in family.combo for _ in range(6))
     combo, k = _greedy(res, options, specs, scene, confidence, start)
-    return combo, judged + k, ("linear scaling, per joint: greedy one-joint loosening from the per-family "
-                               "optimum (not proven least-cost)"), family_combo
+    return JointSearch(combo, family.judged + k, "linear scaling, per joint: greedy one-joint loosening from the "
+                       "per-family optimum (not proven least-cost)", family.combo)
 
 
 def _sized_draw(scene, draw: ClearanceDraw, combo) -> ClearanceDraw:
@@ -200,7 +209,8 @@ def allocate_per_joint(spec: EnsembleSpec, specs: list[Spec], n: int, folder, co
     check_request(spec, specs, n, confidence)
     scene = spec.scene()
     res = joint_responses(spec, specs, n)
-    combo, judged, method, _ = joint_search(res, options, specs, scene, confidence)
+    found = joint_search(res, options, specs, scene, confidence)
+    combo = found.combo
     uniform = cheapest_uniform(res.family(), options, specs, scene, confidence)
     predicted = {s.text: float(np.max(u)) for s, u in zip(specs, joint_uppers(res, combo, specs, scene, confidence))}
     folder = Path(folder)
@@ -208,4 +218,4 @@ def allocate_per_joint(spec: EnsembleSpec, specs: list[Spec], n: int, folder, co
     path = folder / f"{scene.name}_{spec.model}_allocated_per_joint.nc"
     verdicts = verify_per_joint(spec, specs, n, combo, path, confidence)
     return Allocation(combo, sum(c.cost for c in combo), uniform, None if uniform is None else cost_of(uniform),
-                      judged, verdicts, predicted, path, None, method=method, joints=joint_labels())
+                      found.judged, verdicts, predicted, path, None, method=found.method, joints=joint_labels())
