@@ -534,24 +534,42 @@ def _check_link_modes(modes: int, elements: int) -> None:
 
 
 def _build(v: dict, text: str, source: str) -> Scene:
-    g, tr, ct = v["geometry"], v["trajectory"], v["contact"]
-    where = tr.duration_key
-    rod = TubeSection(v["rod_section"]["outer_diameter_m"], v["rod_section"]["inner_diameter_m"])
+    """The checked Scene of the parsed tables ``v`` (the consistency checks no single key can make)."""
+    _check_sections(v)
+    _check_geometry(v["geometry"], v["contact"])
+    _check_link_modes(v["beam"]["link_modes"], v["simulation"]["elements_per_link"])
+    _check_actuator(v["actuator"], v["beam"]["link_modes"])
+    _check_clearances(v["clearance"], v["contact"])
+    _check_timing(v["simulation"], v["trajectory"])
+    return _scene(v, text, source)
+
+
+def _rod(section: dict) -> TubeSection:
+    return TubeSection(section["outer_diameter_m"], section["inner_diameter_m"])
+
+
+def _material(material: dict) -> Material:
+    return Material(material["density_kg_m3"], material["youngs_modulus_Pa"], material["shear_modulus_Pa"])
+
+
+def _check_sections(v: dict) -> None:
+    """SceneError for a rod tube without a wall, a material's impossible Poisson ratio, or lumped mass
+    without the rotary inertia it carries."""
+    rod, mat = _rod(v["rod_section"]), _material(v["material"])
     if rod.inner_diameter >= rod.outer_diameter:
         raise SceneError("[rod_section] inner_diameter_m: must be smaller than outer_diameter_m, "
                          f"got {rod.inner_diameter!r} >= {rod.outer_diameter!r}")
-    mat = Material(**{k: v["material"][f] for k, f in
-                      [("density", "density_kg_m3"), ("youngs_modulus", "youngs_modulus_Pa"),
-                       ("shear_modulus", "shear_modulus_Pa")]})
     if not -1.0 < mat.poisson_ratio <= 0.5:
         raise SceneError(f"[material] shear_modulus_Pa: implies Poisson ratio E/(2G)-1 = "
                          f"{mat.poisson_ratio:.3f}, outside (-1, 0.5]")
     if v["beam"]["mass"] == "lumped" and not v["beam"]["rotary_inertia"]:
         raise SceneError("[beam] mass: 'lumped' puts the sections' rotary inertia on the nodes' "
                          "rotations; set [beam] rotary_inertia = true")
-    _check_link_modes(v["beam"]["link_modes"], v["simulation"]["elements_per_link"])
-    _check_actuator(v["actuator"], v["beam"]["link_modes"])
-    _check_clearances(v["clearance"], ct)
+
+
+def _check_geometry(g: dict, ct: dict) -> None:
+    """SceneError for a size no 6-RSS robot has, nominal actuator offsets, or a friction ramp that ends
+    before it starts."""
     for key in ("base_radius_m", "platform_radius_m", "crank_length_m", "rod_length_m"):
         if g[key] > MAX_SIZE_M:
             raise SceneError(f"[geometry] {key}: {g[key]!r} m is above {MAX_SIZE_M:g} m, no 6-RSS robot's size "
@@ -561,21 +579,31 @@ def _build(v: dict, text: str, source: str) -> Scene:
                          "draw them in an [uncertain.NAME] table")
     if ct["stick_velocity_m_s"] >= ct["slip_velocity_m_s"]:
         raise SceneError("[contact] stick_velocity_m_s: must be smaller than slip_velocity_m_s")
-    dt, duration = v["simulation"]["time_step_s"], tr.duration
+
+
+def _check_timing(sim: dict, tr) -> None:
+    """SceneError unless the steps divide the trajectory's duration and the contact step the output step,
+    and the windows hold samples; fills in the default steady_after_s (s)."""
+    dt, duration, where = sim["time_step_s"], tr.duration, tr.duration_key
     try:
         check_step_count(duration, dt)
     except ValueError as exc:
         raise SceneError(f"[simulation] time_step_s: {exc} ({where})") from None
-    if v["simulation"]["settle_time_s"] >= duration:
+    if sim["settle_time_s"] >= duration:
         raise SceneError(f"[simulation] settle_time_s: must be shorter than {where} "
-                         f"= {duration!r}, got {v['simulation']['settle_time_s']!r}")
-    v["simulation"]["steady_after_s"] = _steady_after(v["simulation"]["steady_after_s"], duration, where)
-    _check_startup_samples(v["simulation"]["settle_time_s"], v["simulation"]["steady_after_s"], dt)
+                         f"= {duration!r}, got {sim['settle_time_s']!r}")
+    sim["steady_after_s"] = _steady_after(sim["steady_after_s"], duration, where)
+    _check_startup_samples(sim["settle_time_s"], sim["steady_after_s"], dt)
     try:
-        whole_steps(dt, v["simulation"]["contact_time_step_s"], at_least=1)
+        whole_steps(dt, sim["contact_time_step_s"], at_least=1)
     except ValueError:
         raise SceneError(f"[simulation] contact_time_step_s: must divide time_step_s = {dt!r} "
                          "into whole steps") from None
+
+
+def _scene(v: dict, text: str, source: str) -> Scene:
+    """The Scene of the checked tables ``v`` (SI; angles from degrees to radians)."""
+    g, ct = v["geometry"], v["contact"]
     deg = np.radians
     return Scene(
         name=v["name"],
@@ -584,11 +612,11 @@ def _build(v: dict, text: str, source: str) -> Scene:
                           g["crank_length_m"], g["rod_length_m"], frozen_array(deg(g["actuator_offsets_deg"]))),
         crank_section=RectangleSection(v["crank_section"]["axial_width_m"],
                                        v["crank_section"]["height_m"]),
-        rod_section=rod,
-        material=mat,
+        rod_section=_rod(v["rod_section"]),
+        material=_material(v["material"]),
         platform=Platform(v["platform"]["mass_kg"], frozen_array(v["platform"]["inertia_kg_m2"])),
         gravity=v["environment"]["gravity_m_s2"],
-        trajectory=tr,
+        trajectory=v["trajectory"],
         simulation=Simulation(**{k.removesuffix("_s").removesuffix("_m"): val
                                  for k, val in v["simulation"].items()}),
         damping=Damping(v["damping"]["mass_coefficient_per_s"],
