@@ -1,5 +1,6 @@
 """The command line guards its user: options and output paths checked before work, one writer per
 output, failures shown, resumed parts verified, a quiet exit on Ctrl-C and on a closed pipe."""
+import json
 import os
 import signal
 import subprocess
@@ -59,6 +60,14 @@ def _one_line_error(capsys, *words):
     for w in words:
         assert w in err, err
     return err
+
+
+def _error_after_progress(capsys, *words):
+    """A run's stderr: its progress lines, then one line of error naming ``words``, no traceback."""
+    err = capsys.readouterr().err.strip().splitlines()
+    assert not any("Traceback" in line for line in err), err
+    assert [line for line in err if "error:" in line] == err[-1:], err
+    assert all(w in err[-1] for w in words), err
 
 
 def _exit_code(argv) -> int:
@@ -276,16 +285,39 @@ def test_failure_reasons_count_each_reason_whatever_its_numbers():
     assert failure_reasons(ds.isel(realization=[1])) == []
 
 
-def test_all_realisations_failing_exit_1_with_the_reason_and_plot_says_one_line(tmp_path, capsys):
-    """Central difference at 1 ms (500x its critical step) diverges at the elastic level."""
+def test_all_realisations_failing_is_one_line_exit_2_and_the_file_keeps_them(tmp_path, capsys):
+    """Central difference at 1 ms (500x its critical step) diverges at the elastic level: the run writes
+    the file (no finished work lost) and ends in one line naming it and the reason, exit 2, with or
+    without --require (whose verdicts' missing estimates had broken the file's strict-JSON attribute);
+    stats, --event and plot refuse the file in one line too."""
     out = tmp_path / "fail.nc"
-    assert main(["run", str(SMOKE), "--model", "elastic", "--integrator", "central-difference",
-                 "-n", "2", "--workers", "1", "-o", str(out)]) == 1
-    err = capsys.readouterr().err
-    assert "2 of 2 realisations failed" in err and "2 x " in err and "divergence limit" in err
-    assert "Traceback" not in err
+    diverging = ["--model", "elastic", "--integrator", "central-difference", "--workers", "1"]
+    assert main(["run", str(SMOKE), *diverging, "-n", "2", "-o", str(out)]) == 2
+    _error_after_progress(capsys, f"{out}: all 2 realisations failed", "2 of 2: elastic displacement",
+                          "divergence limit")
+    assert xr.open_dataset(out).attrs["n_failed"] == 2
+    required = tmp_path / "required.nc"
+    assert main(["run", str(SMOKE), *diverging, "-n", "2", "--require", "displacement:z<=1mm@q95",
+                 "-o", str(required)]) == 2
+    _error_after_progress(capsys, f"{required}: all 2 realisations failed")
+    assert json.loads(xr.open_dataset(required).attrs["requirements"])[0]["estimate"] is None
+    until = tmp_path / "until.nc"
+    assert main(["run", str(SMOKE), *diverging, "-n", "16", "--until", "displacement:z@mean<=1%",
+                 "-o", str(until)]) == 2
+    _error_after_progress(capsys, f"{until}: all 16 realisations failed")
+    assert json.loads(xr.open_dataset(until).attrs["until_widths"])[0]["estimate"] is None
+    for argv in (["stats", str(out)], ["stats", str(out), "--event", "displacement:z>1mm"]):
+        assert main(argv) == 2
+        _one_line_error(capsys, f"{out}: all 2 realisations failed")
     assert main(["plot", str(out), "-o", str(tmp_path / "plots")]) == 2
     _one_line_error(capsys, "nothing to plot", "divergence limit")
+    single = tmp_path / "single.nc"
+    assert main(["simulate", str(SMOKE), "--model", "elastic", "--integrator", "central-difference",
+                 "-o", str(single)]) == 2
+    said = capsys.readouterr()
+    assert said.out == "" and len(said.err.strip().splitlines()) == 1, said   # no table of diverged maxima
+    assert all(w in said.err for w in ("the elastic run failed", "divergence limit", f"{single} keeps its status"))
+    assert xr.open_dataset(single).attrs["status"] == "failed"
 
 
 # --- resume: manifest, -n, nothing to do ------------------------------------------------------

@@ -168,8 +168,5 @@ def format_exceedance(results: list[Exceedance]) -> str:
 
 def exceedance_json(results: list[Exceedance]) -> list[dict]:
     """Plain dicts for ``--json`` (NaN as None)."""
-    from dataclasses import asdict
-
-    from .stats import json_number
-    return [{k: (json_number(v) if isinstance(v, float) else v) for k, v in asdict(r).items()}
-            for r in results]
+    from .stats import json_record
+    return [json_record(r) for r in results]

@@ -24,7 +24,7 @@ some are undecided ("needs more realisations"); 2 stays the CLI's for usage erro
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,7 +33,7 @@ from .spec import PF, Spec
 from ..vocabulary import CONFIDENCE, QUANTILES, WINDOWS
 from .estimators import (QUANTILE_DECISION_CAP, bound_level, interval_floor, no_interval_at, one_sided_cp,
                          quantile_decision_n)
-from .stats import check_window_samples, ensemble_stats, finished_values, json_number
+from .stats import check_window_samples, ensemble_stats, finished_values, json_number, json_record
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
            "verdicts_with_note", "allowed_exceedances", "overall", "judge", "judge_all", "verdicts_json"]
@@ -416,5 +416,6 @@ def overall(verdicts: list[Verdict]) -> str:
 
 
 def verdicts_json(verdicts: list[Verdict]) -> list[dict]:
-    """Plain dicts (SI values; None where a bound does not exist) for ``--json`` and file attributes."""
-    return [asdict(v) for v in verdicts]
+    """Plain dicts (SI values; None where a bound or the estimate does not exist) for ``--json`` and file
+    attributes."""
+    return [json_record(v) for v in verdicts]

@@ -213,6 +213,12 @@ def json_number(v):
     return v if np.isfinite(v) else None
 
 
+def json_record(record) -> dict:
+    """A dataclass instance as a strict-JSON dict: its NaN and infinite floats None (:func:`json_number`)."""
+    from dataclasses import asdict
+    return {k: (json_number(v) if isinstance(v, float) else v) for k, v in asdict(record).items()}
+
+
 def to_json(sds: xr.Dataset) -> dict:
     """Strict-JSON view of :func:`ensemble_stats` (None for a missing number), SI units:
     {variable: {quantity: {direction: {statistic: {bound: value}}}}} plus the attributes; statistics

@@ -203,23 +203,41 @@ def format_errors(summary: dict) -> str:
 _NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 
 
+def every_realisation_failed(ds, path) -> str | None:
+    """The one-line refusal of an ensemble whose realisations all failed (no statistics exist), naming
+    the file and the most frequent reason; None when one finished."""
+    status = ds["status"].values.astype(str)
+    if status.size == 0 or (status == FINISHED).any():
+        return None
+    count, message = _grouped_failures(ds)[0]
+    return (f"{path}: all {status.size} realisations failed, so it has no statistics (the most frequent reason, "
+            f"{count} of {status.size}: {message}); `rss6 check` shows the scene's values and its explicit "
+            "critical step")
+
+
+def _grouped_failures(ds) -> list[tuple[int, str]]:
+    """(count, first message) of each reason the failed realisations give (their messages alike but for
+    their numbers: time, step, size), most frequent first."""
+    status = ds["status"].values.astype(str)
+    messages = ds["status_message"].values.astype(str)[status != FINISHED]
+    reasons, first, counts = np.unique([_NUMBER.sub("#", m) for m in messages], return_index=True,
+                                       return_counts=True)
+    return [(int(counts[i]), messages[first[i]] or "(no message)") for i in np.lexsort((first, -counts))]
+
+
 def failure_reasons(ds, shown: int = 5) -> list[str]:
     """Lines naming how many realisations of an ensemble failed and why: one line per reason (the
     messages alike but for their numbers: time, step, size), most frequent first, at most ``shown``,
     each with its first realisation's message; empty when none failed."""
     status = ds["status"].values.astype(str)
-    failed = status != FINISHED
-    if not failed.any():
+    failed = int((status != FINISHED).sum())
+    if not failed:
         return []
-    messages = ds["status_message"].values.astype(str)[failed]
-    reasons, first, counts = np.unique([_NUMBER.sub("#", m) for m in messages], return_index=True,
-                                       return_counts=True)
-    order = np.lexsort((first, -counts))
-    lines = [f"{int(failed.sum())} of {len(status)} realisations failed:"]
-    lines += [f"  {int(counts[i])} x {messages[first[i]] or '(no message)'}"
-              + (" (the first; the rest differ only in their numbers)" if counts[i] > 1 else "")
-              for i in order[:shown]]
-    if len(order) > shown:
-        lines.append(f"  ... and {len(order) - shown} other reasons "
-                     f"({int(counts[order[shown:]].sum())} realisations)")
+    grouped = _grouped_failures(ds)
+    lines = [f"{failed} of {len(status)} realisations failed:"]
+    lines += [f"  {count} x {message}" + (" (the first; the rest differ only in their numbers)" if count > 1 else "")
+              for count, message in grouped[:shown]]
+    if len(grouped) > shown:
+        lines.append(f"  ... and {len(grouped) - shown} other reasons "
+                     f"({sum(count for count, _ in grouped[shown:])} realisations)")
     return lines

@@ -189,6 +189,7 @@ def format_widths(targets: list[Target], found: list[Width], n: int) -> str:
 def until_attrs(targets: list[Target], found: list[Width], n: int, points: list[int],
                 cap: int) -> dict:
     """File attributes: the rule, whether it was met, the widths reached (SI JSON) and the final n."""
+    from .stats import json_record
     met = all(w.met for w in found)
     shown = points if len(points) <= 12 else points[:6] + ["..."] + points[-3:]
     return {"until_rule": ("stop at the first checked n where every target holds: "
@@ -198,7 +199,7 @@ def until_attrs(targets: list[Target], found: list[Width], n: int, points: list[
                            f"checked at n = {', '.join(map(str, shown))}; cap -n {cap})"),
             "until_met": "met" if met else "not met",
             "until_n": n,
-            "until_widths": json.dumps([w.__dict__ for w in found], allow_nan=False)}
+            "until_widths": json.dumps([json_record(w) for w in found], allow_nan=False)}
 
 
 @dataclass(frozen=True)

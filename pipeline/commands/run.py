@@ -9,7 +9,7 @@ from rss6core import model_level, models_with
 from ..analysis.summary import run_default_level
 from ..ensemble.settings import resolve_cluster, resolve_level, resolve_replicates
 from ..scenes.catalogue import find_scene
-from ..vocabulary import QUANTITIES, STORES, OptionError
+from ..vocabulary import QUANTITIES, STORES, OptionError, UserError
 from .messages import (import_meanwhile, interrupted, loaded_joints_meanwhile, scheduler_lost,
                        warn_oversubscription)
 from .options import (LEVELS_HELP, add_level_settings, add_model, add_parents, add_require, add_scene, add_scheduler,
@@ -128,15 +128,14 @@ def _report(args, level, outcome, until, output, specs: list, verdicts: list, no
     code."""
     from ..analysis.gate import exit_code, verdicts_with_note
     from ..analysis.stats import ensemble_stats, format_stats
-    from ..analysis.summary import failure_reasons
+    from ..analysis.summary import every_realisation_failed, failure_reasons
     ds = outcome.dataset
     print(_outcome_line(outcome, output, args.n if until is None else until.n, level.model))
-    reasons = failure_reasons(ds)
-    for line in reasons:
+    none_finished = every_realisation_failed(ds, output)
+    if none_finished:
+        raise UserError(none_finished)
+    for line in failure_reasons(ds):
         print(line, file=sys.stderr)
-    if reasons and ds.attrs["n_failed"] == ds.sizes["realization"]:
-        print("rss6: every realisation failed; no statistics", file=sys.stderr)
-        return 1
     dynamic = model_level(level.model).contact_joints   # its velocity and acceleration measure the robot
     shown = {"quantity": list(QUANTITIES) if dynamic else ["displacement"],
              "window": ["whole", "steady"] if dynamic else ["whole"]}

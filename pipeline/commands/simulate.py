@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import sys
 import time
 
 from rss6core import FINISHED, SceneError, model_level
@@ -10,6 +9,7 @@ from rss6core import FINISHED, SceneError, model_level
 from ..analysis.summary import contact_peaks, error_summary, format_errors
 from ..ensemble.settings import resolve_level
 from ..scenes.catalogue import find_scene
+from ..vocabulary import UserError
 from .messages import note_compiling
 from .options import LEVELS_HELP, add_json, add_level_settings, add_model, add_parents, add_scene, add_seed, seed_int
 
@@ -51,13 +51,14 @@ def main(args) -> int:
                      elements=level.elements, wall_time=wall, seed=args.seed, realization=args.realization)
     if args.output:
         write_netcdf(ds, args.output)
+    if result.status != FINISHED:   # its maxima would be the divergence's, not the robot's
+        kept = f"; {args.output} keeps its status and message" if args.output else ""
+        raise UserError(f"{args.config}: the {level.model} run failed: {result.message}{kept}; `rss6 check` "
+                        "shows the scene's values and its explicit critical step")
     summary = error_summary(ds)
     if result.contact_force_peak is not None:
         summary["max_contact_force_N"] = contact_peaks(result.contact_force_peak)
     _print(args, level, result, summary, wall)
-    if result.status != FINISHED:
-        print(f"rss6: run failed: {result.message}", file=sys.stderr)
-        return 1
     return 0
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 
-from ..vocabulary import OptionError
+from ..vocabulary import OptionError, UserError
 from .options import add_confidence, add_json, add_parents, add_require
 from .requirements import judge, known_windows, requirements, verdict_attrs
 
@@ -39,6 +39,7 @@ def main(args) -> int:
     from ..analysis.gate import check_confidence, exit_code, verdicts_json, verdicts_with_note
     from ..analysis.exceedance import exceedance_json, format_exceedance
     from ..analysis.stats import ensemble_stats, format_stats, to_json
+    from ..analysis.summary import every_realisation_failed
     from ..files.opening import open_results
     from ..files.outputs import check_new_output
     from ..files.writing import write_netcdf
@@ -55,6 +56,9 @@ def main(args) -> int:
     if args.window is not None:
         specs = [replace(s, window=s.window or args.window) for s in specs]
     ds = open_results(args.file)
+    none_finished = every_realisation_failed(ds, args.file) if "status" in ds else None
+    if none_finished:
+        raise UserError(none_finished)
     note = _loaded_joints_note(ds, args.file, specs + events)
     full = ensemble_stats(ds, args.confidence, window=None)
     if args.window is not None:
