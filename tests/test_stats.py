@@ -163,7 +163,17 @@ def test_mixed_file_uses_finished_realisations_only(tmp_path, capsys):
     path = tmp_path / "mixed.nc"
     write_netcdf(_file(_synthetic(values, status)), path)
     assert main(["stats", str(path), "--quantity", "velocity"]) == 0
-    assert "37 finished realisations (3 failed)" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "37 finished realisations (3 failed)" in out
+    assert "  3 of 40 realisations failed and are in no statistic or bound" in out.split("notes:")[1]
+    assert main(["stats", str(_clean(tmp_path, values[:, keep]))]) == 0
+    assert "failed and are in no statistic" not in capsys.readouterr().out
+
+
+def _clean(tmp_path, values):
+    path = tmp_path / "clean.nc"
+    write_netcdf(_file(_synthetic(values)), path)
+    return path
 
 
 def _raise(name):

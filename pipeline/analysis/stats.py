@@ -252,7 +252,8 @@ def table_cell(value: float, factor: float = 1.0, width: int = 11) -> str:
 
 
 def _missing_notes(sds: xr.Dataset) -> list[str]:
-    """Why bounds are dashes: the n each interval needs, and the maximum's note."""
+    """Why bounds are dashes (the n each interval needs, the maximum's note) and which realisations the
+    statistics leave out (the failed ones)."""
     n, conf = sds.attrs["n_finished"], 100 * sds.attrs["confidence"]
     replicates = sds.attrs.get("qmc_replicates")
     replicates = None if replicates is None else int(replicates)
@@ -267,7 +268,11 @@ def _missing_notes(sds: xr.Dataset) -> list[str]:
     other = [f"confidence {conf:g} %: the quantiles' intervals are exact at any level, but the mean's and std's "
              f"floors and coverage were measured at {100 * CONFIDENCE:g} % only (tests/test_stats.py)"] \
         if replicates is None and abs(sds.attrs["confidence"] - CONFIDENCE) > 1e-12 else []
-    return notes + [f"max: {MAX_NOTE}"] + until + other
+    failed = int(sds.attrs.get("n_failed", 0))
+    left_out = [f"{failed} of {n + failed} realisations failed and are in no statistic or bound: each describes the "
+                "robots that finished, whose errors the failed draws (often the largest) may exceed; --require "
+                "counts them against a pass"] if failed else []
+    return left_out + notes + [f"max: {MAX_NOTE}"] + until + other
 
 
 def format_stats(sds: xr.Dataset) -> str:
