@@ -16,7 +16,7 @@ from pipeline.cli import main
 from pipeline.ensemble.run import EnsembleSpec, run_ensemble
 from pipeline.analysis.estimators import (MIN_N_MEAN, MIN_N_STD, mean_interval, min_n_for_quantile,
                                           quantile_interval, quantile_ranks, std_interval)
-from pipeline.analysis.stats import ensemble_stats, in_window, to_json
+from pipeline.analysis.stats import ensemble_stats, format_stats, in_window, to_json
 from pipeline.vocabulary import QUANTILES, STATISTICS
 from pipeline.files.reading import load_netcdf
 from pipeline.files.schema import MIXED_UNITS, UNITS, _provenance
@@ -274,3 +274,24 @@ def test_rss6_data_2000_realisations_issue_26_done_when(tmp_path):
                 assert np.isnan(sub["max_abs_error"].sel(statistic=s, bound="lower")).all()
         for s in checked:
             assert np.mean([h[s] for h in hits], axis=0).min() >= 0.92, (n, s)
+
+
+def test_the_table_says_which_numbers_do_not_measure_the_robot_by_level():
+    """The paper level's velocities and accelerations measure the step; a contact level's drawn start puts
+    its impacts in the whole run's and startup's maxima (not in a steady-only table, nor where settle_time_s
+    already leaves the start-up out); the other levels get neither note."""
+    sds = ensemble_stats(_file(_synthetic(np.random.default_rng(3).gamma(2.0, size=(3, 20, 6)))), window=None)
+    step, impacts = "they measure the step, not the robot", "the impacts that follow are in the whole run's"
+
+    def notes(**attrs):
+        table = format_stats(sds.assign_attrs(**attrs)) if "window" not in attrs else format_stats(
+            sds.sel(window=[attrs.pop("window")]).assign_attrs(**attrs))
+        return table.split("notes:")[1]
+    assert step not in notes() and impacts not in notes()                     # quasi-static
+    assert step in notes(model="paper") and impacts not in notes(model="paper")
+    assert step not in format_stats(sds.sel(quantity=["displacement"]).assign_attrs(model="paper"))
+    drawn = {"model": "contact", "contact_start": "drawn", "settle_time_s": 0.0, "steady_after_s": 0.75}
+    assert impacts in notes(**drawn) and step not in notes(**drawn)
+    assert impacts not in notes(**drawn | {"contact_start": "equilibrium"})
+    assert impacts not in notes(**drawn | {"settle_time_s": 0.75})
+    assert impacts not in notes(**drawn | {"window": "steady"})
