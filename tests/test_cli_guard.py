@@ -20,6 +20,7 @@ from pipeline.files.opening import open_ensemble
 from pipeline.files.schema import EnsembleFileError
 from pipeline.files.writing import write_netcdf
 from pipeline.analysis.summary import failure_reasons
+from pipeline.vocabulary import OptionError
 from importlib import resources
 
 from pipeline.scenes.catalogue import PACKAGE
@@ -286,23 +287,25 @@ def test_failure_reasons_count_each_reason_whatever_its_numbers():
 
 
 def test_all_realisations_failing_is_one_line_exit_2_and_the_file_keeps_them(tmp_path, capsys):
-    """Central difference at 1 ms (500x its critical step) diverges at the elastic level: the run writes
+    """Newmark with beta = 0.01 (conditionally stable) at 1 ms diverges at the elastic level: the run writes
     the file (no finished work lost) and ends in one line naming it and the reason, exit 2, with or
     without --require (whose verdicts' missing estimates had broken the file's strict-JSON attribute);
     stats, --event and plot refuse the file in one line too."""
     out = tmp_path / "fail.nc"
-    diverging = ["--model", "elastic", "--integrator", "central-difference", "--workers", "1"]
-    assert main(["run", str(SMOKE), *diverging, "-n", "2", "-o", str(out)]) == 2
+    scene = tmp_path / "beta.toml"
+    scene.write_text(SMOKE.read_text().replace("newmark_beta = 0.25", "newmark_beta = 0.01", 1))
+    diverging = ["--model", "elastic", "--workers", "1"]
+    assert main(["run", str(scene), *diverging, "-n", "2", "-o", str(out)]) == 2
     _error_after_progress(capsys, f"{out}: all 2 realisations failed", "2 of 2: elastic displacement",
                           "divergence limit")
     assert xr.open_dataset(out).attrs["n_failed"] == 2
     required = tmp_path / "required.nc"
-    assert main(["run", str(SMOKE), *diverging, "-n", "2", "--require", "displacement:z<=1mm@q95",
+    assert main(["run", str(scene), *diverging, "-n", "2", "--require", "displacement:z<=1mm@q95",
                  "-o", str(required)]) == 2
     _error_after_progress(capsys, f"{required}: all 2 realisations failed")
     assert json.loads(xr.open_dataset(required).attrs["requirements"])[0]["estimate"] is None
     until = tmp_path / "until.nc"
-    assert main(["run", str(SMOKE), *diverging, "-n", "16", "--until", "displacement:z@mean<=1%",
+    assert main(["run", str(scene), *diverging, "-n", "16", "--until", "displacement:z@mean<=1%",
                  "-o", str(until)]) == 2
     _error_after_progress(capsys, f"{until}: all 16 realisations failed")
     assert json.loads(xr.open_dataset(until).attrs["until_widths"])[0]["estimate"] is None
@@ -312,8 +315,7 @@ def test_all_realisations_failing_is_one_line_exit_2_and_the_file_keeps_them(tmp
     assert main(["plot", str(out), "-o", str(tmp_path / "plots")]) == 2
     _one_line_error(capsys, "nothing to plot", "divergence limit")
     single = tmp_path / "single.nc"
-    assert main(["simulate", str(SMOKE), "--model", "elastic", "--integrator", "central-difference",
-                 "-o", str(single)]) == 2
+    assert main(["simulate", str(scene), "--model", "elastic", "-o", str(single)]) == 2
     said = capsys.readouterr()
     assert said.out == "" and len(said.err.strip().splitlines()) == 1, said   # no table of diverged maxima
     assert all(w in said.err for w in ("the elastic run failed", "divergence limit", f"{single} keeps its status"))
@@ -476,3 +478,25 @@ def test_help_gives_every_default():
         for action in sub.choices[name]._actions:
             if action.option_strings and action.nargs != 0:   # options taking a value
                 assert "default" in (action.help or ""), f"rss6 {name} {action.option_strings[0]}"
+
+
+def test_an_explicit_step_above_the_critical_one_is_refused_before_work(tmp_path, capsys):
+    """Central differences at the smoke scene's 1 ms (about 500x 2/omega_max) would diverge in every
+    realisation: refused in one line naming the option, exit 2, no file; a step below the critical one
+    resolves (the bound is the undamped elastic robot's, scipy's eigenvalues of K, M)."""
+    from pipeline.ensemble.settings import resolve_level
+    from pipeline.scenes.catalogue import find_scene
+    from rss6core import natural_frequencies
+    out = tmp_path / "cd.nc"
+    assert main(["run", str(SMOKE), "--model", "elastic", "--integrator", "central-difference", "-n", "2",
+                 "--workers", "1", "-o", str(out)]) == 2
+    _one_line_error(capsys, "--integrator central-difference at the elastic level's step 0.001 s",
+                    "explicit critical step 2/omega_max")
+    assert not out.exists() and not Path(str(out) + ".parts").exists()
+    scene = find_scene(str(SMOKE))
+    critical = 2.0 / natural_frequencies(scene)[-1]
+    duration = scene.trajectory.duration
+    below, above = duration / np.ceil(duration / critical), duration / np.floor(duration / (1.01 * critical))
+    assert resolve_level(scene, SMOKE, model="paper", integrator="central-difference", dt=below).dt == below
+    with pytest.raises(OptionError, match=r"--dt .* with central differences: 1.0\dx the explicit critical"):
+        resolve_level(scene, SMOKE, model="paper", integrator="central-difference", dt=above)

@@ -68,8 +68,32 @@ def resolve_level(scene, config, *, model: str | None = None, integrator: str | 
         raise OptionError(f"--elements {elements}: a link of {elements} elements has at most "
                           f"{max_link_modes(elements)} interior DOFs, fewer than the scene's [beam] link_modes = "
                           f"{scene.beam.link_modes}")
-    return LevelSettings(scene, str(config), model, integrator or default_integrator(scene, model), step,
-                         elements or sim.elements_per_link)
+    level = LevelSettings(scene, str(config), model, integrator or default_integrator(scene, model), step,
+                          elements or sim.elements_per_link)
+    _check_explicit_step(level, dt_given=dt is not None, integrator_given=integrator is not None)
+    return level
+
+
+def _check_explicit_step(level: LevelSettings, dt_given: bool, integrator_given: bool) -> None:
+    """Refuse, before any work, an explicit integrator's step above the critical step 2/omega_max of the
+    scene's undamped elastic robot (s): every realisation would diverge. The contact level's joints add
+    stiffer modes, so there it is a necessary bound only, left to the run."""
+    kind = model_level(level.model)
+    if not kind.elastic_links or kind.contact_joints or level.integrator != "central-difference":
+        return
+    from rss6core import natural_frequencies
+    critical = 2.0 / natural_frequencies(level.scene, level.elements)[-1]
+    if level.dt <= critical:
+        return
+    said = (f"--dt {level.dt:g} with central differences" if dt_given else
+            f"--integrator central-difference at the {level.model} level's step {level.dt:g} s" if integrator_given
+            else f"[simulation] integrator = 'central-difference' at the {level.model} level's step {level.dt:g} s")
+    message = (f"{said}: {level.dt / critical:.3g}x the explicit critical step 2/omega_max = {critical:.3g} s of the "
+               f"scene's elastic robot on {level.elements} elements per link, so every realisation would diverge; "
+               "give a step at most that (dividing the duration) or an implicit integrator (--integrator newmark)")
+    if dt_given or integrator_given:
+        raise OptionError(message)
+    raise SceneError(f"{level.scene.source_path}: {message}")
 
 
 def _check_uncertain(scene, model: str, from_option: bool) -> None:
