@@ -499,6 +499,11 @@ def _check_actuator(actuator: dict, link_modes: int) -> None:
 
 
 MAX_SIZE_M = 20.0   # a [geometry] length above this is a unit slip (a flight simulator's legs are a few metres)
+# (table, key, lowest, highest, the slip a value outside suggests): beyond any link material (polymers to
+# tungsten carbide, foams excluded) or a robot's environment (up to 10 g)
+MAGNITUDES = (("material", "youngs_modulus_Pa", 1e8, 2e12, "a modulus in GPa or MPa written in Pa?"),
+              ("material", "density_kg_m3", 100.0, 25000.0, "a density in g/cm^3 written in kg/m^3?"),
+              ("environment", "gravity_m_s2", 0.0, 100.0, "an acceleration in mm/s^2 written in m/s^2?"))
 
 
 def _below_radius(where: str, size: float, radius: str, contact: dict) -> None:
@@ -553,8 +558,12 @@ def _material(material: dict) -> Material:
 
 
 def _check_sections(v: dict) -> None:
-    """SceneError for a rod tube without a wall, a material's impossible Poisson ratio, or lumped mass
-    without the rotary inertia it carries."""
+    """SceneError for a material or gravity outside MAGNITUDES, a rod tube without a wall, a material's
+    impossible Poisson ratio, or lumped mass without the rotary inertia it carries."""
+    for table, key, low, high, slip in MAGNITUDES:
+        if not low <= v[table][key] <= high:
+            raise SceneError(f"[{table}] {key}: {v[table][key]!r} lies outside [{low:g}, {high:g}], beyond any "
+                             f"6-RSS robot's links and environment ({slip})")
     rod, mat = _rod(v["rod_section"]), _material(v["material"])
     if rod.inner_diameter >= rod.outer_diameter:
         raise SceneError("[rod_section] inner_diameter_m: must be smaller than outer_diameter_m, "

@@ -207,3 +207,23 @@ def test_a_geometry_length_in_mm_written_in_metres_is_named(paper_text):
     with pytest.raises(SceneError) as info:
         parse_scene(_edit(paper_text, line, "rod_length_m = 20.0"))
     assert "in mm written" not in str(info.value)
+
+
+@pytest.mark.parametrize("key, nominal, slip, words", [
+    ("youngs_modulus_Pa", "70.0e9", "70.0", "modulus in GPa or MPa"),
+    ("density_kg_m3", "2700.0", "2.7", "g/cm^3"),
+    ("gravity_m_s2", "9.81", "9810.0", "mm/s^2")])
+def test_a_material_or_gravity_beyond_any_robot_is_a_unit_slip(paper_text, key, nominal, slip, words):
+    """A modulus of 70 Pa or a density of 2.7 kg/m^3 (the helper review's cases: the run diverged at step 1)
+    is refused naming the key and the slip it suggests; the bounds' own ends are accepted."""
+    with pytest.raises(SceneError, match=rf"{key}: {slip} lies outside .*{re.escape(words)}"):
+        parse_scene(_edit(paper_text, f"{key} = {nominal}", f"{key} = {slip}"))
+    from rss6core.scene import MAGNITUDES
+    low, high = next((lo, hi) for _, k, lo, hi, _ in MAGNITUDES if k == key)
+    for end in (low, high):
+        if key == "youngs_modulus_Pa":   # the shear modulus follows, keeping the Poisson ratio
+            text = _edit(_edit(paper_text, "shear_modulus_Pa = 26.5e9", f"shear_modulus_Pa = {end / 2.64!r}"),
+                         f"{key} = {nominal}", f"{key} = {end!r}")
+        else:
+            text = _edit(paper_text, f"{key} = {nominal}", f"{key} = {end!r}")
+        assert parse_scene(text).source_text == text
