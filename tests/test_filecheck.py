@@ -226,5 +226,47 @@ def test_a_split_variables_units_edited_on_disk_are_refused(good, tmp_path, caps
         nc["max_abs_error_displacement_translation"].units = "mm"
     assert main(["stats", str(bad)]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "max_abs_error_displacement_translation has units 'mm'" in err, err
+    assert len(err.splitlines()) == 1, err
+    assert "attribute units of variable max_abs_error_displacement_translation is 'mm'" in err, err
     assert err.count(str(bad)) == 1 and "altered after rss6 wrote it" in err and "Error" not in err, err
+
+
+VARIABLE_ATTRIBUTE_EDITS = {   # (edit, what the one line says); the helper review's cases passed unseen
+    "units of a coordinate": (lambda nc: nc["clearance_size"].setncattr("units", "mm"),
+                              "attribute units of variable clearance_size is 'mm'"),
+    "cell_methods": (lambda nc: nc["max_abs_error_displacement_translation"].setncattr("rss6_cell_methods",
+                                                                                        "time: mean"),
+                     "attribute rss6_cell_methods of variable max_abs_error_displacement_translation is 'time: mean'"),
+    "long_name": (lambda nc: nc["steps"].setncattr("long_name", "anything"), "attribute long_name of variable steps"),
+    "added": (lambda nc: nc["status"].setncattr("comment", "edited"), "attribute comment of variable status was added"),
+    "removed": (lambda nc: nc["steps"].delncattr("long_name"), "attribute long_name of variable steps was removed"),
+}
+
+
+@pytest.mark.parametrize("case", list(VARIABLE_ATTRIBUTE_EDITS))
+def test_an_edited_variable_attribute_is_refused(good, tmp_path, capsys, case):
+    """Every variable's attributes carry checksums (the CHECKSUM entry /variable_attributes), so an edit
+    that changes a value's meaning (its units, what it reduces) is refused naming variable and attribute;
+    a file whose checksums lack the entry (an earlier rss6's) is read as before."""
+    import json
+    import shutil
+
+    import netCDF4
+    from pipeline.files.checksums import VARIABLE_ATTRIBUTES
+    from pipeline.files.schema import CHECKSUM
+    edit, says = VARIABLE_ATTRIBUTE_EDITS[case]
+    bad = tmp_path / "edited.nc"
+    shutil.copy(good, bad)
+    with netCDF4.Dataset(bad, "a") as nc:
+        edit(nc)
+    assert main(["stats", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err and "altered after rss6 wrote it" in err, err
+    older = tmp_path / "older.nc"
+    shutil.copy(good, older)
+    with netCDF4.Dataset(older, "a") as nc:
+        sums = json.loads(nc.getncattr(CHECKSUM))
+        del sums[VARIABLE_ATTRIBUTES]
+        nc.setncattr(CHECKSUM, json.dumps(sums, sort_keys=True))
+        edit(nc)
+    assert main(["stats", str(older)]) == 0, capsys.readouterr().err

@@ -49,14 +49,21 @@ ATTRIBUTES = "/attributes"
 # global attributes the attribute checksums leave out: ``history`` (CF tools append to it; it
 # names commands, not values), ``coordinates`` (xarray's encoding, which it takes away on reading)
 _UNCHECKED = frozenset({"history", "coordinates", CHECKSUM})
+# the entry of CHECKSUM that holds {variable: {attribute: sha256}} of every variable's attributes (units,
+# long_name, cell_methods, ...); files written before rss6 0.3.2's last revision have none
+VARIABLE_ATTRIBUTES = "/variable_attributes"
+# variable attributes that are the encoding's, not the values' meaning: xarray moves them into a
+# variable's encoding on reading (or writes them itself), so they are left out on both sides
+_ENCODING_ATTRS = frozenset({"_FillValue", "missing_value", "coordinates", "scale_factor", "add_offset",
+                             "_Encoding", "_Unsigned", "dtype", "calendar"})
 
 
-def attribute_checksums(attrs: dict) -> dict:
-    """{attribute: sha256 of its value} of a file's global attributes as netCDF4 reads them (type
-    and value: 7 as int64 and 7.0 differ), but those of _UNCHECKED."""
+def attribute_checksums(attrs: dict, unchecked: frozenset = _UNCHECKED) -> dict:
+    """{attribute: sha256 of its value} of a file's global (or a variable's) attributes as netCDF4 reads
+    them (type and value: 7 as int64 and 7.0 differ), but those of ``unchecked``."""
     out = {}
     for name, value in attrs.items():
-        if name not in _UNCHECKED:
+        if name not in unchecked:
             digest = _Checksum(np.asarray(value))
             digest.update(value)
             out[str(name)] = digest.hexdigest()
@@ -65,9 +72,10 @@ def attribute_checksums(attrs: dict) -> dict:
 
 def file_checksums(ds: xr.Dataset) -> dict:
     """{variable: sha256} of a Dataset as read from a file before :func:`cf_decode` (the digests
-    :class:`_InOrderWriter` records), with its global attributes' under ATTRIBUTES; dask-backed
+    :class:`_InOrderWriter` records), with its global attributes' under ATTRIBUTES and its variables'
+    attributes' under VARIABLE_ATTRIBUTES; dask-backed
     variables are read block by block."""
-    out = {ATTRIBUTES: attribute_checksums(ds.attrs)}
+    out = {ATTRIBUTES: attribute_checksums(ds.attrs), VARIABLE_ATTRIBUTES: variable_attribute_checksums(ds.variables)}
     for name, var in ds.variables.items():
         digest = _Checksum(var)
         if dask.is_dask_collection(var.data) and var.ndim:
@@ -113,19 +121,48 @@ def verify_checksums(ds: xr.Dataset, path) -> bool:
         assert attributes is None or isinstance(attributes, dict)
     except (ValueError, AssertionError):
         raise EnsembleFileError(f"{path}: attribute {CHECKSUM} is not the JSON rss6 writes: {ALTERED}") from None
+    variables = recorded.pop(VARIABLE_ATTRIBUTES, None)
     got = file_checksums(ds)
-    got_attributes = got.pop(ATTRIBUTES)
+    got_attributes, got_variables = got.pop(ATTRIBUTES), got.pop(VARIABLE_ATTRIBUTES)
     for name in sorted(set(recorded) | set(got)):
         if recorded.get(name) != got.get(name):
             what = ("was added to" if name not in recorded else "was removed from" if name not in got
                     else "has values that no longer match its checksum in")
             raise EnsembleFileError(f"{path}: variable {name} {what} attribute {CHECKSUM}: {ALTERED}")
+    if isinstance(variables, dict):
+        _verify_variable_attributes(variables, got_variables, ds, path)
+    elif variables is not None:
+        raise EnsembleFileError(f"{path}: attribute {CHECKSUM} is not the JSON rss6 writes: {ALTERED}")
     if attributes is not None:
         _verify_attributes(attributes, got_attributes, ds.attrs, path)
     elif _writes_checksums(ds.attrs.get("rss6_version"), ATTRIBUTE_CHECKSUMS_SINCE):
         raise EnsembleFileError(f"{path}: attribute {CHECKSUM} lacks its {ATTRIBUTES} entry, although rss6 "
                                 f"{ds.attrs['rss6_version']} writes it: {ALTERED}")
     return True
+
+
+def variable_attribute_checksums(variables) -> dict:
+    """{variable: :func:`attribute_checksums` of its attributes, but the encoding's} of ``variables``
+    ({name: object with ``attrs``}, or a netCDF4 file's variables)."""
+    return {str(name): attribute_checksums(_attrs_of(var), _ENCODING_ATTRS) for name, var in variables.items()}
+
+
+def _attrs_of(var) -> dict:
+    """A variable's attributes, of an xarray Variable or of a netCDF4 one."""
+    return dict(var.attrs) if hasattr(var, "attrs") else {k: var.getncattr(k) for k in var.ncattrs()}
+
+
+def _verify_variable_attributes(recorded: dict, got: dict, ds: xr.Dataset, path) -> None:
+    """EnsembleFileError naming the first variable attribute changed, removed or added since rss6 wrote
+    the file (``recorded``: its digests then, ``got``: now); a variable added or removed is the values'
+    check's."""
+    for variable in sorted(set(recorded) & set(got)):
+        was, now = recorded[variable], got[variable]
+        for name in sorted(set(was) | set(now)):
+            if was.get(name) != now.get(name):
+                what = ("was removed" if name not in now else "was added" if name not in was
+                        else f"is {ds[variable].attrs[name]!r}, not the value whose checksum {CHECKSUM} holds")
+                raise EnsembleFileError(f"{path}: attribute {name} of variable {variable} {what}: {ALTERED}")
 
 
 def _verify_attributes(recorded: dict, got: dict, attrs: dict, path) -> None:

@@ -13,7 +13,8 @@ import dask
 import numpy as np
 import xarray as xr
 
-from .checksums import ATTRIBUTES, _Checksum, _rows, attribute_checksums
+from .checksums import (ATTRIBUTES, VARIABLE_ATTRIBUTES, _Checksum, _rows, attribute_checksums,
+                        variable_attribute_checksums)
 from .schema import CHECKSUM, EnsembleFileError, cf_encode
 
 __all__ = ["sigint_deferred", "write_netcdf", "netcdf_size", "check_free_space"]
@@ -116,6 +117,7 @@ def _stream_to_netcdf(ds: xr.Dataset, path, encoding: dict, interrupted: list) -
         writer = _InOrderWriter(interrupted)
         ds.dump_to_store(store, writer=writer, encoding=encoding)
         writer.digests[ATTRIBUTES] = attribute_checksums({k: store.ds.getncattr(k) for k in store.ds.ncattrs()})
+        writer.digests[VARIABLE_ATTRIBUTES] = variable_attribute_checksums(store.ds.variables)
         store.ds.setncattr(CHECKSUM, json.dumps(writer.digests, sort_keys=True))
     finally:
         store.close()
