@@ -54,8 +54,8 @@ def kernel_cache_folder() -> str:
     try:
         return str(contact_kernel.advance_chunk._cache._cache_path)   # numba's own choice (internal)
     except AttributeError:   # a numba without that internal: its documented rule
-        import numba
-        return numba.config.CACHE_DIR or os.path.join(os.path.dirname(contact_kernel.__file__), "__pycache__")
+        return os.environ.get("NUMBA_CACHE_DIR") or os.path.join(os.path.dirname(contact_kernel.__file__),
+                                                                 "__pycache__")
 
 
 def load_draw_kernels() -> float:

@@ -119,10 +119,9 @@ def test_workers_are_asked_about_the_contact_levels_kernels(cluster_client):
 def test_the_cache_folder_is_named_without_numbas_internal_too(monkeypatch, tmp_path):
     """`rss6 warm` names numba's cache folder from a numba internal; a numba without it gets the
     documented rule (NUMBA_CACHE_DIR, else __pycache__ beside the source) instead of an AttributeError."""
-    import numba
     from rss6core import contact_kernel, kernel_cache_folder
     monkeypatch.setattr(contact_kernel.advance_chunk, "_cache", object())
-    monkeypatch.setattr(numba.config, "CACHE_DIR", "")
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     assert kernel_cache_folder() == os.path.join(os.path.dirname(contact_kernel.__file__), "__pycache__")
-    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     assert kernel_cache_folder() == str(tmp_path)
