@@ -451,6 +451,7 @@ def test_histograms_give_each_window_its_own_x_range(full_ensemble):
     try:
         fig = figs["hist_max_acceleration.png"]
         fig.canvas.draw()
+        assert len(fig.axes) >= 12, len(fig.axes)   # six panels a window, or the loop below checks none
         for i, w in enumerate(("startup", "steady")):
             for ax, d in zip(fig.axes[6 * i:6 * i + 6], ds["direction"].values):
                 x = ds["max_abs_error"].sel(window=w, quantity="acceleration", direction=d).values

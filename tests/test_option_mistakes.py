@@ -254,3 +254,4 @@ def test_a_folder_named_like_a_shipped_scene_leaves_the_name_to_the_scene(tmp_pa
     monkeypatch.chdir(tmp_path)
     (tmp_path / "paper").mkdir()
     assert main(["check", "paper"]) == 0
+    assert capsys.readouterr().out.startswith("scene 'paper' (paper): valid\n")
