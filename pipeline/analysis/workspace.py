@@ -7,7 +7,11 @@ import numpy as np
 
 from rss6core import workspace_quality
 
-__all__ = ["workspace_summary", "format_workspace"]
+__all__ = ["workspace_summary", "format_workspace", "NEAR_SINGULAR"]
+
+# a leg's transmission index below this (the crank-rod angle within about 6 deg of its singularity) gets a
+# warning: crank rates and torques grow as its inverse, and the elastic levels may not converge there
+NEAR_SINGULAR = 0.1
 
 
 def workspace_summary(scene) -> dict:
@@ -48,4 +52,16 @@ def format_workspace(s: dict) -> list[str]:
         row("max crank angle at t [s]", [r[1] for r in w["crank_angle_range_time_s"]]),
         f"platform Jacobian: max condition number {w['max_condition_number']:.3f} "
         f"at t = {w['max_condition_number_time_s']:.3f} s",
-    ]
+    ] + _near_singular(w)
+
+
+def _near_singular(w: dict) -> list[str]:
+    """A warning line where a leg's transmission index falls below NEAR_SINGULAR, else none."""
+    worst = int(np.argmin(w["min_transmission_index"]))
+    index = w["min_transmission_index"][worst]
+    if index >= NEAR_SINGULAR:
+        return []
+    return [f"warning: leg {worst + 1} comes within {np.degrees(np.arcsin(index)):.2g} deg of its crank-rod "
+            f"singularity (transmission index {index:.3g} < {NEAR_SINGULAR:g}) at t = "
+            f"{w['min_transmission_index_time_s'][worst]:.3f} s: crank rates and torques grow as 1 / index there, "
+            "and the elastic, paper and contact levels may not converge; move the trajectory away from it"]
