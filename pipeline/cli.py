@@ -127,9 +127,11 @@ def _main(argv: list[str] | None) -> int:
         _start_workers_ahead(sys.argv[1:])
     from rss6core import SceneError
 
-    from .vocabulary import UserError
+    from .vocabulary import OptionError, UserError
     args = build_parser().parse_args(argv)
     try:
+        if getattr(args, "output", None) == "":   # else a command's `args.output or DEFAULT` took the default
+            raise OptionError("-o: the path is empty; give a file or folder name, or leave -o out for the default")
         return args.main(args)
     except (UserError, SceneError) as exc:
         print(f"rss6 {args.command}: error: {exc}", file=sys.stderr)

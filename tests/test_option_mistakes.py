@@ -255,3 +255,14 @@ def test_a_folder_named_like_a_shipped_scene_leaves_the_name_to_the_scene(tmp_pa
     (tmp_path / "paper").mkdir()
     assert main(["check", "paper"]) == 0
     assert capsys.readouterr().out.startswith("scene 'paper' (paper): valid\n")
+
+
+@pytest.mark.parametrize("argv", [["run", "smoke", "--model", "quasi-static", "-n", "2"], ["simulate", "smoke"],
+                                  ["plot", "x.nc"], ["map", "smoke"]])
+def test_an_empty_output_path_is_refused_not_replaced_by_the_default(argv, tmp_path, monkeypatch, capsys):
+    """`-o ''` (an unset shell variable, say) had silently written the default file or folder."""
+    monkeypatch.chdir(tmp_path)
+    assert main([*argv, "-o", ""]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "-o: the path is empty" in err, err
+    assert list(tmp_path.iterdir()) == []

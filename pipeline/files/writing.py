@@ -143,6 +143,6 @@ def check_free_space(path, needed: int) -> None:
     if free < needed + 2 ** 20:
         raise EnsembleFileError(f"{path}: not enough disk space in {folder}: about "
                                 f"{(needed + 2 ** 20) / 2 ** 20:.1f} MiB needed, "
-                                f"{free / 2 ** 20:.1f} MiB free; free some space and rerun "
-                                "(finished parts are kept)")
+                                f"{free / 2 ** 20:.1f} MiB free; free some space and rerun (nothing of "
+                                "this file was written; a run's finished parts are kept)")
 
