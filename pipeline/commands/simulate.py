@@ -68,8 +68,9 @@ def _print(args, level, result, summary: dict, wall: float) -> None:
                           "message": result.message, "model": level.model, "integrator": level.integrator,
                           "time_step_s": level.dt, "elements_per_link": level.elements}, indent=2))
         return
-    print(f"scene {level.scene.name!r}, model {level.model}, {level.integrator}, dt = {level.dt:g} s, "
-          f"{level.elements} elements per link: {result.status} in {wall:.2f} s")
+    integrated = (f"{level.integrator}, dt = {level.dt:g} s, {level.elements} elements per link"
+                  if model_level(level.model).elastic_links else f"dt = {level.dt:g} s, rigid links")
+    print(f"scene {level.scene.name!r}, model {level.model}, {integrated}: {result.status} in {wall:.2f} s")
     print(format_errors(summary))
     if "max_contact_force_N" in summary:
         forces = summary["max_contact_force_N"]
