@@ -258,3 +258,11 @@ def test_every_options_help_states_its_default():
               if a.option_strings and not isinstance(a, (argparse._HelpAction, argparse._StoreTrueAction))
               and not a.required and "default" not in (a.help or "")]
     assert silent == []
+
+
+def test_simulate_names_an_integrator_only_where_the_level_integrates(capsys):
+    """The rigid-link levels integrate nothing in time: their header names no integrator or mesh."""
+    assert main(["simulate", "smoke", "--model", "quasi-static"]) == 0
+    assert capsys.readouterr().out.startswith("scene 'smoke', model quasi-static, dt = 0.001 s, rigid links: finished")
+    assert main(["simulate", "smoke", "--model", "paper"]) == 0
+    assert "model paper, newmark, dt = 0.001 s, 4 elements per link: finished" in capsys.readouterr().out
