@@ -39,6 +39,7 @@ def test_an_absolute_target_in_a_unit_of_the_quantity():
     ("displacement:x<=5%", "missing '@STATISTIC"),
     ("displacement:x@max<=5%", "statistic 'max' has no confidence interval"),
     ("displacement:x@q95<=0%", "must be a positive number"),
+    ("displacement:x@q95<=-5%", "half-width '-5' must be a positive number"),
     ("displacement:x@q95<=5%mm", "unexpected 'mm' after the percentage"),
     ("displacement:x,rx@q95<=0.1mm", "mix translations and rotations"),
     ("displacement:x@q95<=0.1m/s", "unknown unit 'm/s'"),

@@ -40,7 +40,7 @@ __all__ = ["Target", "UntilError", "parse_target", "parse_targets", "checkpoints
 
 GROWTH = 1.25        # mc: each checked n is the previous one times this, rounded up
 LEVEL = stopped_level(CONFIDENCE, stopped_by_width=True)   # the quantiles' bounds the rule checks
-_WIDTH = re.compile(r"\s*((?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(%?)\s*(.*)$")
+_WIDTH = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(%?)\s*(.*)$")
 
 
 class UntilError(UserError):
