@@ -108,15 +108,15 @@ def upper_limits_problem(specs: list[Spec], confidence: float, n: int, study: st
 def upper_limit_problem(spec: Spec, confidence: float, n: int, study: str) -> str | None:
     """Why ``spec`` cannot serve a study (``study``: "a budget", "an allocation") that bounds the error
     from above with n realisations at ``confidence``, as a one-line message; None if it can."""
+    if spec.op not in ("<=", "<"):   # the spec itself first, then what -n can show of it
+        return f"--spec {spec.text!r}: {study} bounds the error from above; use <= or <"
+    if spec.window is not None and spec.window not in WINDOWS:
+        return f"--spec {spec.text!r}: unknown window {spec.window!r}; choose one of {', '.join(WINDOWS)}"
     if spec.statistic == PF and allowed_exceedances(spec, n, confidence) < 0:
         return (f"--spec {spec.text!r}: even with no realisation above the limit, n = {n} cannot show pf "
                 f"{spec.pf_op} {spec.pf_limit:g} at {100 * confidence:g} % (raise -n)")
     if spec.statistic != PF and (why := no_interval_at(spec.statistic, confidence, n)):
         return f"--spec {spec.text!r}: {why}"
-    if spec.op not in ("<=", "<"):
-        return f"--spec {spec.text!r}: {study} bounds the error from above; use <= or <"
-    if spec.window is not None and spec.window not in WINDOWS:
-        return f"--spec {spec.text!r}: unknown window {spec.window!r}; choose one of {', '.join(WINDOWS)}"
     return None
 
 
