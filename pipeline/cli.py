@@ -104,7 +104,7 @@ def command() -> None:
 def _end(code: int) -> None:
     """End the process with ``code`` once the command is done: its exit handlers run (the workers'
     server stopped, dask's and multiprocessing's own), its output is flushed, and the interpreter's
-    teardown of every imported module, 0.3-0.4 s of CPU after a run (docs/performance.md section 34),
+    teardown of every imported module, a cost paid after every run (docs/performance.md section 34),
     is skipped; no thread but dask's daemon offload thread is left by then."""
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):

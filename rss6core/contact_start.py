@@ -106,7 +106,7 @@ def equilibrium_state(scene, jm, joints, reference=None) -> StartState:
     """The static contact equilibrium at t = 0 (module docstring), by damped Newton.  Without
     friction it converges in 2 iterations from the reaction start; the kinetic friction, which turns
     with the contact normal (a dependence the step kernel's Jacobian leaves out), makes it ~30,
-    most of them halved steps, then quadratic (0.1 s for 4 realisations of the smoke scene)."""
+    most of them halved steps, then quadratic (docs/performance.md)."""
     reference = reference or ReferenceMotion(scene)
     d0, v = initial_state(scene, jm, _penetrated(scene, joints, reference), reference=reference)
     ch = _Chunk(scene, jm, np.array([0.0]), reference)

@@ -111,7 +111,7 @@ def time_derivatives(d: np.ndarray, t: np.ndarray, pad: int = 0):
     gets the same central differences, and the pads are cut off the result.
     """
     h = uniform_step(t)
-    spacing = t if h is None else h   # numpy's scalar-step differences: 3.5x cheaper than from t
+    spacing = t if h is None else h   # numpy's scalar-step differences: cheaper than from t
     v = np.gradient(d, spacing, axis=0, edge_order=2)
     a = np.gradient(v, spacing, axis=0, edge_order=2)
     if pad:

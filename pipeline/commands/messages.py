@@ -48,9 +48,9 @@ def note_compiling(model: str) -> None:
 
 def import_meanwhile(*modules: str) -> None:
     """Import ``modules`` (needed only once the realisations are computed) in a thread, in order,
-    while this one starts the workers and waits for them: the statistics' scipy.stats alone took
-    0.6-0.9 s of a 10 s run when imported first. An import that fails there is retried, and then
-    reported, where the module is used."""
+    while this one starts the workers and waits for them: the statistics' scipy.stats alone was a
+    large share of a short run when imported first (docs/performance.md section 15b). An import that
+    fails there is retried, and then reported, where the module is used."""
     import importlib
     import threading
 

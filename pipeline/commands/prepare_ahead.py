@@ -4,7 +4,7 @@
 it the command line in :data:`PREPARE_ENV`.  The server imports this module last among its
 preloads; it resolves the run's level as the command does (:func:`.run.ensemble_spec_of`) and
 prepares it into the cache every chunk reads (:func:`pipeline.ensemble.run.shared_level`), so the
-workers it forks inherit it: neither spends the elastic and paper levels' 0.25-0.3 s elastic run
+workers it forks inherit it: neither spends the elastic and paper levels' elastic run
 (docs/performance.md section 34).  The level is a deterministic function of the same key, computed
 with the workers' BLAS and hash settings, so the files do not change.  This is only a head start:
 whatever goes wrong here (a typo, a missing file) is left, silently, for the command to report.

@@ -28,10 +28,11 @@ def local_cluster(workers: int):
 
     dask starts its workers with MALLOC_TRIM_THRESHOLD_=65536, which also fixes glibc's mmap
     threshold at 128 KiB: every larger temporary array is then mapped and faulted in afresh,
-    which costs the paper level 25-30 % more CPU time per realisation. These workers keep glibc's
-    default (a value set in the environment by the user still applies). The cluster's own logs
-    are silenced below CRITICAL: closing it races with the workers' heartbeats, which then log a
-    traceback although nothing failed; rss6 reports every task's failure itself.
+    which costs the paper level a quarter more CPU time per realisation (docs/performance.md).
+    These workers keep glibc's default (a value set in the environment by the user still applies).
+    The cluster's own logs are silenced below CRITICAL: closing it races with the workers'
+    heartbeats, which then log a traceback although nothing failed; rss6 reports every task's
+    failure itself.
 
     The workers are forked from a server process that imports rss6 and its libraries once
     (:func:`start_worker_server`), not started afresh: each fresh worker spent seconds importing
@@ -58,15 +59,15 @@ def local_cluster(workers: int):
 
 # a local cluster without a dashboard: no statistical profiler in the workers (a stack sample of
 # the running task every 10 ms), and the monitors that feed the dashboard (event-loop tick, system
-# and memory) at a tenth of their rates: idle, 2 workers and the main process then take 0.2 s of CPU
-# per 10 s instead of 1.1 s, CPU taken from the realisations once both cores compute
-# (docs/performance.md, section 18)
+# and memory) at a tenth of their rates: idle, the workers and the main process then take a fifth of
+# the CPU they took, CPU taken from the realisations once both cores compute (docs/performance.md,
+# section 18)
 QUIET_CLUSTER = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.tick.interval": "200ms",
                  "distributed.admin.system-monitor.interval": "2s",
                  "distributed.worker.memory.monitor-interval": "1s"}
 # what a worker needs: rss6core, numpy, xarray, ... through pipeline.ensemble.run; xarray imports dask.array
-# at its first Dataset, the level's design pipeline.ensemble.sampler (0.2-0.3 s per worker in its first task),
+# at its first Dataset, the level's design pipeline.ensemble.sampler (else paid by each worker in its first task),
 # the draws' compiled arithmetic rss6core.draw_kernel (numba, loaded or compiled once in the server)
 WORKER_IMPORTS = ["distributed", "pipeline.ensemble.run", "dask.array", "pipeline.ensemble.sampler",
                   "rss6core.draw_kernel"]

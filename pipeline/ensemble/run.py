@@ -204,11 +204,11 @@ def _checked_parts(manifest: PartsManifest, spec: EnsembleSpec, summary_block: i
 
 
 MAX_AUTO_CHUNK = 64   # batching gains little beyond this; an interrupted run loses at most 2 chunks
-# the contact level computes its fine-grid loads and joint maps once per batch (1.9 s CPU, as much
-# as 8 realisations' steps): twice the batch halves that share (docs/performance.md, section 14);
+# the contact level computes its fine-grid loads and joint maps once per batch (as much CPU as several
+# realisations' steps): twice the batch halves that share (docs/performance.md, section 14);
 # the main process's work per chunk (writing its part and dask's messages), taken from the
 # workers' cores, is paid less often with larger chunks (section 18); a paper-level chunk of 256,
-# which redraws its clearances every step, is about 1 s of work (section 34)
+# which redraws its clearances every step, is a short task still (section 34)
 MAX_AUTO_CHUNK_INTEGRATED = 128
 MAX_AUTO_CHUNK_REDRAWN = 256
 # a larger run has larger chunks: every chunk is a part file that the merge opens (section 26)

@@ -59,7 +59,7 @@ def load_netcdf(path, lazy: bool = False, verify: bool = True, summary_block: in
     try:
         if lazy:
             # opened without dask: only the histories become dask arrays (loading each small
-            # variable through dask took 3x as long as reading it)
+            # variable through dask was slower than reading it; docs/performance.md section 26)
             ds = xr.open_dataset(path, engine="netcdf4", decode_times=False)
             closer = ds.close
             ds = ds.assign(_on_disk(ds, SUMMARY_BLOCK if summary_block is None else summary_block))

@@ -36,7 +36,7 @@ def window_reductions(err: np.ndarray, masks: np.ndarray) -> tuple[np.ndarray, n
     """Max and mean of |err| (quantity, time, direction) over each window's samples (window, time):
     (window, quantity, direction) each; NaN where a window holds no finite value.  Both reduce along
     the time axis of a transposed contiguous copy (quantity, direction, time): exact for the maxima
-    in any order, numpy's pairwise sums for the means, and 6-8x faster than across the history's
+    in any order, numpy's pairwise sums for the means, and several times faster than across the history's
     rows (docs/performance.md sections 29 and 34)."""
     by_time = np.ascontiguousarray(np.abs(err).transpose(0, 2, 1))
     windows = [_samples(mask) for mask in masks]

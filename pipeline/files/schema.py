@@ -237,7 +237,7 @@ def _joined(ds: xr.Dataset, name: str, names: list) -> xr.Variable:
         labels.setdefault(q, []).extend(str(v) for v in ds[family].values)
     lib = np
     if any(dask.is_dask_collection(x) for xs in by_quantity.values() for x in xs):
-        import dask.array as lib   # histories read lazily (imported here: it takes 0.1 s)
+        import dask.array as lib   # histories read lazily (imported here, where needed: its import is slow)
     axis = inner.index("direction")
     data = lib.stack([lib.concatenate(xs, axis=axis) for xs in by_quantity.values()],
                      axis=dims.index("quantity"))

@@ -61,7 +61,7 @@ def write_netcdf(ds: xr.Dataset, path) -> None:
         try:
             # The data are in memory or in local files. While a dask.distributed client is open,
             # xarray would otherwise guard the file with a distributed lock: a scheduler round
-            # trip per variable, which made each chunk's write 8x slower.
+            # trip per variable, which slowed every chunk's write severalfold (docs/performance.md).
             with dask.config.set(scheduler="synchronous"):
                 _stream_to_netcdf(encoded, tmp, encoding, interrupted)
         except BaseException as exc:

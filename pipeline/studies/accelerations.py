@@ -9,7 +9,7 @@ histories.  The friction-excited ~100 Hz bursts are measured as the max over eac
 acceleration minus its running mean over BURST_PERIOD (which removes the slow trajectory-rate
 part).  One command reruns it::
 
-    python -m pipeline.studies.accelerations paper -n 6 -o docs/study   # about 5 min, 2 cores
+    python -m pipeline.studies.accelerations paper -n 6 -o docs/study   # minutes (docs/accelerations.md)
 
 and writes DIR/acceleration_maxima.csv (every realisation) and DIR/acceleration_maxima.md (medians,
 spread, the convergence verdict).
