@@ -540,6 +540,7 @@ def _check_link_modes(modes: int, elements: int) -> None:
 
 def _build(v: dict, text: str, source: str) -> Scene:
     """The checked Scene of the parsed tables ``v`` (the consistency checks no single key can make)."""
+    _check_magnitudes(v)
     _check_sections(v)
     _check_geometry(v["geometry"], v["contact"])
     _check_link_modes(v["beam"]["link_modes"], v["simulation"]["elements_per_link"])
@@ -557,13 +558,17 @@ def _material(material: dict) -> Material:
     return Material(material["density_kg_m3"], material["youngs_modulus_Pa"], material["shear_modulus_Pa"])
 
 
-def _check_sections(v: dict) -> None:
-    """SceneError for a material or gravity outside MAGNITUDES, a rod tube without a wall, a material's
-    impossible Poisson ratio, or lumped mass without the rotary inertia it carries."""
+def _check_magnitudes(v: dict) -> None:
+    """SceneError for a material or gravity outside MAGNITUDES: a unit slip, on which the runs diverge."""
     for table, key, low, high, slip in MAGNITUDES:
         if not low <= v[table][key] <= high:
             raise SceneError(f"[{table}] {key}: {v[table][key]!r} lies outside [{low:g}, {high:g}], beyond any "
                              f"6-RSS robot's links and environment ({slip})")
+
+
+def _check_sections(v: dict) -> None:
+    """SceneError for a rod tube without a wall, a material's impossible Poisson ratio, or lumped mass
+    without the rotary inertia it carries."""
     rod, mat = _rod(v["rod_section"]), _material(v["material"])
     if rod.inner_diameter >= rod.outer_diameter:
         raise SceneError("[rod_section] inner_diameter_m: must be smaller than outer_diameter_m, "

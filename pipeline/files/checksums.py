@@ -50,7 +50,7 @@ ATTRIBUTES = "/attributes"
 # names commands, not values), ``coordinates`` (xarray's encoding, which it takes away on reading)
 _UNCHECKED = frozenset({"history", "coordinates", CHECKSUM})
 # the entry of CHECKSUM that holds {variable: {attribute: sha256}} of every variable's attributes (units,
-# long_name, cell_methods, ...); files written before rss6 0.3.2's last revision have none
+# long_name, cell_methods, ...); files written before the entry was added (2026-11-29) have none
 VARIABLE_ATTRIBUTES = "/variable_attributes"
 # variable attributes that are the encoding's, not the values' meaning: xarray moves them into a
 # variable's encoding on reading (or writes them itself), so they are left out on both sides
