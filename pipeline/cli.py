@@ -122,16 +122,30 @@ def _stop_as_ctrl_c(signum, frame) -> None:
     signal.raise_signal(signal.SIGINT)
 
 
+def _check_output_name(output) -> None:
+    """OptionError for an -o path that is empty (a command's `args.output or DEFAULT` would take the default)
+    or whose name starts or ends with whitespace (the netCDF library strips it, so the file would land
+    beside the name rss6 renames and locks)."""
+    from .vocabulary import OptionError
+    if output is None:
+        return
+    if not str(output).strip():
+        raise OptionError("-o: the path is empty; give a file or folder name, or leave -o out for the default")
+    name = os.path.basename(str(output).rstrip("/")) or str(output)
+    if name != name.strip():
+        raise OptionError(f"-o {output!r}: the name starts or ends with whitespace, which the netCDF library "
+                          "strips; give the name without it")
+
+
 def _main(argv: list[str] | None) -> int:
     if argv is None:
         _start_workers_ahead(sys.argv[1:])
     from rss6core import SceneError
 
-    from .vocabulary import OptionError, UserError
+    from .vocabulary import UserError
     args = build_parser().parse_args(argv)
     try:
-        if getattr(args, "output", None) == "":   # else a command's `args.output or DEFAULT` took the default
-            raise OptionError("-o: the path is empty; give a file or folder name, or leave -o out for the default")
+        _check_output_name(getattr(args, "output", None))
         return args.main(args)
     except (UserError, SceneError) as exc:
         print(f"rss6 {args.command}: error: {exc}", file=sys.stderr)

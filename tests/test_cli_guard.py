@@ -165,6 +165,7 @@ def test_an_existing_file_or_a_bad_output_folder_is_refused_before_work(argv, wo
     (["simulate", "smoke", "--model", "quasi-static", "--start", "equilibrium"],
      ["--start equilibrium: sets the contact level's initial state; this run is the quasi-static level"]),
     ([*QS, "-n", "2", "--start", "drawn", "-o", "{dir}/x.nc"], ["--start drawn", "quasi-static level"]),
+    ([*QS, "-n", "2", "--elements", "3", "-o", "{dir}/x.nc"], ["--elements 3", "quasi-static level's links are rigid"]),
     ([*QS, "-n", "2", "--undecided", "pass", "-o", "{dir}/x.nc"], ["--undecided pass: applies with --require only"]),
     (["stats", "{ens}", "--undecided", "fail"], ["--undecided fail: applies with --require only"]),
 ])
@@ -505,3 +506,18 @@ def test_an_explicit_step_above_the_critical_one_is_refused_before_work(tmp_path
     assert resolve_level(scene, SMOKE, model="paper", integrator="central-difference", dt=below).dt == below
     with pytest.raises(OptionError, match=r"--dt .* with central differences: 1.0\dx the explicit critical"):
         resolve_level(scene, SMOKE, model="paper", integrator="central-difference", dt=above)
+
+
+@pytest.mark.parametrize("model", ["quasi-static", "paper"])
+def test_a_files_history_is_a_command_that_reruns_it(model, tmp_path, capsys):
+    """The history names the options that fix the results, and only those the level takes (a quasi-static
+    file's named --integrator and --elements, which rss6 refuses there): rerun, it gives the same values."""
+    import shlex
+    first = tmp_path / "first.nc"
+    assert main(["run", str(SMOKE), "--model", model, "-n", "2", "--workers", "1", "-o", str(first)]) == 0
+    history = xr.open_dataset(first).attrs["history"]
+    argv = shlex.split(history)[1:]
+    assert argv[:2] == ["run", "smoke"] and ("--integrator" in argv) == (model == "paper"), history
+    again = tmp_path / "again.nc"
+    assert main([*argv, "--workers", "1", "-o", str(again)]) == 0, capsys.readouterr().err
+    xr.testing.assert_identical(open_ensemble(again).drop_attrs(), open_ensemble(first).drop_attrs())

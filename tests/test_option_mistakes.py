@@ -259,10 +259,14 @@ def test_a_folder_named_like_a_shipped_scene_leaves_the_name_to_the_scene(tmp_pa
 
 @pytest.mark.parametrize("argv", [["run", "smoke", "--model", "quasi-static", "-n", "2"], ["simulate", "smoke"],
                                   ["plot", "x.nc"], ["map", "smoke"]])
-def test_an_empty_output_path_is_refused_not_replaced_by_the_default(argv, tmp_path, monkeypatch, capsys):
-    """`-o ''` (an unset shell variable, say) had silently written the default file or folder."""
+@pytest.mark.parametrize("output, says", [("", "-o: the path is empty"), (" ", "-o: the path is empty"),
+                                          (" x.nc", "starts or ends with whitespace"),
+                                          ("sub/x.nc ", "starts or ends with whitespace")])
+def test_an_empty_or_padded_output_path_is_refused(argv, output, says, tmp_path, monkeypatch, capsys):
+    """`-o ''` (an unset shell variable, say) had silently written the default file or folder; a name with
+    a leading space, which the netCDF library strips, had ended in a traceback and stray files."""
     monkeypatch.chdir(tmp_path)
-    assert main([*argv, "-o", ""]) == 2
+    assert main([*argv, "-o", output]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "-o: the path is empty" in err, err
+    assert len(err.splitlines()) == 1 and says in err, err
     assert list(tmp_path.iterdir()) == []

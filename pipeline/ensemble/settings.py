@@ -53,6 +53,9 @@ def resolve_level(scene, config, *, model: str | None = None, integrator: str | 
     if integrator is not None and not model_level(model).elastic_links:
         raise OptionError(f"--integrator {integrator}: the {model} level integrates nothing in time (its links "
                           "are rigid); integrators are for the elastic, paper and contact levels")
+    if elements is not None and not model_level(model).elastic_links:
+        raise OptionError(f"--elements {elements}: the {model} level's links are rigid (no mesh); elements are for "
+                          "the elastic, paper and contact levels")
     if start is not None and not model_level(model).contact_start:
         raise OptionError(f"--start {start}: sets the contact level's initial state; this run is the "
                           f"{model} level")

@@ -83,10 +83,12 @@ def _provenance(scene, title: str, *, model: str, integrator: str, dt: float,
 def command_line(command: str, scene, *, model: str, integrator: str, dt: float, elements: int,
                  options: str = "") -> str:
     """A history line: the rss6 command and the options that fix its results (the scene by name;
-    its text is the file's scene_toml), e.g. 'rss6 run smoke --model contact ... -n 16'."""
-    start = f" --start {scene.simulation.contact_start}" if model_level(model).contact_start else ""
-    return (f"rss6 {command} {scene.name} --model {model} --integrator {integrator} --dt {dt} "
-            f"--elements {elements}{start}" + (f" {options}" if options else ""))
+    its text is the file's scene_toml), e.g. 'rss6 run smoke --model contact ... -n 16'; the integrator
+    and mesh only for a level with elastic links (a rigid-link level refuses them)."""
+    level = model_level(model)
+    start = f" --start {scene.simulation.contact_start}" if level.contact_start else ""
+    links = f" --integrator {integrator} --dt {dt} --elements {elements}" if level.elastic_links else f" --dt {dt}"
+    return f"rss6 {command} {scene.name} --model {model}{links}{start}" + (f" {options}" if options else "")
 
 
 def derived_history(source: xr.Dataset, line: str) -> str:
