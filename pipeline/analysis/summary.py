@@ -203,23 +203,39 @@ def format_errors(summary: dict) -> str:
 _NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 
 
+# what a failed run's refusal points to (the scene's magnitudes, a near-singular pose, an explicit step)
+CHECK_HINT = "`rss6 check` shows the scene's values, its workspace and its explicit critical step"
+
+
 def every_realisation_failed(ds, path) -> str | None:
-    """The one-line refusal of an ensemble whose realisations all failed (no statistics exist), naming
-    the file and the most frequent reason; None when one finished."""
-    status = ds["status"].values.astype(str)
+    """The one-line refusal of an ensemble (or a single run's file) whose realisations all failed (no
+    statistics exist), naming the file and the most frequent reason; None when one finished, or for a
+    file without statuses (a statistics file)."""
+    if "status" not in ds.variables and "status" not in ds.attrs:
+        return None
+    status, _ = _statuses(ds)
     if status.size == 0 or (status == FINISHED).any():
         return None
     count, message = _grouped_failures(ds)[0]
-    return (f"{path}: all {status.size} realisations failed, so it has no statistics (the most frequent reason, "
-            f"{count} of {status.size}: {message}); `rss6 check` shows the scene's values and its explicit "
-            "critical step")
+    why = (f"its one run failed, so it has no statistics ({message})" if status.size == 1 else
+           f"all {status.size} realisations failed, so it has no statistics (the most frequent reason, "
+           f"{count} of {status.size}: {message})")
+    return f"{path}: {why}; {CHECK_HINT}"
+
+
+
+def _statuses(ds) -> tuple[np.ndarray, np.ndarray]:
+    """The status and message of every realisation of an ensemble, or of a single run's file (attributes)."""
+    if "status" in ds.variables:
+        return ds["status"].values.astype(str), ds["status_message"].values.astype(str)
+    return np.array([str(ds.attrs["status"])]), np.array([str(ds.attrs.get("status_message", ""))])
 
 
 def _grouped_failures(ds) -> list[tuple[int, str]]:
     """(count, first message) of each reason the failed realisations give (their messages alike but for
     their numbers: time, step, size), most frequent first."""
-    status = ds["status"].values.astype(str)
-    messages = ds["status_message"].values.astype(str)[status != FINISHED]
+    status, messages = _statuses(ds)
+    messages = messages[status != FINISHED]
     reasons, first, counts = np.unique([_NUMBER.sub("#", m) for m in messages], return_index=True,
                                        return_counts=True)
     return [(int(counts[i]), messages[first[i]] or "(no message)") for i in np.lexsort((first, -counts))]

@@ -6,7 +6,7 @@ import time
 
 from rss6core import FINISHED, SceneError, model_level
 
-from ..analysis.summary import contact_peaks, error_summary, format_errors
+from ..analysis.summary import CHECK_HINT, contact_peaks, error_summary, format_errors
 from ..ensemble.settings import resolve_level
 from ..scenes.catalogue import find_scene
 from ..vocabulary import UserError
@@ -53,8 +53,7 @@ def main(args) -> int:
         write_netcdf(ds, args.output)
     if result.status != FINISHED:   # its maxima would be the divergence's, not the robot's
         kept = f"; {args.output} keeps its status and message" if args.output else ""
-        raise UserError(f"{args.config}: the {level.model} run failed: {result.message}{kept}; `rss6 check` "
-                        "shows the scene's values and its explicit critical step")
+        raise UserError(f"{args.config}: the {level.model} run failed: {result.message}{kept}; {CHECK_HINT}")
     summary = error_summary(ds)
     if result.contact_force_peak is not None:
         summary["max_contact_force_N"] = contact_peaks(result.contact_force_peak)

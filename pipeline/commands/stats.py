@@ -56,7 +56,7 @@ def main(args) -> int:
     if args.window is not None:
         specs = [replace(s, window=s.window or args.window) for s in specs]
     ds = open_results(args.file)
-    none_finished = every_realisation_failed(ds, args.file) if "status" in ds else None
+    none_finished = every_realisation_failed(ds, args.file)
     if none_finished:
         raise UserError(none_finished)
     note = _loaded_joints_note(ds, args.file, specs + events)
