@@ -265,4 +265,8 @@ def test_simulate_names_an_integrator_only_where_the_level_integrates(capsys):
     assert main(["simulate", "smoke", "--model", "quasi-static"]) == 0
     assert capsys.readouterr().out.startswith("scene 'smoke', model quasi-static, dt = 0.001 s, rigid links: finished")
     assert main(["simulate", "smoke", "--model", "paper"]) == 0
-    assert "model paper, newmark, dt = 0.001 s, 4 elements per link: finished" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "model paper, newmark, dt = 0.001 s, 4 elements per link: finished" in out
+    assert out.splitlines()[-1].startswith("note: paper level: its velocity and acceleration errors")
+    assert main(["simulate", "smoke", "--model", "paper", "--json"]) == 0
+    assert "they measure the step, not the robot" in json.loads(capsys.readouterr().out)["notes"][0]

@@ -272,26 +272,27 @@ def _missing_notes(sds: xr.Dataset) -> list[str]:
     left_out = [f"{failed} of {n + failed} realisations failed and are in no statistic or bound: each describes the "
                 "robots that finished, whose errors the failed draws (often the largest) may exceed; --require "
                 "counts them against a pass"] if failed else []
-    return left_out + notes + [f"max: {MAX_NOTE}"] + until + other + _level_notes(sds)
+    windows = set(windows_of(sds)) or {"whole"}
+    return (left_out + notes + [f"max: {MAX_NOTE}"] + until + other
+            + level_notes(sds.attrs, {str(q) for q in sds["quantity"].values}, windows))
 
 
-def _level_notes(sds: xr.Dataset) -> list[str]:
-    """Which of the table's numbers do not measure the robot in operation, by the file's level: the paper
-    level's velocities and accelerations (they measure the step), and the contact level's start-up
-    maxima after a drawn start (the start's impacts)."""
+def level_notes(attrs, shown: set, windows: set) -> list[str]:
+    """Which numbers of a table (its quantities ``shown``, its analysis ``windows``) of a file with
+    attributes ``attrs`` do not measure the robot in operation, by the file's level: the paper level's
+    velocities and accelerations (they measure the step), and the contact level's start-up maxima after
+    a drawn start (the start's impacts)."""
     from rss6core import MODELS, model_level
-    model = str(sds.attrs.get("model", ""))
+    model = str(attrs.get("model", ""))
     if model not in MODELS:
         return []
-    level, shown = model_level(model), {str(q) for q in sds["quantity"].values}
-    notes = []
+    level, notes = model_level(model), []
     if level.redraws_every_step and shown & {"velocity", "acceleration"}:
         notes.append(f"{model} level: its velocity and acceleration errors come from eccentricities redrawn every "
                      "step and grow as the step shrinks: they measure the step, not the robot (the contact level "
                      "measures them)")
-    windows = set(windows_of(sds)) or {"whole"}
-    starts = not empty_window("startup", *file_window_bounds(sds.attrs))   # the start is in the whole run
-    if level.contact_start and sds.attrs.get("contact_start") == "drawn" and starts and windows & {"whole", "startup"}:
+    starts = not empty_window("startup", *file_window_bounds(attrs))   # the start is in the whole run
+    if level.contact_start and attrs.get("contact_start") == "drawn" and starts and windows & {"whole", "startup"}:
         notes.append(f"{model} level, drawn start: the joints start off their contact equilibrium, and the impacts "
                      "that follow are in the whole run's and the startup's maxima (velocity and acceleration above "
                      "all); the steady window measures the robot in operation (or --start equilibrium)")

@@ -9,7 +9,7 @@ from rss6core import FINISHED, SceneError, model_level
 from ..analysis.summary import CHECK_HINT, contact_peaks, error_summary, format_errors
 from ..ensemble.settings import resolve_level
 from ..scenes.catalogue import find_scene
-from ..vocabulary import UserError
+from ..vocabulary import QUANTITIES, UserError
 from .messages import note_compiling
 from .options import LEVELS_HELP, add_json, add_level_settings, add_model, add_parents, add_scene, add_seed, seed_int
 
@@ -57,15 +57,18 @@ def main(args) -> int:
     summary = error_summary(ds)
     if result.contact_force_peak is not None:
         summary["max_contact_force_N"] = contact_peaks(result.contact_force_peak)
-    _print(args, level, result, summary, wall)
+    from ..analysis.stats import level_notes
+    _print(args, level, result, summary, wall, level_notes(ds.attrs, set(QUANTITIES), {"whole", "steady"}))
     return 0
 
 
-def _print(args, level, result, summary: dict, wall: float) -> None:
+def _print(args, level, result, summary: dict, wall: float, notes: list[str]) -> None:
+    """The run's summary (``--json``: as JSON) and ``notes``, what of it does not measure the robot."""
     if args.json:
         print(json.dumps({**summary, "wall_time_s": wall, "status": result.status,
                           "message": result.message, "model": level.model, "integrator": level.integrator,
-                          "time_step_s": level.dt, "elements_per_link": level.elements}, indent=2))
+                          "time_step_s": level.dt, "elements_per_link": level.elements}
+                         | ({"notes": notes} if notes else {}), indent=2))
         return
     integrated = (f"{level.integrator}, dt = {level.dt:g} s, {level.elements} elements per link"
                   if model_level(level.model).elastic_links else f"dt = {level.dt:g} s, rigid links")
@@ -77,3 +80,5 @@ def _print(args, level, result, summary: dict, wall: float) -> None:
         print("max contact force (N): " + ", ".join(f"{k} {v:.4g}" for k, v in forces.items())
               + (" (the paper's method keeps every joint inside its clearance, so eq. 17 gives none)"
                  if closed else ""))
+    for line in notes:
+        print(f"note: {line}")
