@@ -227,7 +227,9 @@ def every_realisation_failed(ds, path) -> str | None:
 def _statuses(ds) -> tuple[np.ndarray, np.ndarray]:
     """The status and message of every realisation of an ensemble, or of a single run's file (attributes)."""
     if "status" in ds.variables:
-        return ds["status"].values.astype(str), ds["status_message"].values.astype(str)
+        status = ds["status"].values.astype(str)
+        messages = ds["status_message"].values.astype(str) if "status_message" in ds.variables else ""
+        return status, np.broadcast_to(np.asarray(messages, dtype=str), status.shape)
     return np.array([str(ds.attrs["status"])]), np.array([str(ds.attrs.get("status_message", ""))])
 
 
