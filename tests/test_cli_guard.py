@@ -500,7 +500,7 @@ def test_an_explicit_step_above_the_critical_one_is_refused_before_work(tmp_path
     assert main(["run", str(SMOKE), "--model", "elastic", "--integrator", "central-difference", "-n", "2",
                  "--workers", "1", "-o", str(out)]) == 2
     _one_line_error(capsys, "--integrator central-difference at the elastic level's step 0.001 s",
-                    "explicit critical step 2/omega_max")
+                    "explicit critical step 1.89e-06 s")
     assert not out.exists() and not Path(str(out) + ".parts").exists()
     scene = find_scene(str(SMOKE))
     critical = 2.0 / natural_frequencies(scene)[-1]
@@ -509,6 +509,11 @@ def test_an_explicit_step_above_the_critical_one_is_refused_before_work(tmp_path
     assert resolve_level(scene, SMOKE, model="paper", integrator="central-difference", dt=below).dt == below
     with pytest.raises(OptionError, match=r"--dt .* with central differences: 1.0\dx the explicit critical"):
         resolve_level(scene, SMOKE, model="paper", integrator="central-difference", dt=above)
+    explicit_newmark = tmp_path / "beta0.toml"   # Newmark's beta = 0 with gamma = 1/2 is central differences
+    explicit_newmark.write_text(SMOKE.read_text().replace("newmark_beta = 0.25", "newmark_beta = 0.0", 1))
+    assert main(["simulate", str(explicit_newmark), "--model", "elastic"]) == 2
+    _one_line_error(capsys, "[simulation] integrator = 'newmark' (Newmark with beta = 0, gamma = 0.5)",
+                    "528x the explicit critical step 1.89e-06 s")
 
 
 @pytest.mark.parametrize("model", ["quasi-static", "paper"])

@@ -78,22 +78,29 @@ def resolve_level(scene, config, *, model: str | None = None, integrator: str | 
 
 
 def _check_explicit_step(level: LevelSettings, dt_given: bool, integrator_given: bool) -> None:
-    """Refuse, before any work, an explicit integrator's step above the critical step 2/omega_max of the
-    scene's undamped elastic robot (s): every realisation would diverge. The contact level's joints add
-    stiffer modes, so there it is a necessary bound only, left to the run."""
-    kind = model_level(level.model)
-    if not kind.elastic_links or kind.contact_joints or level.integrator != "central-difference":
+    """Refuse, before any work, an explicit integrator's step above its critical step on the scene's
+    undamped elastic robot, Omega_crit / omega_max with Omega_crit = (gamma / 2)^(-1/2) (2 for central
+    differences, Newmark's beta = 0 and gamma = 1/2; s): every realisation would diverge. The contact
+    level's joints add stiffer modes, so there it is a necessary bound only, left to the run."""
+    kind, sim = model_level(level.model), level.scene.simulation
+    central = level.integrator == "central-difference"
+    if not kind.elastic_links or kind.contact_joints or not (central or (level.integrator == "newmark"
+                                                                         and sim.newmark_beta == 0)):
         return
     from rss6core import natural_frequencies
-    critical = 2.0 / natural_frequencies(level.scene, level.elements)[-1]
+    gamma = 0.5 if central else sim.newmark_gamma
+    critical = (gamma / 2) ** -0.5 / natural_frequencies(level.scene, level.elements)[-1]
     if level.dt <= critical:
         return
-    said = (f"--dt {level.dt:g} with central differences" if dt_given else
-            f"--integrator central-difference at the {level.model} level's step {level.dt:g} s" if integrator_given
-            else f"[simulation] integrator = 'central-difference' at the {level.model} level's step {level.dt:g} s")
-    message = (f"{said}: {level.dt / critical:.3g}x the explicit critical step 2/omega_max = {critical:.3g} s of the "
-               f"scene's elastic robot on {level.elements} elements per link, so every realisation would diverge; "
-               "give a step at most that (dividing the duration) or an implicit integrator (--integrator newmark)")
+    scheme = "central differences" if central else f"Newmark with beta = 0, gamma = {gamma:g}"
+    said = (f"--dt {level.dt:g} with {scheme}" if dt_given else
+            f"--integrator {level.integrator} at the {level.model} level's step {level.dt:g} s" if integrator_given
+            else f"[simulation] integrator = {level.integrator!r} ({scheme}) at the {level.model} level's step "
+            f"{level.dt:g} s")
+    message = (f"{said}: {level.dt / critical:.3g}x the explicit critical step {critical:.3g} s of the scene's "
+               f"elastic robot on {level.elements} elements per link (2/omega_max for central differences), so "
+               "every realisation would diverge; give a step at most that (dividing the duration) or an "
+               "implicit integrator (newmark with beta >= 1/4, hht, generalized-alpha)")
     if dt_given or integrator_given:
         raise OptionError(message)
     raise SceneError(f"{level.scene.source_path}: {message}")
