@@ -223,7 +223,6 @@ def every_realisation_failed(ds, path) -> str | None:
     return f"{path}: {why}; {CHECK_HINT}"
 
 
-
 def _statuses(ds) -> tuple[np.ndarray, np.ndarray]:
     """The status and message of every realisation of an ensemble, or of a single run's file (attributes)."""
     if "status" in ds.variables:
