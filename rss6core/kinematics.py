@@ -170,7 +170,7 @@ def workspace_quality(scene, t: np.ndarray | None = None) -> WorkspaceQuality:
     if bad.size:
         k, leg = bad[0]
         raise WorkspaceError(f"trajectory leaves the workspace: leg {leg + 1} cannot reach its "
-                             f"platform joint at t = {t[k]:.4f} s (|K/rho| = {abs(ratio[k, leg]):.4f} "
+                             f"platform joint at t = {t[k]:.4f} s (|K/rho| = {abs(ratio[k, leg]):.7g} "
                              f"> 1){_WHERE}")
     alpha = inverse_kinematics(geo, b)
     c, dc, _ = crank_points(geo, alpha)

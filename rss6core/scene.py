@@ -502,6 +502,7 @@ MAX_SIZE_M = 20.0   # a [geometry] length above this is a unit slip (a flight si
 # (table, key, lowest, highest, the slip a value outside suggests): beyond any link material (polymers to
 # tungsten carbide, foams excluded) or a robot's environment (up to 10 g)
 MAGNITUDES = (("material", "youngs_modulus_Pa", 1e8, 2e12, "a modulus in GPa or MPa written in Pa?"),
+              ("material", "shear_modulus_Pa", 3e7, 1e12, "a modulus in GPa or MPa written in Pa?"),
               ("material", "density_kg_m3", 100.0, 25000.0, "a density in g/cm^3 written in kg/m^3?"),
               ("environment", "gravity_m_s2", 0.0, 100.0, "an acceleration in mm/s^2 written in m/s^2?"))
 

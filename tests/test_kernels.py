@@ -90,7 +90,7 @@ def test_the_compile_note_names_the_kernels_once_per_command(monkeypatch):
     monkeypatch.setattr(progress, "_COMPILE_NOTED", [])
     stream = io.StringIO()
     bar = progress._Progress(4, 0, stream)
-    bar.begin(2, "1 workers")
+    bar.begin(2, "1 worker")
     bar.compiling([])
     assert "compil" not in stream.getvalue()
     for _ in range(3):

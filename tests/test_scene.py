@@ -212,6 +212,7 @@ def test_a_geometry_length_in_mm_written_in_metres_is_named(paper_text):
 @pytest.mark.parametrize("key, nominal, slip, words", [
     ("youngs_modulus_Pa", "70.0e9", "70.0", "modulus in GPa or MPa"),
     ("density_kg_m3", "2700.0", "2.7", "g/cm^3"),
+    ("shear_modulus_Pa", "26.5e9", "26.5", "modulus in GPa or MPa"),
     ("gravity_m_s2", "9.81", "9810.0", "mm/s^2")])
 def test_a_material_or_gravity_beyond_any_robot_is_a_unit_slip(paper_text, key, nominal, slip, words):
     """A modulus of 70 Pa or a density of 2.7 kg/m^3 (the helper review's cases: the run diverged at step 1)
@@ -220,7 +221,7 @@ def test_a_material_or_gravity_beyond_any_robot_is_a_unit_slip(paper_text, key, 
         parse_scene(_edit(paper_text, f"{key} = {nominal}", f"{key} = {slip}"))
     from rss6core.scene import MAGNITUDES
     low, high = next((lo, hi) for _, k, lo, hi, _ in MAGNITUDES if k == key)
-    for end in (low, high):
+    for end in (low, high) if key != "shear_modulus_Pa" else ():   # its ends: the Poisson ratio's check's
         if key == "youngs_modulus_Pa":   # the shear modulus follows, keeping the Poisson ratio
             text = _edit(_edit(paper_text, "shear_modulus_Pa = 26.5e9", f"shear_modulus_Pa = {end / 2.64!r}"),
                          f"{key} = {nominal}", f"{key} = {end!r}")

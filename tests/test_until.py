@@ -40,6 +40,8 @@ def test_an_absolute_target_in_a_unit_of_the_quantity():
     ("displacement:x@max<=5%", "statistic 'max' has no confidence interval"),
     ("displacement:x@q95<=0%", "must be a positive number"),
     ("displacement:x@q95<=-5%", "half-width '-5' must be a positive number"),
+    ("displacement:x@q95<=nan%", "half-width 'nan' must be a positive number"),
+    ("displacement:x@q95<=inf mm", "half-width 'inf' must be a positive number"),
     ("displacement:x@q95<=5%mm", "unexpected 'mm' after the percentage"),
     ("displacement:x,rx@q95<=0.1mm", "mix translations and rotations"),
     ("displacement:x@q95<=0.1m/s", "unknown unit 'm/s'"),
@@ -236,7 +238,7 @@ def test_the_workers_are_said_to_start_once_for_every_batch(tmp_path, capsys):
     run_until(spec, targets, 25, tmp_path / "u.nc", workers=1, stream=stream)
     bar = capsys.readouterr().err                                      # the batches' progress lines
     assert checkpoints(targets, 25) == [16, 20, 25] and bar.count("realisations to compute") == 3
-    assert stream.getvalue().startswith("rss6 run --until: at most 3 batches (checks at n = 16 to 25) on 1 workers; "
+    assert stream.getvalue().startswith("rss6 run --until: at most 3 batches (checks at n = 16 to 25) on 1 worker; "
                                         "starting workers\n")
     assert (stream.getvalue() + bar).count("starting workers") == 1
 

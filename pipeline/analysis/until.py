@@ -40,7 +40,7 @@ __all__ = ["Target", "UntilError", "parse_target", "parse_targets", "checkpoints
 
 GROWTH = 1.25        # mc: each checked n is the previous one times this, rounded up
 LEVEL = stopped_level(CONFIDENCE, stopped_by_width=True)   # the quantiles' bounds the rule checks
-_WIDTH = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(%?)\s*(.*)$")
+_WIDTH = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?(?:nan|inf))\s*(%?)\s*(.*)$", re.I)
 
 
 class UntilError(UserError):
@@ -255,7 +255,9 @@ def run_until(spec, targets: list[Target], cap: int, output, workers: int = 2,
         + [n for n in points if n > done]
     outcome, computed = None, 0
     if plan and progress:   # said once: the batches' own first lines do not repeat it
-        stream.write(f"rss6 run --until: at most {len(plan)} batches (checks at n = {plan[0]} to {plan[-1]}) on "
+        batches = (f"1 batch (a check at n = {plan[0]})" if len(plan) == 1 else
+                   f"{len(plan)} batches (checks at n = {plan[0]} to {plan[-1]})")
+        stream.write(f"rss6 run --until: at most {batches} on "
                      f"{cluster_label(workers, scheduler)}; starting workers\n")
         stream.flush()
     # one cluster (or client of the scheduler) for every batch: a cluster per batch would cost its

@@ -19,7 +19,7 @@ def compile_note(kernels: list[str]) -> str:
 
 def cluster_label(workers: int, scheduler: str | None) -> str:
     """Where a run computes, as its progress lines say it: "2 workers" or "scheduler tcp://..."."""
-    return f"scheduler {scheduler}" if scheduler else f"{workers} workers"
+    return f"scheduler {scheduler}" if scheduler else f"{workers} worker{'s' if workers != 1 else ''}"
 
 
 class _Progress:
