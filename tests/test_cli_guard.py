@@ -328,7 +328,7 @@ def test_all_realisations_failing_is_one_line_exit_2_and_the_file_keeps_them(tmp
     assert xr.open_dataset(single).attrs["status"] == "failed"
     for argv in (["stats", str(single)], ["stats", str(single), "--event", "displacement:z>1mm"]):
         assert main(argv) == 2   # a single run's file: it had printed a table of dashes and 0/0 = nan
-        _one_line_error(capsys, f"{single}: its one run failed, so it has no statistics")
+        _one_line_error(capsys, f"{single}: the run failed, so it has no statistics")
 
 
 # --- resume: manifest, -n, nothing to do ------------------------------------------------------

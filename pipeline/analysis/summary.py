@@ -207,18 +207,18 @@ _NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 CHECK_HINT = "`rss6 check` shows the scene's values, its workspace and its explicit critical step"
 
 
-def every_realisation_failed(ds, path) -> str | None:
-    """The one-line refusal of an ensemble (or a single run's file) whose realisations all failed (no
-    statistics exist), naming the file and the most frequent reason; None when one finished, or for a
-    file without statuses (a statistics file)."""
+def every_realisation_failed(ds, path, so: str = "it has no statistics") -> str | None:
+    """The one-line refusal of an ensemble (or a single run's file) whose realisations all failed, naming
+    the file, what follows (``so``: no statistics, nothing to plot) and the most frequent reason; None
+    when one finished, or for a file without statuses (a statistics file)."""
     if "status" not in ds.variables and "status" not in ds.attrs:
         return None
     status, _ = _statuses(ds)
     if status.size == 0 or (status == FINISHED).any():
         return None
     count, message = _grouped_failures(ds)[0]
-    why = (f"its one run failed, so it has no statistics ({message})" if status.size == 1 else
-           f"all {status.size} realisations failed, so it has no statistics (the most frequent reason, "
+    why = (f"the run failed, so {so} ({message})" if status.size == 1 else
+           f"all {status.size} realisations failed, so {so} (the most frequent reason, "
            f"{count} of {status.size}: {message})")
     return f"{path}: {why}; {CHECK_HINT}"
 
