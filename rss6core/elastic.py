@@ -8,6 +8,8 @@ that blows up (non-finite state or an elastic displacement above
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .assembly import (ElasticModel, StepSolver, apply, build_elastic_model, internal_force,
@@ -27,18 +29,42 @@ def _system(scene, model: ElasticModel, t: np.ndarray, motion=None):
 def quasi_static_state(scene, model: ElasticModel, t0: float = 0.0, h: float = 1e-4, motion=None):
     """Initial state on the quasi-static path d_qs(t) = K(t)^-1 F(t), consistent with eq. 32.
 
-    v and a are the first and second central differences of d_qs (step h, s);
-    d = K^-1 (F - C v - M a) then satisfies eq. 32 exactly at t0, so the run
-    starts without the stiff-mode transient that d = K^-1 F, v = a = 0 would ring.
+    v and a are second-order differences of d_qs (step h, s): central about t0 where the
+    trajectory continued to t0 - h stays in the workspace, else one-sided over t0..t0 + 3h (a start
+    on the workspace's border); d = K^-1 (F - C v - M a) then satisfies eq. 32 exactly at t0, so
+    the run starts without the stiff-mode transient that d = K^-1 F, v = a = 0 would ring.
     ``motion``: as in :func:`simulate_elastic`.
     """
-    maps, F = _system(scene, model, np.array([t0 - h, t0, t0 + h]), motion)
+    path = _quasi_static_path(scene, model, t0 + h * np.array([-1.0, 0.0, 1.0]), motion)
+    if np.all(np.isfinite(path.d)):
+        v = (path.d[2] - path.d[0]) / (2.0 * h)
+        a = (path.d[2] - 2.0 * path.d[1] + path.d[0]) / (h * h)
+        at = 1
+    else:
+        path = _quasi_static_path(scene, model, t0 + h * np.arange(4.0), motion)
+        d0, d1, d2, d3 = path.d
+        v = (-3.0 * d0 + 4.0 * d1 - d2) / (2.0 * h)
+        a = (2.0 * d0 - 5.0 * d1 + 4.0 * d2 - d3) / (h * h)
+        at = 0
+    maps, F = path.maps, path.F
+    rhs = F[at] - internal_force(model, maps[at], np.zeros_like(v), v) - apply(model, maps[at], a, 1.0, 0.0)
+    return path.stiff.solve(at, rhs), v, a
+
+
+@dataclass(frozen=True)
+class _QuasiStaticPath:
+    """d_qs(t) = K(t)^-1 F(t) at a few instants, with the end maps, loads and stiffness solver there."""
+
+    maps: object
+    F: np.ndarray
+    stiff: StepSolver
+    d: np.ndarray
+
+
+def _quasi_static_path(scene, model: ElasticModel, t: np.ndarray, motion) -> _QuasiStaticPath:
+    maps, F = _system(scene, model, t, motion)
     stiff = StepSolver(model, maps, 0.0, 1.0)
-    d = np.stack([stiff.solve(k, F[k]) for k in range(3)])
-    v = (d[2] - d[0]) / (2.0 * h)
-    a = (d[2] - 2.0 * d[1] + d[0]) / (h * h)
-    rhs = F[1] - internal_force(model, maps[1], np.zeros_like(v), v) - apply(model, maps[1], a, 1.0, 0.0)
-    return stiff.solve(1, rhs), v, a
+    return _QuasiStaticPath(maps, F, stiff, np.stack([stiff.solve(k, F[k]) for k in range(len(t))]))
 
 
 def simulate_elastic(scene, elements: int = 4, integrator: Integrator | None = None,

@@ -7,7 +7,7 @@ import scipy.linalg
 
 from rss6core.assembly import (StepSolver, build_elastic_model, dense_matrices, end_maps, frame_coupling_forces,
                                rigid_loads)
-from rss6core.elastic import elastic_energy, simulate_elastic
+from rss6core.elastic import elastic_energy, quasi_static_state, simulate_elastic
 from rss6core.integrators import Integrator
 from rss6core.kinematics import rigid_motion
 from rss6core.models import natural_frequencies
@@ -214,3 +214,32 @@ def test_paper_elastic_peaks_are_the_readmes(paper):
     assert peak[2] == pytest.approx(0.0293e-3, rel=1e-2)          # the vertical sag, m
     assert peak == pytest.approx([0.00045e-3, 0.0056e-3, 0.0293e-3, 4.4e-5, 6.0e-5, 9.1e-6],
                                  rel=1.5e-2)                      # two-digit values: rounding
+
+
+def _outside_before(scene, t_start):
+    """The scene's rigid motion, as if the trajectory left the workspace before t_start (NaN there)."""
+    def motion(t):
+        m = rigid_motion(scene, t)
+        before = np.asarray(t) < t_start
+        return dataclasses.replace(m, **{f.name: np.where(before.reshape((-1,) + (1,) * (getattr(m, f.name).ndim - 1)),
+                                                         np.nan, getattr(m, f.name))
+                                         for f in dataclasses.fields(m) if f.name != "platform"})
+    return motion
+
+
+def test_a_start_on_the_workspace_border_takes_one_sided_differences(paper):
+    """Where the trajectory continued before t0 leaves the workspace, the initial state's v and a
+    come from t0..t0 + 3h (second order) and match the central differences' to O(h^2)."""
+    model, t0 = build_elastic_model(paper, 4), 0.3
+    central = quasi_static_state(paper, model, t0)
+    one_sided = quasi_static_state(paper, model, t0, motion=_outside_before(paper, t0))
+    # v and a: the stencils divide the solves' round-off by h = 1e-4 s and h^2
+    for name, c, o, rel in zip("dva", central, one_sided, (1e-7, 1e-5, 1e-4)):
+        assert np.all(np.isfinite(o)), name
+        assert np.max(np.abs(o - c)) <= rel * np.max(np.abs(c)), name
+    lowered = dataclasses.replace(paper, trajectory=dataclasses.replace(
+        paper.trajectory, offset=paper.trajectory.offset + np.array([0.0, 0.0, -0.3157, 0.0, 0.0, 0.0])))
+    d, v, a = quasi_static_state(lowered, model, 0.0)   # its continuation before t = 0 is unreachable
+    assert np.isfinite(rigid_motion(lowered, np.array([0.0])).alpha).all()
+    assert not np.isfinite(rigid_motion(lowered, np.array([-1e-4])).alpha).all()
+    assert np.all(np.isfinite(d)) and np.all(np.isfinite(v)) and np.all(np.isfinite(a))
