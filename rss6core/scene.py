@@ -653,9 +653,24 @@ def _scene(v: dict, text: str, source: str) -> Scene:
 def _uncertain(v: dict) -> UncertainInputs:
     """The [uncertain.*] and [correlation.*] tables (rss6core/uncertain.py), checked against the nominal keys."""
     try:
-        return parse_uncertain(v.get("uncertain", {}), v.get("correlation", {}), v)
+        inputs = parse_uncertain(v.get("uncertain", {}), v.get("correlation", {}), v)
     except UncertainInputError as exc:
         raise SceneError(str(exc)) from None
+    _check_drawn_magnitudes(inputs)
+    return inputs
+
+
+def _check_drawn_magnitudes(inputs: UncertainInputs) -> None:
+    """SceneError for an uncertain material whose law can draw a value outside MAGNITUDES (a unit slip
+    in its parameters, or a spread no robot has): such realised robots would diverge at their first step."""
+    bounds = {f"{table}.{key}": (low, high, slip) for table, key, low, high, slip in MAGNITUDES}
+    for item in inputs.inputs:
+        if item.parameter in bounds:
+            (low, high, slip), (lo, hi) = bounds[item.parameter], item.extremes()
+            if lo < low or hi > high:
+                raise SceneError(f"[uncertain.{item.name}] {item.parameter}: law {item.law!r} can draw values in "
+                                 f"[{lo:.6g}, {hi:.6g}] {item.units}, outside [{low:g}, {high:g}], beyond any "
+                                 f"6-RSS robot's links ({slip})")
 
 
 def parse_scene(text: str, source: str = "<string>") -> Scene:
