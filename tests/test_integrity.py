@@ -10,6 +10,7 @@ from pathlib import Path
 
 import netCDF4
 import pytest
+import xarray as xr
 
 import pipeline.files.reading as reading
 import pipeline.files.schema as schema
@@ -66,6 +67,20 @@ def _besides_the_loaded_joints(err: str) -> list[str]:
 def _copy(src: Path, dst: Path) -> Path:
     dst.write_bytes(src.read_bytes())
     return dst
+
+
+def test_a_variable_added_or_removed_after_writing_is_refused_naming_it(merged, tmp_path, capsys):
+    """A variable the checksum attribute does not list, and one it lists that the file lacks."""
+    added = _copy(merged, tmp_path / "added.nc")
+    with netCDF4.Dataset(added, "a") as nc:
+        nc.createVariable("my_note", "f8", ("realization",))[:] = 1.0
+    assert main(["stats", str(added)]) == 2
+    _one_line(capsys, f"{added}: variable my_note has no checksum in attribute {CHECKSUM}: it was added after")
+    with xr.open_dataset(merged) as ds:
+        ds.load().drop_vars("mean_abs_error_displacement_translation").to_netcdf(tmp_path / "removed.nc")
+    assert main(["stats", str(tmp_path / "removed.nc")]) == 2
+    _one_line(capsys, "variable mean_abs_error_displacement_translation has a checksum in attribute "
+              f"{CHECKSUM} but is missing from the file")
 
 
 def test_one_value_times_ten_is_refused_by_stats_plot_and_resume(merged, tmp_path, capsys):

@@ -126,9 +126,11 @@ def verify_checksums(ds: xr.Dataset, path) -> bool:
     got_attributes, got_variables = got.pop(ATTRIBUTES), got.pop(VARIABLE_ATTRIBUTES)
     for name in sorted(set(recorded) | set(got)):
         if recorded.get(name) != got.get(name):
-            what = ("was added to" if name not in recorded else "was removed from" if name not in got
-                    else "has values that no longer match its checksum in")
-            raise EnsembleFileError(f"{path}: variable {name} {what} attribute {CHECKSUM}: {ALTERED}")
+            what = (f"has no checksum in attribute {CHECKSUM}: it was added after rss6 wrote the file"
+                    if name not in recorded else
+                    f"has a checksum in attribute {CHECKSUM} but is missing from the file" if name not in got
+                    else f"has values that no longer match its checksum in attribute {CHECKSUM}")
+            raise EnsembleFileError(f"{path}: variable {name} {what}: {ALTERED}")
     if isinstance(variables, dict):
         _verify_variable_attributes(variables, got_variables, ds, path)
     elif variables is not None:
