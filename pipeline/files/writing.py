@@ -141,8 +141,14 @@ def check_free_space(path, needed: int) -> None:
     folder = os.path.dirname(os.path.abspath(path))
     free = shutil.disk_usage(folder).free
     if free < needed + 2 ** 20:
-        raise EnsembleFileError(f"{path}: not enough disk space in {folder}: about "
-                                f"{(needed + 2 ** 20) / 2 ** 20:.1f} MiB needed, "
-                                f"{free / 2 ** 20:.1f} MiB free; free some space and rerun (nothing of "
-                                "this file was written; a run's finished parts are kept)")
+        raise EnsembleFileError(f"{path}: not enough disk space in {folder}: {_amounts(needed + 2 ** 20, free)}; "
+                                "free some space and rerun (nothing of this file was written; a run's finished "
+                                "parts are kept)")
+
+
+def _amounts(needed: int, free: int) -> str:
+    """'about X MiB needed, Y MiB free', in bytes where the MiB would print the same."""
+    mib = [f"{b / 2 ** 20:.1f} MiB" for b in (needed, free)]
+    shown = mib if mib[0] != mib[1] else [f"{b:,} bytes" for b in (needed, free)]
+    return f"about {shown[0]} needed, {shown[1]} free"
 
