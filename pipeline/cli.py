@@ -8,6 +8,7 @@ import argparse
 import atexit
 import json
 import os
+import re
 import signal
 import sys
 
@@ -35,6 +36,10 @@ class _Parser(argparse.ArgumentParser):
     the command does not take names the commands that take it, or this command's nearest options."""
 
     def error(self, message: str):
+        missing = re.fullmatch(r"argument (\S+): expected one argument", message)
+        if missing:    # argparse reads "-1e-6" as an option, not as the value it looks like
+            option = missing.group(1).split("/")[-1]
+            message += f"; a value that starts with '-' (such as -1e-6) is read as an option: write {option}=VALUE"
         print(f"{self.prog}: error: {message} (see {self.prog} -h)", file=sys.stderr)
         sys.exit(2)
 

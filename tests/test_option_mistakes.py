@@ -200,6 +200,16 @@ def test_an_option_the_command_does_not_take_names_the_commands_that_do_or_the_n
     assert code == 2 and err == [says], err
 
 
+def test_a_negative_value_read_as_an_option_says_how_to_write_it(capsys, tmp_path, small_file, no_work):
+    """argparse takes "-1e-6" for an option; the line says to write --dt=-1e-6, which then names the value."""
+    code, err = _run(["simulate", "smoke", "--dt", "-1e-6"], capsys, tmp_path, small_file)
+    assert code == 2 and err == ["rss6 simulate: error: argument --dt: expected one argument; a value that starts "
+                                 "with '-' (such as -1e-6) is read as an option: write --dt=VALUE "
+                                 "(see rss6 simulate -h)"], err
+    code, err = _run(["simulate", "smoke", "--dt=-1e-6"], capsys, tmp_path, small_file)
+    assert code == 2 and len(err) == 1 and "--dt: must be a finite positive number, got -1e-6" in err[0], err
+
+
 def test_report_checks_every_scene_before_it_makes_a_folder(configs, tmp_path, capsys):
     """A scene with a typo is refused before OUT/results exists (bad-input audit)."""
     bad = tmp_path / "bad.toml"
