@@ -85,6 +85,15 @@ def test_a_left_checkpoint_needs_resume_and_a_finished_output_is_not_rerun(tmp_p
         assert "exists; rss6 reliability does not overwrite" in capsys.readouterr().err
 
 
+def test_resume_without_a_checkpoint_says_it_starts_from_the_first_batch(tmp_path, capsys, whole):
+    out = tmp_path / "r.nc"
+    assert main(_argv(out, "--resume")) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out) == whole[0]
+    assert f"note: --resume found no checkpoint at {out}.checkpoint.nc: the run starts from its first batch" \
+        in captured.err
+
+
 # --cov: a CoV target (issue 40 "Rare events")
 
 EVENT = "displacement:z>0.15mm"   # P about 0.1 at the smoke scene's quasi-static level

@@ -96,6 +96,9 @@ def main(args) -> int:
     note = loaded_joints_meanwhile("reliability", level.scene, level.model, [event])
     with OutputLock(output):
         checkpoint = Checkpoint(checkpoint_path(output), {**spec.attrs(), "options": options}, args.resume)
+        if args.resume and not checkpoint.batches:
+            print(f"rss6 reliability: note: --resume found no checkpoint at {checkpoint.path}: the run starts "
+                  "from its first batch", file=sys.stderr)
         try:
             est = reliability(spec, event, args.method, args.n, args.p0, args.confidence, cluster.workers,
                               checkpoint, args.cov, args.budget)
