@@ -263,14 +263,15 @@ def test_histogram_q95_marker_is_stats_estimate_with_its_interval_only_from_min_
         axes = figs["hist_max_acceleration.png"].axes
         for i, w in enumerate(("startup", "steady")):
             for ax, d in zip(axes[6 * i:6 * i + 6], sds.direction.values):
-                f, _ = _hist_unit(ds, "acceleration", d)
+                f, unit = _hist_unit(ds, "acceleration", d)
                 marks = {ln.get_gid(): ln.get_xdata() for ln in ax.get_lines()}
                 legend = [t.get_text() for t in ax.get_legend().get_texts()]
                 cell = sds["max_abs_error"].sel(window=w, statistic="q95", quantity="acceleration",
                                                 direction=d)
                 est, lo, hi = (float(cell.sel(bound=b)) * f for b in ("estimate", "lower", "upper"))
                 np.testing.assert_allclose(marks[f"q95 {w}"], est, rtol=1e-12)
-                assert any(t.startswith(f"{w}, q95 est. {est:.3g}") for t in legend), legend
+                assert any(t.startswith(f"{w}, q95 est. {est:.3g} {unit}") for t in legend), legend
+                assert any(t.startswith(f"{w}, mean ") and t.endswith(f" {unit}") for t in legend), legend
                 if n == 60:
                     np.testing.assert_allclose(marks[f"q95 interval {w}"], [lo, hi], rtol=1e-12)
                 else:

@@ -100,9 +100,9 @@ def _histogram_panel(ax, peak, q95, panel: _Panel) -> None:
     x = x * f
     mean = estimates(x, ("mean",))[0]
     counts, _, _ = ax.hist(x, bins=min(30, max(5, x.size // 4)), color=f"C{i}", alpha=0.5,
-                           label=f"{w}, mean {mean:.3g}")
+                           label=f"{w}, mean {mean:.3g} {unit}")
     ax.axvline(mean, color=f"C{i}", lw=1.2, gid=f"mean {w}")
-    _mark_q95(ax, q95, f, i, w)
+    _mark_q95(ax, q95, panel.unit, i, w)
     ax.set_ylim(0, max(counts.max(), 1) / BARS_TOP)
     ax.legend(fontsize=7, loc="upper left")
     ax.grid(alpha=0.3)
@@ -128,15 +128,17 @@ def _unresolved_note(ax, x, panel: _Panel) -> None:
     ax.set(xticks=[], yticks=[], ylabel="")
 
 
-def _mark_q95(ax, cell, f: float, i: int, window: str) -> None:
-    """A dashed line at the q95 estimate of ``cell`` (bound: estimate, lower, upper; SI, shown times
-    ``f``) and, only where pipeline.analysis.stats gives one, its interval as a capped bar above the bars."""
+def _mark_q95(ax, cell, shown: tuple, i: int, window: str) -> None:
+    """A dashed line at the q95 estimate of ``cell`` (bound: estimate, lower, upper; SI, shown as
+    ``shown`` = (factor, unit)) and, only where pipeline.analysis.stats gives one, its interval as a
+    capped bar above the bars."""
+    f, unit = shown
     est, lo, hi = (float(cell.sel(bound=b)) * f for b in ("estimate", "lower", "upper"))
-    text = f"{window}, q95 est. {est:.3g}"
+    text = f"{window}, q95 est. {est:.3g} {unit}"
     if np.isfinite(lo) and np.isfinite(hi):
         ax.plot([lo, hi], [BARS_TOP + 0.07] * 2, color=f"C{i}", lw=1.5, marker="|", ms=7,
                 transform=ax.get_xaxis_transform(), gid=f"q95 interval {window}")
-        text += f" [{lo:.3g}, {hi:.3g}]"
+        text += f" [{lo:.3g}, {hi:.3g}] {unit}"
     ax.axvline(est, color=f"C{i}", lw=1.2, ls="--", label=text, gid=f"q95 {window}")
 
 
