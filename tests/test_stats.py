@@ -295,3 +295,14 @@ def test_the_table_says_which_numbers_do_not_measure_the_robot_by_level():
     assert impacts not in notes(**drawn | {"contact_start": "equilibrium"})
     assert impacts not in notes(**drawn | {"settle_time_s": 0.75})
     assert impacts not in notes(**drawn | {"window": "steady"})
+
+
+def test_identical_realisations_are_named_one_run_repeated():
+    """Every std 0 to round-off (an elastic-level ensemble of a scene without uncertain inputs): the notes say
+    one run gives the numbers; a spread of 1e-9, or a single realisation, gets no such note."""
+    one = np.random.default_rng(4).gamma(2.0, size=(3, 1, 6))
+    same = "realisations gave the same numbers (to round-off)"
+    for values, noted in ((np.repeat(one, 5, axis=1), True), (one, False),
+                          (np.repeat(one, 5, axis=1) * (1.0 + 1e-9 * np.arange(5))[None, :, None], False)):
+        table = format_stats(ensemble_stats(_file(_synthetic(values)), window=None))
+        assert (same in table.split("notes:")[1]) == noted, table

@@ -273,8 +273,22 @@ def _missing_notes(sds: xr.Dataset) -> list[str]:
                 "robots that finished, whose errors the failed draws (often the largest) may exceed; --require "
                 "counts them against a pass"] if failed else []
     windows = set(windows_of(sds)) or {"whole"}
-    return (left_out + notes + [f"max: {MAX_NOTE}"] + until + other
+    return (left_out + _identical_note(sds) + notes + [f"max: {MAX_NOTE}"] + until + other
             + level_notes(sds.attrs, {str(q) for q in sds["quantity"].values}, windows))
+
+
+def _identical_note(sds: xr.Dataset) -> list[str]:
+    """Where every finished realisation gave the same numbers (n > 1, each std within 1e-12 of its mean,
+    the sum's round-off): the realisations are one run repeated (typically a level that draws no
+    clearances, without uncertain inputs)."""
+    cells = [sds[v].sel(bound="estimate") for v in ("max_abs_error", "mean_abs_error") if v in sds]
+    if sds.attrs["n_finished"] < 2 or not cells or not all(
+            np.all(np.abs(c.sel(statistic="std").values) <= 1e-12 * np.abs(c.sel(statistic="mean").values))
+            for c in cells):
+        return []
+    return [f"all {sds.attrs['n_finished']} realisations gave the same numbers (to round-off): nothing drawn "
+            "changes them (the rigid and elastic levels draw no clearances, and a scene without [uncertain] inputs "
+            "nothing else); one run, rss6 simulate, gives them"]
 
 
 def level_notes(attrs, shown: set, windows: set) -> list[str]:
