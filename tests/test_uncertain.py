@@ -77,7 +77,8 @@ def test_a_table_is_read_with_its_law_and_draw_count(paper_text):
      r"\[uncertain.x\] material.youngs_modulus_Pa: law 'lognormal' can draw values in \[1.9\d+e\+09, 2.5\d+e\+12\] Pa, "
      r"outside \[1e\+08, 2e\+12\], beyond any 6-RSS robot's links \(a modulus in GPa or MPa"),
     ('parameter = "material.density_kg_m3"\nlaw = "uniform"\nlow_kg_m3 = -2650\nhigh_kg_m3 = 0',   # 2.7 g/cm^3 - 2.65
-     r"\[uncertain.x\] material.density_kg_m3: law 'uniform' can draw values in \[50, 2700\] kg m-3, outside \[100, 25000\]"),
+     r"\[uncertain.x\] material.density_kg_m3: law 'uniform' can draw values in \[50, 2700\] kg m-3, "
+     r"outside \[100, 25000\]"),
     ('parameter = "platform.mass_kg"\nlaw = "uniform"\nlow_kg = -2\nhigh_kg = 1',
      r"\[uncertain.x\] platform.mass_kg: .* must be positive"),
     ('parameter = "contact.friction_coefficient"\nlaw = "uniform"\nlow = -0.2\nhigh = 0.1',
