@@ -4,6 +4,7 @@ maximisation over the clearance sets, and the map marks unreachable poses instea
 import importlib.util
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 import xarray as xr
@@ -160,6 +161,22 @@ def test_the_heat_maps_are_legible_and_mask_the_unreachable(smoke):
     assert map_table(ds).splitlines()[-1] == ("q95 from 40 draws per pose: a point estimate without its 95 % "
                                               "interval, which needs n >= 59 (-n)")
     _sibling("test_figures").assert_legible(figs)
+
+
+def test_the_trajectory_is_cut_at_the_grids_edge_and_the_legend_says_so(smoke):
+    """A grid narrower than the path: the axes stay on the grid's cells and the legend says the path leaves it;
+    a grid that holds the path: the plain legend, the axes on the grid all the same."""
+    from pipeline.analysis.map_plots import map_figures
+    from pipeline.studies.workspace_map import GridAxis, workspace_map
+    for half_width, cut in ((0.02, True), (0.06, False)):   # the smoke path's y spans +-0.05 m
+        ds = workspace_map(smoke, (GridAxis("y", -half_width, half_width, 3), GridAxis("z", -0.5, -0.3, 3)), 8, 2)
+        ax = map_figures(ds)["workspace_map_x.png"].axes[0]
+        cell = 1e3 * half_width / 2   # mm: half of the 3 centres' spacing, half_width
+        np.testing.assert_allclose(ax.get_xlim(), (-1e3 * half_width - cell, 1e3 * half_width + cell))
+        np.testing.assert_allclose(ax.get_ylim(), (-550.0, -250.0))
+        label = ax.get_legend_handles_labels()[1][0]
+        assert ("cut at the grid's edge" in label) == cut, label
+        plt.close("all")
 
 
 def test_a_banded_scenes_heat_maps_keep_their_title_on_the_canvas(configs):

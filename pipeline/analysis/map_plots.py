@@ -41,6 +41,26 @@ def q95_caveat(ds) -> str | None:
             f"which needs n >= {needed} (-n)")
 
 
+def _trajectory_on_grid(ax, px, py, x, y) -> None:
+    """The trajectory's projected path, within the grid's cells (x, y their centres): where it leaves the
+    grid the axes stay on the grid, and the legend says the path is cut there."""
+    ax.plot(px, py, color="w", lw=1.6)
+    extent = [_cell_edges(x), _cell_edges(y)]
+    outside = (px.min() < extent[0][0] or px.max() > extent[0][1] or py.min() < extent[1][0]
+               or py.max() > extent[1][1])
+    ax.plot(px, py, color="k", lw=0.8, label="trajectory (projected on these two axes"
+            + ("; cut at the grid's edge, which it leaves)" if outside else ")"))
+    ax.set(xlim=extent[0], ylim=extent[1])
+
+
+def _cell_edges(centres: np.ndarray) -> tuple[float, float]:
+    """The outer edges of pcolormesh's 'nearest' cells around sorted ``centres`` (half a cell beyond each end)."""
+    if centres.size < 2:
+        return float(centres[0]) - 0.5, float(centres[0]) + 0.5
+    return (float(centres[0] - (centres[1] - centres[0]) / 2),
+            float(centres[-1] + (centres[-1] - centres[-2]) / 2))
+
+
 def direction_map_figure(ds, direction: str):
     """The worst case and the q95 of |error| in ``direction`` over the grid, side by side."""
     from matplotlib.patches import Patch
@@ -56,9 +76,7 @@ def direction_map_figure(ds, direction: str):
         values = np.ma.masked_invalid(ds[f"{field}_{family}"].sel({family: direction}).values * scale)
         mesh = ax.pcolormesh(x, y, values, shading="nearest", cmap=cmap)
         fig.colorbar(mesh, ax=ax, label=f"|{direction} error| [{unit}]")
-        ax.plot(ds[f"path_{columns}"].values * fa, ds[f"path_{rows}"].values * fb, color="w", lw=1.6)
-        ax.plot(ds[f"path_{columns}"].values * fa, ds[f"path_{rows}"].values * fb, color="k", lw=0.8,
-                label="trajectory (projected on these two axes)")
+        _trajectory_on_grid(ax, ds[f"path_{columns}"].values * fa, ds[f"path_{rows}"].values * fb, x, y)
         caveat = q95_caveat(ds) if field == "q95" else None
         title = [what] + (textwrap.wrap(f"({caveat})".replace(" %", "\u00a0%"), 60) if caveat else [])
         ax.set(xlabel=f"{ds[columns].attrs['long_name']} [{ua}]", ylabel=f"{ds[rows].attrs['long_name']} [{ub}]",
