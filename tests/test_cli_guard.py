@@ -467,6 +467,19 @@ def test_full_disk_is_one_line_and_keeps_the_parts(tmp_path, monkeypatch, capsys
     assert not out.exists() and len(list(Path(str(out) + ".parts").glob("*.nc"))) == 1
 
 
+def test_simulate_on_a_full_disk_prints_its_answer_before_the_one_line(tmp_path, monkeypatch, capsys):
+    """rss6 simulate -o on a full disk: the run's summary is printed (its work is not lost), then one line, exit 2."""
+    import shutil
+    from collections import namedtuple
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: namedtuple("u", "total used free")(0, 0, 1000))
+    assert main(["simulate", "smoke", "--model", "quasi-static", "--json", "-o", str(tmp_path / "one.nc")]) == 2
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["status"] == "finished"
+    err = captured.err.strip()
+    assert len(err.splitlines()) == 1 and "not enough disk space" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_write_failing_on_a_full_disk_says_so(tmp_path, monkeypatch):
     import shutil
     from collections import namedtuple

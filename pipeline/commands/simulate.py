@@ -49,9 +49,9 @@ def main(args) -> int:
     wall = time.perf_counter() - start
     ds = run_dataset(level.scene, result, model=level.model, integrator=level.integrator, dt=level.dt,
                      elements=level.elements, wall_time=wall, seed=args.seed, realization=args.realization)
-    if args.output:
-        write_netcdf(ds, args.output)
     if result.status != FINISHED:   # its maxima would be the divergence's, not the robot's
+        if args.output:
+            write_netcdf(ds, args.output)
         kept = f"; {args.output} keeps its status and message" if args.output else ""
         raise UserError(f"{args.config}: the {level.model} run failed: {result.message}{kept}; {CHECK_HINT}")
     summary = error_summary(ds)
@@ -59,6 +59,8 @@ def main(args) -> int:
         summary["max_contact_force_N"] = contact_peaks(result.contact_force_peak)
     from ..analysis.stats import level_notes
     _print(args, level, result, summary, wall, level_notes(ds.attrs, set(QUANTITIES), {"whole", "steady"}))
+    if args.output:   # after the summary is printed: a full disk loses the file, not the run's answer
+        write_netcdf(ds, args.output)
     return 0
 
 
