@@ -114,6 +114,11 @@ def test_a_certain_or_an_impossible_event_is_said_at_the_first_level():
     assert (certain.status, certain.pf, certain.n_evaluations) == ("certain", 1.0, 100)
     impossible = subset_simulation(lambda z: np.zeros(len(z)), 3, 1.0, SubsetSettings(n_per_level=100))
     assert (impossible.status, impossible.pf) == ("impossible", 0.0) and "level-0" in impossible.message
+    # level 0 is plain Monte Carlo: the exact binomial interval of 100 of 100 and 0 of 100, not [1, 1] or none
+    edge = 0.025 ** (1 / 100)     # two-sided 95 %: P(all n exceed | p) = p^n = 0.025 at the lower bound
+    assert (certain.lower, certain.upper) == (pytest.approx(edge, rel=1e-12), 1.0)
+    assert (impossible.lower, impossible.upper) == (0.0, pytest.approx(1 - edge, rel=1e-12))
+    assert "Clopper-Pearson" in certain.interval and "Clopper-Pearson" in impossible.interval
 
 
 @pytest.mark.parametrize("n, p0", [(1000, 0.0), (1000, 0.7), (1000, 0.003), (999, 0.1)])

@@ -31,6 +31,7 @@ import numpy as np
 from scipy import stats as sps
 
 from ..vocabulary import CONFIDENCE
+from .estimators import clopper_pearson
 
 __all__ = ["SubsetSettings", "LevelRecord", "Evaluations", "SubsetResult", "subset_simulation",
            "lognormal_interval", "chain_gamma", "MIN_N_INTERVAL"]
@@ -223,13 +224,23 @@ def _first_level_extreme(r, threshold, record0, records, settings):
     threshold), else None."""
     n = r.size
     if np.all(r > threshold):
-        return _finish([record0], 1.0, records, "certain",
-                       f"all {n} level-0 draws exceed the threshold: P is 1 to within this sample", settings)
+        return _plain_level_zero(_finish([record0], 1.0, records, "certain",
+                                         f"all {n} level-0 draws exceed the threshold: P is 1 to within this sample",
+                                         settings), n, n)
     if np.all(r == r.flat[0]):
-        return _finish([record0], 0.0, records, "impossible",
-                       f"the response is {r.flat[0]:g} at all {n} level-0 draws, below the threshold: "
-                       "P is 0 to within this sample (no subset level can start)", settings)
+        return _plain_level_zero(_finish([record0], 0.0, records, "impossible",
+                                         f"the response is {r.flat[0]:g} at all {n} level-0 draws, below the "
+                                         "threshold: P is 0 to within this sample (no subset level can start)",
+                                         settings), 0, n)
     return None
+
+
+def _plain_level_zero(result: SubsetResult, k: int, n: int) -> SubsetResult:
+    """A result level 0 decided: its draws are plain Monte Carlo, so its interval is the exact binomial one of
+    k of n (a CoV of 0 or none gives no log-normal interval: [1, 1] would claim certainty)."""
+    lower, upper = clopper_pearson(k, n, result.confidence)
+    return replace(result, lower=float(lower), upper=float(upper),
+                   interval=f"exact binomial (Clopper-Pearson) of {k} of {n} level-0 draws, plain Monte Carlo")
 
 
 def subset_simulation(response, dimension: int, threshold: float = 0.0,
