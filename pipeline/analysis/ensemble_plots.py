@@ -14,7 +14,7 @@ import numpy as np
 from ..files.records import file_window_label
 from ..vocabulary import CONFIDENCE, DIRECTIONS, FINISHED, QUANTITIES
 from .envelopes import draw_envelope, envelope_marks, marked_windows, steady_samples
-from .estimators import MIN_N_MEAN, estimates, running_mean_interval
+from .estimators import estimates, moment_floor, running_mean_interval
 from .plot_common import (FAMILY_DIRECTIONS, SI_UNITS, family_units, figure_legend, figure_title, panel_grid,
                           plain_ticks, plt, save_figures, si_text)
 from .resolution import Resolution, resolutions
@@ -157,8 +157,9 @@ def _convergence(ds, q: str, finished, confidence: float = CONFIDENCE):
     n = np.arange(1, peak.shape[0] + 1)
     iid = str(ds.attrs.get("sampler", "mc")) == "mc"   # a QMC prefix has no running iid interval
     units = family_units(q, peak)
+    floor = moment_floor("mean", confidence)
     fig, axes = panel_grid(figure_title(f"running mean of max |{q} error| (whole run) with its "
-                                   f"{100 * confidence:g} % interval (given from n = {MIN_N_MEAN})"
+                                   f"{100 * confidence:g} % interval (given from n = {floor})"
                                    if iid else f"running mean of max |{q} error| (whole run, randomised "
                                    "QMC: intervals from the replicates, rss6 stats)",
                                    ds, peak.shape[0]))
@@ -180,7 +181,7 @@ def _convergence(ds, q: str, finished, confidence: float = CONFIDENCE):
 
 def _interval(ax, n, mean, lo, hi, label: str) -> None:
     """The running mean's interval where it is given: a band over two or more n, an error bar at a
-    single n (the last, when n = MIN_N_MEAN), where a band would have no width to show."""
+    single n (the last, when n is the mean interval's floor), where a band would have no width to show."""
     if n.size >= 2:
         ax.fill_between(n, lo, hi, alpha=0.3, lw=0, label=label)
     elif n.size == 1:

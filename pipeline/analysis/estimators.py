@@ -95,7 +95,8 @@ from scipy import stats as sps
 from ..vocabulary import CONFIDENCE, QUANTILES, STATISTICS
 
 __all__ = ["BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "STD_WIDENING", "UNTIL_WIDENING", "MIN_POINTS_RQMC", "MAX_NOTE",
-           "QUANTILE_DECISION_CAP", "clopper_pearson", "one_sided_cp",
+           "QUANTILE_DECISION_CAP", "MEAN_FLOORS", "STD_FLOORS", "LOWEST_MEASURED", "moment_floor",
+           "clopper_pearson", "one_sided_cp",
            "quantile_ranks", "min_n_for_quantile", "quantile_estimates", "quantile_interval", "BoundRanks",
            "one_sided_ranks", "quantile_bounds", "quantile_decision_n", "mean_interval", "mean_bounds",
            "running_mean_interval", "std_interval", "estimates", "one_sided_bounds", "stopped_level", "bound_level",
@@ -104,6 +105,11 @@ __all__ = ["BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "STD_WIDENING", "UNTIL_WIDENING"
 BOUNDS = ("estimate", "lower", "upper")
 MIN_N_MEAN = 16     # smallest n whose coverage reaches the label on the measured laws (module doc)
 MIN_N_STD = 300     # widened Bonett: >= 94.7 % measured on the laws of the module doc from here
+# above 95 % the mean needs more n and the std reaches no label (docs/ensembles.md, benchmarks/interval_coverage.py):
+# (highest two-sided level, smallest n) in order; beyond the last level, no interval at any n
+MEAN_FLOORS = ((CONFIDENCE, MIN_N_MEAN), (0.99, 64), (0.999, 256))
+STD_FLOORS = ((CONFIDENCE, MIN_N_STD),)
+LOWEST_MEASURED = 0.8   # the lowest two-sided level at which those floors' coverage was measured
 STD_WIDENING = 0.6  # Bonett's interval is computed at the level 1 - STD_WIDENING (1 - confidence)
 UNTIL_WIDENING = 0.5  # n chosen by the intervals' widths: bounds at 1 - UNTIL_WIDENING (1 - confidence)
 MIN_POINTS_RQMC = {"mean": 16, "std": 32, "q05": 128, "q50": 16, "q95": 512, "q99": 1024}
@@ -224,6 +230,13 @@ def quantile_decision_n(n: int, violating: int, allowed: float, confidence: floa
 # --- mean and std -----------------------------------------------------------------
 
 
+def moment_floor(statistic: str, confidence: float) -> int | None:
+    """Smallest n from which the mean's or std's two-sided interval at ``confidence`` reaches its label on the
+    measured laws (MEAN_FLOORS, STD_FLOORS); None where no n was seen to (the std above 95 %)."""
+    floors = {"mean": MEAN_FLOORS, "std": STD_FLOORS}[statistic]
+    return next((n for level, n in floors if confidence <= level + 1e-12), None)
+
+
 def _mean_interval_from_moments(n, mean, std, skew, confidence):
     """Union of the Student-t and Hall's skewness-corrected intervals (see module doc)."""
     n, mean, std, skew = np.broadcast_arrays(*(np.asarray(v, float) for v in (n, mean, std, skew)))
@@ -238,7 +251,8 @@ def _mean_interval_from_moments(n, mean, std, skew, confidence):
     t = np.stack([mean - tq * se, mean + tq * se])
     hall = np.where(np.isfinite(hall), hall, t)             # zero spread: skewness undefined
     out = np.stack([np.minimum(t[0], hall[0]), np.maximum(t[1], hall[1])])
-    return np.where(n >= MIN_N_MEAN, out, np.nan)
+    floor = moment_floor("mean", confidence)
+    return np.where((n >= floor) if floor is not None else False, out, np.nan)
 
 
 def _moments(x: np.ndarray):
@@ -254,7 +268,7 @@ def _moments(x: np.ndarray):
 
 
 def mean_interval(x: np.ndarray, confidence: float) -> np.ndarray:
-    """(lower, upper) for the mean along axis 0 of finite data; NaN below MIN_N_MEAN."""
+    """(lower, upper) for the mean along axis 0 of finite data; NaN below its floor (moment_floor)."""
     n, mean, std, skew = _moments(np.asarray(x, float))
     return _mean_interval_from_moments(n, mean, std, skew, confidence)
 
@@ -262,7 +276,7 @@ def mean_interval(x: np.ndarray, confidence: float) -> np.ndarray:
 def mean_bounds(x: np.ndarray, confidence: float) -> np.ndarray:
     """One-sided (lower, upper) bounds of the mean along axis 0 of finite data, each at
     ``confidence`` (module doc: the bound on the side of the sample skewness is the two-sided
-    interval's); NaN below MIN_N_MEAN."""
+    interval's); NaN below its floor (moment_floor)."""
     skew = _moments(np.asarray(x, float))[3]
     one, two = mean_interval(x, 2 * confidence - 1), mean_interval(x, confidence)
     return np.stack([np.where(skew < 0, two[0], one[0]), np.where(skew > 0, two[1], one[1])])
@@ -287,10 +301,11 @@ def running_mean_interval(x: np.ndarray, confidence: float):
 
 def std_interval(x: np.ndarray, confidence: float) -> np.ndarray:
     """Bonett's (2006) interval for the standard deviation along axis 0 of finite data, at the widened
-    level 1 - STD_WIDENING (1 - confidence) (module doc); NaN below MIN_N_STD."""
+    level 1 - STD_WIDENING (1 - confidence) (module doc); NaN below its floor (moment_floor)."""
     x = np.asarray(x, float)
     n = x.shape[0]
-    if n < max(MIN_N_STD, 5):
+    floor = moment_floor("std", confidence)
+    if floor is None or n < max(floor, 5):
         return np.full((2,) + x.shape[1:], np.nan)
     z = sps.norm.ppf(1 - STD_WIDENING * (1 - confidence) / 2)
     trimmed = sps.trim_mean(x, 1 / (2 * np.sqrt(n - 4)), axis=0)
@@ -398,19 +413,23 @@ def rqmc_intervals(groups: np.ndarray, confidence: float) -> np.ndarray:
     return np.where(enough[:, None, None], out, np.nan)
 
 
-def interval_floor(statistic: str, confidence: float, replicates: int | None = None) -> int:
-    """Smallest n with an interval of ``statistic`` (mc: iid intervals; with ``replicates``: RQMC)."""
+def interval_floor(statistic: str, confidence: float, replicates: int | None = None) -> int | None:
+    """Smallest n with an interval of ``statistic`` (mc: iid intervals; with ``replicates``: RQMC); None
+    where none is given at any n (:func:`moment_floor`)."""
     if replicates is not None:
         return replicates * MIN_POINTS_RQMC[statistic]
     if statistic in QUANTILES:
         return min_n_for_quantile(QUANTILES[statistic], confidence)
-    return {"mean": MIN_N_MEAN, "std": MIN_N_STD}[statistic]
+    return moment_floor(statistic, confidence)
 
 
 def no_interval_at(statistic: str, confidence: float, n: int, replicates: int | None = None) -> str | None:
     """Why a request capped at ``n`` realisations can get no interval of ``statistic`` (e.g. "q99 has
     no 95 % interval below n = 299 (-n 100); raise -n"), or None when it can."""
     floor = interval_floor(statistic, confidence, replicates)
+    if floor is None:
+        return (f"{statistic} has no {100 * confidence:g} % interval at any n: its coverage falls short of the label "
+                "above 95 % (docs/ensembles.md); use --confidence 0.95 or below")
     if n >= floor:
         return None
     return f"{statistic} has no {100 * confidence:g} % interval below n = {floor} (-n {n}); raise -n"

@@ -173,6 +173,8 @@ def _shrinkage_needed(spec: Spec, ev: _Evidence, n: int, confidence: float,
     """(n, reason) from the bound's 1/sqrt(n) shrinkage about an unchanged estimate; ``replicates``:
     R of a randomised QMC file, whose bounds start at other n."""
     floor = interval_floor(spec.statistic, confidence, replicates)
+    if floor is None:
+        return None, f"no {100 * confidence:g} % one-sided bound at any n (docs/ensembles.md)"
     bound = ev.upper if ev.estimate < spec.limit else ev.lower
     if not np.isfinite(bound):
         return max(floor, n + 1), f"no {100 * confidence:g} % one-sided bound that could decide at n = {n}"

@@ -19,9 +19,9 @@ import xarray as xr
 from ..files.records import empty_window, file_window_bounds
 from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
-from .estimators import (BOUNDS, MAX_NOTE, MIN_N_MEAN, MIN_N_STD, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
-                         bound_level, estimates_and_bounds, interval_floor, min_n_for_quantile, stopped_level,
-                         replicate_groups, rqmc_intervals)
+from .estimators import (BOUNDS, LOWEST_MEASURED, MAX_NOTE, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
+                         bound_level, estimates_and_bounds, interval_floor, min_n_for_quantile, moment_floor,
+                         stopped_level, replicate_groups, rqmc_intervals)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
            "to_json", "format_stats"]
@@ -184,15 +184,21 @@ def _rqmc_attrs(replicates: int, confidence: float, stopped_by_width: bool) -> d
             **{f"min_n_{k}": interval_floor(k, confidence, replicates) for k in QUANTILES}}
 
 
+def _below_floor(statistic: str, confidence: float) -> str:
+    """Where the mean's or std's interval is NaN: 'n < 16', or every n above 95 % for the std."""
+    floor = moment_floor(statistic, confidence)
+    return f"n < {floor}" if floor is not None else "every n at this confidence (its coverage falls short above 95 %)"
+
+
 def _attrs(ds, n: int, failed: int, confidence: float, stopped_by_width: bool) -> dict:
     needed = {k: min_n_for_quantile(p, bound_level(k, confidence, stopped_by_width)) for k, p in QUANTILES.items()}
     steady = {k: ds.attrs[k] for k in ("steady_after_s", "settle_time_s") if k in ds.attrs}
     return {**_provenance(ds, confidence), **steady, "n_finished": n, "n_failed": failed,
             "confidence": confidence,
             "interval_mean": f"union of Student t and Hall (1992) skewness-corrected t; NaN for "
-                             f"n < {MIN_N_MEAN}",
+                             f"{_below_floor('mean', confidence)}",
             "interval_std": f"Bonett (2006) at the level 1 - {STD_WIDENING:g} (1 - confidence); NaN for "
-                            f"n < {MIN_N_STD}",
+                            f"{_below_floor('std', confidence)}",
             "interval_quantiles": "distribution-free order statistics, exact binomial coverage"
                                   f"{_widened(confidence, stopped_by_width)}; NaN for n < "
                                   + ", ".join(f"{v} ({k})" for k, v in needed.items()),
@@ -259,15 +265,16 @@ def _missing_notes(sds: xr.Dataset) -> list[str]:
     replicates = None if replicates is None else int(replicates)
     need = {k: interval_floor(k, sds.attrs["confidence"], replicates)
             for k in ("mean", "std", *QUANTILES)}
-    notes = [f"{k}: no {conf:g} % interval below n = {v} (n = {n} here)"
-             for k, v in need.items() if n < v]
+    notes = [f"{k}: no {conf:g} % interval below n = {v} (n = {n} here)" if v is not None else
+             f"{k}: no {conf:g} % interval at any n: its coverage falls short of the label above 95 % "
+             "(docs/ensembles.md)" for k, v in need.items() if v is None or n < v]
     if replicates is not None:
         notes.insert(0, f"randomised QMC, {replicates} replicates: intervals are Student t over "
                         "the replicates (none if a realisation failed)")
     until = [f"--until: {sds.attrs['interval_after_until']}"] if "interval_after_until" in sds.attrs else []
     other = [f"confidence {conf:g} %: the quantiles' intervals are exact at any level, but the mean's and std's "
-             f"floors and coverage were measured at {100 * CONFIDENCE:g} % only (tests/test_stats.py)"] \
-        if replicates is None and abs(sds.attrs["confidence"] - CONFIDENCE) > 1e-12 else []
+             f"coverage was measured from {100 * LOWEST_MEASURED:g} % up (docs/ensembles.md)"] \
+        if replicates is None and sds.attrs["confidence"] < LOWEST_MEASURED - 1e-12 else []
     failed = int(sds.attrs.get("n_failed", 0))
     left_out = [f"{failed} of {n + failed} realisations failed and are in no statistic or bound: each describes the "
                 "robots that finished, whose errors the failed draws (often the largest) may exceed; --require "

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..vocabulary import CONFIDENCE, UserError
-from .estimators import stopped_level
+from .estimators import bound_level, stopped_level
 from .spec import SpecError, _statistic, _subject, _unit_factor
 
 __all__ = ["Target", "UntilError", "parse_target", "parse_targets", "checkpoints", "widths",
@@ -119,7 +119,7 @@ def check_cap(targets: list[Target], cap: int, replicates: int | None = None) ->
     no check could meet it (as ``rss6 budget`` refuses the same request)."""
     from .estimators import interval_floor
     for t in targets:
-        floor = interval_floor(t.statistic, LEVEL, replicates)
+        floor = interval_floor(t.statistic, bound_level(t.statistic, CONFIDENCE, True), replicates)
         if cap < floor:
             raise _fail(t.text, f"{t.statistic} has no {100 * CONFIDENCE:g} % interval after --until below "
                                 f"n = {floor} (-n {cap}; docs/ensembles.md); raise -n")
@@ -132,7 +132,8 @@ def checkpoints(targets: list[Target], cap: int, replicates: int | None = None) 
     time.  qmc (R ``replicates``): R m with m doubling from the largest minimum points per
     replicate, so each replicate stays a power-of-two prefix of its Sobol' sequence."""
     from .estimators import interval_floor
-    first = max(interval_floor(t.statistic, LEVEL, replicates) for t in targets)
+    first = max(interval_floor(t.statistic, bound_level(t.statistic, CONFIDENCE, True), replicates)
+                for t in targets)
     out, n = [], first
     while n < cap:
         out.append(n)

@@ -58,7 +58,7 @@ from scipy import stats as sps
 
 from rss6core import FINISHED, models_with
 
-from ..analysis.estimators import BOUNDS, MIN_N_MEAN, mean_interval
+from ..analysis.estimators import BOUNDS, mean_interval, moment_floor
 from ..analysis.stats import in_window, json_number, table_cell
 from ..files.records import file_window_label
 from ..vocabulary import CONFIDENCE, SUMMARIES
@@ -284,7 +284,8 @@ def _costs(ds: xr.Dataset, y: np.ndarray, name: str, cost: float, width, confide
         return out
     mean = np.abs(ds[f"{name}_mean"].sel(estimator="multifidelity", bound="estimate").values)
     z = sps.norm.ppf(0.5 + confidence / 2)
-    plain = np.maximum(np.ceil((z * y.std(axis=0, ddof=1) / (width * mean)) ** 2), MIN_N_MEAN)
+    plain = np.maximum(np.ceil((z * y.std(axis=0, ddof=1) / (width * mean)) ** 2),
+                       moment_floor("mean", confidence) or np.nan)
     high = np.maximum(np.ceil(plain * widened * (1 - (1 - 1 / ratio) * rho ** 2)), MIN_N_MF)   # none below
     return out | {
         f"{name}_plain_n_for_width": (cells, plain, {**one, "long_name": "plain MC high "
@@ -324,7 +325,8 @@ def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
             "estimator": "two-model multi-fidelity Monte Carlo (control variate, optimal fitted "
                          "coefficient, low mean from all low realisations)",
             "interval_multifidelity": f"{SKEWED_COVERAGE}; NaN for N < {MIN_N_MF}",
-            "interval_high_only": f"pipeline.analysis.estimators mean interval; NaN for n < {MIN_N_MEAN}",
+            "interval_high_only": "pipeline.analysis.estimators mean interval; NaN for n < "
+                                  f"{moment_floor('mean', confidence)}",
             "min_n_multifidelity": MIN_N_MF,
             "statistics_offered": "mean only (quantiles and exceedance probabilities: see "
                                   "pipeline/multifidelity.py)",
