@@ -327,3 +327,25 @@ def test_the_mean_and_std_floors_follow_their_coverage_above_95_percent():
     assert np.mean((lower <= 1.0) & (1.0 <= upper)) >= 0.985
     assert np.isnan(std_interval(rng.chisquare(1, (1000, 5)), 0.99)).all()
     assert np.isfinite(std_interval(rng.chisquare(1, (300, 5)), 0.95)).all()
+
+
+def test_the_json_and_the_statistics_file_keep_the_tables_notes(tmp_path, capsys):
+    """A paper-level file: the note that its velocities and accelerations measure the step is in --json's
+    table_notes and the -o file's table_notes, as under the text table; a contact-level file judged over the
+    whole run: --json's requirements_note names the start-up its maxima include."""
+    values = _synthetic(np.random.default_rng(5).gamma(2.0, size=(3, 32, 6)))
+    values["max_contact_force"] = (("realization", "joint"), np.full((32, 18), 10.0), {"units": "N"})
+    paper, contact = tmp_path / "paper.nc", tmp_path / "contact.nc"
+    write_netcdf(_file(values).assign_attrs(model="paper"), paper)
+    write_netcdf(_file(values).assign_attrs(model="contact", contact_start="drawn"), contact)
+    assert main(["stats", str(paper), "--json", "-o", str(tmp_path / "s.nc")]) == 0
+    notes = json.loads(capsys.readouterr().out)["table_notes"]
+    assert any("they measure the step, not the robot" in line for line in notes), notes
+    assert load_netcdf(tmp_path / "s.nc").attrs["table_notes"].split("\n") == notes
+    assert main(["stats", str(paper)]) == 0
+    text = capsys.readouterr().out
+    assert all(f"  {line}" in text for line in notes), (text, notes)
+    assert main(["stats", str(contact), "--json", "--require", "displacement:z<=1mm@q50"]) in (0, 1, 3)
+    out = json.loads(capsys.readouterr().out)
+    assert "judged over the whole run" in out["requirements_note"]
+    assert any("drawn start" in line for line in out["table_notes"])

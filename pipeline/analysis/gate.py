@@ -36,7 +36,8 @@ from .estimators import (QUANTILE_DECISION_CAP, bound_level, interval_floor, no_
 from .stats import check_window_samples, ensemble_stats, finished_values, json_number, json_record
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
-           "verdicts_with_note", "allowed_exceedances", "overall", "judge", "judge_all", "verdicts_json"]
+           "verdicts_with_note", "start_up_note", "allowed_exceedances", "overall", "judge", "judge_all",
+           "verdicts_json"]
 
 OUTCOMES = ("pass", "undecided", "fail")
 EXIT_CODES = {"pass": 0, "fail": 1, "undecided": 3}

@@ -24,7 +24,7 @@ from .estimators import (BOUNDS, LOWEST_MEASURED, MAX_NOTE, MIN_POINTS_RQMC, STD
                          stopped_level, replicate_groups, rqmc_intervals)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
-           "to_json", "format_stats"]
+           "to_json", "format_stats", "table_notes", "level_notes"]
 
 
 def windows_of(ds: xr.Dataset) -> list[str]:
@@ -257,7 +257,7 @@ def table_cell(value: float, factor: float = 1.0, width: int = 11) -> str:
     return f"{value * factor:{width}.4g}" if np.isfinite(value) else f"{'-':>{width}s}"
 
 
-def _missing_notes(sds: xr.Dataset) -> list[str]:
+def table_notes(sds: xr.Dataset) -> list[str]:
     """Why bounds are dashes (the n each interval needs, the maximum's note) and which realisations the
     statistics leave out (the failed ones)."""
     n, conf = sds.attrs["n_finished"], 100 * sds.attrs["confidence"]
@@ -327,13 +327,13 @@ def format_stats(sds: xr.Dataset) -> str:
     analysis window, labelled, when the statistics have several."""
     from ..files.records import file_window_label
     if "window" not in sds.dims:
-        return "\n".join(_table_lines(sds) + ["notes:"] + [f"  {t}" for t in _missing_notes(sds)])
+        return "\n".join(_table_lines(sds) + ["notes:"] + [f"  {t}" for t in table_notes(sds)])
     lines = []
     for i, w in enumerate(windows_of(sds)):
         body = _table_lines(in_window(sds, w))
         lines += ([] if i else body[:1]) + [f"window: {file_window_label(w, sds.attrs)}"]
         lines += body[1:]
-    return "\n".join(lines + ["notes:"] + [f"  {t}" for t in _missing_notes(sds)])
+    return "\n".join(lines + ["notes:"] + [f"  {t}" for t in table_notes(sds)])
 
 
 def _table_lines(sds: xr.Dataset) -> list[str]:

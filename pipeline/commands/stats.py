@@ -36,9 +36,9 @@ def add_parser(sub) -> None:
 
 
 def main(args) -> int:
-    from ..analysis.gate import check_confidence, exit_code, verdicts_json, verdicts_with_note
+    from ..analysis.gate import check_confidence, exit_code, start_up_note, verdicts_json, verdicts_with_note
     from ..analysis.exceedance import exceedance_json, format_exceedance
-    from ..analysis.stats import ensemble_stats, format_stats, to_json
+    from ..analysis.stats import ensemble_stats, format_stats, table_notes, to_json
     from ..analysis.summary import every_realisation_failed
     from ..files.opening import open_results
     from ..files.outputs import check_new_output
@@ -66,10 +66,13 @@ def main(args) -> int:
     verdicts = judge(ds, specs, args.confidence)
     probabilities = _probabilities(ds, events, args.confidence)
     sds = _selection(full, args)
+    notes = table_notes(sds)   # what the text table says under its numbers, kept by the file and the JSON too
     if args.output:
-        write_netcdf(sds.assign_attrs(verdict_attrs(verdicts)) if specs else sds, args.output)
+        write_netcdf(sds.assign_attrs(verdict_attrs(verdicts) if specs else {}, table_notes="\n".join(notes)),
+                     args.output)
     if args.json:
-        out = to_json(sds) | ({"requirements": verdicts_json(verdicts)} if specs else {})
+        out = to_json(sds) | {"table_notes": notes} | ({"requirements": verdicts_json(verdicts)} if specs else {})
+        out |= {"requirements_note": startup} if specs and (startup := start_up_note(verdicts, ds)) else {}
         out |= {"exceedance": exceedance_json(probabilities)} if events else {}
         out |= note.json()
         print(json.dumps(out, indent=2, allow_nan=False))
