@@ -215,6 +215,17 @@ def test_quantile_n_to_decide_is_where_the_same_share_first_decides(spec_text, n
     assert all(outcome_at(m) == "undecided" for m in range(n + 1, need) if m > need - 4)
 
 
+def test_the_n_to_decide_far_beyond_n_is_the_first_that_decides():
+    """14 of 300 violate a q95 limit (helper-35's case): the first deciding n lies 11 000 beyond, where a 1 % grid
+    stepped over it (11639); the Clopper-Pearson bounds of the same share, computed apart, first decide there."""
+    from pipeline.analysis.estimators import one_sided_cp
+    need = quantile_decision_n(300, 14, 0.05, CONF)
+    m = np.arange(301, need + 1)
+    lower, upper = one_sided_cp(np.rint(14 / 300 * m), m, CONF)
+    decides = (lower > 0.05) | (upper < 0.05)
+    assert need == 11432 and decides[-1] and not decides[:-1].any()
+
+
 def test_no_n_decides_a_share_equal_to_the_allowed_one():
     spec = parse_spec("displacement:x<=1mm@q50")
     (v,) = judge(spec, _ensemble(_with_share(40, 20, spec)))

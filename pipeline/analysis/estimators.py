@@ -117,7 +117,7 @@ MAX_NOTE = ("no interval: the sample maximum estimates no population parameter; 
             "realisation exceeds it with probability 1/(n + 1)")
 _RTOL = 1e-12       # binomial coverage computed in floating point
 QUANTILE_DECISION_CAP = 10 ** 6   # largest n quantile_decision_n looks at
-EXACT_DECISION_SCAN = 5000        # it tries every n up to n + this (the binomial tails jitter)
+EXACT_DECISION_SCAN = 5000        # its first block of n' (then doubling)
 
 
 # --- quantiles ----------------------------------------------------------------
@@ -207,24 +207,25 @@ def quantile_bounds(sorted_x: np.ndarray, p: float, confidence: float) -> np.nda
 def quantile_decision_n(n: int, violating: int, allowed: float, confidence: float) -> int | None:
     """The smallest n' > n at which the one-sided binomial bound decides (either way) whether the
     share of violating draws exceeds ``allowed`` (1 - p for an upper limit on the p-quantile, p for a
-    lower one), if a share ``violating / n`` of n' draws violate (k' rounded): exact up to
-    n + EXACT_DECISION_SCAN, beyond it the first on a 1 % grid of n' refined within its step; None
-    up to QUANTILE_DECISION_CAP.  Fail: P(Bin(n', allowed) >= k') <= 1 - confidence; pass:
-    P(Bin(n', allowed) <= k') <= 1 - confidence (the ranks of :func:`one_sided_ranks` as counts)."""
+    lower one), if a share ``violating / n`` of n' draws violate (k' rounded): every n' is tried (the
+    binomial tails jitter, so a grid can step over the first), in blocks that double from
+    EXACT_DECISION_SCAN; None up to QUANTILE_DECISION_CAP.  Fail: P(Bin(n', allowed) >= k') <= 1 -
+    confidence; pass: P(Bin(n', allowed) <= k') <= 1 - confidence (the ranks of :func:`one_sided_ranks`
+    as counts)."""
     def first(m: np.ndarray) -> int | None:
         k = np.rint(violating / n * m)
         fail = (k >= 1) & (sps.binom.sf(k - 1, m, allowed) <= 1 - confidence + _RTOL)
         hit = np.flatnonzero(fail | (sps.binom.cdf(k, m, allowed) <= 1 - confidence + _RTOL))
         return int(m[hit[0]]) if hit.size else None
 
-    top = min(n + EXACT_DECISION_SCAN, QUANTILE_DECISION_CAP)
-    found = first(np.arange(n + 1, top + 1))
-    if found is not None or top == QUANTILE_DECISION_CAP:
-        return found
-    grid = np.unique(np.ceil(top * 1.01 ** np.arange(
-        math.log(QUANTILE_DECISION_CAP / top) / math.log(1.01) + 1)).astype(int))
-    end = first(grid)
-    return None if end is None else first(np.arange(grid[grid < end].max(initial=top) + 1, end + 1))
+    start, block = n + 1, EXACT_DECISION_SCAN
+    while start <= QUANTILE_DECISION_CAP:
+        stop = min(start + block, QUANTILE_DECISION_CAP + 1)
+        found = first(np.arange(start, stop))
+        if found is not None:
+            return found
+        start, block = stop, 2 * block
+    return None
 
 
 # --- mean and std -----------------------------------------------------------------
