@@ -84,7 +84,6 @@ longer a scrambled net).  Point estimates stay those of all n realisations.
 """
 from __future__ import annotations
 
-import math
 import warnings
 from dataclasses import dataclass
 from functools import lru_cache
