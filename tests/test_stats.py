@@ -349,3 +349,14 @@ def test_the_json_and_the_statistics_file_keep_the_tables_notes(tmp_path, capsys
     out = json.loads(capsys.readouterr().out)
     assert "judged over the whole run" in out["requirements_note"]
     assert any("drawn start" in line for line in out["table_notes"])
+
+
+def test_an_until_files_notes_give_the_widened_quantiles_floors():
+    """n chosen by --until: the quantiles' bounds are taken at 97.5 %, so q99's dash at n = 350 is explained by
+    its floor there, 368 (the attribute min_n_q99), not by the 95 % floor of 299 it has passed."""
+    sds = ensemble_stats(_file(_synthetic(np.random.default_rng(6).gamma(2.0, size=(3, 350, 6)))),
+                         stopped_by_width=True)
+    notes = format_stats(sds).split("notes:")[1]
+    assert sds.attrs["min_n_q99"] == min_n_for_quantile(0.99, 0.975) == 368
+    assert "q99: no 95 % interval below n = 368 (n = 350 here)" in notes, notes
+    assert np.isnan(sds["max_abs_error"].sel(statistic="q99", bound="lower")).all()

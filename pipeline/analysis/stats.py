@@ -263,7 +263,8 @@ def table_notes(sds: xr.Dataset) -> list[str]:
     n, conf = sds.attrs["n_finished"], 100 * sds.attrs["confidence"]
     replicates = sds.attrs.get("qmc_replicates")
     replicates = None if replicates is None else int(replicates)
-    need = {k: interval_floor(k, sds.attrs["confidence"], replicates)
+    stopped = "interval_after_until" in sds.attrs   # --until chose n: the quantiles' bounds are widened
+    need = {k: interval_floor(k, bound_level(k, sds.attrs["confidence"], stopped, replicates is not None), replicates)
             for k in ("mean", "std", *QUANTILES)}
     notes = [f"{k}: no {conf:g} % interval below n = {v} (n = {n} here)" if v is not None else
              f"{k}: no {conf:g} % interval at any n: its coverage falls short of the label above 95 % "
