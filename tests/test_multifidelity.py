@@ -220,6 +220,9 @@ def test_cli_runs_resumes_and_writes_json(tmp_path, capsys):
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "rho" in text and "displacement x" in text
+    # the paper level's rates measure the step: the table says so, as rss6 stats does, and so do the file and JSON
+    step_note = "note: paper level: its velocity and acceleration errors come from eccentricities redrawn every step"
+    assert step_note in text
     high, low = (load_netcdf(p) for p in level_paths(out))
     assert high.sizes["realization"] == 32 and low.sizes["realization"] == 64
     first = load_netcdf(out)
@@ -228,6 +231,8 @@ def test_cli_runs_resumes_and_writes_json(tmp_path, capsys):
     assert js["n_high"] == 32 and js["max_abs_error"]["displacement"]["x"]["multifidelity_lower"]
     assert js["window"] == "whole" and js["analysis_window"] == "whole run"
     assert js["mean_abs_error"]["velocity"]["z"]["correlation"] is not None
+    assert js["table_notes"][0].startswith(step_note.removeprefix("note: "))
+    assert first.attrs["table_notes"] == js["table_notes"][0]
     xr.testing.assert_identical(load_netcdf(out).drop_attrs(), first.drop_attrs())
 
 

@@ -8,7 +8,7 @@ from rss6core import MODELS, models_with
 
 from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
-from ..vocabulary import OptionError
+from ..vocabulary import QUANTITIES, OptionError
 from .messages import interrupted, scheduler_lost, warn_oversubscription
 from .options import (add_confidence, add_json, add_parents, add_scene, add_scheduler, add_seed, add_window_choice,
                       MAX_REALISATIONS, add_workers, fraction, int_at_least, positive_float, realisations)
@@ -60,6 +60,7 @@ def _check_levels(args) -> None:
 
 
 def main(args) -> int:
+    from ..analysis.stats import level_notes
     from ..files.records import check_window
     from ..files.writing import write_netcdf
     from ..studies.multifidelity import (REQUEST_ATTR, check_multifidelity_output, format_multifidelity, level_paths,
@@ -87,18 +88,21 @@ def main(args) -> int:
             return interrupted(kept)
     try:
         mds = multifidelity_dataset(*data, args.confidence, files, args.cost_ratio, args.width, args.window).load()
+        # what of the dear level's maxima does not measure the robot (the paper level's step, a drawn start's impacts)
+        notes = level_notes(data[0].attrs, set(QUANTITIES), {args.window})
     except ValueError as exc:   # too few finished pairs
         print(f"rss6 multifidelity: error: {files[0]}: {exc}", file=sys.stderr)
         return 1
     finally:
         for level_data in data:
             level_data.close()
-    write_netcdf(mds.assign_attrs({REQUEST_ATTR: json.dumps(request, sort_keys=True)}), output)
+    write_netcdf(mds.assign_attrs({REQUEST_ATTR: json.dumps(request, sort_keys=True), "table_notes": "\n".join(notes)}),
+                 output)
     if args.json:
-        print(json.dumps(to_json(mds), indent=2, allow_nan=False))
+        print(json.dumps(to_json(mds) | {"table_notes": notes}, indent=2, allow_nan=False))
     else:
         print(f"wrote {output} (also the means of mean_abs_error; --json prints both)")
-        print(format_multifidelity(mds))
+        print(format_multifidelity(mds) + "".join(f"\nnote: {line}" for line in notes))
     return 0
 
 
