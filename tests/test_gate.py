@@ -2,6 +2,7 @@
 decisions against an independent binomial test, their error rates measured (a design that meets
 its limit exactly is failed at most nominal + 1 point of the time), the n to decide, exit codes."""
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -456,6 +457,22 @@ def test_mean_decisions_err_at_most_nominal_plus_one_point(law):
               f"{max((lower > law_.mean()).mean(), (upper < law_.mean()).mean()):.4f}")
         assert (lower > law_.mean()).mean() <= 0.06, (n, (lower > law_.mean()).mean())
         assert (upper < law_.mean()).mean() <= 0.06, (n, (upper < law_.mean()).mean())
+
+
+def test_the_worst_error_at_the_limit_is_the_readmes():
+    """README: "a design exactly at its limit is failed at most 5.25 % of the time": the largest share of the two
+    tests above (the same samples), which a change of the bounds moves."""
+    from tests.test_readme import README
+    rates = []
+    for law, (i, n) in itertools.product(LAWS, enumerate(SIZES)):
+        for statistic in ("q05", "q50", "q95"):
+            p, truth = QUANTILES[statistic], LAWS[law].ppf(QUANTILES[statistic])
+            lower, upper = quantile_bounds(np.sort(_samples(law, n, seed=10 * i + int(100 * p)), axis=0), p, CONF)
+            rates += [(lower > truth).mean(), (upper < truth).mean()]
+        lower, upper = mean_bounds(_samples(law, n, seed=500 + i), CONF)
+        rates += [(lower > LAWS[law].mean()).mean(), (upper < LAWS[law].mean()).mean()]
+    assert "failed at most 5.25 % of the time" in " ".join(README.read_text().split())
+    assert max(rates) == pytest.approx(0.0525, abs=5e-4)
 
 
 @pytest.mark.parametrize("law", [sps.expon(), sps.chi2(1)], ids=["exponential", "chi2(1)"])

@@ -68,6 +68,17 @@ def test_every_interval_covers_at_least_nominal_minus_two_points(statistic, law)
             assert coverage >= CONF - 0.02, (statistic, law, n, coverage)
 
 
+def test_the_worst_measured_coverage_is_the_readmes():
+    """README: "measured coverage at least 94.3 % wherever an interval is given": the lowest of the cells above
+    (the same samples), which a change of an interval or its floor moves."""
+    from tests.test_readme import README
+    worst = min(_coverage(law, n, truth(law), interval, seed=1000 * i + n)[1]
+                for truth, interval, rule in INTERVALS.values() for law in LAWS.values()
+                for i, n in enumerate(SIZES) if rule(n))
+    assert "measured coverage at least 94.3 %" in " ".join(README.read_text().split())
+    assert worst == pytest.approx(0.943, abs=5e-4)
+
+
 @pytest.mark.parametrize("law", [sps.gamma(2.0), sps.expon()], ids=["gamma(2)", "exponential"])
 def test_the_widened_std_interval_reaches_its_label_from_its_floor(law):
     """20 000 samples of n = MIN_N_STD on skewed laws: the std interval covers >= 94.5 % (95 % nominal, -3
