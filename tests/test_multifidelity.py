@@ -49,6 +49,15 @@ def test_interval_reaches_its_label(law):
     assert worst < 0.99   # not vacuously wide
 
 
+def test_the_skewness_correction_holds_the_label_at_the_smallest_n():
+    """chi2(1) margins (skewness 2.8), N = 32, M/N = 32, rho = 0.8, 10 000 repetitions: the widened union covers
+    >= 95 % (about 96 %); without Hall's part (Student t alone, as when the label's mean floor of 64 at the
+    widened 98 % cut it off) it covered 93.5 %."""
+    y, x = _pairs(sps.chi2(1), 0.8, MIN_N_MF, 32 * MIN_N_MF, 10_000, seed=11)
+    cv = control_variate_mean(y, x, CONF)
+    assert np.mean((cv.lower <= 0) & (0 <= cv.upper)) >= CONF
+
+
 def test_no_interval_below_the_measured_minimum():
     y, x = _pairs(LAWS["normal"], 0.8, MIN_N_MF - 1, 4 * MIN_N_MF, 10, seed=1)
     cv = control_variate_mean(y, x, CONF)

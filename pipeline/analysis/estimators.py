@@ -237,8 +237,9 @@ def moment_floor(statistic: str, confidence: float) -> int | None:
     return next((n for level, n in floors if confidence <= level + 1e-12), None)
 
 
-def _mean_interval_from_moments(n, mean, std, skew, confidence):
-    """Union of the Student-t and Hall's skewness-corrected intervals (see module doc)."""
+def _mean_interval_from_moments(n, mean, std, skew, confidence, floor: int | None):
+    """Union of the Student-t and Hall's skewness-corrected intervals (see module doc); NaN below ``floor``
+    (None: at every n)."""
     n, mean, std, skew = np.broadcast_arrays(*(np.asarray(v, float) for v in (n, mean, std, skew)))
     tq = sps.t.ppf(0.5 + confidence / 2, np.maximum(n - 1, 1))
     se = std / np.sqrt(n)
@@ -251,7 +252,6 @@ def _mean_interval_from_moments(n, mean, std, skew, confidence):
     t = np.stack([mean - tq * se, mean + tq * se])
     hall = np.where(np.isfinite(hall), hall, t)             # zero spread: skewness undefined
     out = np.stack([np.minimum(t[0], hall[0]), np.maximum(t[1], hall[1])])
-    floor = moment_floor("mean", confidence)
     return np.where((n >= floor) if floor is not None else False, out, np.nan)
 
 
@@ -267,10 +267,13 @@ def _moments(x: np.ndarray):
     return n, mean, std, skew
 
 
-def mean_interval(x: np.ndarray, confidence: float) -> np.ndarray:
-    """(lower, upper) for the mean along axis 0 of finite data; NaN below its floor (moment_floor)."""
+def mean_interval(x: np.ndarray, confidence: float, own_floor: int | None = None) -> np.ndarray:
+    """(lower, upper) for the mean along axis 0 of finite data; NaN below its floor at ``confidence``
+    (moment_floor), or below ``own_floor`` where the caller's estimator sets its own (multi-fidelity's
+    widened level, whose coverage it measured itself)."""
     n, mean, std, skew = _moments(np.asarray(x, float))
-    return _mean_interval_from_moments(n, mean, std, skew, confidence)
+    floor = moment_floor("mean", confidence) if own_floor is None else own_floor
+    return _mean_interval_from_moments(n, mean, std, skew, confidence, floor)
 
 
 def mean_bounds(x: np.ndarray, confidence: float) -> np.ndarray:
@@ -296,7 +299,7 @@ def running_mean_interval(x: np.ndarray, confidence: float):
         skew = np.where(m2 > 0, m3 / m2 ** 1.5, 0.0)
         std = np.sqrt(m2 * n / np.maximum(n - 1, 1))
     mean = m + x.mean()
-    return mean, _mean_interval_from_moments(n, mean, std, skew, confidence)
+    return mean, _mean_interval_from_moments(n, mean, std, skew, confidence, moment_floor("mean", confidence))
 
 
 def std_interval(x: np.ndarray, confidence: float) -> np.ndarray:

@@ -134,7 +134,7 @@ def _interval(estimate, resid, se, level: float):
     half = sps.t.ppf(0.5 + level / 2, n - 2) * se
     with np.errstate(all="ignore"):
         scale = np.where(se > 0, se / (resid.std(axis=0, ddof=1) / np.sqrt(n)), 0.0)
-        low, high = mean_interval(resid, level)                  # around the residuals' mean, 0
+        low, high = mean_interval(resid, level, own_floor=MIN_N_MF)   # around the residuals' mean, 0
     return (estimate - np.maximum(half, np.nan_to_num(-low * scale)),
             estimate + np.maximum(half, np.nan_to_num(high * scale)))
 
