@@ -208,15 +208,18 @@ def quantile_decision_n(n: int, violating: int, allowed: float, confidence: floa
     share of violating draws exceeds ``allowed`` (1 - p for an upper limit on the p-quantile, p for a
     lower one), if a share ``violating / n`` of n' draws violate (k' rounded): every n' is tried (the
     binomial tails jitter, so a grid can step over the first), in blocks that double from
-    EXACT_DECISION_SCAN; None up to QUANTILE_DECISION_CAP.  Fail: P(Bin(n', allowed) >= k') <= 1 -
-    confidence; pass: P(Bin(n', allowed) <= k') <= 1 - confidence (the ranks of :func:`one_sided_ranks`
-    as counts)."""
+    EXACT_DECISION_SCAN; None when no n' within EXACT_DECISION_SCAN below QUANTILE_DECISION_CAP decides
+    (looked at first).  Fail: P(Bin(n', allowed) >= k') <= 1 - confidence; pass: P(Bin(n', allowed) <= k')
+    <= 1 - confidence (the ranks of :func:`one_sided_ranks` as counts)."""
     def first(m: np.ndarray) -> int | None:
         k = np.rint(violating / n * m)
         fail = (k >= 1) & (sps.binom.sf(k - 1, m, allowed) <= 1 - confidence + _RTOL)
         hit = np.flatnonzero(fail | (sps.binom.cdf(k, m, allowed) <= 1 - confidence + _RTOL))
         return int(m[hit[0]]) if hit.size else None
 
+    near_cap = np.arange(max(n + 1, QUANTILE_DECISION_CAP - EXACT_DECISION_SCAN), QUANTILE_DECISION_CAP + 1)
+    if first(near_cap) is None:
+        return None   # the bounds narrow as n grows: what no n near the cap decides, no smaller n does
     start, block = n + 1, EXACT_DECISION_SCAN
     while start <= QUANTILE_DECISION_CAP:
         stop = min(start + block, QUANTILE_DECISION_CAP + 1)
