@@ -106,7 +106,7 @@ MIN_N_MEAN = 16     # smallest n whose coverage reaches the label on the measure
 MIN_N_STD = 300     # widened Bonett: >= 94.7 % measured on the laws of the module doc from here
 # above 95 % the mean needs more n and the std reaches no label (docs/ensembles.md, benchmarks/interval_coverage.py):
 # (highest two-sided level, smallest n) in order; beyond the last level, no interval at any n
-MEAN_FLOORS = ((CONFIDENCE, MIN_N_MEAN), (0.99, 64), (0.999, 256))
+MEAN_FLOORS = ((CONFIDENCE, MIN_N_MEAN), (0.99, 64), (0.999, 128))
 STD_FLOORS = ((CONFIDENCE, MIN_N_STD),)
 LOWEST_MEASURED = 0.8   # the lowest two-sided level at which those floors' coverage was measured
 STD_WIDENING = 0.6  # Bonett's interval is computed at the level 1 - STD_WIDENING (1 - confidence)

@@ -33,7 +33,7 @@ from .spec import PF, Spec
 from ..vocabulary import CONFIDENCE, QUANTILES, WINDOWS
 from .estimators import (QUANTILE_DECISION_CAP, bound_level, interval_floor, no_interval_at, one_sided_cp,
                          quantile_decision_n)
-from .stats import check_window_samples, ensemble_stats, finished_values, json_number, json_record
+from .stats import check_window_samples, ensemble_stats, finished_values, json_number, json_record, one_run_repeated
 
 __all__ = ["OUTCOMES", "EXIT_CODES", "Verdict", "check_confidence", "exit_code", "format_verdicts",
            "verdicts_with_note", "start_up_note", "allowed_exceedances", "overall", "judge", "judge_all",
@@ -303,22 +303,12 @@ def judge_all(specs: list[Spec], ds, confidence: float = CONFIDENCE) -> list[Ver
         except ValueError as exc:
             raise ValueError(f"--require {s.text!r}: {exc}") from None
     bounds = ensemble_stats(ds, confidence, window=None, one_sided=True)
-    exact = _draws_nothing(ds)
+    exact = one_run_repeated(ds)
     return [_exact(v, s, ds) if exact else v for s in specs
             for v in (_judge_pf(s, ds, confidence) if s.statistic == PF else _judge(s, ds, bounds))]
 
 
 EXACT_RULE = "exact: the level draws nothing on this scene, so every realisation is the same run"
-
-
-def _draws_nothing(ds) -> bool:
-    """Whether every realisation of ``ds`` is the same run: its level draws no clearances and its scene no
-    [uncertain.*] inputs, and none failed (then each statistic is that run's value, known exactly)."""
-    from rss6core import FINISHED, model_level, parse_scene
-    model, text = ds.attrs.get("model"), ds.attrs.get("scene_toml")
-    if model is None or text is None or ("status" in ds and (ds["status"].values.astype(str) != FINISHED).any()):
-        return False
-    return not model_level(str(model)).draws_clearances and not parse_scene(str(text), "file").uncertain.inputs
 
 
 def _exact(v: Verdict, spec: Spec, ds) -> Verdict:

@@ -194,6 +194,7 @@ def _attrs(ds, n: int, failed: int, confidence: float, stopped_by_width: bool) -
     needed = {k: min_n_for_quantile(p, bound_level(k, confidence, stopped_by_width)) for k, p in QUANTILES.items()}
     steady = {k: ds.attrs[k] for k in ("steady_after_s", "settle_time_s") if k in ds.attrs}
     return {**_provenance(ds, confidence), **steady, "n_finished": n, "n_failed": failed,
+            **({"one_run_repeated": ONE_RUN} if n > 1 and one_run_repeated(ds) else {}),
             "confidence": confidence,
             "interval_mean": f"union of Student t and Hall (1992) skewness-corrected t; NaN for "
                              f"{_below_floor('mean', confidence)}",
@@ -285,18 +286,27 @@ def table_notes(sds: xr.Dataset) -> list[str]:
             + level_notes(sds.attrs, {str(q) for q in sds["quantity"].values}, windows))
 
 
+ONE_RUN = "the level draws no clearances and the scene no [uncertain.*] inputs: every realisation is the same run"
+
+
+def one_run_repeated(ds) -> bool:
+    """Whether every realisation of the ensemble (or single-run) Dataset ``ds`` is the same run: its level draws
+    no clearances, its scene no [uncertain.*] inputs, and none failed (each statistic is then that run's value,
+    known exactly: the gate's exact rule and the tables' note)."""
+    from rss6core import model_level, parse_scene
+    model, text = ds.attrs.get("model"), ds.attrs.get("scene_toml")
+    if model is None or text is None or ("status" in ds and (ds["status"].values.astype(str) != FINISHED).any()):
+        return False
+    return not model_level(str(model)).draws_clearances and not parse_scene(str(text), "file").uncertain.inputs
+
+
 def _identical_note(sds: xr.Dataset) -> list[str]:
-    """Where every finished realisation gave the same numbers (n > 1, each std within 1e-12 of its mean,
-    the sum's round-off): the realisations are one run repeated (typically a level that draws no
-    clearances, without uncertain inputs)."""
-    cells = [sds[v].sel(bound="estimate") for v in ("max_abs_error", "mean_abs_error") if v in sds]
-    if sds.attrs["n_finished"] < 2 or not cells or not all(
-            np.all(np.abs(c.sel(statistic="std").values) <= 1e-12 * np.abs(c.sel(statistic="mean").values))
-            for c in cells):
+    """Where the statistics are of one run repeated (:func:`one_run_repeated`, the attribute one_run_repeated)."""
+    if "one_run_repeated" not in sds.attrs:
         return []
-    return [f"all {sds.attrs['n_finished']} realisations gave the same numbers (to round-off): nothing drawn "
-            "changes them (the rigid and elastic levels draw no clearances, and a scene without [uncertain] inputs "
-            "nothing else); one run, rss6 simulate, gives them"]
+    return [f"all {sds.attrs['n_finished']} realisations are one run: {sds.attrs['model']} level and scene "
+            "without [uncertain.*] inputs draw nothing, so each statistic is that run's value (rss6 simulate gives "
+            "it; no bound is needed)"]
 
 
 def level_notes(attrs, shown: set, windows: set) -> list[str]:
