@@ -35,15 +35,19 @@ class _Parser(argparse.ArgumentParser):
     """argparse with a one-line error (the option and the problem; ``-h`` gives the usage); an option
     the command does not take names the commands that take it, or this command's nearest options."""
 
+    words: list[str] = []   # the command line being parsed (the subcommands' parsers report its errors)
+
     def error(self, message: str):
         missing = re.fullmatch(r"argument (\S+): expected one argument", message)
-        if missing:    # argparse reads "-1e-6" as an option, not as the value it looks like
+        value = _value_read_as_option(missing.group(1).split("/"), _Parser.words) if missing else None
+        if value:    # argparse reads "-1e-6" as an option, not as the value it looks like
             option = missing.group(1).split("/")[-1]
-            message += f"; a value that starts with '-' (such as -1e-6) is read as an option: write {option}=VALUE"
+            message += f"; a value that starts with '-' ({value}) is read as an option: write {option}={value}"
         print(f"{self.prog}: error: {message} (see {self.prog} -h)", file=sys.stderr)
         sys.exit(2)
 
     def parse_args(self, args=None, namespace=None):
+        _Parser.words = list(sys.argv[1:] if args is None else args)
         parsed, extras = self.parse_known_args(args, namespace)
         if extras:
             command = getattr(parsed, "command", None)
@@ -53,6 +57,15 @@ class _Parser(argparse.ArgumentParser):
                   + "".join(f"; {hint}" for hint in hints) + f" (see {where} -h)", file=sys.stderr)
             sys.exit(2)
         return parsed
+
+
+def _value_read_as_option(names: list[str], words: list[str]) -> str | None:
+    """The word after option ``names`` in ``words`` when it is a negative number (argparse took it for an
+    option), else None."""
+    for before, word in zip(words, words[1:]):
+        if before in names and re.fullmatch(r"-(\d|\.\d)\S*", word):
+            return word
+    return None
 
 
 def _option_hint(parser: argparse.ArgumentParser, command: str | None, word: str) -> str:

@@ -204,7 +204,10 @@ def test_a_negative_value_read_as_an_option_says_how_to_write_it(capsys, tmp_pat
     """argparse takes "-1e-6" for an option; the line says to write --dt=-1e-6, which then names the value."""
     code, err = _run(["simulate", "smoke", "--dt", "-1e-6"], capsys, tmp_path, small_file)
     assert code == 2 and err == ["rss6 simulate: error: argument --dt: expected one argument; a value that starts "
-                                 "with '-' (such as -1e-6) is read as an option: write --dt=VALUE "
+                                 "with '-' (-1e-6) is read as an option: write --dt=-1e-6 "
+                                 "(see rss6 simulate -h)"], err
+    code, err = _run(["simulate", "smoke", "--dt"], capsys, tmp_path, small_file)   # a value simply missing
+    assert code == 2 and err == ["rss6 simulate: error: argument --dt: expected one argument "
                                  "(see rss6 simulate -h)"], err
     code, err = _run(["simulate", "smoke", "--dt=-1e-6"], capsys, tmp_path, small_file)
     assert code == 2 and len(err) == 1 and "--dt: must be a finite positive number, got -1e-6" in err[0], err

@@ -54,9 +54,8 @@ def _trajectory_on_grid(ax, px, py, x, y) -> None:
 
 
 def _cell_edges(centres: np.ndarray) -> tuple[float, float]:
-    """The outer edges of pcolormesh's 'nearest' cells around sorted ``centres`` (half a cell beyond each end)."""
-    if centres.size < 2:
-        return float(centres[0]) - 0.5, float(centres[0]) + 0.5
+    """The outer edges of pcolormesh's 'nearest' cells around sorted ``centres`` (half a cell beyond each end;
+    a grid axis has two or more points, --grid's N >= 2)."""
     return (float(centres[0] - (centres[1] - centres[0]) / 2),
             float(centres[-1] + (centres[-1] - centres[-2]) / 2))
 

@@ -20,8 +20,8 @@ from ..files.records import empty_window, file_window_bounds
 from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
 from .estimators import (BOUNDS, LOWEST_MEASURED, MAX_NOTE, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
-                         bound_level, estimates_and_bounds, interval_floor, min_n_for_quantile, moment_floor,
-                         stopped_level, replicate_groups, rqmc_intervals)
+                         bound_level, estimates_and_bounds, highest_level, interval_floor, min_n_for_quantile,
+                         moment_floor, stopped_level, replicate_groups, rqmc_intervals)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
            "to_json", "format_stats", "table_notes", "level_notes"]
@@ -187,7 +187,8 @@ def _rqmc_attrs(replicates: int, confidence: float, stopped_by_width: bool) -> d
 def _below_floor(statistic: str, confidence: float) -> str:
     """Where the mean's or std's interval is NaN: 'n < 16', or every n above 95 % for the std."""
     floor = moment_floor(statistic, confidence)
-    return f"n < {floor}" if floor is not None else "every n at this confidence (its coverage falls short above 95 %)"
+    return f"n < {floor}" if floor is not None else (
+        f"every n at this confidence (its coverage falls short above {100 * highest_level(statistic):g} %)")
 
 
 def _attrs(ds, n: int, failed: int, confidence: float, stopped_by_width: bool) -> dict:
@@ -268,8 +269,8 @@ def table_notes(sds: xr.Dataset) -> list[str]:
     need = {k: interval_floor(k, bound_level(k, sds.attrs["confidence"], stopped, replicates is not None), replicates)
             for k in ("mean", "std", *QUANTILES)}
     notes = [f"{k}: no {conf:g} % interval below n = {v} (n = {n} here)" if v is not None else
-             f"{k}: no {conf:g} % interval at any n: its coverage falls short of the label above 95 % "
-             "(docs/ensembles.md)" for k, v in need.items() if v is None or n < v]
+             f"{k}: no {conf:g} % interval at any n: its coverage falls short of the label above "
+             f"{100 * highest_level(k):g} % (docs/ensembles.md)" for k, v in need.items() if v is None or n < v]
     if replicates is not None:
         notes.insert(0, f"randomised QMC, {replicates} replicates: intervals are Student t over "
                         "the replicates (none if a realisation failed)")

@@ -95,8 +95,9 @@ def main(args) -> int:
     start = time.perf_counter()
     note = loaded_joints_meanwhile("reliability", level.scene, level.model, [event])
     with OutputLock(output):
+        found = checkpoint_path(output).exists()
         checkpoint = Checkpoint(checkpoint_path(output), {**spec.attrs(), "options": options}, args.resume)
-        if args.resume and not checkpoint.batches:
+        if args.resume and not found:
             print(f"rss6 reliability: note: --resume found no checkpoint at {checkpoint.path}: the run starts "
                   "from its first batch", file=sys.stderr)
         try:

@@ -72,7 +72,8 @@ def main(args) -> int:
                      args.output)
     if args.json:
         out = to_json(sds) | {"table_notes": notes} | ({"requirements": verdicts_json(verdicts)} if specs else {})
-        out |= {"requirements_note": startup} if specs and (startup := start_up_note(verdicts, ds)) else {}
+        out |= ({"requirements_note": startup.removeprefix("note: ")}
+                if specs and (startup := start_up_note(verdicts, ds)) else {})
         out |= {"exceedance": exceedance_json(probabilities)} if events else {}
         out |= note.json()
         print(json.dumps(out, indent=2, allow_nan=False))

@@ -325,8 +325,9 @@ def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
             "estimator": "two-model multi-fidelity Monte Carlo (control variate, optimal fitted "
                          "coefficient, low mean from all low realisations)",
             "interval_multifidelity": f"{SKEWED_COVERAGE}; NaN for N < {MIN_N_MF}",
-            "interval_high_only": "pipeline.analysis.estimators mean interval; NaN for n < "
-                                  f"{moment_floor('mean', confidence)}",
+            "interval_high_only": "pipeline.analysis.estimators mean interval; NaN for "
+                                  + (f"n < {moment_floor('mean', confidence)}" if moment_floor('mean', confidence)
+                                     else "every n at this confidence"),
             "min_n_multifidelity": MIN_N_MF,
             "statistics_offered": "mean only (quantiles and exceedance probabilities: see "
                                   "pipeline/multifidelity.py)",
