@@ -94,7 +94,8 @@ from scipy import stats as sps
 from ..vocabulary import CONFIDENCE, QUANTILES, STATISTICS
 
 __all__ = ["BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "STD_WIDENING", "UNTIL_WIDENING", "MIN_POINTS_RQMC", "MAX_NOTE",
-           "QUANTILE_DECISION_CAP", "MEAN_FLOORS", "STD_FLOORS", "LOWEST_MEASURED", "highest_level", "moment_floor",
+           "QUANTILE_DECISION_CAP", "MEAN_FLOORS", "STD_FLOORS", "LOWEST_MEASURED", "highest_level", "short_of_label",
+           "moment_floor",
            "clopper_pearson", "one_sided_cp",
            "quantile_ranks", "min_n_for_quantile", "quantile_estimates", "quantile_interval", "BoundRanks",
            "one_sided_ranks", "quantile_bounds", "quantile_decision_n", "mean_interval", "mean_bounds",
@@ -236,6 +237,11 @@ def quantile_decision_n(n: int, violating: int, allowed: float, confidence: floa
 def highest_level(statistic: str) -> float:
     """The highest two-sided level at which the mean's or std's interval was seen to reach its label."""
     return {"mean": MEAN_FLOORS, "std": STD_FLOORS}[statistic][-1][0]
+
+
+def short_of_label(statistic: str) -> str:
+    """Why the mean or std has no interval at any n beyond its highest measured level."""
+    return f"its coverage falls short of the label above {100 * highest_level(statistic):g} % (docs/ensembles.md)"
 
 
 def moment_floor(statistic: str, confidence: float) -> int | None:
@@ -440,8 +446,8 @@ def no_interval_at(statistic: str, confidence: float, n: int, replicates: int | 
     floor = interval_floor(statistic, confidence, replicates)
     if floor is None:
         top = highest_level(statistic)
-        return (f"{statistic} has no {100 * confidence:g} % interval at any n: its coverage falls short of the label "
-                f"above {100 * top:g} % (docs/ensembles.md); use --confidence {top:g} or below")
+        return (f"{statistic} has no {100 * confidence:g} % interval at any n: {short_of_label(statistic)}; "
+                f"use --confidence {top:g} or below")
     if n >= floor:
         return None
     return f"{statistic} has no {100 * confidence:g} % interval below n = {floor} (-n {n}); raise -n"

@@ -20,11 +20,11 @@ from ..files.records import empty_window, file_window_bounds
 from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
 from .estimators import (BOUNDS, LOWEST_MEASURED, MAX_NOTE, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
-                         bound_level, estimates_and_bounds, highest_level, interval_floor, min_n_for_quantile,
-                         moment_floor, stopped_level, replicate_groups, rqmc_intervals)
+                         bound_level, estimates_and_bounds, interval_floor, min_n_for_quantile, moment_floor,
+                         short_of_label, stopped_level, replicate_groups, rqmc_intervals)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
-           "to_json", "format_stats", "table_notes", "level_notes"]
+           "to_json", "format_stats", "table_notes", "level_notes", "below_floor", "one_run_repeated"]
 
 
 def windows_of(ds: xr.Dataset) -> list[str]:
@@ -104,17 +104,18 @@ def ensemble_stats(ds: xr.Dataset, confidence: float = CONFIDENCE, window: str |
     quantiles' bounds are widened (default: whether the file was written by ``rss6 run --until``)."""
     if stopped_by_width is None:
         stopped_by_width = "until_rule" in ds.attrs
+    repeated = one_run_repeated(ds)   # once per file, not per window: it may parse the scene
     if window is None and "window" in ds.dims:
-        parts = [_window_stats(in_window(ds, w), confidence, one_sided, stopped_by_width).expand_dims(window=[w])
-                 for w in windows_of(ds)]
+        parts = [_window_stats(in_window(ds, w), confidence, one_sided, stopped_by_width, repeated)
+                 .expand_dims(window=[w]) for w in windows_of(ds)]
         out = xr.concat(parts, dim="window", combine_attrs="override")
         return out.assign_coords(unit=parts[0]["unit"]) if "unit" in parts[0].coords else out
-    return _window_stats(in_window(ds, window or "whole"), confidence, one_sided, stopped_by_width)
+    return _window_stats(in_window(ds, window or "whole"), confidence, one_sided, stopped_by_width, repeated)
 
 
 def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False,
-                  stopped_by_width: bool = False) -> xr.Dataset:
-    """:func:`ensemble_stats` of a Dataset without a window dimension."""
+                  stopped_by_width: bool = False, repeated: bool = False) -> xr.Dataset:
+    """:func:`ensemble_stats` of a Dataset without a window dimension (``repeated``: :func:`one_run_repeated`)."""
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
     if one_sided and not confidence > 0.5:
@@ -132,7 +133,7 @@ def _window_stats(ds: xr.Dataset, confidence: float, one_sided: bool = False,
                  "units": var.attrs.get("units", "")}
         data[name] = (("statistic", "bound", "quantity", "direction"), np.stack(per_quantity, axis=2), attrs)
     n = int(finished.sum())
-    attrs = _attrs(ds, n, int((~finished).sum()), confidence, stopped_by_width)
+    attrs = _attrs(ds, n, int((~finished).sum()), confidence, stopped_by_width, repeated)
     if design is not None:
         attrs |= _rqmc_attrs(design.replicates, confidence, stopped_by_width)
     if one_sided:
@@ -184,23 +185,22 @@ def _rqmc_attrs(replicates: int, confidence: float, stopped_by_width: bool) -> d
             **{f"min_n_{k}": interval_floor(k, confidence, replicates) for k in QUANTILES}}
 
 
-def _below_floor(statistic: str, confidence: float) -> str:
+def below_floor(statistic: str, confidence: float) -> str:
     """Where the mean's or std's interval is NaN: 'n < 16', or every n above 95 % for the std."""
     floor = moment_floor(statistic, confidence)
-    return f"n < {floor}" if floor is not None else (
-        f"every n at this confidence (its coverage falls short above {100 * highest_level(statistic):g} %)")
+    return f"n < {floor}" if floor is not None else f"every n at this confidence ({short_of_label(statistic)})"
 
 
-def _attrs(ds, n: int, failed: int, confidence: float, stopped_by_width: bool) -> dict:
+def _attrs(ds, n: int, failed: int, confidence: float, stopped_by_width: bool, repeated: bool) -> dict:
     needed = {k: min_n_for_quantile(p, bound_level(k, confidence, stopped_by_width)) for k, p in QUANTILES.items()}
     steady = {k: ds.attrs[k] for k in ("steady_after_s", "settle_time_s") if k in ds.attrs}
     return {**_provenance(ds, confidence), **steady, "n_finished": n, "n_failed": failed,
-            **({"one_run_repeated": ONE_RUN} if n > 1 and one_run_repeated(ds) else {}),
+            **({"one_run_repeated": ONE_RUN} if n > 1 and repeated else {}),
             "confidence": confidence,
             "interval_mean": f"union of Student t and Hall (1992) skewness-corrected t; NaN for "
-                             f"{_below_floor('mean', confidence)}",
+                             f"{below_floor('mean', confidence)}",
             "interval_std": f"Bonett (2006) at the level 1 - {STD_WIDENING:g} (1 - confidence); NaN for "
-                            f"{_below_floor('std', confidence)}",
+                            f"{below_floor('std', confidence)}",
             "interval_quantiles": "distribution-free order statistics, exact binomial coverage"
                                   f"{_widened(confidence, stopped_by_width)}; NaN for n < "
                                   + ", ".join(f"{v} ({k})" for k, v in needed.items()),
@@ -269,8 +269,8 @@ def table_notes(sds: xr.Dataset) -> list[str]:
     need = {k: interval_floor(k, bound_level(k, sds.attrs["confidence"], stopped, replicates is not None), replicates)
             for k in ("mean", "std", *QUANTILES)}
     notes = [f"{k}: no {conf:g} % interval below n = {v} (n = {n} here)" if v is not None else
-             f"{k}: no {conf:g} % interval at any n: its coverage falls short of the label above "
-             f"{100 * highest_level(k):g} % (docs/ensembles.md)" for k, v in need.items() if v is None or n < v]
+             f"{k}: no {conf:g} % interval at any n: {short_of_label(k)}" for k, v in need.items()
+             if v is None or n < v]
     if replicates is not None:
         notes.insert(0, f"randomised QMC, {replicates} replicates: intervals are Student t over "
                         "the replicates (none if a realisation failed)")
@@ -296,9 +296,11 @@ def one_run_repeated(ds) -> bool:
     known exactly: the gate's exact rule and the tables' note)."""
     from rss6core import model_level, parse_scene
     model, text = ds.attrs.get("model"), ds.attrs.get("scene_toml")
-    if model is None or text is None or ("status" in ds and (ds["status"].values.astype(str) != FINISHED).any()):
+    if model is None or text is None or model_level(str(model)).draws_clearances:
         return False
-    return not model_level(str(model)).draws_clearances and not parse_scene(str(text), "file").uncertain.inputs
+    if "status" in ds and (ds["status"].values.astype(str) != FINISHED).any():
+        return False
+    return not parse_scene(str(text), "file").uncertain.inputs
 
 
 def _identical_note(sds: xr.Dataset) -> list[str]:

@@ -59,7 +59,7 @@ from scipy import stats as sps
 from rss6core import FINISHED, models_with
 
 from ..analysis.estimators import BOUNDS, mean_interval, moment_floor
-from ..analysis.stats import in_window, json_number, table_cell
+from ..analysis.stats import below_floor, in_window, json_number, table_cell
 from ..files.records import file_window_label
 from ..vocabulary import CONFIDENCE, SUMMARIES
 
@@ -326,8 +326,7 @@ def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
                          "coefficient, low mean from all low realisations)",
             "interval_multifidelity": f"{SKEWED_COVERAGE}; NaN for N < {MIN_N_MF}",
             "interval_high_only": "pipeline.analysis.estimators mean interval; NaN for "
-                                  + (f"n < {moment_floor('mean', confidence)}" if moment_floor('mean', confidence)
-                                     else "every n at this confidence"),
+                                  f"{below_floor('mean', confidence)}",
             "min_n_multifidelity": MIN_N_MF,
             "statistics_offered": "mean only (quantiles and exceedance probabilities: see "
                                   "pipeline/multifidelity.py)",
