@@ -326,6 +326,11 @@ def test_all_realisations_failing_is_one_line_exit_2_and_the_file_keeps_them(tmp
     assert said.out == "" and len(said.err.strip().splitlines()) == 1, said   # no table of diverged maxima
     assert all(w in said.err for w in ("the elastic run failed", "divergence limit", f"{single} keeps its status"))
     assert xr.open_dataset(single).attrs["status"] == "failed"
+    assert main(["simulate", str(scene), "--model", "elastic", "--json"]) == 2
+    said = capsys.readouterr()   # a script reads the status from stdout; the error stays one line on stderr
+    printed = json.loads(said.out)
+    assert printed["status"] == "failed" and "divergence limit" in printed["message"], printed
+    assert "max_abs_error" not in printed and len(said.err.strip().splitlines()) == 1, said
     for argv in (["stats", str(single)], ["stats", str(single), "--event", "displacement:z>1mm"]):
         assert main(argv) == 2   # a single run's file: it had printed a table of dashes and 0/0 = nan
         _one_line_error(capsys, f"{single}: the run failed, so it has no statistics")

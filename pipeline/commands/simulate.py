@@ -53,6 +53,8 @@ def main(args) -> int:
         if args.output:
             write_netcdf(ds, args.output)
         kept = f"; {args.output} keeps its status and message" if args.output else ""
+        if args.json:   # a script reads the status from stdout; the one-line error still goes to stderr
+            print(json.dumps(_run_fields(level, result, wall), indent=2))
         raise UserError(f"{args.config}: the {level.model} run failed: {result.message}{kept}; {CHECK_HINT}")
     summary = error_summary(ds)
     if result.contact_force_peak is not None:
@@ -67,10 +69,8 @@ def main(args) -> int:
 def _print(args, level, result, summary: dict, wall: float, notes: list[str]) -> None:
     """The run's summary (``--json``: as JSON) and ``notes``, what of it does not measure the robot."""
     if args.json:
-        print(json.dumps({**summary, "wall_time_s": wall, "status": result.status,
-                          "message": result.message, "model": level.model, "integrator": level.integrator,
-                          "time_step_s": level.dt, "elements_per_link": level.elements}
-                         | ({"notes": notes} if notes else {}), indent=2))
+        print(json.dumps({**summary, **_run_fields(level, result, wall)} | ({"notes": notes} if notes else {}),
+                         indent=2))
         return
     integrated = (f"{level.integrator}, dt = {level.dt:g} s, {level.elements} elements per link"
                   if model_level(level.model).elastic_links else f"dt = {level.dt:g} s, rigid links")
@@ -84,3 +84,9 @@ def _print(args, level, result, summary: dict, wall: float, notes: list[str]) ->
                  if closed else ""))
     for line in notes:
         print(f"note: {line}")
+
+
+def _run_fields(level, result, wall: float) -> dict:
+    """What ``--json`` says of the run itself, finished or not: its status, message and settings (SI)."""
+    return {"wall_time_s": wall, "status": result.status, "message": result.message, "model": level.model,
+            "integrator": level.integrator, "time_step_s": level.dt, "elements_per_link": level.elements}
