@@ -144,3 +144,20 @@ def test_the_response_of_an_event_over_several_directions_is_their_largest_maxim
     r = _response(parse_event("displacement:x,y,z>1mm"), maxima)
     np.testing.assert_array_equal(r, [3.0, 0.5, np.inf])
     np.testing.assert_array_equal(_response(parse_event("displacement:x>1mm"), maxima), [1.0, 0.5, 0.0])
+
+
+@pytest.mark.parametrize("method", ["subset", "mc"])
+def test_an_event_every_draw_exceeds_has_no_cov_and_stops_the_cov_rule(tmp_path, capsys, method):
+    """P = 1 at 1000 of 1000: the plug-in CoV sqrt((1 - P) / (N P)) is 0, a certainty no N reaches; the answer
+    gives none (JSON null) beside the exact interval, and the CoV rule still stops after the first block."""
+    out = tmp_path / f"{method}.nc"
+    argv = ["reliability", "smoke", "--event", "displacement:z>0.000001mm", "--method", method, "--cov", "0.1",
+            "--workers", "1", "-o", str(out)]
+    capsys.readouterr()
+    assert main([*argv, "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert (res["pf"], res["cov"], res["evaluations"]) == (1.0, None, 1000), res
+    assert res["status"] == ("certain" if method == "subset" else "converged")
+    assert res["lower"] == pytest.approx(0.025 ** (1 / 1000), rel=1e-9) and res["upper"] == 1.0
+    assert main([*argv[:-1], str(tmp_path / "text.nc")]) == 0
+    assert "no CoV" in capsys.readouterr().out

@@ -119,6 +119,7 @@ def test_a_certain_or_an_impossible_event_is_said_at_the_first_level():
     assert (certain.lower, certain.upper) == (pytest.approx(edge, rel=1e-12), 1.0)
     assert (impossible.lower, impossible.upper) == (0.0, pytest.approx(1 - edge, rel=1e-12))
     assert "Clopper-Pearson" in certain.interval and "Clopper-Pearson" in impossible.interval
+    assert np.isnan([certain.cov, certain.cov_upper, impossible.cov]).all()   # not 0: no N makes P = 1 certain
 
 
 @pytest.mark.parametrize("n, p0", [(1000, 0.0), (1000, 0.7), (1000, 0.003), (999, 0.1)])

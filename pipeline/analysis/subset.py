@@ -237,9 +237,10 @@ def _first_level_extreme(r, threshold, record0, records, settings):
 
 def _plain_level_zero(result: SubsetResult, k: int, n: int) -> SubsetResult:
     """A result level 0 decided: its draws are plain Monte Carlo, so its interval is the exact binomial one of
-    k of n (a CoV of 0 or none gives no log-normal interval: [1, 1] would claim certainty)."""
+    k of n (a CoV of 0 or none gives no log-normal interval: [1, 1] would claim certainty). Its CoV is
+    undefined (NaN): the plug-in sqrt((1 - p) / (N p)) is 0 at p = 1, which no sample of N can claim."""
     lower, upper = clopper_pearson(k, n, result.confidence)
-    return replace(result, lower=float(lower), upper=float(upper),
+    return replace(result, lower=float(lower), upper=float(upper), cov=float("nan"), cov_upper=float("nan"),
                    interval=f"exact binomial (Clopper-Pearson) of {k} of {n} level-0 draws, plain Monte Carlo")
 
 

@@ -151,5 +151,6 @@ def _text(est, event, output) -> str:
     interval = (f"{100 * est.confidence:g} % interval [{est.lower:.4g}, {est.upper:.4g}] ({est.interval})"
                 if math.isfinite(est.lower) else f"no {100 * est.confidence:g} % interval: {est.interval}")
     event_line = f"P({event.text}){union_words(event.directions)} over the {window_words(event.window)}"
-    return (f"wrote {output}\n{event_line} = {est.pf:.4g} by {est.method}, CoV {est.cov:.3g}; {interval}\n"
+    cov = f"CoV {est.cov:.3g}" if math.isfinite(est.cov) else "no CoV (none at a probability of 0 or 1)"
+    return (f"wrote {output}\n{event_line} = {est.pf:.4g} by {est.method}, {cov}; {interval}\n"
             f"{est.level.size} evaluations (per level: {levels}); {est.message}")

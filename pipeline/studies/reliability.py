@@ -231,8 +231,15 @@ def _subset(spec, event: Event, dimension: int, settings: SubsetSettings, client
 
 
 def _mc_cov(k: int, n: int) -> float:
-    """The CoV of the Monte Carlo estimate k / n: sqrt((1 - P) / (n P)); infinite for k = 0."""
-    return float(np.sqrt((1 - k / n) / k)) if k else float("inf")
+    """The CoV of the Monte Carlo estimate k / n: sqrt((1 - P) / (n P)); infinite for k = 0, undefined (NaN)
+    for k = n, where the plug-in 0 would claim a certainty no n reaches."""
+    return float(np.sqrt((1 - k / n) / k)) if 0 < k < n else float("inf") if k == 0 else float("nan")
+
+
+def _cov_met(k: int, n: int, cov_target: float) -> bool:
+    """Whether k of n meets a CoV target; k = n stops the rule as the plug-in CoV 0 did (the exact interval then
+    says how close to 1 P is)."""
+    return k == n or _mc_cov(k, n) <= cov_target
 
 
 def _monte_carlo(spec, event: Event, dimension: int, n: int, seed: int, confidence: float, client,
@@ -246,14 +253,14 @@ def _monte_carlo(spec, event: Event, dimension: int, n: int, seed: int, confiden
         zs.append(rng.standard_normal((MC_BLOCK, dimension))[:n - b * MC_BLOCK])
         maxima.append(batch(zs[-1]))
         k += int(np.count_nonzero(_response(event, maxima[-1]) > event.limit))
-        if cov_target is not None and _mc_cov(k, b * MC_BLOCK + len(zs[-1])) <= cov_target:
+        if cov_target is not None and _cov_met(k, b * MC_BLOCK + len(zs[-1]), cov_target):
             break
     z, maxima = np.concatenate(zs), np.concatenate(maxima)
     m = len(z)
     lower, upper = (float(v) for v in clopper_pearson(k, m, confidence))
     status, message = "finished", f"{k} of {m} realisations exceed the limit"   # n asked for: no convergence claimed
     if cov_target is not None:
-        met = _mc_cov(k, m) <= cov_target
+        met = _cov_met(k, m, cov_target)
         status = "converged" if met else "budget"
         message += (f"; CoV target {cov_target:g} met" if met else
                     f"; CoV target {cov_target:g} not met within the budget of {n} realisations")
