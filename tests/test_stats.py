@@ -290,7 +290,9 @@ def test_rss6_data_2000_realisations_issue_26_done_when(tmp_path):
             for s in withheld:
                 assert np.isnan(sub["max_abs_error"].sel(statistic=s, bound="lower")).all()
         for s in checked:
-            assert np.mean([h[s] for h in hits], axis=0).min() >= 0.92, (n, s)
+            coverage = np.mean([h[s] for h in hits], axis=0).min()
+            print(f"sub-samples of {n}: {s} covered in at least {coverage:.4f}")   # pytest -s: docs/ensembles.md
+            assert coverage >= 0.92, (n, s)
 
 
 def test_the_table_says_which_numbers_do_not_measure_the_robot_by_level():
