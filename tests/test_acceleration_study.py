@@ -46,7 +46,8 @@ def test_markdown_states_the_verdict_and_the_band():
         scale = 1.03 if v.beam == TIMOSHENKO else 1.0
         runs[v] = {"steady": scale * (1 + 0.01 * rng.random((4, 6))), "bursts": np.ones((4, 2, 6)),
                    "seconds_per_realization": 1.0, "failed": 0, "steady_after": 0.75}
-    text = markdown(runs, "paper", 4, 0)
+    text = markdown(runs, "paper", 4, 0, "python -m pipeline.studies.accelerations paper -n 4 -o d")
+    assert text.startswith("`python -m pipeline.studies.accelerations paper -n 4 -o d`: Scene paper")  # its command
     assert "steady window t >= 0.75 s" in text
     assert "8 -> 16 elements" in text and "converged (within 5 %) in every direction" in text
     assert "model-form band" in text and "ry 3." in text

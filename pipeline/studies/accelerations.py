@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import shlex
 import sys
 import time
 from dataclasses import dataclass
@@ -142,8 +143,9 @@ def _verdict(runs: dict) -> list[str]:
     return lines
 
 
-def markdown(runs: dict, scene_name: str, n: int, seed: int) -> str:
-    """The study's table (steady-window maxima, ry burst maxima, cost) and verdict, as markdown."""
+def markdown(runs: dict, scene_name: str, n: int, seed: int, command: str = "") -> str:
+    """The study's table (steady-window maxima, ry burst maxima, cost) and verdict, as markdown, headed by the
+    ``command`` that measured it."""
     head = ("| setting | " + " | ".join(f"{d} steady" for d in DIRECTIONS)
             + " | ry burst t~1 s | ry burst t~2 s | s/realisation |")
     rows = [head, "|" + "---|" * (len(DIRECTIONS) + 4)]
@@ -152,7 +154,8 @@ def markdown(runs: dict, scene_name: str, n: int, seed: int) -> str:
                     + f" | {_cell(r['bursts'][:, 0, 4])} | {_cell(r['bursts'][:, 1, 4])}"
                     + f" | {r['seconds_per_realization']:.3g} |")
     steady_after = next(iter(runs.values()))["steady_after"]
-    intro = (f"Scene {scene_name}, contact level, realisations 0-{n - 1} of seed {seed}; max |acceleration "
+    intro = ((f"`{command}`: " if command else "")
+             + f"Scene {scene_name}, contact level, realisations 0-{n - 1} of seed {seed}; max |acceleration "
              f"error| over the steady window t >= {steady_after:g} s on the output grid (x, y, z in m/s^2; "
              f"rx, ry, rz in "
              f"rad/s^2), median [min-max] over the realisations; bursts: max |ry - its {1e3 * BURST_PERIOD:g} ms "
@@ -160,7 +163,7 @@ def markdown(runs: dict, scene_name: str, n: int, seed: int) -> str:
     return "\n".join([intro, "", *rows, "", *_verdict(runs)]) + "\n"
 
 
-def write(runs: dict, outdir, scene_name: str, n: int, seed: int) -> Path:
+def write(runs: dict, outdir, scene_name: str, n: int, seed: int, command: str = "") -> Path:
     """DIR/acceleration_maxima.csv (one row per variant and realisation) and DIR/acceleration_maxima.md."""
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
@@ -177,7 +180,7 @@ def write(runs: dict, outdir, scene_name: str, n: int, seed: int) -> Path:
                            + [f"{x:.6g}" for x in r["bursts"][i].reshape(-1)]
                            + [f"{r['seconds_per_realization']:.4g}"])
     path = out / "acceleration_maxima.md"
-    path.write_text(markdown(runs, scene_name, n, seed))
+    path.write_text(markdown(runs, scene_name, n, seed, command))
     return path
 
 
@@ -200,7 +203,8 @@ def main(argv=None) -> int:
         return 2
     print(f"acceleration study: {scene.name}, {args.n} realisations per variant (seed {args.seed})")
     runs = study(scene, args.n, args.seed, default_variants(tuple(args.meshes)))
-    path = write(runs, args.output, scene.name, args.n, args.seed)
+    command = " ".join(["python -m pipeline.studies.accelerations", *map(shlex.quote, argv or sys.argv[1:])])
+    path = write(runs, args.output, scene.name, args.n, args.seed, command)
     print(path.read_text())
     return 0
 
