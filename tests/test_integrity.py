@@ -262,17 +262,26 @@ def test_two_tampered_parts_are_named_in_one_run_with_the_command_that_recovers(
         assert a.getncattr(CHECKSUM) == b.getncattr(CHECKSUM)   # the same values as a clean run
 
 
-@pytest.mark.parametrize("loss", ["deleted", "unreadable"])
+@pytest.mark.parametrize("loss", ["deleted", "unreadable", "parts a list", "an entry a number", "no provenance",
+                                  "an entry without its checksum"])
 def test_parts_whose_manifest_is_lost_are_verified_and_kept(merged, tmp_path, loss):
     """A deleted or unreadable manifest.json costs no finished work (bad-input audit: it had thrown
     away every stored chunk): each part's own checksums and identity are checked, the good ones are
     vouched for again and the rerun computes nothing, giving the clean run's values."""
     out = tmp_path / "out.nc"
     manifest = _three_parts(out)
+    data = json.loads(manifest.path.read_text())
+    first = next(iter(data["parts"]))
+    edits = {"parts a list": lambda d: d | {"parts": []},   # a reviewer's edits: each had ended in a traceback
+             "an entry a number": lambda d: d | {"parts": d["parts"] | {first: 5}},
+             "no provenance": lambda d: {"parts": d["parts"]},   # had read "made with different settings"
+             "an entry without its checksum": lambda d: d | {"parts": d["parts"] | {first: {"realizations": [0]}}}}
     if loss == "deleted":
         manifest.path.unlink()
-    else:
+    elif loss == "unreadable":
         manifest.path.write_text('{"parts": {"chunk-0000000')
+    else:
+        manifest.path.write_text(json.dumps(edits[loss](data)))
     outcome = ensemble(_spec(), N, out, workers=1, progress=False)
     assert outcome.stored_before == N and outcome.computed == 0
     with netCDF4.Dataset(out) as a, netCDF4.Dataset(merged) as b:

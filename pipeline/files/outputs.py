@@ -285,15 +285,26 @@ class PartsManifest:
             return {}
         try:
             data = json.loads(self.path.read_text())
-            entries = data["parts"]
-        except (OSError, ValueError, KeyError, TypeError):   # kept aside; its parts are then unvouched
+        except (OSError, ValueError):
+            data = None
+        if not self._well_formed(data):   # kept aside; its parts are then unvouched
             self.path.replace(self.path.with_name("manifest.json.unreadable"))
             self.lost = True
             return {}
+        entries = data["parts"]
         if data.get("provenance") != self.provenance:
             raise EnsembleFileError(f"{self.path}: the parts were made with different settings "
                                     f"({self.settings}); choose another output file or the same settings")
         return entries
+
+    def _well_formed(self, data) -> bool:
+        """Whether ``data`` has the manifest's shape: a provenance and, per part, its sha256 and a list of its
+        indices (an edited shape is read as a lost manifest, not as other settings or a traceback)."""
+        key = self.index + "s"
+        return (isinstance(data, dict) and isinstance(data.get("provenance"), dict)
+                and isinstance(data.get("parts"), dict)
+                and all(isinstance(e, dict) and isinstance(e.get("sha256"), str) and isinstance(e.get(key), list)
+                        and e[key] and all(isinstance(r, int) for r in e[key]) for e in data["parts"].values()))
 
     def _save(self) -> None:
         tmp = self.path.with_name("manifest.json.tmp")
