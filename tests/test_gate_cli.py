@@ -132,6 +132,31 @@ def test_malformed_spec_is_one_line_exit_2_and_computes_nothing(tmp_path, spec, 
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_verdict_on_what_the_paper_level_measures_of_its_step_is_refused_before_work(tmp_path, capsys):
+    """The paper level's velocity and acceleration errors measure its step, not the robot (a reviewer's run passed
+    'acceleration:z<=200m/s^2@q50' silently): --require, --spec and --event on them are one line, exit 2, before
+    any work; displacement specs, and the same specs at another level's file, are judged."""
+    paper = tmp_path / "paper.nc"
+    step_measured = ["--require", "acceleration:z<=200m/s^2@q50"]
+    run = ["run", "smoke", "--model", "paper", "-n", "4", "--workers", "1", "-o", str(paper)]
+    assert main([*run, *step_measured]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "'acceleration:z<=200m/s^2@q50'" in err and "measure the step" in err
+    assert not paper.exists()
+    assert main(["budget", "smoke", "--model", "paper", "--spec", "velocity:z<=1mm/s@q95",
+                 "-o", str(tmp_path / "budget")]) == 2
+    assert "--spec 'velocity:z<=1mm/s@q95'" in capsys.readouterr().err and not (tmp_path / "budget").exists()
+    assert main([*run, "--require", "displacement:z<=1mm@q50"]) != 2 and paper.exists()   # judged (undecided at n = 4)
+    for extra in (step_measured, ["--event", "velocity:z>1mm/s"]):
+        capsys.readouterr()
+        assert main(["stats", str(paper), *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "measure the step, not the robot" in err, err
+    elastic = tmp_path / "elastic.nc"
+    assert main(["simulate", "smoke", "--model", "elastic", "-o", str(elastic)]) == 0
+    assert main(["stats", str(elastic), *step_measured]) != 2   # judged: the elastic level measures the robot
+
+
 def test_stats_with_a_malformed_spec_or_a_confidence_not_above_half_exits_2(recipe_run, capsys):
     _, output, _ = recipe_run
     for extra, token in [(["--require", "displacement:x<=1parsec@q95"], "unknown unit 'parsec'"),

@@ -12,7 +12,7 @@ from ..vocabulary import OptionError
 from .messages import interrupted, loaded_joints_meanwhile, warn_oversubscription
 from .options import (add_confidence, add_json, add_model, add_parents, add_scene, add_seed, add_workers, output_stem,
                       positive_int, realisations)
-from .requirements import known_windows
+from .requirements import known_windows, robot_measures
 
 
 def add_parser(sub) -> None:
@@ -80,6 +80,7 @@ def main(args) -> int:
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
     known_windows(specs, level.scene, "--spec")
+    robot_measures(specs, level.model, "--spec")
     if args.per_joint and not model_level(level.model).linear_in_clearances:
         raise OptionError(f"--per-joint: at the {', '.join(m for m in MODELS if model_level(m).linear_in_clearances)} "
                           f"level only (exact linear scaling); at the {level.model} level each per-joint step "

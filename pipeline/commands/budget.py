@@ -8,7 +8,7 @@ from ..scenes.catalogue import find_scene
 from .messages import interrupted, note_loaded_joints, warn_oversubscription
 from .options import (add_confidence, add_model, add_parents, add_scene, add_seed, add_workers, output_stem,
                       positive_float, realisations)
-from .requirements import known_windows
+from .requirements import known_windows, robot_measures
 
 
 def add_parser(sub) -> None:
@@ -45,6 +45,7 @@ def main(args) -> int:
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
     known_windows(specs, level.scene, "--spec")
+    robot_measures(specs, level.model, "--spec")
     folder = check_output_folder(args.output or f"budget_{output_stem(args.config)}_{level.model}", args.parents)
     request = {"scene": text_identity(level.scene.source_text), "--model": level.model, "--spec": args.spec,
                "-n": args.n, "--seed": args.seed, "--confidence": args.confidence, "--tolerance": args.tolerance}

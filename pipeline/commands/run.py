@@ -14,7 +14,7 @@ from .messages import (import_meanwhile, interrupted, loaded_joints_meanwhile, s
                        warn_oversubscription)
 from .options import (LEVELS_HELP, add_level_settings, add_model, add_parents, add_require, add_scene, add_scheduler,
                       add_seed, add_workers, int_at_least, output_stem, positive_int, realisations)
-from .requirements import annotator, known_windows, requirements
+from .requirements import annotator, known_windows, requirements, robot_measures
 
 
 def add_parser(sub) -> None:
@@ -76,6 +76,7 @@ def main(args) -> int:
     cluster = resolve_cluster(args.workers, args.scheduler, args.worker_timeout)
     level = level_settings(args)
     known_windows(specs + targets, level.scene)
+    robot_measures(specs, level.model)
     _refuse_clearance_free_default(args, level)
     replicates = resolve_replicates(args.sampler, args.replicates, args.n, level)
     check_cap(targets, args.n, replicates)

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 from ..vocabulary import OptionError, UserError
 from .options import add_confidence, add_json, add_parents, add_require
-from .requirements import judge, known_windows, requirements, verdict_attrs
+from .requirements import judge, known_windows, requirements, robot_measures, verdict_attrs
 
 
 def add_parser(sub) -> None:
@@ -59,6 +59,8 @@ def main(args) -> int:
     none_finished = every_realisation_failed(ds, args.file)
     if none_finished:
         raise UserError(none_finished)
+    robot_measures(specs, str(ds.attrs.get("model", "")))
+    robot_measures(events, str(ds.attrs.get("model", "")), "--event")
     note = _loaded_joints_note(ds, args.file, specs + events)
     full = ensemble_stats(ds, args.confidence, window=None)
     if args.window is not None:
