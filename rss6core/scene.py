@@ -285,6 +285,16 @@ def _check_startup_samples(settle: float, steady_after: float, dt: float) -> Non
                          "steady_after_s a step or more after settle_time_s, or at most settle_time_s for none")
 
 
+def _check_not_the_end_sample_alone(sim: dict, duration: float, dt: float) -> None:
+    """SceneError if the whole or steady window, [settle_time_s, T] or [steady_after_s, T], would hold the end
+    sample T alone (s): its maximum would be that sample's, an end-sample artefact, and its mean the same."""
+    for key in ("settle_time_s", "steady_after_s"):
+        if sim[key] > duration - dt + 1e-12:
+            window = "whole" if key == "settle_time_s" else "steady"
+            raise SceneError(f"[simulation] {key}: the {window} window [{sim[key]!r}, {duration!r}] s holds only the "
+                             f"end sample (time_step_s = {dt!r} s); put {key} at least a step before the end")
+
+
 _SCHEMA: dict = {
     "name": _Key(str),
     "geometry": {
@@ -609,6 +619,7 @@ def _check_timing(sim: dict, tr) -> None:
                          f"= {duration!r}, got {sim['settle_time_s']!r}")
     sim["steady_after_s"] = _steady_after(sim["steady_after_s"], duration, where)
     _check_startup_samples(sim["settle_time_s"], sim["steady_after_s"], dt)
+    _check_not_the_end_sample_alone(sim, duration, dt)
     try:
         whole_steps(dt, sim["contact_time_step_s"], at_least=1)
     except ValueError:

@@ -228,3 +228,18 @@ def test_a_material_or_gravity_beyond_any_robot_is_a_unit_slip(paper_text, key, 
         else:
             text = _edit(paper_text, f"{key} = {nominal}", f"{key} = {end!r}")
         assert parse_scene(text).source_text == text
+
+
+@pytest.mark.parametrize("key, value, ok", [("steady_after_s", 1.9995, False), ("steady_after_s", 1.999, True),
+                                            ("settle_time_s", 1.9995, False), ("settle_time_s", 1.999, True)])
+def test_a_window_of_the_end_sample_alone_is_refused(paper_text, key, value, ok):
+    """A reviewer's steady window [1.9995, 2] s on the 1 ms grid held the end sample alone: its maximum was that
+    sample (max == mean), an end-sample artefact. A step before the end keeps two samples and is taken."""
+    text = _edit(paper_text, "time_step_s = 1.0e-3", f"time_step_s = 1.0e-3\n{key} = {value}")
+    if key == "settle_time_s":   # steady_after_s at most settle_time_s: no start-up window
+        text = _edit(text, "time_step_s = 1.0e-3", f"time_step_s = 1.0e-3\nsteady_after_s = {value}")
+    if ok:
+        parse_scene(text)
+        return
+    with pytest.raises(SceneError, match=rf"\[simulation\] {key}: the .* window .* holds only the end sample"):
+        parse_scene(text)
