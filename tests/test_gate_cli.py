@@ -73,9 +73,13 @@ def _stats_json(output, *specs, extra=()):
 
 def test_a_limit_far_below_fails(recipe_run):
     _, output, _ = recipe_run
-    proc, out = _stats_json(output, "displacement:x,y,z<=1um@q95")
+    proc, out = _stats_json(output, "displacement:x,y,z<=1um@q95", "displacement:rx<=0.001mrad@q95")
     assert proc.returncode == 1
     assert {v["outcome"] for v in out["requirements"]} == {"fail"}
+    # SI values name their SI unit; the spec's unit is named as such (a reviewer read 'limit 0.0002, unit mm')
+    units = {(v["si_unit"], v["spec_unit"], round(v["limit"], 15)) for v in out["requirements"]}
+    assert units == {("m", "um", 1e-6), ("rad", "mrad", 1e-6)}, units
+    assert all("unit" not in v for v in out["requirements"])
 
 
 def test_a_limit_neither_side_decides_exits_3_with_the_n_it_needs(recipe_run, capsys):

@@ -30,7 +30,7 @@ import numpy as np
 
 from .exceedance import Event, event_values
 from .spec import PF, Spec
-from ..vocabulary import CONFIDENCE, QUANTILES, WINDOWS
+from ..vocabulary import CONFIDENCE, QUANTILES, QUANTITIES, WINDOWS, family_of
 from .estimators import (QUANTILE_DECISION_CAP, bound_level, interval_floor, no_interval_at, one_sided_cp,
                          quantile_decision_n)
 from .stats import check_window_samples, ensemble_stats, finished_values, json_number, json_record, one_run_repeated
@@ -409,6 +409,13 @@ def overall(verdicts: list[Verdict]) -> str:
 
 
 def verdicts_json(verdicts: list[Verdict]) -> list[dict]:
-    """Plain dicts (SI values; None where a bound or the estimate does not exist) for ``--json`` and file
-    attributes."""
-    return [json_record(v) for v in verdicts]
+    """Plain dicts (SI values, in ``si_unit``; None where a bound or the estimate does not exist) for ``--json``
+    and file attributes; the spec's own unit is ``spec_unit``, ``factor`` SI units each."""
+    records = []
+    for v in verdicts:
+        record = json_record(v)
+        record["spec_unit"] = record.pop("unit")
+        record["si_unit"] = ("rad" if family_of(v.direction) == "rotation" else "m") + ("", "/s", "/s^2")[
+            QUANTITIES.index(v.quantity)]
+        records.append(record)
+    return records
