@@ -83,12 +83,12 @@ def test_superposition_reproduces_a_run_at_every_size(paper, eccentricity):
 
 def test_command_verifies_and_writes(configs, tmp_path, capsys):
     code = main(["allocate", str(configs / "paper.toml"), "--spec", SPEC, "-n", str(N), "--classes", ",".join(SMALL),
-                 "--workers", "1", "-o", str(tmp_path / "a"), "--json"])
+                 "--workers", "1", "-o", str(tmp_path / "a b"), "--json"])   # a space: the printed command quotes it
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["verification"] == "pass"
     assert out["total_cost"] < out["uniform_cost"]
     import xarray as xr
-    with xr.open_dataset(tmp_path / "a" / "allocation.nc") as ds:
+    with xr.open_dataset(tmp_path / "a b" / "allocation.nc") as ds:
         assert list(ds["fit_class"].values) == [c["class"] for c in out["classes"]]
         assert set(ds["verdict_outcome"].values) == {"pass"}
     # the verification re-simulated the search's draws; the command printed for fresh draws runs the

@@ -225,3 +225,5 @@ def test_the_limiting_line_names_the_window_of_its_statistic():
     assert limiting.startswith("displacement x q95 (whole run): upper bound ")
     ratio_steady, limiting = exact_scale([replace(v, window="steady") for v in verdicts])
     assert limiting.startswith("displacement x q95 (steady window): upper bound ") and ratio_steady == ratio
+    _, limiting = exact_scale([replace(v, measure="mean") for v in verdicts])   # the mean |error|'s q95, as spec'd
+    assert limiting.startswith("displacement x q95:mean (whole run): upper bound "), limiting

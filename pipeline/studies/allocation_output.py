@@ -68,8 +68,10 @@ def fresh_check_command(a: Allocation, model: str, n: int, seed: int, specs: lis
     None for per-joint bands (no scene holds them)."""
     if a.scene_path is None:
         return None
-    return (f"rss6 run {a.scene_path} --model {model} -n {n} --seed {seed + 1} -o {a.scene_path.with_suffix('')}"
-            f"_seed{seed + 1}.nc " + " ".join(f"--require '{s}'" for s in specs))
+    from shlex import quote
+    output = f"{a.scene_path.with_suffix('')}_seed{seed + 1}.nc"
+    return (f"rss6 run {quote(str(a.scene_path))} --model {model} -n {n} --seed {seed + 1} -o {quote(output)} "
+            + " ".join(f"--require {quote(s)}" for s in specs))
 
 
 def allocation_dataset(a: Allocation, scene, model: str, integrator: str, dt: float, elements: int,

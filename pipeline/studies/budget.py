@@ -136,7 +136,8 @@ def exact_scale(verdicts: list[Verdict]) -> tuple[float, str]:
                               "clearance meets it")
         ratio = v.limit / v.upper
         if best is None or ratio < best[0]:
-            best = (ratio, f"{v.quantity} {v.direction} {v.statistic} ({window_words(v.window)}): upper bound "
+            statistic = v.statistic + (":mean" if v.measure == "mean" else "")   # of the mean |error|: as the spec
+            best = (ratio, f"{v.quantity} {v.direction} {statistic} ({window_words(v.window)}): upper bound "
                            f"{v.upper / v.factor:.4g} {v.unit} at scale 1, limit {v.limit / v.factor:.4g} {v.unit}")
     return best
 
