@@ -578,8 +578,8 @@ def _check_magnitudes(v: dict) -> None:
 
 
 def _check_sections(v: dict) -> None:
-    """SceneError for a rod tube without a wall, a material's impossible Poisson ratio, or lumped mass
-    without the rotary inertia it carries."""
+    """SceneError for a rod tube without a wall, a material's impossible Poisson ratio, platform moments no body
+    has, or lumped mass without the rotary inertia it carries."""
     rod, mat = _rod(v["rod_section"]), _material(v["material"])
     if rod.inner_diameter >= rod.outer_diameter:
         raise SceneError("[rod_section] inner_diameter_m: must be smaller than outer_diameter_m, "
@@ -587,6 +587,7 @@ def _check_sections(v: dict) -> None:
     if not -1.0 < mat.poisson_ratio <= 0.5:
         raise SceneError(f"[material] shear_modulus_Pa: implies Poisson ratio E/(2G)-1 = "
                          f"{mat.poisson_ratio:.3f}, outside (-1, 0.5]")
+    _rigid_body_moments(v["platform"]["inertia_kg_m2"], "[platform] inertia_kg_m2")
     if v["beam"]["mass"] == "lumped" and not v["beam"]["rotary_inertia"]:
         raise SceneError("[beam] mass: 'lumped' puts the sections' rotary inertia on the nodes' "
                          "rotations; set [beam] rotary_inertia = true")
@@ -668,7 +669,29 @@ def _uncertain(v: dict) -> UncertainInputs:
     except UncertainInputError as exc:
         raise SceneError(str(exc)) from None
     _check_drawn_magnitudes(inputs)
+    _check_drawn_inertia(inputs)
     return inputs
+
+
+def _rigid_body_moments(moments, where: str) -> None:
+    """SceneError unless principal moments (kg m^2) are those of a body: each at most the sum of the
+    other two (I1 + I2 >= I3, as every mass distribution gives; equality for a flat plate)."""
+    m = np.sort(np.asarray(moments, float))
+    if m[0] + m[1] < m[2] * (1 - 1e-12):
+        raise SceneError(f"{where}: principal moments {', '.join(f'{x:.6g}' for x in moments)} kg m^2 are no "
+                         f"body's: the largest ({m[2]:.6g}) exceeds the sum of the other two ({m[0] + m[1]:.6g})")
+
+
+def _check_drawn_inertia(inputs: UncertainInputs) -> None:
+    """SceneError for an uncertain platform inertia whose law can draw moments no body has (a shared
+    deviation added to all three can break I1 + I2 >= I3; a factor cannot)."""
+    for item in inputs.inputs:
+        if item.parameter == "platform.inertia_kg_m2":
+            for d in item.draws([0.0, 1.0]):
+                moments = item.realised(np.full(item.count, d))
+                if np.all(np.isfinite(moments)):
+                    _rigid_body_moments(moments, f"[uncertain.{item.name}] {item.parameter}: law {item.law!r} "
+                                                 "can draw")
 
 
 def _check_drawn_magnitudes(inputs: UncertainInputs) -> None:

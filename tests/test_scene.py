@@ -243,3 +243,16 @@ def test_a_window_of_the_end_sample_alone_is_refused(paper_text, key, value, ok)
         return
     with pytest.raises(SceneError, match=rf"\[simulation\] {key}: the .* window .* holds only the end sample"):
         parse_scene(text)
+
+
+def test_platform_moments_no_body_has_are_refused(paper_text):
+    """I1 + I2 >= I3 holds for every mass distribution (a reviewer's [3e-5, 3e-5, 5.42e-3] was taken); the paper's
+    near-flat plate (2.73 + 2.73 >= 5.42) passes, and so does a drawn inertia that keeps it. A shared deviation
+    added to all three moments lowers I1 + I2 - I3 by itself: from -4e-5 kg m^2 on it leaves every body."""
+    nominal = "inertia_kg_m2 = [2.73e-3, 2.73e-3, 5.42e-3]"
+    with pytest.raises(SceneError, match=r"\[platform\] inertia_kg_m2: .* no body's: the largest \(0.00542\)"):
+        parse_scene(_edit(paper_text, nominal, "inertia_kg_m2 = [3e-5, 3e-5, 5.42e-3]"))
+    table = '\n[uncertain.inertia]\nparameter = "platform.inertia_kg_m2"\nlaw = "uniform"\n'
+    parse_scene(paper_text + table + "low_kg_m2 = -3.9e-5\nhigh_kg_m2 = 1e-3\n")
+    with pytest.raises(SceneError, match=r"\[uncertain.inertia\] platform.inertia_kg_m2: law 'uniform' can draw"):
+        parse_scene(paper_text + table + "low_kg_m2 = -4.1e-5\nhigh_kg_m2 = 1e-3\n")
