@@ -126,16 +126,30 @@ def test_mc_adds_blocks_until_the_cov_target_and_no_further(tmp_path, capsys):
 
 def test_subset_doubles_n_within_its_budget(tmp_path, capsys):
     """A target the first run meets: one run. An unreachable one: N = 200, then 400, and no third run,
-    which would take the evaluations beyond the budget (status 'budget')."""
+    whose most evaluations (N + 16 (1 - p0) N = 12320 at N = 800) would take them beyond the budget."""
     base = ["reliability", "smoke", "--event", RARE, "-n", "200", "--workers", "1", "--json"]
     met = _run_json(capsys, base + ["--cov", "0.9", "-o", str(tmp_path / "a.nc")])
     assert met["status"] == "converged" and met["evaluations_per_level"][0] == 200 and met["cov"] <= 0.9
     assert "1 run(s) up to N = 200" in met["message"]
-    capped = _run_json(capsys, base + ["--cov", "0.01", "--budget", "2000", "-o", str(tmp_path / "b.nc")])
+    capped = _run_json(capsys, base + ["--cov", "0.01", "--budget", "10000", "-o", str(tmp_path / "b.nc")])
     assert capped["status"] == "budget" and capped["evaluations_per_level"][0] == 400
     assert "2 run(s) up to N = 400" in capped["message"] and capped["cov"] > 0.01
     spent = int(capped["message"].split("evaluations in all")[0].rsplit(", ", 1)[1])
-    assert spent <= 2000 < spent + 2 * capped["evaluations"]
+    assert spent <= 10000 < spent + 12320
+
+
+def test_a_budget_below_the_first_subset_run_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    """N = 1000 may take 1000 + 16 * 900 = 15400 evaluations: --budget 1500 (or 5) cannot hold it, so no
+    evaluation runs (it used to run 1900 and call them within a budget of 5)."""
+    monkeypatch.setattr(study, "evaluate", lambda *a, **k: pytest.fail("work started"))
+    for budget in ("5", "15399"):
+        capsys.readouterr()
+        code = main(["reliability", "smoke", "--event", EVENT, "--cov", "0.5", "--budget", budget,
+                     "-o", str(tmp_path / "x.nc")])
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and len(err.splitlines()) == 1, err
+        assert f"--budget {budget}" in err and "N = 1000" in err and "15400" in err, err
+    assert not list(tmp_path.iterdir())
 
 
 @pytest.mark.parametrize("extra, token", [

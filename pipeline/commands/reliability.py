@@ -37,7 +37,8 @@ def add_parser(sub) -> None:
                         "run each time), until the estimated CoV is at most C or --budget would be exceeded "
                         "(exit 0 either way; status 'budget' if not met) (default: none: a run of size -n)")
     p.add_argument("--budget", type=evaluations, metavar="E",
-                   help="with --cov: evaluations at most, over all runs (default 20000 subset, 200000 mc)")
+                   help="with --cov: evaluations at most, over all runs (default 50000 subset, 200000 mc); a subset "
+                        "run starts only if its most evaluations, N + 16 (1 - p0) N, fit in what is left")
     p.add_argument("-p0", "--p0", type=float, default=0.1,
                    help="subset: conditional probability of each level, in (0, 0.5] (default 0.1)")
     add_seed(p)
@@ -58,13 +59,15 @@ def _settings(args):
     """Every option checked before any work: the event, p0 and N, the level's random inputs."""
     from ..analysis.exceedance import parse_event
     from ..analysis.subset import SubsetSettings
-    from ..studies.reliability import input_dimension
+    from ..studies.reliability import DEFAULT_BUDGET, check_subset_budget, input_dimension
     event = parse_event(args.event)
     if args.method == "subset":
         try:
-            SubsetSettings(args.n or 1000, args.p0, args.seed, args.confidence)
+            settings = SubsetSettings(args.n or 1000, args.p0, args.seed, args.confidence)
         except ValueError as exc:
             raise OptionError(f"-n/--p0: {exc}") from None
+        if args.cov is not None:
+            check_subset_budget(settings, args.budget or DEFAULT_BUDGET["subset"])
     elif args.p0 != 0.1:
         raise OptionError("--p0: applies with --method subset only")
     if args.budget and args.cov is None:
