@@ -67,7 +67,7 @@ def test_a_run_interrupted_between_batches_resumes_to_the_uninterrupted_result(t
     assert not (tmp_path / "r.nc.checkpoint.nc").exists()
 
 
-def test_a_left_checkpoint_needs_resume_and_a_finished_output_is_not_rerun(tmp_path, monkeypatch, capsys):
+def test_a_left_checkpoint_needs_resume_and_a_finished_output_is_not_recomputed(tmp_path, monkeypatch, capsys):
     out = tmp_path / "r.nc"
     _interrupt_at(monkeypatch, 1)
     assert main(_argv(out)) == 130
@@ -79,10 +79,13 @@ def test_a_left_checkpoint_needs_resume_and_a_finished_output_is_not_rerun(tmp_p
     assert main(_argv(out, "--resume", "--seed", "4")) == 2     # another request
     assert "made by a different request" in capsys.readouterr().err
     assert main(_argv(out, "--resume")) == 0
-    capsys.readouterr()
-    for extra in ([], ["--resume"]):
-        assert main(_argv(out, *extra)) == 2
-        assert "exists; rss6 reliability does not overwrite" in capsys.readouterr().err
+    answer = json.loads(capsys.readouterr().out)
+    monkeypatch.setattr(study, "evaluate", lambda *a, **k: pytest.fail("evaluated again"))
+    for extra in ([], ["--resume"]):   # the same request: answered from the file
+        assert main(_argv(out, *extra)) == 0
+        assert json.loads(capsys.readouterr().out) == answer
+    assert main(_argv(out, "--seed", "4")) == 2
+    assert "another rss6 reliability request (--seed 0 there, 4 now)" in capsys.readouterr().err
 
 
 def test_resume_without_a_checkpoint_says_it_starts_from_the_first_batch(tmp_path, capsys, whole):
@@ -174,3 +177,23 @@ def test_mc_without_a_cov_target_claims_no_convergence(tmp_path, capsys):
     res = _run_json(capsys, ["reliability", "smoke", "--event", EVENT, "--method", "mc", "-n", "1000",
                              "--workers", "1", "-o", str(tmp_path / "m.nc"), "--json"])
     assert res["status"] == "finished" and res["evaluations"] == 1000
+
+
+def test_a_rerun_of_the_same_request_answers_from_its_file_and_draws_the_missing_figure(tmp_path, capsys,
+                                                                                        monkeypatch):
+    """A run interrupted after writing its file (the figure deleted stands for it): the same command prints the
+    answer from the file, evaluates nothing and draws the figure; another --event onto the file is refused in
+    one line naming it (it used to refuse both: 'exists; rss6 reliability does not overwrite a file')."""
+    out, png = tmp_path / "r.nc", tmp_path / "r.png"
+    argv = ["reliability", "smoke", "--model", "quasi-static", "--event", EVENT, "-o", str(out), "--plot", str(png)]
+    first = _run_json(capsys, argv + ["--json"])
+    png.unlink()
+    monkeypatch.setattr(study, "evaluate", lambda *a, **k: pytest.fail("evaluated again"))
+    again = _run_json(capsys, argv + ["--json"])
+    assert png.exists() and again == first
+    capsys.readouterr()
+    assert main(argv) == 0 and f"read back {out}" in capsys.readouterr().out
+    other = ["reliability", "smoke", "--model", "quasi-static", "--event", RARE, "-o", str(out)]
+    assert main(other) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"--event {EVENT} there, {RARE} now" in err, err

@@ -30,7 +30,7 @@ from ..files.writing import sigint_deferred
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
 
 __all__ = ["ReliabilityError", "Estimate", "input_dimension", "input_labels", "physical_inputs", "what_fails",
-           "evaluate", "reliability", "check_subset_budget",
+           "evaluate", "reliability", "check_subset_budget", "estimate_from_dataset",
            "reliability_dataset", "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
 
 METHODS = ("subset", "mc")
@@ -326,6 +326,17 @@ def reliability(spec, event: Event, method: str = "subset", n: int | None = None
         if cov_target is not None:
             return _subset_to_cov(spec, event, dimension, settings, client, checkpoint, cov_target, budget)
         return _subset(spec, event, dimension, settings, client, checkpoint)
+
+
+def estimate_from_dataset(ds: xr.Dataset) -> Estimate:
+    """The Estimate a reliability file holds (:func:`reliability_dataset`: its ``estimate`` attribute, null read
+    back as NaN, and every evaluation), so that a rerun of the same request answers from the file."""
+    import json
+    s = {k: float("nan") if v is None else v for k, v in json.loads(ds.attrs["estimate"]).items()}
+    thresholds = tuple(float("nan") if t is None else t for t in s["thresholds"])
+    return Estimate(s["method"], s["pf"], s["lower"], s["upper"], s["confidence"], s["cov"], s["interval"],
+                    tuple(s["evaluations_per_level"]), thresholds, s["status"], s["message"], ds["z"].values,
+                    ds["level"].values, ds["max_abs_error"].values)
 
 
 def reliability_dataset(est: Estimate, event: Event, spec, elapsed: float, options: str = "") -> xr.Dataset:
