@@ -197,3 +197,21 @@ def test_a_rerun_of_the_same_request_answers_from_its_file_and_draws_the_missing
     assert main(other) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"--event {EVENT} there, {RARE} now" in err, err
+
+
+def test_an_event_far_beyond_every_response_says_so_and_a_rerun_reprints_it(tmp_path, capsys, monkeypatch):
+    """z > 2 mm on the smoke scene, whose responses stay near 0.3 mm: the error names the largest response against
+    the limit and that the event may be impossible (not only 'a larger -n may get one', which cannot), and the
+    same command onto its file reprints it without evaluating."""
+    out = tmp_path / "i.nc"
+    argv = ["reliability", "smoke", "--model", "quasi-static", "--event", "displacement:z>2mm", "-n", "20",
+            "--workers", "1", "-o", str(out)]
+    capsys.readouterr()
+    assert main(argv) == 2
+    errors = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
+    top = 1e3 * load_netcdf(out)["max_abs_error"].sel(quantity="displacement", direction="z").values.max()
+    assert len(errors) == 1 and f"largest response of its 110 evaluations is {top:.4g} mm against the limit 2 mm" \
+        in errors[0] and "may be impossible for scene smoke at the quasi-static level" in errors[0], errors
+    monkeypatch.setattr(study, "evaluate", lambda *a, **k: pytest.fail("evaluated again"))
+    assert main(argv) == 2
+    assert [line for line in capsys.readouterr().err.splitlines() if ": error: " in line] == errors

@@ -96,9 +96,7 @@ def main(args) -> int:
     if est is None:
         return 130
     if not math.isfinite(est.pf):     # stalled, or no convergence within the levels: no estimate to report
-        print(f"rss6 reliability: error: no estimate of P({event.text}) ({est.status}: {est.message}); the "
-              f"{est.level.size} evaluations are in {output}; a larger -n or another --p0 may get one",
-              file=sys.stderr)
+        print(f"rss6 reliability: error: {_no_estimate(est, event, level, output)}", file=sys.stderr)
         return 2
     try:
         _report(args, est, event, level, output, figure, note, wrote=not answered)
@@ -106,6 +104,22 @@ def main(args) -> int:
         return interrupted(f"the answer is in {output}", "rerun the same command to print it and write the figure")
     note()
     return 0
+
+
+def _no_estimate(est, event, level, output) -> str:
+    """Why a run gave no estimate, with the largest response it reached against the limit (far below it, the
+    event may be impossible and no -n helps) and advice that works: the same command only reprints this."""
+    from ..studies.reliability import largest_response
+    top = largest_response(est, event)
+    reached = (f"the largest response of its {est.level.size} evaluations is {top / event.factor:.4g} {event.unit} "
+               f"against the limit {event.limit / event.factor:g} {event.unit}")
+    kept = f"they are in {output} (the same command reprints this without recomputing)"
+    if top <= event.limit:
+        return (f"no estimate of P({event.text}) ({est.status}: {est.message}); {reached}: the event may be "
+                f"impossible for scene {level.scene.name} at the {level.model} level (P 0 to within these "
+                f"evaluations; a larger -n is unlikely to reach it); {kept}; ask for a lower limit with another -o")
+    return (f"no estimate of P({event.text}) ({est.status}: {est.message}); {reached}; {kept}; a larger -n or "
+            "another --p0, with another -o, may get one")
 
 
 def _request(args, event, level) -> dict:

@@ -31,6 +31,7 @@ from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
 
 __all__ = ["ReliabilityError", "Estimate", "input_dimension", "input_labels", "physical_inputs", "what_fails",
            "evaluate", "reliability", "check_subset_budget", "estimate_from_dataset",
+           "largest_response",
            "reliability_dataset", "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
 
 METHODS = ("subset", "mc")
@@ -207,6 +208,12 @@ def _response(event: Event, maxima: np.ndarray) -> np.ndarray:
     realisation failed."""
     r = maxima[:, QUANTITIES.index(event.quantity), [DIRECTIONS.index(d) for d in event.directions]]
     return np.where(np.isnan(r).any(axis=-1), np.inf, r.max(axis=-1))
+
+
+def largest_response(est: "Estimate", event: Event) -> float:
+    """The largest response the estimate's evaluations reached (SI; +inf when a realisation failed): against the
+    limit, whether the event was ever approached."""
+    return float(_response(event, est.maxima).max()) if est.level.size else float("nan")
 
 
 def _batches(spec, window: str, client, checkpoint):
