@@ -67,7 +67,7 @@ def test_a_run_interrupted_between_batches_resumes_to_the_uninterrupted_result(t
     assert not (tmp_path / "r.nc.checkpoint.nc").exists()
 
 
-def test_a_left_checkpoint_needs_resume_and_a_finished_output_is_not_rerun(tmp_path, monkeypatch, capsys):
+def test_a_left_checkpoint_needs_resume_and_a_finished_output_is_not_recomputed(tmp_path, monkeypatch, capsys):
     out = tmp_path / "r.nc"
     _interrupt_at(monkeypatch, 1)
     assert main(_argv(out)) == 130
@@ -79,10 +79,13 @@ def test_a_left_checkpoint_needs_resume_and_a_finished_output_is_not_rerun(tmp_p
     assert main(_argv(out, "--resume", "--seed", "4")) == 2     # another request
     assert "made by a different request" in capsys.readouterr().err
     assert main(_argv(out, "--resume")) == 0
-    capsys.readouterr()
-    for extra in ([], ["--resume"]):
-        assert main(_argv(out, *extra)) == 2
-        assert "exists; rss6 reliability does not overwrite" in capsys.readouterr().err
+    answer = json.loads(capsys.readouterr().out)
+    monkeypatch.setattr(study, "evaluate", lambda *a, **k: pytest.fail("evaluated again"))
+    for extra in ([], ["--resume"]):   # the same request: answered from the file
+        assert main(_argv(out, *extra)) == 0
+        assert json.loads(capsys.readouterr().out) == answer
+    assert main(_argv(out, "--seed", "4")) == 2
+    assert "another rss6 reliability request (--seed 0 there, 4 now)" in capsys.readouterr().err
 
 
 def test_resume_without_a_checkpoint_says_it_starts_from_the_first_batch(tmp_path, capsys, whole):
@@ -126,16 +129,30 @@ def test_mc_adds_blocks_until_the_cov_target_and_no_further(tmp_path, capsys):
 
 def test_subset_doubles_n_within_its_budget(tmp_path, capsys):
     """A target the first run meets: one run. An unreachable one: N = 200, then 400, and no third run,
-    which would take the evaluations beyond the budget (status 'budget')."""
+    whose most evaluations (N + 16 (1 - p0) N = 12320 at N = 800) would take them beyond the budget."""
     base = ["reliability", "smoke", "--event", RARE, "-n", "200", "--workers", "1", "--json"]
     met = _run_json(capsys, base + ["--cov", "0.9", "-o", str(tmp_path / "a.nc")])
     assert met["status"] == "converged" and met["evaluations_per_level"][0] == 200 and met["cov"] <= 0.9
     assert "1 run(s) up to N = 200" in met["message"]
-    capped = _run_json(capsys, base + ["--cov", "0.01", "--budget", "2000", "-o", str(tmp_path / "b.nc")])
+    capped = _run_json(capsys, base + ["--cov", "0.01", "--budget", "10000", "-o", str(tmp_path / "b.nc")])
     assert capped["status"] == "budget" and capped["evaluations_per_level"][0] == 400
     assert "2 run(s) up to N = 400" in capped["message"] and capped["cov"] > 0.01
     spent = int(capped["message"].split("evaluations in all")[0].rsplit(", ", 1)[1])
-    assert spent <= 2000 < spent + 2 * capped["evaluations"]
+    assert spent <= 10000 < spent + 12320
+
+
+def test_a_budget_below_the_first_subset_run_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    """N = 1000 may take 1000 + 16 * 900 = 15400 evaluations: --budget 1500 (or 5) cannot hold it, so no
+    evaluation runs (it used to run 1900 and call them within a budget of 5)."""
+    monkeypatch.setattr(study, "evaluate", lambda *a, **k: pytest.fail("work started"))
+    for budget in ("5", "15399"):
+        capsys.readouterr()
+        code = main(["reliability", "smoke", "--event", EVENT, "--cov", "0.5", "--budget", budget,
+                     "-o", str(tmp_path / "x.nc")])
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and len(err.splitlines()) == 1, err
+        assert f"--budget {budget}" in err and "N = 1000" in err and "15400" in err, err
+    assert not list(tmp_path.iterdir())
 
 
 @pytest.mark.parametrize("extra, token", [
@@ -160,3 +177,41 @@ def test_mc_without_a_cov_target_claims_no_convergence(tmp_path, capsys):
     res = _run_json(capsys, ["reliability", "smoke", "--event", EVENT, "--method", "mc", "-n", "1000",
                              "--workers", "1", "-o", str(tmp_path / "m.nc"), "--json"])
     assert res["status"] == "finished" and res["evaluations"] == 1000
+
+
+def test_a_rerun_of_the_same_request_answers_from_its_file_and_draws_the_missing_figure(tmp_path, capsys,
+                                                                                        monkeypatch):
+    """A run interrupted after writing its file (the figure deleted stands for it): the same command prints the
+    answer from the file, evaluates nothing and draws the figure; another --event onto the file is refused in
+    one line naming it (it used to refuse both: 'exists; rss6 reliability does not overwrite a file')."""
+    out, png = tmp_path / "r.nc", tmp_path / "r.png"
+    argv = ["reliability", "smoke", "--model", "quasi-static", "--event", EVENT, "-o", str(out), "--plot", str(png)]
+    first = _run_json(capsys, argv + ["--json"])
+    png.unlink()
+    monkeypatch.setattr(study, "evaluate", lambda *a, **k: pytest.fail("evaluated again"))
+    again = _run_json(capsys, argv + ["--json"])
+    assert png.exists() and again == first
+    capsys.readouterr()
+    assert main(argv) == 0 and f"read back {out}" in capsys.readouterr().out
+    other = ["reliability", "smoke", "--model", "quasi-static", "--event", RARE, "-o", str(out)]
+    assert main(other) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"--event {EVENT} there, {RARE} now" in err, err
+
+
+def test_an_event_far_beyond_every_response_says_so_and_a_rerun_reprints_it(tmp_path, capsys, monkeypatch):
+    """z > 2 mm on the smoke scene, whose responses stay near 0.3 mm: the error names the largest response against
+    the limit and that the event may be impossible (not only 'a larger -n may get one', which cannot), and the
+    same command onto its file reprints it without evaluating."""
+    out = tmp_path / "i.nc"
+    argv = ["reliability", "smoke", "--model", "quasi-static", "--event", "displacement:z>2mm", "-n", "20",
+            "--workers", "1", "-o", str(out)]
+    capsys.readouterr()
+    assert main(argv) == 2
+    errors = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
+    top = 1e3 * load_netcdf(out)["max_abs_error"].sel(quantity="displacement", direction="z").values.max()
+    assert len(errors) == 1 and f"largest response of its 110 evaluations is {top:.4g} mm against the limit 2 mm" \
+        in errors[0] and "may be impossible for scene smoke at the quasi-static level" in errors[0], errors
+    monkeypatch.setattr(study, "evaluate", lambda *a, **k: pytest.fail("evaluated again"))
+    assert main(argv) == 2
+    assert [line for line in capsys.readouterr().err.splitlines() if ": error: " in line] == errors

@@ -258,3 +258,25 @@ def test_a_lost_manifests_chunk_without_checksums_is_refused(interrupted, config
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{part.name}: carries no checksums of its values" in err[0], err
     assert "families-" not in err[0], err
+
+
+def test_a_rerun_of_the_same_request_answers_from_its_file_and_draws_the_charts(configs, tmp_path, monkeypatch,
+                                                                                capsys):
+    """A run interrupted after writing its file, before its charts (the charts deleted stand for it): the same
+    command evaluates nothing, prints the indices from the file and draws the charts; another -n onto the file is
+    refused in one line naming it (both used to be refused: 'exists; rss6 sensitivity does not overwrite a file')."""
+    out = tmp_path / "s.nc"
+    argv = ["sensitivity", str(configs / "smoke.toml"), "-n", "64", "--workers", "1", "-o", str(out)]
+    assert main(argv) == 0
+    table = capsys.readouterr().out.split("\n", 1)[1]
+    charts = sorted(p.name for p in (tmp_path / "s_plots").glob("sobol_*.png"))
+    for name in charts[1:]:
+        (tmp_path / "s_plots" / name).unlink()
+    _counting(monkeypatch, stop_at=1)   # any evaluation is a Ctrl-C: exit 130
+    assert main(argv) == 0
+    said = capsys.readouterr().out
+    assert said.startswith(f"read back {out}") and said.split("\n", 1)[1] == table
+    assert sorted(p.name for p in (tmp_path / "s_plots").glob("sobol_*.png")) == charts
+    assert main(argv[:-2] + ["-n", "128", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "-n 64 there, 128 now" in err, err

@@ -6,6 +6,7 @@ import json
 import math
 import sys
 import time
+from pathlib import Path
 
 from ..ensemble.settings import resolve_cluster, resolve_level
 from ..scenes.catalogue import find_scene
@@ -37,7 +38,8 @@ def add_parser(sub) -> None:
                         "run each time), until the estimated CoV is at most C or --budget would be exceeded "
                         "(exit 0 either way; status 'budget' if not met) (default: none: a run of size -n)")
     p.add_argument("--budget", type=evaluations, metavar="E",
-                   help="with --cov: evaluations at most, over all runs (default 20000 subset, 200000 mc)")
+                   help="with --cov: evaluations at most, over all runs (default 50000 subset, 200000 mc); a subset "
+                        "run starts only if its most evaluations, N + 16 (1 - p0) N, fit in what is left")
     p.add_argument("-p0", "--p0", type=float, default=0.1,
                    help="subset: conditional probability of each level, in (0, 0.5] (default 0.1)")
     add_seed(p)
@@ -58,13 +60,15 @@ def _settings(args):
     """Every option checked before any work: the event, p0 and N, the level's random inputs."""
     from ..analysis.exceedance import parse_event
     from ..analysis.subset import SubsetSettings
-    from ..studies.reliability import input_dimension
+    from ..studies.reliability import DEFAULT_BUDGET, check_subset_budget, input_dimension
     event = parse_event(args.event)
     if args.method == "subset":
         try:
-            SubsetSettings(args.n or 1000, args.p0, args.seed, args.confidence)
+            settings = SubsetSettings(args.n or 1000, args.p0, args.seed, args.confidence)
         except ValueError as exc:
             raise OptionError(f"-n/--p0: {exc}") from None
+        if args.cov is not None:
+            check_subset_budget(settings, args.budget or DEFAULT_BUDGET["subset"])
     elif args.p0 != 0.1:
         raise OptionError("--p0: applies with --method subset only")
     if args.budget and args.cov is None:
@@ -79,47 +83,108 @@ def _settings(args):
 
 
 def main(args) -> int:
-    from ..files.outputs import OutputLock, check_new_output
+    from ..files.outputs import OutputLock, answered_request
+    event, level = _settings(args)
+    cluster = resolve_cluster(args.workers)
+    request = _request(args, event, level)
+    output = Path(args.output or f"{output_stem(args.config)}_{level.model}_reliability.nc")
+    answered = answered_request(output, "reliability", request, args.parents)
+    figure = _figure(args, answered)
+    note = loaded_joints_meanwhile("reliability", level.scene, level.model, [event])
+    with OutputLock(output):
+        est = _held(output) if answered else _compute(args, event, level, cluster, output, request)
+    if est is None:
+        return 130
+    if not math.isfinite(est.pf):     # stalled, or no convergence within the levels: no estimate to report
+        print(f"rss6 reliability: error: {_no_estimate(est, event, level, output)}", file=sys.stderr)
+        return 2
+    try:
+        _report(args, est, event, level, output, figure, note, wrote=not answered)
+    except KeyboardInterrupt:
+        return interrupted(f"the answer is in {output}", "rerun the same command to print it and write the figure")
+    note()
+    return 0
+
+
+def _no_estimate(est, event, level, output) -> str:
+    """Why a run gave no estimate, with the largest response it reached against the limit (far below it, the
+    event may be impossible and no -n helps) and advice that works: the same command only reprints this."""
+    from ..studies.reliability import largest_response
+    top = largest_response(est, event)
+    reached = (f"the largest response of its {est.level.size} evaluations is {top / event.factor:.4g} {event.unit} "
+               f"against the limit {event.limit / event.factor:g} {event.unit}")
+    kept = f"they are in {output} (the same command reprints this without recomputing)"
+    if top <= event.limit:
+        return (f"no estimate of P({event.text}) ({est.status}: {est.message}); {reached}: the event may be "
+                f"impossible for scene {level.scene.name} at the {level.model} level (P 0 to within these "
+                f"evaluations; a larger -n is unlikely to reach it); {kept}; ask for a lower limit with another -o")
+    return (f"no estimate of P({event.text}) ({est.status}: {est.message}); {reached}; {kept}; a larger -n or "
+            "another --p0, with another -o, may get one")
+
+
+def _request(args, event, level) -> dict:
+    """What a reliability file answers (pipeline.files.outputs.answered_request): the scene's sha256, the level's
+    numerics and every option that changes the estimate."""
+    from ..files.outputs import text_identity
+    return {"scene": text_identity(level.scene.source_text), "--model": level.model, "--integrator": level.integrator,
+            "--dt": level.dt, "--elements": level.elements, "--event": event.text, "--method": args.method,
+            "-n": args.n, "--p0": args.p0, "--seed": args.seed, "--confidence": args.confidence, "--cov": args.cov,
+            "--budget": args.budget}
+
+
+def _figure(args, answered: bool):
+    """The --plot file checked before any work (None: none asked, or one already drawn from the file that
+    answers this request, which a rerun keeps)."""
+    from ..files.outputs import check_new_output
+    if not args.plot or (answered and Path(args.plot).exists()):
+        return None
+    return check_new_output(args.plot, "rss6 reliability", args.parents, "--plot")
+
+
+def _held(output):
+    """The estimate an earlier run of the same request wrote to ``output``: nothing is recomputed (a checkpoint
+    it left, interrupted before removing it, holds nothing more and goes)."""
+    from ..files.reading import load_netcdf
+    from ..studies.reliability import estimate_from_dataset
+    from ..studies.reliability_checkpoint import checkpoint_path
+    print(f"rss6 reliability: {output} already answers this request: nothing is recomputed", file=sys.stderr)
+    checkpoint_path(output).unlink(missing_ok=True)
+    return estimate_from_dataset(load_netcdf(output))
+
+
+def _compute(args, event, level, cluster, output, request):
+    """Run the estimate (resuming a checkpoint with --resume) and write ``output`` with ``request``; None after
+    Ctrl-C (said on stderr)."""
+    from ..files.outputs import REQUEST_ATTR
     from ..files.writing import write_netcdf
     from ..studies.reliability import reliability, reliability_dataset
     from ..studies.reliability_checkpoint import Checkpoint, checkpoint_path
-    event, level = _settings(args)
-    cluster = resolve_cluster(args.workers)
-    output = check_new_output(args.output or f"{output_stem(args.config)}_{level.model}_reliability.nc",
-                              "rss6 reliability", args.parents)
-    figure = check_new_output(args.plot, "rss6 reliability", args.parents, "--plot") if args.plot else None
     spec = level.ensemble_spec(args.seed)
     options = f"--event '{event.text}' --method {args.method}" + (f" -n {args.n}" if args.n else "") + \
         (f" --p0 {args.p0:g}" if args.method == "subset" else "") + f" --seed {args.seed}" + \
         (f" --cov {args.cov:g}" if args.cov else "") + (f" --budget {args.budget}" if args.budget else "")
     start = time.perf_counter()
-    note = loaded_joints_meanwhile("reliability", level.scene, level.model, [event])
-    with OutputLock(output):
-        found = checkpoint_path(output).exists()
-        checkpoint = Checkpoint(checkpoint_path(output), {**spec.attrs(), "options": options}, args.resume)
-        if args.resume and not found:
-            print(f"rss6 reliability: note: --resume found no checkpoint at {checkpoint.path}: the run starts "
-                  "from its first batch", file=sys.stderr)
-        try:
-            est = reliability(spec, event, args.method, args.n, args.p0, args.confidence, cluster.workers,
-                              checkpoint, args.cov, args.budget)
-        except KeyboardInterrupt:
-            kept = f"the evaluations so far are kept in {checkpoint.path}"
-            return interrupted(kept if checkpoint.batches else None, "rerun the same command with --resume to continue")
-        write_netcdf(reliability_dataset(est, event, spec, time.perf_counter() - start, options), output)
-        checkpoint.remove()
-    if not math.isfinite(est.pf):     # stalled, or no convergence within the levels: no estimate to report
-        print(f"rss6 reliability: error: no estimate of P({event.text}) ({est.status}: {est.message}); the "
-              f"{est.level.size} evaluations are in {output}; a larger -n or another --p0 may get one",
-              file=sys.stderr)
-        return 2
-    _report(args, est, event, level, output, figure, note)
-    note()
-    return 0
+    found = checkpoint_path(output).exists()
+    checkpoint = Checkpoint(checkpoint_path(output), {**spec.attrs(), "options": options}, args.resume)
+    if args.resume and not found:
+        print(f"rss6 reliability: note: --resume found no checkpoint at {checkpoint.path}: the run starts "
+              "from its first batch", file=sys.stderr)
+    try:
+        est = reliability(spec, event, args.method, args.n, args.p0, args.confidence, cluster.workers,
+                          checkpoint, args.cov, args.budget)
+    except KeyboardInterrupt:
+        kept = f"the evaluations so far are kept in {checkpoint.path}"
+        interrupted(kept if checkpoint.batches else None, "rerun the same command with --resume to continue")
+        return None
+    ds = reliability_dataset(est, event, spec, time.perf_counter() - start, options)
+    write_netcdf(ds.assign_attrs({REQUEST_ATTR: json.dumps(request, sort_keys=True)}), output)
+    checkpoint.remove()
+    return est
 
 
-def _report(args, est, event, level, output, figure, note) -> None:
-    """Print the estimate and what fails (text or JSON); write the figure if asked."""
+def _report(args, est, event, level, output, figure, note, wrote: bool = True) -> None:
+    """Print the estimate and what fails (text or JSON); write the figure if asked. ``wrote``: whether this run
+    wrote ``output`` (else it answers from the file of an earlier run)."""
     from ..analysis.failure_domain import failure_domain_json, format_failure_domain
     from ..studies.reliability import what_fails
     fd, physical = what_fails(est, event, level.scene, level.model)
@@ -132,7 +197,7 @@ def _report(args, est, event, level, output, figure, note) -> None:
         out |= note.json()
         print(json.dumps(out, indent=2))
         return
-    print(_text(est, event, output))
+    print(_text(est, event, output, wrote))
     print(format_failure_domain(fd, physical) if fd else "what fails: no evaluation exceeded the limit")
     if figure is not None:
         print(f"wrote {figure}")
@@ -144,13 +209,14 @@ def _strict(summary: dict) -> dict:
     return {k: json_number(v) if isinstance(v, float) else v for k, v in summary.items()}
 
 
-def _text(est, event, output) -> str:
-    """The estimate in a few lines."""
+def _text(est, event, output, wrote: bool = True) -> str:
+    """The estimate in a few lines (the first: the file written, or read back)."""
     from ..analysis.exceedance import union_words
     levels = ", ".join(f"{e}" for e in est.evaluations_per_level)
     interval = (f"{100 * est.confidence:g} % interval [{est.lower:.4g}, {est.upper:.4g}] ({est.interval})"
                 if math.isfinite(est.lower) else f"no {100 * est.confidence:g} % interval: {est.interval}")
     event_line = f"P({event.text}){union_words(event.directions)} over the {window_words(event.window)}"
     cov = f"CoV {est.cov:.3g}" if math.isfinite(est.cov) else "no CoV (none at a probability of 0 or 1)"
-    return (f"wrote {output}\n{event_line} = {est.pf:.4g} by {est.method}, {cov}; {interval}\n"
+    return (f"{'wrote' if wrote else 'read back'} {output}\n"
+            f"{event_line} = {est.pf:.4g} by {est.method}, {cov}; {interval}\n"
             f"{est.level.size} evaluations (per level: {levels}); {est.message}")

@@ -45,39 +45,83 @@ def add_parser(sub) -> None:
 
 
 def main(args) -> int:
-    import shutil
     from ..analysis.sensitivity_plots import plot_sensitivity
-    from ..ensemble.run import parts_dir
-    from ..files.outputs import OutputLock, check_new_output, check_output_folder, claimed_output_folder
+    from ..files.outputs import OutputLock, answered_request, check_output_folder, claimed_output_folder
     from ..files.reading import load_netcdf
-    from ..files.writing import write_netcdf
-    from ..studies.sensitivity import format_joints, format_sensitivity, sensitivity
+    from ..studies.sensitivity import format_joints, format_sensitivity
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
-    output = check_new_output(args.output or f"{output_stem(args.config)}_{level.model}_sobol.nc", "rss6 sensitivity",
-                              args.parents)
+    output = Path(args.output or f"{output_stem(args.config)}_{level.model}_sobol.nc")
+    request = _request(args, level)
+    answered = answered_request(output, "sensitivity", request, args.parents)
     plots = Path(args.plots or output.with_name(output.stem + "_plots"))
     if args.plots and args.no_plots:
         raise OptionError("--plots and --no-plots: give one")
     if not args.no_plots:
         check_output_folder(plots, args.parents, "--plots")   # before the work, which the charts follow
     warn_oversubscription(cluster.workers, None)
-    start, parts = time.perf_counter(), parts_dir(output)
+    start = time.perf_counter()
     charts = (contextlib.nullcontext() if args.no_plots else   # one file's charts per folder, claimed before the work
               claimed_output_folder(plots, "sensitivity", figure_request(output), ("sobol_*.png",), "--plots"))
     with charts, OutputLock(output):
+        ds = _held(output) if answered else _compute(args, level, cluster, output, request)
+        if ds is None:
+            return 130
         try:
-            ds = sensitivity(level.ensemble_spec(args.seed), args.n, args.per_joint, args.confidence,
-                             cluster.workers, window=args.window, parts=parts,
-                             announce=lambda line: print(f"rss6 sensitivity: {line}", file=sys.stderr))
+            paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
         except KeyboardInterrupt:
-            return interrupted(f"finished chunks are kept in {parts}" if parts.exists() else None)
-        write_netcdf(ds, output)
-        if parts.exists():
-            shutil.rmtree(parts)
-        paths = [] if args.no_plots else plot_sensitivity(load_netcdf(output), plots)
-    print(f"wrote {output} in {time.perf_counter() - start:.1f} s" + (f"; bar charts in {plots}/" if paths else ""))
+            return interrupted(f"the indices are in {output}", "rerun the same command to print them and draw "
+                                                               "the charts")
+    said = f"read back {output}" if answered else f"wrote {output} in {time.perf_counter() - start:.1f} s"
+    print(said + (f"; bar charts in {plots}/" if paths else ""))
     print(format_sensitivity(ds))
     if args.per_joint:
         print(format_joints(ds))
     return 0
+
+
+def _request(args, level) -> dict:
+    """What a sensitivity file answers (pipeline.files.outputs.answered_request): the scene's sha256, the level's
+    numerics and every option that changes the indices."""
+    from ..files.outputs import text_identity
+    return {"scene": text_identity(level.scene.source_text), "--model": level.model, "--integrator": level.integrator,
+            "--dt": level.dt, "--elements": level.elements, "-n": args.n, "--per-joint": args.per_joint,
+            "--seed": args.seed, "--confidence": args.confidence, "--window": args.window}
+
+
+def _held(output):
+    """The indices an earlier run of the same request wrote to ``output`` (a run interrupted before its charts):
+    nothing is recomputed; finished chunks it left, interrupted before removing them, go."""
+    import shutil
+
+    from ..ensemble.run import parts_dir
+    from ..files.reading import load_netcdf
+    print(f"rss6 sensitivity: {output} already answers this request: nothing is recomputed", file=sys.stderr)
+    if parts_dir(output).exists():
+        shutil.rmtree(parts_dir(output))
+    return load_netcdf(output)
+
+
+def _compute(args, level, cluster, output, request):
+    """The indices, resumed from and kept in OUTPUT.parts, written to ``output`` with ``request``; None after
+    Ctrl-C (said on stderr)."""
+    import json
+    import shutil
+
+    from ..ensemble.run import parts_dir
+    from ..files.outputs import REQUEST_ATTR
+    from ..files.writing import write_netcdf
+    from ..studies.sensitivity import sensitivity
+    parts = parts_dir(output)
+    try:
+        ds = sensitivity(level.ensemble_spec(args.seed), args.n, args.per_joint, args.confidence,
+                         cluster.workers, window=args.window, parts=parts,
+                         announce=lambda line: print(f"rss6 sensitivity: {line}", file=sys.stderr))
+    except KeyboardInterrupt:
+        interrupted(f"finished chunks are kept in {parts}" if parts.exists() else None)
+        return None
+    ds = ds.assign_attrs({REQUEST_ATTR: json.dumps(request, sort_keys=True)})
+    write_netcdf(ds, output)
+    if parts.exists():
+        shutil.rmtree(parts)
+    return ds

@@ -18,7 +18,8 @@ from ..vocabulary import UserError
 from .schema import EnsembleFileError
 from .writing import sigint_deferred, write_netcdf
 
-__all__ = ["check_output_path", "OutputLock", "PartsManifest", "parts_dir", "unfinished"]
+__all__ = ["check_output_path", "answered_request", "REQUEST_ATTR", "OutputLock", "PartsManifest", "parts_dir",
+           "unfinished"]
 
 
 def check_output_path(path, create_dirs: bool = False) -> Path:
@@ -135,6 +136,35 @@ def text_identity(text: str) -> str:
     """What a request record holds of a scene's text: its sha256 (any edit is another request; an input
     file's: :func:`sha256` of its path)."""
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+REQUEST_ATTR = "rss6_request"   # the request a command's output file answers, JSON (:func:`answered_request`)
+
+
+def answered_request(path, command: str, request: dict, create_dirs: bool = False, what: str = "") -> bool:
+    """Check ``rss6 COMMAND``'s output file ``path`` before any work (:func:`check_output_path`): False when it is
+    absent; True when it is an earlier file of the command (its history's last line starts ``rss6 COMMAND``) that
+    records the same ``request`` (the scene's sha256 and every option that changes the answer) in its
+    ``rss6_request`` attribute, so that a rerun of the same request (one interrupted after writing it, say) reuses
+    it instead of being refused. Any other file, or one answering another request (each option it changes named),
+    is refused (EnsembleFileError), never overwritten. ``what``: how messages name the file (default COMMAND)."""
+    import netCDF4
+    path = check_output_path(path, create_dirs)
+    if not path.exists():
+        return False
+    try:
+        with netCDF4.Dataset(path) as nc:
+            lines, held = str(getattr(nc, "history", "")).splitlines(), getattr(nc, REQUEST_ATTR, None)
+    except OSError:
+        lines, held = [], None
+    if not (lines and lines[-1].startswith(f"rss6 {command}")):   # the last line: its own
+        raise EnsembleFileError(f"{path}: exists and is not an rss6 {what or command} file; rss6 {command} does not "
+                                "overwrite it (remove it or choose another -o)")
+    said = "it records none" if held is None else request_changes(json.loads(held), request)
+    if said:
+        raise EnsembleFileError(f"{path}: holds the answer to another rss6 {command} request ({said}); "
+                                "choose another -o, or remove it to replace it")
+    return True
 
 
 def check_new_output(path, command: str, create_dirs: bool = False, option: str = "-o") -> Path:

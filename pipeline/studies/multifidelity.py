@@ -60,6 +60,7 @@ from rss6core import FINISHED, models_with
 
 from ..analysis.estimators import BOUNDS, mean_interval, moment_floor
 from ..analysis.stats import below_floor, in_window, json_number, table_cell
+from ..files.outputs import REQUEST_ATTR  # noqa: F401  (re-exported: the attribute of the request a file answers)
 from ..files.records import file_window_label
 from ..vocabulary import CONFIDENCE, SUMMARIES
 
@@ -408,33 +409,13 @@ def format_multifidelity(mds: xr.Dataset, name: str = "max_abs_error") -> str:
 
 def check_multifidelity_output(path, request: dict, create_dirs: bool = False):
     """The output F.nc checked before any work: a file there must be an earlier multi-fidelity file of
-    the same ``request`` (its ``rss6_request`` attribute: a rerun resumes the two ensembles and rewrites
-    it); any other file, or one answering another request, is refused, not overwritten."""
-    import json
-
-    import netCDF4
-
-    from ..files.outputs import check_output_path, request_changes
-    from ..files.schema import EnsembleFileError
-    path = check_output_path(path, create_dirs)
-    if not path.exists():
-        return path
-    try:
-        with netCDF4.Dataset(path) as nc:
-            lines, held = str(getattr(nc, "history", "")).splitlines(), getattr(nc, REQUEST_ATTR, None)
-    except OSError:
-        lines, held = [], None
-    if not (lines and lines[-1].startswith(HISTORY)):   # the last line: its own
-        raise EnsembleFileError(f"{path}: exists and is not an rss6 multi-fidelity file; rss6 "
-                                "multifidelity does not overwrite it (remove it or choose another -o)")
-    said = "it records none" if held is None else request_changes(json.loads(held), request)
-    if said:
-        raise EnsembleFileError(f"{path}: holds the answer to another rss6 multifidelity request ({said}); "
-                                "choose another -o, or remove it to replace it")
-    return path
+    the same ``request`` (:func:`pipeline.files.outputs.answered_request`: a rerun resumes the two ensembles
+    and rewrites it); any other file, or one answering another request, is refused, not overwritten."""
+    from ..files.outputs import answered_request, check_output_path
+    answered_request(path, "multifidelity", request, create_dirs, "multi-fidelity")
+    return check_output_path(path)
 
 
-REQUEST_ATTR = "rss6_request"   # the options a multi-fidelity file answers, JSON (check_multifidelity_output)
 
 
 def level_paths(output) -> tuple:

@@ -30,13 +30,15 @@ from ..files.writing import sigint_deferred
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
 
 __all__ = ["ReliabilityError", "Estimate", "input_dimension", "input_labels", "physical_inputs", "what_fails",
-           "evaluate", "reliability", "reliability_dataset", "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
+           "evaluate", "reliability", "check_subset_budget", "estimate_from_dataset",
+           "largest_response",
+           "reliability_dataset", "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
 
 METHODS = ("subset", "mc")
 MC_BLOCK = 1000          # plain Monte Carlo draws block b of z from SeedSequence([seed, MC_TAG, b])
 MC_TAG = 40404040
 IN_PROCESS_ROWS = 64     # batches up to this many rows of a cheap level are evaluated here, larger ones on the workers
-DEFAULT_BUDGET = {"subset": 20_000, "mc": 200_000}   # evaluations at most with a CoV target (--budget)
+DEFAULT_BUDGET = {"subset": 50_000, "mc": 200_000}   # evaluations at most with a CoV target (--budget)
 _ONE_BELOW = np.nextafter(1.0, 0.0)
 
 
@@ -208,6 +210,12 @@ def _response(event: Event, maxima: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(r).any(axis=-1), np.inf, r.max(axis=-1))
 
 
+def largest_response(est: "Estimate", event: Event) -> float:
+    """The largest response the estimate's evaluations reached (SI; +inf when a realisation failed): against the
+    limit, whether the event was ever approached."""
+    return float(_response(event, est.maxima).max()) if est.level.size else float("nan")
+
+
 def _batches(spec, window: str, client, checkpoint):
     """The function evaluating a batch of rows z: through ``checkpoint`` (a
     reliability_checkpoint.Checkpoint: stored batches replayed, new ones stored) when given."""
@@ -268,12 +276,30 @@ def _monte_carlo(spec, event: Event, dimension: int, n: int, seed: int, confiden
                     (m,), (event.limit,), status, message, z, np.zeros(m, int), maxima)
 
 
+def subset_most_evaluations(settings: SubsetSettings) -> int:
+    """The most evaluations one subset run can take: N at level 0, then (1 - p0) N new ones at each of
+    its ``max_levels`` levels (what a run that never converges spends); what --budget must hold."""
+    return settings.n_per_level + settings.max_levels * (settings.steps - 1) * settings.chains
+
+
+def check_subset_budget(settings: SubsetSettings, budget: int) -> None:
+    """ReliabilityError (before any work) when even the first run of a CoV target cannot fit in ``budget``."""
+    first, step = subset_most_evaluations(settings), (settings.steps - 1) * settings.chains
+    if first > budget:
+        raise ReliabilityError(f"--budget {budget}: the first subset run, N = {settings.n_per_level}, may take "
+                               f"up to {first} evaluations (N at level 0, then {step} "
+                               f"at each of up to {settings.max_levels} levels); give --budget {first} or more, "
+                               "or a smaller -n")
+
+
 def _subset_to_cov(spec, event: Event, dimension: int, settings: SubsetSettings, client, checkpoint,
                    cov_target: float, budget: int) -> Estimate:
     """Subset simulation with N doubled (a fresh run each time, its own seed schedule) until its CoV is
-    at most ``cov_target``, while the evaluations of all runs stay within ``budget``; the last run's
-    estimate and file, the runs and evaluations spent in its message."""
+    at most ``cov_target``; a run starts only if its most evaluations (:func:`subset_most_evaluations`)
+    fit in what is left of ``budget``, so the runs never spend more. The last run's estimate and file,
+    the runs and evaluations spent in its message."""
     from dataclasses import replace
+    check_subset_budget(settings, budget)
     spent, runs = 0, 0
     while True:
         est = _subset(spec, event, dimension, settings, client, checkpoint)
@@ -282,10 +308,11 @@ def _subset_to_cov(spec, event: Event, dimension: int, settings: SubsetSettings,
         if est.status in ("certain", "impossible") or est.cov <= cov_target:
             return replace(est, message=f"{est.message}; CoV target {cov_target:g} met ({done})"
                            if est.cov <= cov_target else est.message)
-        if spent + 2 * est.level.size > budget:
-            return replace(est, status="budget", message=f"{est.message}; CoV target {cov_target:g} not met: "
-                                                         f"the next run would exceed the budget of {budget} ({done})")
         settings = replace(settings, n_per_level=2 * settings.n_per_level)
+        if spent + subset_most_evaluations(settings) > budget:
+            return replace(est, status="budget", message=f"{est.message}; CoV target {cov_target:g} not met: the "
+                           f"next run (N = {settings.n_per_level}) could take {subset_most_evaluations(settings)} "
+                           f"evaluations, beyond what is left of the budget of {budget} ({done})")
 
 
 def reliability(spec, event: Event, method: str = "subset", n: int | None = None, p0: float = 0.1,
@@ -306,6 +333,17 @@ def reliability(spec, event: Event, method: str = "subset", n: int | None = None
         if cov_target is not None:
             return _subset_to_cov(spec, event, dimension, settings, client, checkpoint, cov_target, budget)
         return _subset(spec, event, dimension, settings, client, checkpoint)
+
+
+def estimate_from_dataset(ds: xr.Dataset) -> Estimate:
+    """The Estimate a reliability file holds (:func:`reliability_dataset`: its ``estimate`` attribute, null read
+    back as NaN, and every evaluation), so that a rerun of the same request answers from the file."""
+    import json
+    s = {k: float("nan") if v is None else v for k, v in json.loads(ds.attrs["estimate"]).items()}
+    thresholds = tuple(float("nan") if t is None else t for t in s["thresholds"])
+    return Estimate(s["method"], s["pf"], s["lower"], s["upper"], s["confidence"], s["cov"], s["interval"],
+                    tuple(s["evaluations_per_level"]), thresholds, s["status"], s["message"], ds["z"].values,
+                    ds["level"].values, ds["max_abs_error"].values)
 
 
 def reliability_dataset(est: Estimate, event: Event, spec, elapsed: float, options: str = "") -> xr.Dataset:
