@@ -270,3 +270,16 @@ def test_simulate_names_an_integrator_only_where_the_level_integrates(capsys):
     assert out.splitlines()[-1].startswith("note: paper level: its velocity and acceleration errors")
     assert main(["simulate", "smoke", "--model", "paper", "--json"]) == 0
     assert "they measure the step, not the robot" in json.loads(capsys.readouterr().out)["notes"][0]
+
+
+def test_a_bare_shipped_name_beside_a_copy_of_its_file_says_which_it_reads(configs, tmp_path, monkeypatch, capsys):
+    """`rss6 check paper` in a folder holding an edited paper.toml reads the shipped scene (a reviewer's silent
+    surprise): it says so once, and `paper.toml` reads the copy."""
+    from pipeline.scenes.catalogue import _note_shipped_over_local
+    _note_shipped_over_local.cache_clear()   # said once per process
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "paper.toml").write_text((configs / "paper.toml").read_text())
+    assert main(["check", "paper"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("note: 'paper' is the shipped scene; paper.toml in this folder is not read") == 1, err
+    assert main(["check", "paper.toml"]) == 0 and "shipped" not in capsys.readouterr().err

@@ -2,6 +2,8 @@
 the data package ``pipeline.scene_files``) and how a command-line argument finds one."""
 from __future__ import annotations
 
+import sys
+from functools import cache
 from importlib import resources
 from pathlib import Path
 
@@ -36,4 +38,14 @@ def find_scene(config: str | Path) -> Scene:
                          f"(rss6 check {path.stem} works from any folder)")
     if path.is_file() or str(config).endswith(".toml"):
         return load_scene(config)
+    if path.with_name(path.name + ".toml").is_file():
+        _note_shipped_over_local(str(config))
     return parse_scene(scene_text(str(config)), str(config))
+
+
+@cache   # once per command, however often it looks the scene up
+def _note_shipped_over_local(name: str) -> None:
+    """Say that a bare NAME is the shipped scene although NAME.toml lies here (an edited copy, most likely)."""
+    if name in scene_names():
+        print(f"rss6: note: {name!r} is the shipped scene; {name}.toml in this folder is not read (give "
+              f"{name}.toml to use it)", file=sys.stderr)
