@@ -192,3 +192,15 @@ def test_failed_realisations_widen_the_interval_to_either_outcome():
     high = sps.binomtest(10, 40).proportion_ci(CONF, method="exact").high
     assert (r.lower, r.upper) == (pytest.approx(low, rel=1e-9), pytest.approx(high, rel=1e-9))
     assert "the interval counts them out on its lower side and in on its upper one" in format_exceedance([r])
+
+
+def test_an_event_on_one_run_repeated_is_exact_as_the_gate_says(tmp_path, capsys):
+    """A file whose realisations are all one run (elastic level, nothing drawn): P is 0 or 1 exactly, as the
+    gate's exact rule has it; a Clopper-Pearson [0.025, 1] of 1 of 1 said otherwise (a reviewer's find)."""
+    single = tmp_path / "elastic.nc"
+    assert main(["simulate", "smoke", "--model", "elastic", "-o", str(single)]) == 0
+    capsys.readouterr()
+    for event, p in (("displacement:z>0.001mm", 1.0), ("displacement:z>1m", 0.0)):
+        assert main(["stats", str(single), "--event", event, "--json"]) == 0
+        (r,) = json.loads(capsys.readouterr().out)["exceedance"]
+        assert (r["estimate"], r["lower"], r["upper"]) == (p, p, p) and r["method"].startswith("exact"), r

@@ -98,6 +98,9 @@ def parse_event(text: str, flag: str = "--event") -> Event:
     return Event(text, quantity, tuple(directions), limit * factor, m.group(2).strip(), factor, window)
 
 
+ONE_RUN_METHOD = "exact: every realisation is the same run (nothing drawn), so P is 0 or 1"
+
+
 @dataclass(frozen=True)
 class Exceedance:
     """The estimate k / n of an event's probability over the n finished realisations and its two-sided
@@ -143,6 +146,11 @@ def exceedance(ds, event: Event, confidence: float = CONFIDENCE) -> Exceedance:
     if n == 0:
         return Exceedance(event.text, 0, 0, failed, float("nan"), float("nan"), float("nan"), confidence,
                           event.window, event.directions)
+    from .stats import one_run_repeated
+    if one_run_repeated(ds):   # the gate's exact rule: every realisation is the same run, so P is k / n, 0 or 1
+        p = k / n
+        return Exceedance(event.text, k, n, failed, p, p, p, confidence, event.window, event.directions,
+                          ONE_RUN_METHOD)
     # a failed realisation may or may not be in the event: the interval takes it as neither on the lower
     # side and as in it on the upper one, so it covers the probability over every draw
     lower = clopper_pearson(k, n + failed, confidence)[0]
@@ -158,11 +166,11 @@ def format_exceedance(results: list[Exceedance]) -> str:
     for r in results:
         failed = (f"; the estimate leaves the {r.n_failed} failed realisations out, the interval counts them "
                   "out on its lower side and in on its upper one") if r.n_failed else ""
+        how = (r.method if r.method == ONE_RUN_METHOD else
+               f"Clopper-Pearson, exact: covers with at least {100 * r.confidence:g} % for every true P{failed}")
         lines.append(f"P({r.event}){union_words(r.directions)} over the {window_words(r.window)} = "
                      f"{r.exceeding}/{r.n} = {r.estimate:.4g}, "
-                     f"{100 * r.confidence:g} % interval [{r.lower:.4g}, {r.upper:.4g}] "
-                     f"(Clopper-Pearson, exact: covers with at least {100 * r.confidence:g} % "
-                     f"for every true P{failed})")
+                     f"{100 * r.confidence:g} % interval [{r.lower:.4g}, {r.upper:.4g}] ({how})")
     return "\n".join(lines)
 
 
