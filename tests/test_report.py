@@ -197,3 +197,21 @@ def test_the_reports_window_prose_follows_the_scenes_settle_time():
     assert _start_text(text.START_PEAKS, "drawn", paper).startswith("The start-up peaks are impacts")
     assert _start_text(text.START_PEAKS, "drawn", settled).startswith("This scene leaves t < 0.3 s")
     assert "impacts" not in _start_text(text.START, "drawn", settled)
+
+
+def test_a_scene_with_uncertain_inputs_has_its_family_runs_at_nominal_inputs(configs):
+    """paper_manufacturing's family runs drew its manufacturing inputs too, and the report called their
+    medians the clearances' contributions ('only A' above 'all joints'): they now hold the inputs at
+    nominal, and the labels say which numbers hold clearances + manufacturing inputs."""
+    from pipeline.studies import report_text as text
+    from pipeline.studies.report import _nominal_inputs
+    scene = parse_scene((configs / "paper_manufacturing.toml").read_text())
+    assert scene.uncertain
+    for family in "ACB":
+        assert not parse_scene(_only(scene.source_text, family, "m")).uncertain
+    nominal = _nominal_inputs(scene.source_text, "m")
+    assert not parse_scene(nominal).uncertain and "without [uncertain.crank_length]" in nominal.splitlines()[0]
+    assert text.labelled("contact", scene) == "contact (clearances + manufacturing inputs)"
+    assert text.labelled("elastic", scene, nominal=True) == "elastic (manufacturing inputs at nominal)"
+    paper = parse_scene((configs / "paper.toml").read_text())
+    assert text.labelled("contact", paper) == "contact" and "uncertain" not in _only(paper.source_text, "B", "p")
