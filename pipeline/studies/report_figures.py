@@ -10,7 +10,7 @@ import numpy as np
 from rss6core import rigid_motion
 
 from ..analysis.envelopes import draw_envelope, envelope_marks, steady_samples
-from ..analysis.plot_common import family_units, legend_entries, plain_ticks, plt
+from ..analysis.plot_common import family_units, legend_entries, plain_ticks, plt, realisation_count
 from ..analysis.stats import ensemble_stats
 from ..vocabulary import DIRECTIONS, FINISHED
 from .report_text import clearance_mm
@@ -109,7 +109,7 @@ def _envelope_panel(ax, lv: _LevelErrors, k: int, unit: tuple, level: str, stead
     """A level's envelope of |error| in direction ``k`` over the whole run or the steady window."""
     f, name = unit
     draw_envelope(ax, lv.ds, lv.err[..., k], lv.finer, k, f, steady=steady)
-    when = f"t >= {float(lv.ds.attrs['steady_after_s']):g} s" if steady else f"n = {lv.err.shape[0]}"
+    when = f"t >= {float(lv.ds.attrs['steady_after_s']):g} s" if steady else realisation_count(lv.ds, len(lv.err))
     ax.set(title=f"{level}: |{DIRECTIONS[k]} error|, {when}", ylabel=f"[{name}]")
 
 
