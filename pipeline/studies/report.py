@@ -32,7 +32,7 @@ from .report_figures import LEVELS, error_figure, rigid_figure
 from .report_text import clearance_mm as _clearance_mm
 from ..scenes.variant import scene_variant, uncertain_tables
 from ..analysis.estimators import min_n_for_quantile
-from ..analysis.stats import ensemble_stats, in_window
+from ..analysis.stats import ensemble_stats, in_window, level_notes
 from ..files.opening import open_ensemble
 from ..files.reading import load_netcdf
 from ..files.records import file_window_label, run_dataset
@@ -222,19 +222,40 @@ def _table(head: list[str], rows: list[list[str]]) -> list[str]:
         "| " + " | ".join(r) + " |" for r in rows]
 
 
+MARKS = ("†", "‡", "§", "¶")
+
+
+def _level_marks(st: dict) -> tuple[dict, list[str]]:
+    """Which cells of the comparison table do not measure the robot in operation, by level and quantity
+    (pipeline.analysis.stats.level_notes over the whole run: the paper level's velocities and accelerations
+    measure the step, a drawn start's impacts are in the contact level's): {(level, quantity): mark} and
+    the notes, each after its mark."""
+    notes, marks = {}, {}
+    for level in _LEVELS:
+        for q in dict.fromkeys(q for _, q, _ in _ROWS):
+            said = level_notes(st[level].attrs, {q}, {"whole"})
+            for note in said:
+                notes.setdefault(note, MARKS[len(notes)])
+            marks[(level, q)] = "".join(notes[n] for n in said)
+    return marks, [f"{mark} {note}." for note, mark in notes.items()]
+
+
 def _comparison_table(scene, st: dict) -> list[str]:
+    """The paper's numbers beside each level's median and 95 % quantile over the whole run, the cells that do
+    not measure the robot marked (:func:`_level_marks`), with the marks' notes below."""
     mm = _clearance_mm(scene)
     head = ["statistic (per realisation)", "dir", "unit", f"paper, {mm} mm"]
-    for level in map(lambda lv: text.labelled(lv, scene), _LEVELS):
+    for level in (text.labelled(f"{lv}, {file_window_label('whole', st[lv].attrs)}", scene) for lv in _LEVELS):
         head += [f"{level}: median [95 % CI]", f"{level}: 95 % quantile [95 % CI]"]
-    rows = []
+    rows, (marks, notes) = [], _level_marks(st)
     for stat, q, d in _ROWS:
         f, unit = display_unit(q, d)
         cells = [_label(stat, q), d, unit, _fmt(PAPER_VALUES[(stat, q, d)].get(mm), f)]
         for level in _LEVELS:
-            cells += [_cell(st[level], stat, q, d, "q50", f), _cell(st[level], stat, q, d, "q95", f)]
+            m = f" {marks[(level, q)]}" if marks[(level, q)] else ""
+            cells += [_cell(st[level], stat, q, d, p, f) + m for p in ("q50", "q95")]
         rows.append(cells)
-    return _table(head, rows)
+    return _table(head, rows) + ([""] + ["- " + n for n in notes] if notes else [])
 
 
 def _label(stat: str, quantity: str) -> str:
@@ -367,6 +388,8 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
     for q in ("displacement", "velocity", "acceleration"):
         md += [f"![{q} error]({rel(_error_figure(scene, q, e, figs))})", ""]
     md += ["### Beside the paper's numbers (docs/model.md section 9)", ""] + _inputs_paragraph(scene)
+    steady = text.window_times("steady", e["contact"].attrs)
+    md += [text.COMPARISON.format(whole=file_window_label("whole", e["contact"].attrs), steady=steady), ""]
     md += _comparison_table(scene, st)
     md += ["", f"### Which joint family contributes most ({text.labelled('contact level', scene, True, False)})",
            "", text.FAMILY.format(off_um=OFF * 1e6, off_percent=OFF / scene.clearance.spherical_B * 100)

@@ -19,6 +19,13 @@ FAMILY = (
     "is about proportional to the clearance, so such a family adds about {off_percent:.0f} % of what "
     "it adds at the scene's clearance.")
 
+COMPARISON = (
+    "Our numbers here are each level's over the {whole}, start-up included, as the column heads say (the paper "
+    "names no window for its own). A marked cell does not measure the robot in operation: it measures "
+    "the time step or start-up impacts, as its mark's note below the table says. The steady window's "
+    "numbers ({steady}) are in 'Start-up and steady operation' below (contact level), and the steady "
+    "acceleration maxima's model-form band of the paper scene in docs/accelerations.md.")
+
 INPUTS = (
     "This scene also draws {count} manufacturing and assembly inputs per realisation ([uncertain.*] tables: "
     "{names}; docs/model.md section 4b). Every level's realisations below draw them with the clearances: "
