@@ -122,6 +122,32 @@ def test_report_figures_are_legible(smoke, full_ensemble, simulate_file):
     assert_legible(figs)
 
 
+def _with_failures(ds: xr.Dataset, failed: list[int]) -> xr.Dataset:
+    """``ds`` with the realisations ``failed`` recorded as failed: status 'failed', errors NaN."""
+    ds = ds.copy(deep=True)
+    ds["status"].values[failed] = "failed"
+    for name in ("error", "max_abs_error", "mean_abs_error"):
+        ds[name].loc[{"realization": failed}] = np.nan
+    return ds
+
+
+def test_figures_say_how_many_realisations_failed(smoke, full_ensemble, simulate_file):
+    """With 3 of 20 realisations failed the figures said 'n = 17' and nothing of the failures: each n now
+    says finished of how many, and how many failed (plot_common.realisation_count, one implementation)."""
+    ds = _with_failures(open_ensemble(full_ensemble), [2, 5, 11])
+    said = "n = 17 finished of 20 (3 failed)"
+    for name, fig in ensemble_figures(ds).items():
+        assert said in " ".join(fig._suptitle.get_text().split()), name
+        plt.close(fig)
+    runs = {"elastic": open_results(simulate_file)} | {level: ds for level in LEVELS}
+    fig = error_figure(smoke, "displacement", runs)
+    assert sum(said in ax.get_title() for ax in fig.axes) == 2 * 6   # each level's envelope row
+    plt.close(fig)
+    clean = ensemble_figures(open_ensemble(full_ensemble))
+    assert all("failed" not in f._suptitle.get_text() for f in clean.values())
+    plt.close("all")
+
+
 def _tradeoff_dataset() -> xr.Dataset:
     labels = ["rigid 1 ms", "quasi-static 1 ms", "elastic newmark 1 ms 4 el",
               "elastic newmark 0.5 ms 8 el", "paper newmark 1 ms 4 el", "paper newmark 0.5 ms 4 el",

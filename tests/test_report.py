@@ -12,6 +12,7 @@ from pipeline.cli import main
 from pipeline.studies.report import OFF, PAPER_VALUES, _only, with_clearance
 from pipeline.files.opening import open_ensemble
 from pipeline.files.schema import EnsembleFileError
+from pipeline.vocabulary import QUANTITIES
 from rss6core import parse_scene
 
 
@@ -197,3 +198,41 @@ def test_the_reports_window_prose_follows_the_scenes_settle_time():
     assert _start_text(text.START_PEAKS, "drawn", paper).startswith("The start-up peaks are impacts")
     assert _start_text(text.START_PEAKS, "drawn", settled).startswith("This scene leaves t < 0.3 s")
     assert "impacts" not in _start_text(text.START, "drawn", settled)
+
+
+def test_a_scene_with_uncertain_inputs_has_its_family_runs_at_nominal_inputs(configs):
+    """paper_manufacturing's family runs drew its manufacturing inputs too, and the report called their
+    medians the clearances' contributions ('only A' above 'all joints'): they now hold the inputs at
+    nominal, and the labels say which numbers hold clearances + manufacturing inputs."""
+    from pipeline.studies import report_text as text
+    from pipeline.studies.report import _nominal_inputs
+    scene = parse_scene((configs / "paper_manufacturing.toml").read_text())
+    assert scene.uncertain
+    for family in "ACB":
+        assert not parse_scene(_only(scene.source_text, family, "m")).uncertain
+    nominal = _nominal_inputs(scene.source_text, "m")
+    assert not parse_scene(nominal).uncertain and "without [uncertain.crank_length]" in nominal.splitlines()[0]
+    assert text.labelled("contact", scene) == "contact (clearances + manufacturing inputs)"
+    assert text.labelled("elastic", scene, nominal=True) == "elastic (manufacturing inputs at nominal)"
+    paper = parse_scene((configs / "paper.toml").read_text())
+    assert text.labelled("contact", paper) == "contact" and "uncertain" not in _only(paper.source_text, "B", "p")
+
+
+def test_the_comparison_table_marks_what_measures_the_step_or_start_up_impacts():
+    """docs/results.md set the contact level's whole-run acceleration maxima (start-up impacts) and the paper
+    level's accelerations (the step) beside the paper's numbers with no window and no mark: the cells that do
+    not measure the robot now carry level_notes' marks, the same notes as rss6 stats."""
+    from types import SimpleNamespace
+    from pipeline.analysis.stats import level_notes
+    from pipeline.studies.report import _level_marks
+    windows = {"steady_after_s": 0.75, "settle_time_s": 0.0}
+    st = {"quasi-static": SimpleNamespace(attrs={"model": "quasi-static", **windows}),
+          "paper": SimpleNamespace(attrs={"model": "paper", **windows}),
+          "contact": SimpleNamespace(attrs={"model": "contact", "contact_start": "drawn", **windows})}
+    marks, notes = _level_marks(st)
+    assert {k: v for k, v in marks.items() if v} == {("paper", "velocity"): "†", ("paper", "acceleration"): "†",
+                                                      **{("contact", q): "‡" for q in QUANTITIES}}
+    assert notes == [f"{m} {n}." for m, n in zip("†‡", level_notes(st["paper"].attrs, {"velocity"}, {"whole"})
+                                                   + level_notes(st["contact"].attrs, {"velocity"}, {"whole"}))]
+    st["contact"].attrs["contact_start"] = "equilibrium"   # no start-up impacts: nothing of the contact level
+    assert not any(v for (level, _), v in _level_marks(st)[0].items() if level == "contact")

@@ -12,11 +12,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..vocabulary import DIRECTIONS, UserError  # noqa: E402
+from rss6core import FAILED  # noqa: E402
+
+from ..vocabulary import DIRECTIONS, FINISHED, UserError  # noqa: E402
 from ..vocabulary import FAMILIES as _FAMILIES  # noqa: E402
 
 __all__ = ["plt", "SI_UNITS", "FAMILY_DIRECTIONS", "figure_unit", "family_units", "si_text", "figure_title",
-           "plain_ticks", "panel_grid", "save_figure", "save_figures", "mark_steady", "legend_entries", "figure_legend"]
+           "realisation_count", "plain_ticks", "panel_grid", "save_figure", "save_figures", "mark_steady",
+           "legend_entries", "figure_legend"]
 
 SI_UNITS = {"displacement": ("m", "rad"), "velocity": ("m/s", "rad/s"),   # translation, rotation
             "acceleration": ("m/s$^2$", "rad/s$^2$")}
@@ -62,11 +65,25 @@ def si_text(value: float, unit: str) -> str:
     return f"{value / scale:.3g} {prefix}{unit}"
 
 
+def realisation_count(ds, n: int) -> str:
+    """'n = 41 finished of 100 (59 failed)': the ``n`` realisations a figure of ``ds`` draws, and, where
+    any of the file's realisations failed, of how many and how many failed; 'n = 100' where none did.
+    Every figure's n comes from here, so that no figure hides its failed realisations."""
+    status = ds["status"].values.astype(str) if "status" in ds else np.array([FINISHED] * n)
+    finished, total = int((status == FINISHED).sum()), status.size
+    failed = int((status == FAILED).sum())
+    if not failed:
+        return f"n = {n}"
+    return (f"n = {n} finished of {total} ({failed} failed)" if n == finished
+            else f"n = {n}; {failed} of the file's {total} realisations failed")
+
+
 def figure_title(what: str, ds, n: int | None = None, width: int = 110) -> str:
-    """A title naming what is drawn, the scene, the level, n and the file, wrapped to ``width``."""
+    """A title naming what is drawn, the scene, the level, n (and the failed realisations) and the file,
+    wrapped to ``width``."""
     a = ds.attrs
     source = Path(str(ds.encoding.get("source", "in-memory data"))).name
-    count = "" if n is None else f", n = {n}"
+    count = "" if n is None else f", {realisation_count(ds, n)}"
     head = f"{what}: scene {a.get('scene_name', '?')}, {a.get('model', '?')} level{count}, {source}"
     return "\n".join(textwrap.wrap(head, width))
 

@@ -13,7 +13,7 @@ import tomllib
 
 from rss6core import parse_scene
 
-__all__ = ["dump_scene_toml", "scene_variant"]
+__all__ = ["dump_scene_toml", "scene_variant", "uncertain_tables"]
 
 
 def _value(v) -> str:
@@ -74,3 +74,11 @@ def scene_variant(text: str, overrides: dict[str, dict], source: str = "<variant
     out = dump_scene_toml(data, f"rss6 variant of {source}: {note}")
     parse_scene(out, source)
     return out
+
+
+def uncertain_tables(scene) -> dict[str, list[str]]:
+    """The scene's [uncertain.*] and [correlation.*] sub-tables as a ``drop`` of :func:`scene_variant`:
+    dropping them holds every uncertain input at its nominal value (empty for a scene without any)."""
+    tables = {"uncertain": [i.name for i in scene.uncertain.inputs],
+              "correlation": [c.name for c in scene.uncertain.correlations]}
+    return {k: names for k, names in tables.items() if names}

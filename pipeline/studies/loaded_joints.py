@@ -17,7 +17,7 @@ import numpy as np
 
 from rss6core import model_level, parse_scene, simulate
 
-from ..scenes.variant import scene_variant
+from ..scenes.variant import scene_variant, uncertain_tables
 from ..vocabulary import DIRECTIONS, FAMILIES
 
 __all__ = ["leaves_out_loaded_joints", "loaded_joint_maxima", "loaded_joints_note", "loaded_breaches"]
@@ -42,7 +42,7 @@ def _loaded_scene(scene):
     overrides = {"simulation": {"quasi_static_eccentricity": "reaction"}}
     if scene.sampling.size_tolerance > 0.0:
         overrides["sampling"] = {"size_tolerance": 0.0}
-    drop = {"tolerance": tolerance, "uncertain": [i.name for i in scene.uncertain.inputs]}
+    drop = {"tolerance": tolerance} | uncertain_tables(scene)
     return parse_scene(scene_variant(scene.source_text, overrides, scene.name, add=True, drop=drop), scene.name)
 
 

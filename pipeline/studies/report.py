@@ -7,36 +7,41 @@ resume like ``rss6 run``) into DATA:
 - ``SCENE_elastic.nc``: the ideal-joint elastic run (one, deterministic);
 - ``SCENE_contact_only{A,C,B}.nc``: the contact level with one joint family's
   clearances as in the scene and the other two switched off (10 um, see OFF);
+- of a scene with [uncertain.*] inputs (manufacturing tolerances), which every level above draws,
+  the elastic run is ``SCENE_elastic_nominal-inputs.nc`` and it and the joint-family runs hold
+  those inputs at nominal, with ``SCENE_contact_nominal-inputs.nc`` as their all-joints run, so
+  that the family table attributes the clearances' error alone;
 then writes OUT/results.md and OUT/results/*.png from those files alone.
 """
 from __future__ import annotations
 
-import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from rss6core import (MODELS, default_integrator, default_time_step, model_level, models_with, parse_scene,
-                      rigid_motion, simulate, size_band)
+                      simulate, size_band)
 
 from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client
 from ..ensemble.run import EnsembleSpec, run_ensemble
 from ..scenes.catalogue import find_scene
-from ..analysis.envelopes import draw_envelope, envelope_marks, steady_samples
-from ..analysis.plot_common import family_units, legend_entries, plain_ticks, plt, save_figure
+from ..analysis.plot_common import save_figure
 from . import report_text as text
-from ..scenes.variant import scene_variant
+from .report_figures import LEVELS, error_figure, rigid_figure
+from .report_text import clearance_mm as _clearance_mm
+from ..scenes.variant import scene_variant, uncertain_tables
 from ..analysis.estimators import min_n_for_quantile
-from ..analysis.stats import ensemble_stats, in_window
+from ..analysis.stats import ensemble_stats, in_window, level_notes
 from ..files.opening import open_ensemble
 from ..files.reading import load_netcdf
 from ..files.records import file_window_label, run_dataset
 from ..files.schema import EnsembleFileError, display_unit
 from ..files.writing import write_netcdf
-from ..vocabulary import CONFIDENCE, DIRECTIONS, FINISHED, QUANTILES
+from ..vocabulary import CONFIDENCE, QUANTILES
 
-__all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "report_command", "PAPER_VALUES", "OFF"]
+__all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "report_command", "PAPER_VALUES", "OFF",
+           "LEVELS", "error_figure", "rigid_figure"]
 
 # m: clearance of a switched-off joint family at the contact level, which needs positive
 # clearances; the contact error shrinks in proportion to the clearance (tested), so a 10 um
@@ -45,7 +50,6 @@ __all__ = ["ReportPlan", "with_clearance", "run_scene", "write_report", "report_
 OFF = 1e-5
 FAMILY_KEYS = {"A": ("revolute_radial_m", "revolute_axial_m"), "C": ("spherical_C_m",),
                "B": ("spherical_B_m",)}
-LEVELS = ("paper", "contact")
 
 # docs/model.md section 9 (paper sec. 6), SI: (statistic, quantity, direction) -> {clearance mm: value}
 PAPER_VALUES = {
@@ -84,10 +88,30 @@ def with_clearance(text: str, values: dict[str, float], source: str = "<report>"
 
 def _only(text: str, family: str, source: str) -> str:
     """The scene with every joint family but ``family`` switched off (OFF, and without its
-    [tolerance.<family>] band, which would otherwise set its sizes)."""
+    [tolerance.<family>] band, which would otherwise set its sizes) and its uncertain inputs at nominal."""
     off = [k for f, keys in FAMILY_KEYS.items() if f != family for k in keys]
-    return scene_variant(text, {"clearance": {k: OFF for k in off}}, source,
-                         drop={"tolerance": [k.removesuffix("_m") for k in off]})
+    drop = {"tolerance": [k.removesuffix("_m") for k in off]} | uncertain_tables(parse_scene(text, source))
+    return scene_variant(text, {"clearance": {k: OFF for k in off}}, source, drop=drop)
+
+
+def _nominal_inputs(text: str, source: str) -> str:
+    """The scene with its [uncertain.*] inputs (and their correlations) held at nominal."""
+    return scene_variant(text, {}, source, drop=uncertain_tables(parse_scene(text, source)))
+
+
+def _elastic_run(scene, data: Path) -> Path:
+    """Run (unless its file exists) the ideal-joint elastic level, which draws no clearances: one run,
+    of the nominal robot where the scene has uncertain inputs; returns its file."""
+    nominal = "_nominal-inputs" if scene.uncertain else ""
+    path = data / f"{scene.name}_elastic{nominal}.nc"
+    if not path.exists():
+        if scene.uncertain:
+            scene = parse_scene(_nominal_inputs(scene.source_text, scene.name), scene.name)
+        result = simulate(scene, "elastic")
+        write_netcdf(run_dataset(scene, result, model="elastic", integrator=default_integrator(scene, "elastic"),
+                                 dt=default_time_step(scene, "elastic"), elements=scene.simulation.elements_per_link,
+                                 wall_time=0.0), path)
+    return path
 
 
 def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store, client) -> None:
@@ -104,14 +128,7 @@ def run_scene(config, data: Path, plan: ReportPlan, client=None) -> dict[str, Pa
     ``client``: an open dask client for all its ensembles, else each starts its own cluster."""
     scene = find_scene(config)
     data.mkdir(parents=True, exist_ok=True)
-    paths = {}
-    path = data / f"{scene.name}_elastic.nc"
-    if not path.exists():
-        result = simulate(scene, "elastic")
-        write_netcdf(run_dataset(scene, result, model="elastic", integrator=default_integrator(scene, "elastic"),
-                                 dt=default_time_step(scene, "elastic"), elements=scene.simulation.elements_per_link,
-                                 wall_time=0.0), path)
-    paths["elastic"] = path
+    paths = {"elastic": _elastic_run(scene, data)}
     for model, store in (("quasi-static", "summary"), ("paper", "full"), ("contact", "full")):
         path = data / f"{scene.name}_{model}.nc"
         _ensemble(scene, scene.source_text, str(config), model, plan.n, path, plan, store, client)
@@ -121,6 +138,10 @@ def run_scene(config, data: Path, plan: ReportPlan, client=None) -> dict[str, Pa
         _ensemble(scene, _only(scene.source_text, family, str(config)), str(config), "contact",
                   plan.family_n, path, plan, "summary", client)
         paths[f"only{family}"] = path
+    if scene.uncertain:   # the family runs' all-joints run: every clearance, inputs at nominal
+        path = paths["nominal"] = data / f"{scene.name}_contact_nominal-inputs.nc"
+        _ensemble(scene, _nominal_inputs(scene.source_text, str(config)), str(config), "contact",
+                  plan.family_n, path, plan, "summary", client)
     return paths
 
 
@@ -143,10 +164,6 @@ def _cell(sds, stat, q, d, statistic: str, f: float) -> str:
     return f"{est} [{lo}, {hi}]"
 
 
-def _clearance_mm(scene) -> float:
-    return round(scene.clearance.spherical_B * 1e3, 3)
-
-
 def _banded(scene) -> bool:
     """Whether any joint family draws its clearance sizes from a tolerance band."""
     return any(size_band(scene, k.removesuffix("_m")) is not None for keys in FAMILY_KEYS.values() for k in keys)
@@ -154,118 +171,16 @@ def _banded(scene) -> bool:
 
 def _clearance_words(scene) -> str:
     mm = _clearance_mm(scene)
-    return f"{mm} mm nominal clearances drawn from tolerance bands" if _banded(scene) else f"{mm} mm clearances"
+    words = f"{mm} mm nominal clearances drawn from tolerance bands" if _banded(scene) else f"{mm} mm clearances"
+    return words + (f" and {len(scene.uncertain.inputs)} manufacturing inputs" if scene.uncertain else "")
 
-
-# --- figures ------------------------------------------------------------------
 
 def _rigid_figure(scene, t, out: Path) -> Path:
     return save_figure(rigid_figure(scene, t), out / f"{scene.name}_rigid.png")
 
 
-def rigid_figure(scene, t):
-    """The ideal rigid platform motion (pose, rate, acceleration per direction) of a scene."""
-    pm = rigid_motion(scene, t).platform
-    fig, axes = plt.subplots(3, 6, figsize=(18, 8), constrained_layout=True, sharex=True)
-    fig.suptitle(f"scene {scene.name}: ideal rigid platform motion ({scene.trajectory.label}), the reference of "
-                 f"every error; {len(t)} instants over {t[-1] - t[0]:.3g} s")
-    labels = ("x", "y", "z", "n1", "n2", "n3")
-    for row, (q, values) in enumerate((("displacement", pm.pose), ("velocity", pm.pose_rate),
-                                       ("acceleration", pm.pose_acc))):
-        units = family_units(q, values)
-        for k in range(6):
-            f, unit = units[DIRECTIONS[k]]
-            ax = axes[row, k]
-            ax.plot(t, values[:, k] * f, color="0.3", lw=1.2)
-            ax.set(title=f"{labels[k]} {q}", ylabel=f"[{unit}]")
-            ax.grid(alpha=0.3)
-            plain_ticks(ax)
-            if row == 2:
-                ax.set_xlabel("time [s]")
-    return fig
-
-
 def _error_figure(scene, quantity: str, runs: dict, out: Path) -> Path:
     return save_figure(error_figure(scene, quantity, runs), out / f"{scene.name}_{quantity}.png")
-
-
-@dataclass(frozen=True)
-class _LevelErrors:
-    """One level's ensemble in an error figure: its file, the finished realisations' errors
-    (R, T, direction) SI, and its stored maxima and those above the sampled envelope (envelope_marks)."""
-    ds: object
-    err: np.ndarray
-    stored: dict
-    finer: dict
-
-    @classmethod
-    def of(cls, ds, quantity: str) -> "_LevelErrors":
-        err = ds["error"].sel(quantity=quantity).transpose("realization", "time", "direction")
-        err = err.values[ds["status"].values.astype(str) == FINISHED]
-        return cls(ds, err, *envelope_marks(ds, ensemble_stats(ds, window=None), quantity, err))
-
-    def rows(self) -> list[str]:
-        """The figure rows of this level: one realisation, the envelope, and the steady window's
-        envelope on axes of its own where the file has a steady window."""
-        return ["signed", "envelope"] + (["steady"] if steady_samples(self.ds).any() else [])
-
-
-def error_figure(scene, quantity: str, runs: dict):
-    """Like the paper's figs. 11-16: the platform error (actual minus rigid) of the elastic level
-    (ideal joints) and, per clearance level, one realisation (signed), the envelope of |error| over
-    the ensemble and that envelope over the steady window alone (which start-up impacts would
-    flatten), per direction, with the file's stored maxima where they exceed the envelope's samples
-    (the contact level's come from every internal step); one unit per direction family.  ``runs``:
-    the scene's opened files by role."""
-    elastic = runs["elastic"]
-    el = elastic["error"].sel(quantity=quantity).transpose("time", "direction").values
-    levels = {level: _LevelErrors.of(runs[level], quantity) for level in LEVELS}
-    units = family_units(quantity, el, *(a for lv in levels.values() for a in (lv.err, *lv.stored.values())))
-    rows = [(level, row) for level, lv in levels.items() for row in lv.rows()]
-    fig, axes = plt.subplots(len(rows), 6, figsize=(19, 2.6 * len(rows) + 0.8), constrained_layout=True)
-    fig.suptitle(f"scene {scene.name} ({_clearance_mm(scene)} mm clearances): platform {quantity} "
-                 "error, actual minus ideal rigid motion; levels " + ", ".join(LEVELS))
-    for r, (level, row) in enumerate(rows):
-        lv = levels[level]
-        for k, (ax, d) in enumerate(zip(axes[r], DIRECTIONS)):
-            if row == "signed":
-                _signed_panel(ax, lv, elastic, el, k, units[d], level)
-            else:
-                _envelope_panel(ax, lv, k, units[d], level, row == "steady")
-            if r and row != "steady":
-                ax.sharex(axes[0, k])
-            if row == "signed":
-                ax.tick_params(labelbottom=False)   # the envelope below shares its time axis
-            else:
-                ax.set_xlabel("time [s]")
-            ax.grid(alpha=0.3)
-            plain_ticks(ax)
-        if row != "steady":
-            _row_legend(axes[r], wrap=row == "envelope")
-    return fig
-
-
-def _signed_panel(ax, lv: _LevelErrors, elastic, el, k: int, unit: tuple, level: str) -> None:
-    """Realisation 0 of a level and the elastic level's error in direction ``k``, signed."""
-    f, name = unit
-    ax.plot(lv.ds["time"].values, lv.err[0, :, k] * f, color="C3", lw=0.8, label=f"{level}: realisation 0")
-    ax.plot(elastic["time"].values, el[:, k] * f, color="k", lw=1.0, label="elastic, ideal joints")
-    ax.set(title=f"{level}: {DIRECTIONS[k]} error", ylabel=f"[{name}]")
-
-
-def _envelope_panel(ax, lv: _LevelErrors, k: int, unit: tuple, level: str, steady: bool) -> None:
-    """A level's envelope of |error| in direction ``k`` over the whole run or the steady window."""
-    f, name = unit
-    draw_envelope(ax, lv.ds, lv.err[..., k], lv.finer, k, f, steady=steady)
-    when = f"t >= {float(lv.ds.attrs['steady_after_s']):g} s" if steady else f"n = {lv.err.shape[0]}"
-    ax.set(title=f"{level}: |{DIRECTIONS[k]} error|, {when}", ylabel=f"[{name}]")
-
-
-def _row_legend(axes, wrap: bool) -> None:
-    """One legend in a row's first panel with every label of the row (wrapped for envelopes)."""
-    labelled = legend_entries(axes)
-    labels = [textwrap.fill(x, 28) for x in labelled] if wrap else list(labelled)
-    axes[0].legend(labelled.values(), labels, fontsize=7, loc="best")
 
 
 def _open_run(path):
@@ -307,19 +222,40 @@ def _table(head: list[str], rows: list[list[str]]) -> list[str]:
         "| " + " | ".join(r) + " |" for r in rows]
 
 
+MARKS = ("†", "‡", "§", "¶")
+
+
+def _level_marks(st: dict) -> tuple[dict, list[str]]:
+    """Which cells of the comparison table do not measure the robot in operation, by level and quantity
+    (pipeline.analysis.stats.level_notes over the whole run: the paper level's velocities and accelerations
+    measure the step, a drawn start's impacts are in the contact level's): {(level, quantity): mark} and
+    the notes, each after its mark."""
+    notes, marks = {}, {}
+    for level in _LEVELS:
+        for q in dict.fromkeys(q for _, q, _ in _ROWS):
+            said = level_notes(st[level].attrs, {q}, {"whole"})
+            for note in said:
+                notes.setdefault(note, MARKS[len(notes)])
+            marks[(level, q)] = "".join(notes[n] for n in said)
+    return marks, [f"{mark} {note}." for note, mark in notes.items()]
+
+
 def _comparison_table(scene, st: dict) -> list[str]:
+    """The paper's numbers beside each level's median and 95 % quantile over the whole run, the cells that do
+    not measure the robot marked (:func:`_level_marks`), with the marks' notes below."""
     mm = _clearance_mm(scene)
     head = ["statistic (per realisation)", "dir", "unit", f"paper, {mm} mm"]
-    for level in _LEVELS:
+    for level in (text.labelled(f"{lv}, {file_window_label('whole', st[lv].attrs)}", scene) for lv in _LEVELS):
         head += [f"{level}: median [95 % CI]", f"{level}: 95 % quantile [95 % CI]"]
-    rows = []
+    rows, (marks, notes) = [], _level_marks(st)
     for stat, q, d in _ROWS:
         f, unit = display_unit(q, d)
         cells = [_label(stat, q), d, unit, _fmt(PAPER_VALUES[(stat, q, d)].get(mm), f)]
         for level in _LEVELS:
-            cells += [_cell(st[level], stat, q, d, "q50", f), _cell(st[level], stat, q, d, "q95", f)]
+            m = f" {marks[(level, q)]}" if marks[(level, q)] else ""
+            cells += [_cell(st[level], stat, q, d, p, f) + m for p in ("q50", "q95")]
         rows.append(cells)
-    return _table(head, rows)
+    return _table(head, rows) + ([""] + ["- " + n for n in notes] if notes else [])
 
 
 def _label(stat: str, quantity: str) -> str:
@@ -341,15 +277,18 @@ def _growth_table(scenes: list, st: dict) -> list[str]:
     return _table(head, rows)
 
 
-def _family_table(st: dict) -> list[str]:
-    runs = [("all joints", st["contact"])] + [(f"only {f}", st[f"only{f}"]) for f in FAMILY_KEYS]
+def _family_table(scene, st: dict) -> list[str]:
+    """Medians of the contact level with all joints and with one family at a time, and the elastic run's
+    maximum; of a scene with uncertain inputs, every run at nominal inputs (the all-joints run a family run)."""
+    runs = [("all joints", st["nominal" if scene.uncertain else "contact"])] + [
+        (f"only {f}", st[f"only{f}"]) for f in FAMILY_KEYS]
     head = ["statistic", "dir", "unit"] + [f"{name} ({_count(sds)})" for name, sds in runs]
     rows = []
     for stat, q, d in _ROWS:
         f, unit = display_unit(q, d)
         rows.append([_label(stat, q), d, unit] + [_fmt(_stat(sds, stat, q, d), f) for _, sds in runs]
                     + [_fmt(_stat(st["elastic"], stat, q, d, "max"), f)])
-    return _table(head + ["elastic (no clearance)"], rows)
+    return _table(head + ["elastic (" + text.labelled("no clearance", scene, True, False) + ")"], rows)
 
 
 def _window_table(sds, attrs) -> list[str]:
@@ -381,6 +320,10 @@ def _displacement_fields(scene, st: dict, paper_dx: float) -> dict:
     return {"scene": scene.name, "mm": _clearance_mm(scene), "paper_dx": paper_dx * 1e3,
             "contact_dx": ct * 1e3, "contact_ratio": ct / paper_dx, "qs_dx": qs * 1e3,
             "qs_ratio": qs / paper_dx, "how": text.HOW[scene.simulation.quasi_static_eccentricity],
+            "contact_what": f" ({text.contents(scene)})" if scene.uncertain else "",
+            "qs_what": ("the rigid-link kinematics of the clearances and the drawn manufacturing inputs together"
+                        if scene.uncertain else "the rigid-link clearance kinematics alone"),
+            "elastic_what": f", {text.contents(scene, nominal=True)}" if scene.uncertain else "",
             "elastic_dx": el * 1e3, "sag": _stat(st["contact"], "mean", "displacement", "z") * 1e3,
             "contact_z": _stat(st["contact"], "max", "displacement", "z") * 1e3}
 
@@ -409,7 +352,8 @@ def _explanations(scene, st: dict, dt: float, by_window, start: str) -> list[str
                                             startup_a=startup * 1e3, steady_a=steady * 1e3,
                                             steady=text.window_times("steady", by_window.attrs),
                                             start=text.start_text(text.START_PEAKS, start, by_window.attrs),
-                                            family=fam, share=100 * share))
+                                            family=fam, share=100 * share, family_what=(
+                                                f" ({text.contents(scene, nominal=True)})" if scene.uncertain else "")))
     return out
 
 
@@ -417,7 +361,7 @@ def _open_scene(config, data: Path, plan: ReportPlan, client) -> dict:
     """The scene's files by role, run where missing (on ``client``) and opened into memory; of an ensemble
     that an earlier, larger -n (--family-n) grew, only the first -n realisations, as the command says."""
     def first(role, ds):
-        n = plan.family_n if role.startswith("only") else plan.n
+        n = plan.family_n if role.startswith("only") or role == "nominal" else plan.n
         return ds.sel(realization=ds["realization"].values < n)
     return {k: (_open_run(p) if _one_run(k) else first(k, open_ensemble(p)))
             for k, p in run_scene(config, data, plan, client).items()}
@@ -429,20 +373,31 @@ def _one_run(role: str) -> bool:
     return role in MODELS and role not in models_with("draws_clearances")
 
 
+def _inputs_paragraph(scene) -> list[str]:
+    """The paragraph (and blank line) naming a scene's uncertain inputs, which its levels draw; none without."""
+    if not scene.uncertain:
+        return []
+    names = ", ".join(i.name for i in scene.uncertain.inputs)
+    return [text.INPUTS.format(count=len(scene.uncertain.inputs), names=names), ""]
+
+
 def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
     md = [f"## Scene `{scene.name}` ({_clearance_words(scene)})", "",
           "Runs: " + "; ".join(_setting_line(e[k], st[k]) for k in _LEVELS) + ".", ""]
     md += [f"![rigid motion]({rel(_rigid_figure(scene, e['contact']['time'].values, figs))})", ""]
     for q in ("displacement", "velocity", "acceleration"):
         md += [f"![{q} error]({rel(_error_figure(scene, q, e, figs))})", ""]
-    md += ["### Beside the paper's numbers (docs/model.md section 9)", ""] + _comparison_table(scene, st)
-    md += ["", "### Which joint family contributes most (contact level)", "",
-           text.FAMILY.format(off_um=OFF * 1e6, off_percent=OFF / scene.clearance.spherical_B * 100),
-           ""] + _family_table(st)
+    md += ["### Beside the paper's numbers (docs/model.md section 9)", ""] + _inputs_paragraph(scene)
+    steady = text.window_times("steady", e["contact"].attrs)
+    md += [text.COMPARISON.format(whole=file_window_label("whole", e["contact"].attrs), steady=steady), ""]
+    md += _comparison_table(scene, st)
+    md += ["", f"### Which joint family contributes most ({text.labelled('contact level', scene, True, False)})",
+           "", text.FAMILY.format(off_um=OFF * 1e6, off_percent=OFF / scene.clearance.spherical_B * 100)
+           + (text.FAMILY_NOMINAL if scene.uncertain else ""), ""] + _family_table(scene, st)
     contact = e["contact"]
     by_window = ensemble_stats(contact, window=None)
     start = parse_scene(contact.attrs["scene_toml"]).simulation.contact_start
-    md += ["", "### Start-up and steady operation (contact level)", "",
+    md += ["", f"### Start-up and steady operation ({text.labelled('contact level', scene, brackets=False)})", "",
            text.WINDOWS_PARAGRAPH.format(**{w: text.window_times(w, contact.attrs) for w in ("startup", "steady")})
            + " " + text.start_text(text.START, start, contact.attrs), ""]
     md += _window_table(by_window, contact.attrs)

@@ -19,19 +19,38 @@ FAMILY = (
     "is about proportional to the clearance, so such a family adds about {off_percent:.0f} % of what "
     "it adds at the scene's clearance.")
 
+COMPARISON = (
+    "Our numbers here are each level's over the {whole}, start-up included, as the column heads say (the paper "
+    "names no window for its own). A marked cell does not measure the robot in operation: it measures "
+    "the time step or start-up impacts, as its mark's note below the table says. The steady window's "
+    "numbers ({steady}) are in 'Start-up and steady operation' below (contact level), and the steady "
+    "acceleration maxima's model-form band of the paper scene in docs/accelerations.md.")
+
+INPUTS = (
+    "This scene also draws {count} manufacturing and assembly inputs per realisation ([uncertain.*] tables: "
+    "{names}; docs/model.md section 4b). Every level's realisations below draw them with the clearances: "
+    "the quasi-static, paper and contact numbers are the error of clearances + manufacturing inputs "
+    "together, as their labels say. The ideal-joint elastic run and the joint-family runs hold them at "
+    "nominal, so that they measure the elastic links and the clearances alone.")
+
+FAMILY_NOMINAL = (
+    " Every run of this table holds the scene's manufacturing inputs at nominal (without its "
+    "[uncertain.*] tables), so that it attributes the clearances' error alone: its all-joints column is "
+    "a run of its own, not the contact level above, which draws those inputs too.")
+
 GROWTH = ("Ratio of the medians of the larger-clearance scene to the smaller one (the paper reports "
           "displacement at both sizes only).")
 
 DISPLACEMENT = (
     "- **Displacement ({scene}).** The paper's largest displacement error is {paper_dx:.4g} mm; our "
-    "contact level's median per-realisation maximum is {contact_dx:.3g} mm ({contact_ratio:.3g} "
-    "times), and the rigid-link clearance kinematics alone (quasi-static level, {how}) gives "
+    "contact level's{contact_what} median per-realisation maximum is {contact_dx:.3g} mm ({contact_ratio:.3g} "
+    "times), and {qs_what} (quasi-static level, {how}) gives "
     "{qs_dx:.3g} mm ({qs_ratio:.3g} times). A joint with a {mm} mm clearance lets the platform move "
     "by the clearance's order through the leg closure (docs/model.md section 9), so an error of "
     "hundredths of a millimetre at {mm} mm clearance cannot come from the clearances: the paper's "
     "eq. 33 keeps only the part of each clearance vector along the link axes (virtual lengths) and "
     "redraws it every step, which averages the kinematic error instead of letting the joints rest "
-    "on their walls. The elastic (ideal-joint) error alone is {elastic_dx:.3g} mm. Most of the "
+    "on their walls. The elastic (ideal-joint{elastic_what}) error alone is {elastic_dx:.3g} mm. Most of the "
     "contact level's z error is a steady sag: its median mean |z error| is {sag:.3g} mm against a "
     "median maximum of {contact_z:.3g} mm, because under gravity every joint rests on the wall of "
     "its clearance, and each leg's closure adds up the offsets of its three joints (A, C, B).")
@@ -64,8 +83,8 @@ ACCELERATION = (
     "benchmarks/acceleration_candidates.py`): the steady maxima's model-form band "
     "runs from rss6's value to that model's (x 99-198, y 144-285, z 377-689 mm/s^2; rx 2.27-5.42, "
     "ry 5.05-8.17, rz 1.15-1.60 rad/s^2; docs/accelerations.md). Of the three joint families "
-    "switched on one at a time, {family} gives the largest median peak over the whole run ({share:.0f} % of the three "
-    "runs' sum).")
+    "switched on one at a time{family_what}, {family} gives the largest median peak over the whole run "
+    "({share:.0f} % of the three runs' sum).")
 
 START_PEAKS = {
     "drawn": ("The start-up peaks are impacts: the joints, started off their walls, fall onto them "
@@ -115,3 +134,24 @@ def start_text(texts: dict, start: str, attrs) -> str:
     settle_time_s leaves the first moments out of every window, the text saying so."""
     settle = float(attrs.get("settle_time_s", 0.0))
     return texts["settled"].format(settle=settle) if settle > 0 else texts[start]
+
+
+def clearance_mm(scene) -> float:
+    """The scene's clearance (spherical B, the report's reference size), mm."""
+    return round(scene.clearance.spherical_B * 1e3, 3)
+
+
+def contents(scene, nominal: bool = False) -> str:
+    """What a run of the scene holds beyond its clearances, as a label: '' for a scene without
+    [uncertain.*] inputs; else 'clearances + manufacturing inputs', or with ``nominal`` (a run
+    without its [uncertain.*] tables) 'manufacturing inputs at nominal'."""
+    if not scene.uncertain:
+        return ""
+    return "manufacturing inputs at nominal" if nominal else "clearances + manufacturing inputs"
+
+
+def labelled(name: str, scene, nominal: bool = False, brackets: bool = True) -> str:
+    """``name`` followed by what the run holds (:func:`contents`), where it says anything: in brackets, or
+    after a comma (``brackets`` False, for a name in brackets already)."""
+    what = contents(scene, nominal)
+    return name if not what else f"{name} ({what})" if brackets else f"{name}, {what}"
