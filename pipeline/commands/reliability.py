@@ -38,8 +38,8 @@ def add_parser(sub) -> None:
                         "run each time), until the estimated CoV is at most C or --budget would be exceeded "
                         "(exit 0 either way; status 'budget' if not met) (default: none: a run of size -n)")
     p.add_argument("--budget", type=evaluations, metavar="E",
-                   help="with --cov: evaluations at most, over all runs (default 50000 subset, 200000 mc); a subset "
-                        "run starts only if its most evaluations, N + 16 (1 - p0) N, fit in what is left")
+                   help="with --cov: evaluations at most, over all runs (default 20000 subset, 200000 mc); a subset "
+                        "run takes at most the levels, (1 - p0) N evaluations each after N, that fit in what is left")
     p.add_argument("-p0", "--p0", type=float, default=0.1,
                    help="subset: conditional probability of each level, in (0, 0.5] (default 0.1)")
     add_seed(p)

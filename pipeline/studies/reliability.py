@@ -11,6 +11,7 @@ workers of pipeline.ensemble.cluster when a batch is large.
 """
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -30,7 +31,7 @@ from ..files.writing import sigint_deferred
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
 
 __all__ = ["ReliabilityError", "Estimate", "input_dimension", "input_labels", "physical_inputs", "what_fails",
-           "evaluate", "reliability", "check_subset_budget", "estimate_from_dataset",
+           "evaluate", "reliability", "check_subset_budget", "subset_levels_within", "estimate_from_dataset",
            "largest_response",
            "reliability_dataset", "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
 
@@ -38,7 +39,7 @@ METHODS = ("subset", "mc")
 MC_BLOCK = 1000          # plain Monte Carlo draws block b of z from SeedSequence([seed, MC_TAG, b])
 MC_TAG = 40404040
 IN_PROCESS_ROWS = 64     # batches up to this many rows of a cheap level are evaluated here, larger ones on the workers
-DEFAULT_BUDGET = {"subset": 50_000, "mc": 200_000}   # evaluations at most with a CoV target (--budget)
+DEFAULT_BUDGET = {"subset": 20_000, "mc": 200_000}   # evaluations at most with a CoV target (--budget)
 _ONE_BELOW = np.nextafter(1.0, 0.0)
 
 
@@ -276,43 +277,49 @@ def _monte_carlo(spec, event: Event, dimension: int, n: int, seed: int, confiden
                     (m,), (event.limit,), status, message, z, np.zeros(m, int), maxima)
 
 
-def subset_most_evaluations(settings: SubsetSettings) -> int:
-    """The most evaluations one subset run can take: N at level 0, then (1 - p0) N new ones at each of
-    its ``max_levels`` levels (what a run that never converges spends); what --budget must hold."""
-    return settings.n_per_level + settings.max_levels * (settings.steps - 1) * settings.chains
+def subset_levels_within(settings: SubsetSettings, left: int) -> int:
+    """The most levels a subset run of ``settings`` can take within ``left`` evaluations: N at level 0, then
+    (1 - p0) N new ones per level; at most its ``max_levels``."""
+    return int(min(settings.max_levels, (left - settings.n_per_level) // ((settings.steps - 1) * settings.chains)))
 
 
 def check_subset_budget(settings: SubsetSettings, budget: int) -> None:
-    """ReliabilityError (before any work) when even the first run of a CoV target cannot fit in ``budget``."""
-    first, step = subset_most_evaluations(settings), (settings.steps - 1) * settings.chains
-    if first > budget:
-        raise ReliabilityError(f"--budget {budget}: the first subset run, N = {settings.n_per_level}, may take "
-                               f"up to {first} evaluations (N at level 0, then {step} "
-                               f"at each of up to {settings.max_levels} levels); give --budget {first} or more, "
-                               "or a smaller -n")
+    """ReliabilityError (before any work) when the first run of a CoV target cannot take even one level within
+    ``budget``: N + (1 - p0) N evaluations."""
+    if subset_levels_within(settings, budget) < 1:
+        one = settings.n_per_level + (settings.steps - 1) * settings.chains
+        raise ReliabilityError(f"--budget {budget}: the first subset run, N = {settings.n_per_level}, needs {one} "
+                               f"evaluations for its first level (N, then {one - settings.n_per_level}); give "
+                               f"--budget {one} or more, or a smaller -n")
 
 
 def _subset_to_cov(spec, event: Event, dimension: int, settings: SubsetSettings, client, checkpoint,
                    cov_target: float, budget: int) -> Estimate:
     """Subset simulation with N doubled (a fresh run each time, its own seed schedule) until its CoV is
-    at most ``cov_target``; a run starts only if its most evaluations (:func:`subset_most_evaluations`)
-    fit in what is left of ``budget``, so the runs never spend more. The last run's estimate and file,
-    the runs and evaluations spent in its message."""
+    at most ``cov_target``; each run takes at most the levels that fit in what is left of ``budget``
+    (:func:`subset_levels_within`), so the runs never spend more. The last estimate and file, the runs
+    and evaluations spent in its message; status 'budget' where the budget, not the event, ended them."""
     from dataclasses import replace
     check_subset_budget(settings, budget)
-    spent, runs = 0, 0
+    spent, runs, last, done = 0, 0, None, ""
     while True:
-        est = _subset(spec, event, dimension, settings, client, checkpoint)
+        levels = subset_levels_within(settings, budget - spent)
+        if levels < 1:
+            return replace(last, status="budget", message=f"{last.message}; CoV target {cov_target:g} not met: the "
+                           f"next run (N = {settings.n_per_level}) cannot take a level within what is left of the "
+                           f"budget of {budget} ({done})")
+        est = _subset(spec, event, dimension, replace(settings, max_levels=levels), client, checkpoint)
         spent, runs = spent + est.level.size, runs + 1
         done = f"{runs} run(s) up to N = {settings.n_per_level}, {spent} evaluations in all"
-        if est.status in ("certain", "impossible") or est.cov <= cov_target:
+        if est.status == "max_levels" and levels < settings.max_levels:   # the budget ran out, not the levels
+            ended = last or est
+            return replace(ended, status="budget", message=f"{ended.message}; CoV target {cov_target:g} not met: "
+                           f"the run at N = {settings.n_per_level} needed more than the {levels} levels left in the "
+                           f"budget of {budget} ({done})")
+        if est.status in ("certain", "impossible") or est.cov <= cov_target or not math.isfinite(est.pf):
             return replace(est, message=f"{est.message}; CoV target {cov_target:g} met ({done})"
                            if est.cov <= cov_target else est.message)
-        settings = replace(settings, n_per_level=2 * settings.n_per_level)
-        if spent + subset_most_evaluations(settings) > budget:
-            return replace(est, status="budget", message=f"{est.message}; CoV target {cov_target:g} not met: the "
-                           f"next run (N = {settings.n_per_level}) could take {subset_most_evaluations(settings)} "
-                           f"evaluations, beyond what is left of the budget of {budget} ({done})")
+        last, settings = est, replace(settings, n_per_level=2 * settings.n_per_level)
 
 
 def reliability(spec, event: Event, method: str = "subset", n: int | None = None, p0: float = 0.1,
