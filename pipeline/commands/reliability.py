@@ -148,8 +148,9 @@ def _held(output):
     from ..studies.reliability import estimate_from_dataset
     from ..studies.reliability_checkpoint import checkpoint_path
     print(f"rss6 reliability: {output} already answers this request: nothing is recomputed", file=sys.stderr)
+    held = estimate_from_dataset(load_netcdf(output))   # verified before the checkpoint goes
     checkpoint_path(output).unlink(missing_ok=True)
-    return estimate_from_dataset(load_netcdf(output))
+    return held
 
 
 def _compute(args, event, level, cluster, output, request):

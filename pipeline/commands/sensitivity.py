@@ -97,9 +97,10 @@ def _held(output):
     from ..ensemble.run import parts_dir
     from ..files.reading import load_netcdf
     print(f"rss6 sensitivity: {output} already answers this request: nothing is recomputed", file=sys.stderr)
+    held = load_netcdf(output)   # verified before the chunks go
     if parts_dir(output).exists():
         shutil.rmtree(parts_dir(output))
-    return load_netcdf(output)
+    return held
 
 
 def _compute(args, level, cluster, output, request):
