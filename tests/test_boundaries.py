@@ -177,6 +177,7 @@ def test_the_core_writes_the_level_table_and_finished_once():
 # the pipeline's choices of particular levels (not their properties): module -> how many sites
 CHOSEN_LEVELS = {
     "studies/report.py": 4,      # the paper's section 6: its method against contact, level by level
+    "studies/report_figures.py": 1,   # its figures of the same two levels (figs. 11-16)
     "studies/stability.py": 1,   # the figure's two panels: the elastic and the contact sweeps
     "studies/tradeoff.py": 1,    # one colour per level in the trade-off figure
 }

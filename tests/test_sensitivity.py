@@ -275,9 +275,11 @@ def test_bad_requests_get_one_line(argv, message, configs, tmp_path, capsys):
 
 
 def test_existing_output_is_refused(sobol_file, configs, capsys):
+    """Another request onto a finished file (its -n and --per-joint differ) is refused, naming what differs."""
     before = sobol_file.read_bytes()
     assert main(["sensitivity", str(configs / "smoke.toml"), "-o", str(sobol_file)]) == 2
-    assert "exists" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "holds the answer to another rss6 sensitivity request" in err and "-n 64 there, 1024 now" in err, err
     assert sobol_file.read_bytes() == before
 
 
