@@ -744,4 +744,22 @@ def test_a_figure_that_cannot_be_written_is_one_line_naming_it_and_leaves_no_par
     monkeypatch.setattr(fig, "savefig", full_disk)
     with pytest.raises(UserError, match=r"f\.png: the figure could not be written: No space left on device$"):
         save_figure(fig, path)
-    assert not path.exists()
+    assert not path.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_a_figure_interrupted_while_written_leaves_no_file_a_rerun_would_keep(tmp_path, monkeypatch):
+    """Ctrl-C half-way through a PNG: no file under the figure's name (a same-request rerun of rss6 reliability
+    keeps an existing figure, so a half-written one would stay), and no temporary file."""
+    from pipeline.analysis.plot_common import save_figure
+    fig, path = plt.figure(), tmp_path / "f.png"
+
+    def interrupted(target, **kwargs):
+        Path(target).write_bytes(b"half a png")
+        raise KeyboardInterrupt
+    monkeypatch.setattr(fig, "savefig", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        save_figure(fig, path)
+    assert list(tmp_path.iterdir()) == []
+    whole = plt.figure()
+    assert save_figure(whole, path) == path and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"   # a whole PNG
+    assert list(tmp_path.iterdir()) == [path]

@@ -3,6 +3,7 @@
 The Agg backend is set once, here; also plain ticks, the 2 x 3 panel grid and the steady window's mark."""
 from __future__ import annotations
 
+import os
 import textwrap
 from pathlib import Path
 
@@ -103,14 +104,17 @@ def panel_grid(title: str):
 
 
 def save_figure(fig, path: Path) -> Path:
-    """Write ``fig`` as a PNG to ``path`` and close it; a write that fails (a full disk) is one line
-    naming the file, and leaves no partial file."""
+    """Write ``fig`` as a PNG to ``path`` (through a temporary file, renamed when whole) and close it; a write
+    that fails (a full disk) is one line naming the file, and neither it nor Ctrl-C leaves a partial file,
+    which a rerun would take for a figure already drawn."""
+    part = Path(f"{path}.part")
     try:
-        fig.savefig(path, dpi=110)
+        fig.savefig(part, dpi=110, format="png")
+        os.replace(part, path)
     except OSError as exc:
-        Path(path).unlink(missing_ok=True)
         raise UserError(f"{path}: the figure could not be written: {exc.strerror or exc}") from None
     finally:
+        part.unlink(missing_ok=True)
         plt.close(fig)
     return path
 
