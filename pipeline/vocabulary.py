@@ -5,10 +5,11 @@ and the kinds of user mistake that end a command with one line and exit code 2.
 A leaf: it imports nothing of the pipeline, so every part may import it."""
 from __future__ import annotations
 
-from rss6core import FINISHED
+from rss6core import FINISHED, MODELS, model_level
 
 __all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "family_of", "WINDOWS", "window_words", "QUANTILES", "STATISTICS",
-           "REQUIRABLE", "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "UserError", "OptionError"]
+           "REQUIRABLE", "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "step_measured", "STEP_WORDS", "UserError",
+           "OptionError"]
 
 QUANTITIES = ("displacement", "velocity", "acceleration")   # of the platform's pose error
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")             # translations (m), rotations (rad)
@@ -35,6 +36,18 @@ REQUIRABLE = tuple(s for s in STATISTICS if s != "max")   # those with an interv
 SUMMARIES = ("max_abs_error", "mean_abs_error")   # per-realisation summaries over a window
 STORES = ("summary", "full")   # --store: summaries only, or also the error histories
 CONFIDENCE = 0.95   # the default confidence of every interval, bound and verdict
+
+
+STEP_WORDS = ("come from eccentricities redrawn every step and grow as the step shrinks: they measure the step, "
+              "not the robot")   # said of such errors wherever a table, note or refusal meets them
+
+
+def step_measured(model: str, quantities) -> list[str]:
+    """Which of ``quantities`` the ``model`` level's errors measure its step in, not the robot: velocity and
+    acceleration at a level that redraws its eccentricities every step (the paper level)."""
+    if model not in MODELS or not model_level(model).redraws_every_step:
+        return []
+    return [q for q in ("velocity", "acceleration") if q in quantities]
 
 
 class UserError(ValueError):

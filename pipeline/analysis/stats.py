@@ -18,7 +18,7 @@ import xarray as xr
 
 from ..files.records import empty_window, file_window_bounds
 from ..files.schema import SETTINGS
-from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, SUMMARIES
+from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, STEP_WORDS, SUMMARIES, step_measured
 from .estimators import (BOUNDS, LOWEST_MEASURED, MAX_NOTE, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
                          bound_level, estimates_and_bounds, interval_floor, min_n_for_quantile, moment_floor,
                          short_of_label, stopped_level, replicate_groups, rqmc_intervals)
@@ -322,9 +322,8 @@ def level_notes(attrs, shown: set, windows: set) -> list[str]:
     if model not in MODELS:
         return []
     level, notes = model_level(model), []
-    if level.redraws_every_step and shown & {"velocity", "acceleration"}:
-        notes.append(f"{model} level: its velocity and acceleration errors come from eccentricities redrawn every "
-                     "step and grow as the step shrinks: they measure the step, not the robot (the contact level "
+    if step_measured(model, shown):
+        notes.append(f"{model} level: its velocity and acceleration errors {STEP_WORDS} (the contact level "
                      "measures them)")
     starts = not empty_window("startup", *file_window_bounds(attrs))   # the start is in the whole run
     if level.contact_start and attrs.get("contact_start") == "drawn" and starts and windows & {"whole", "startup"}:

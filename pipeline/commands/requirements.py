@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from ..vocabulary import CONFIDENCE, WINDOWS, OptionError
+from ..vocabulary import CONFIDENCE, STEP_WORDS, WINDOWS, OptionError, step_measured
 
 
 def requirements(args) -> list:
@@ -34,14 +34,10 @@ def robot_measures(specs: list, model: str, flag: str | None = None) -> None:
     """A --require, --spec or --event on a quantity the ``model`` level's numbers do not measure the robot in
     (the paper level's velocities and accelerations measure its step) is a one-line error: a verdict on it
     would pass or fail the step, not the design."""
-    from rss6core import MODELS, model_level
-    if model not in MODELS or not model_level(model).redraws_every_step:
-        return
     for s in specs:
-        if s.quantity in ("velocity", "acceleration"):
-            raise OptionError(f"{flag or '--require'} {s.text!r}: the {model} level's {s.quantity} errors come from "
-                              "eccentricities redrawn every step and grow as the step shrinks: they measure the "
-                              "step, not the robot; judge them at the contact level (or elastic, without clearances)")
+        if step_measured(model, (s.quantity,)):
+            raise OptionError(f"{flag or '--require'} {s.text!r}: the {model} level's {s.quantity} errors "
+                              f"{STEP_WORDS}; judge them at the contact level (or elastic, without clearances)")
 
 
 def judge(ds, specs: list, confidence: float = CONFIDENCE) -> list:
