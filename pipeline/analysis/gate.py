@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .exceedance import Event, event_values
-from .spec import PF, Spec
-from ..vocabulary import CONFIDENCE, QUANTILES, QUANTITIES, WINDOWS, family_of
+from .spec import PF, Spec, si_unit
+from ..vocabulary import CONFIDENCE, QUANTILES, WINDOWS
 from .estimators import (QUANTILE_DECISION_CAP, bound_level, interval_floor, no_interval_at, one_sided_cp,
                          quantile_decision_n)
 from .stats import check_window_samples, ensemble_stats, finished_values, json_number, json_record, one_run_repeated
@@ -415,7 +415,6 @@ def verdicts_json(verdicts: list[Verdict]) -> list[dict]:
     for v in verdicts:
         record = json_record(v)
         record["spec_unit"] = record.pop("unit")
-        record["si_unit"] = ("rad" if family_of(v.direction) == "rotation" else "m") + ("", "/s", "/s^2")[
-            QUANTITIES.index(v.quantity)]
+        record["si_unit"] = si_unit(v.quantity, v.direction)
         records.append(record)
     return records

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 from ..vocabulary import FAMILIES, QUANTITIES, REQUIRABLE, SUMMARIES, UserError
 
-__all__ = ["OPERATORS", "PF", "Spec", "SpecError", "parse_spec", "parse_specs"]
+__all__ = ["OPERATORS", "PF", "Spec", "SpecError", "parse_spec", "parse_specs", "si_unit"]
 
 TRANSLATIONS, ROTATIONS = FAMILIES["translation"], FAMILIES["rotation"]
 MEASURES = dict(zip(("max", "mean"), SUMMARIES))   # the summary a spec's ":max" or ":mean" names
@@ -41,6 +41,12 @@ STANDARD_GRAVITY = 9.80665  # m/s^2
 _LENGTHS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6}
 _ANGLES = {"rad": 1.0, "mrad": 1e-3, "urad": 1e-6, "µrad": 1e-6, "deg": math.pi / 180}
 _POWER = {"displacement": 0, "velocity": 1, "acceleration": 2}
+_PER_TIME = ("", "/s", "/s^2")   # by _POWER
+
+
+def si_unit(quantity: str, direction: str) -> str:
+    """The SI unit a spec's values are held in: m or rad, per s or s^2 by ``quantity``."""
+    return ("rad" if direction in ROTATIONS else "m") + _PER_TIME[_POWER[quantity]]
 _NUMBER = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*)$")
 _OPERATOR = re.compile(r"<=|>=|=<|=>|==|!=|<|>|=")
 
@@ -121,7 +127,7 @@ def _unit_factor(text: str, unit: str, quantity: str, directions: tuple[str, ...
         return STANDARD_GRAVITY
     base, power = _split_unit(unit)
     table = _ANGLES if rotation else _LENGTHS
-    suffix = ("", "/s", "/s^2")[need]
+    suffix = _PER_TIME[need]
     names = ("rad", "mrad", "deg") if rotation else ("m", "mm", "um")
     valid = ", ".join(f"{b}{suffix}" for b in names) + (", g" if need == 2 and not rotation else "")
     if base not in table or power != need:
