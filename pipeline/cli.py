@@ -31,32 +31,49 @@ def commands() -> tuple:
             plot, tradeoff, stability, map)
 
 
+class _ParseError(Exception):
+    """An argument error found by the parser ``prog`` (the top one or a command's), reported by the top parser,
+    which holds the command line."""
+
+    def __init__(self, prog: str, message: str):
+        super().__init__(message)
+        self.prog, self.message = prog, message
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with a one-line error (the option and the problem; ``-h`` gives the usage); an option
     the command does not take names the commands that take it, or this command's nearest options."""
 
-    words: list[str] = []   # the command line being parsed (the subcommands' parsers report its errors)
-
     def error(self, message: str):
-        missing = re.fullmatch(r"argument (\S+): expected one argument", message)
-        value = _value_read_as_option(missing.group(1).split("/"), _Parser.words) if missing else None
-        if value:    # argparse reads "-1e-6" as an option, not as the value it looks like
-            option = missing.group(1).split("/")[-1]
-            message += f"; a value that starts with '-' ({value}) is read as an option: write {option}={value}"
-        print(f"{self.prog}: error: {message} (see {self.prog} -h)", file=sys.stderr)
-        sys.exit(2)
+        raise _ParseError(self.prog, message)
 
     def parse_args(self, args=None, namespace=None):
-        _Parser.words = list(sys.argv[1:] if args is None else args)
-        parsed, extras = self.parse_known_args(args, namespace)
+        words = list(sys.argv[1:] if args is None else args)
+        try:
+            parsed, extras = self.parse_known_args(words, namespace)
+        except _ParseError as e:
+            _exit_with(e.prog, _with_negative_value_hint(e.message, words))
         if extras:
             command = getattr(parsed, "command", None)
             where = f"{self.prog} {command}" if command else self.prog
             hints = [hint for hint in (_option_hint(self, command, word) for word in extras) if hint]
-            print(f"{where}: error: unrecognized arguments: {' '.join(extras)}"
-                  + "".join(f"; {hint}" for hint in hints) + f" (see {where} -h)", file=sys.stderr)
-            sys.exit(2)
+            _exit_with(where, f"unrecognized arguments: {' '.join(extras)}" + "".join(f"; {hint}" for hint in hints))
         return parsed
+
+
+def _exit_with(prog: str, message: str):
+    print(f"{prog}: error: {message} (see {prog} -h)", file=sys.stderr)
+    sys.exit(2)
+
+
+def _with_negative_value_hint(message: str, words: list[str]) -> str:
+    """argparse reads "-1e-6" as an option, not as the value it looks like: say how to write it."""
+    missing = re.fullmatch(r"argument (\S+): expected one argument", message)
+    value = _value_read_as_option(missing.group(1).split("/"), words) if missing else None
+    if not value:
+        return message
+    option = missing.group(1).split("/")[-1]
+    return message + f"; a value that starts with '-' ({value}) is read as an option: write {option}={value}"
 
 
 def _value_read_as_option(names: list[str], words: list[str]) -> str | None:

@@ -8,8 +8,8 @@ from __future__ import annotations
 from rss6core import FINISHED, MODELS, model_level
 
 __all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "family_of", "WINDOWS", "window_words", "QUANTILES", "STATISTICS",
-           "REQUIRABLE", "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "step_measured", "STEP_WORDS", "UserError",
-           "OptionError"]
+           "REQUIRABLE", "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "ESTIMATE_ENDS", "step_measured", "STEP_WORDS",
+           "UserError", "OptionError"]
 
 QUANTITIES = ("displacement", "velocity", "acceleration")   # of the platform's pose error
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")             # translations (m), rotations (rad)
@@ -48,6 +48,18 @@ def step_measured(model: str, quantities) -> list[str]:
     if model not in MODELS or not model_level(model).redraws_every_step:
         return []
     return [q for q in ("velocity", "acceleration") if q in quantities]
+
+
+# how a probability estimate (rss6 reliability: subset simulation or plain Monte Carlo) ended: its ``status``
+ESTIMATE_ENDS = {
+    "finished": "plain Monte Carlo ran the -n draws asked for; no convergence claimed",
+    "converged": "subset simulation reached the limit, or the --cov target was met",
+    "certain": "every level-0 draw exceeds the limit: P is 1 to within the sample",
+    "impossible": "a constant response below the limit at every level-0 draw: P is 0 to within the sample",
+    "stalled": "subset's threshold stopped rising (a flat or discontinuous response): no estimate",
+    "max_levels": "subset's last level ended below the limit: no estimate",
+    "budget": "--budget ended the runs before the --cov target was met",
+}
 
 
 class UserError(ValueError):

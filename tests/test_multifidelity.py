@@ -259,5 +259,5 @@ def test_an_answer_to_another_request_is_refused_not_overwritten(tmp_path):
     with pytest.raises(EnsembleFileError, match=r"another rss6 multifidelity request \(--low-n 64 there, 32 now\)"):
         check_multifidelity_output(out, request | {"--low-n": 32})
     xr.Dataset(attrs={"history": f"{HISTORY} smoke"}).to_netcdf(out)
-    with pytest.raises(EnsembleFileError, match=r"\(it records none\)"):
+    with pytest.raises(EnsembleFileError, match=r"F.nc: an rss6 multifidelity file that records no request"):
         check_multifidelity_output(out, request)

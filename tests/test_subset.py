@@ -122,6 +122,24 @@ def test_a_certain_or_an_impossible_event_is_said_at_the_first_level():
     assert np.isnan([certain.cov, certain.cov_upper, impossible.cov]).all()   # not 0: no N makes P = 1 certain
 
 
+def test_an_estimate_ends_only_with_a_word_the_vocabulary_and_docs_give():
+    """One vocabulary of how an estimate ends (vocabulary.ESTIMATE_ENDS): another word is refused where an
+    estimate is made, and docs/reliability.md names each."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from pipeline.studies.reliability import Estimate
+    from pipeline.vocabulary import ESTIMATE_ENDS
+    stalled = subset_simulation(lambda z: np.floor(z[:, 0]), 2, 5.0, SubsetSettings(n_per_level=100))
+    assert stalled.status == "stalled" and stalled.status in ESTIMATE_ENDS
+    with pytest.raises(ValueError, match="estimate status 'done': not one of finished, converged"):
+        replace(stalled, status="done")
+    with pytest.raises(ValueError, match="estimate status 'ok'"):
+        Estimate("mc", 0.5, 0.4, 0.6, 0.95, 0.1, "", (10,), (1.0,), "ok", "", *[np.zeros(1)] * 3)
+    docs = (Path(__file__).parents[1] / "docs" / "reliability.md").read_text()
+    assert [end for end in ESTIMATE_ENDS if f"`{end}`" not in docs] == []
+
+
 @pytest.mark.parametrize("n, p0", [(1000, 0.0), (1000, 0.7), (1000, 0.003), (999, 0.1)])
 def test_settings_refuse_a_p0_or_n_that_gives_no_whole_chains(n, p0):
     with pytest.raises(ValueError, match="p0|N p0"):

@@ -329,7 +329,7 @@ def level_notes(attrs, shown: set, windows: set) -> list[str]:
     if level.contact_start and attrs.get("contact_start") == "drawn" and starts and windows & {"whole", "startup"}:
         notes.append(f"{model} level, drawn start: the joints start off their contact equilibrium, and the impacts "
                      "that follow are in the whole run's and the startup's maxima (velocity and acceleration above "
-                     "all); the steady window measures the robot in operation (or --start equilibrium)")
+                     "all); the steady window measures the robot in operation, as does a run with --start equilibrium")
     return notes
 
 

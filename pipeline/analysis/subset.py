@@ -30,10 +30,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import stats as sps
 
-from ..vocabulary import CONFIDENCE
+from ..vocabulary import CONFIDENCE, ESTIMATE_ENDS
 from .estimators import clopper_pearson
 
-__all__ = ["SubsetSettings", "LevelRecord", "Evaluations", "SubsetResult", "subset_simulation",
+__all__ = ["SubsetSettings", "LevelRecord", "Evaluations", "SubsetResult", "check_estimate_end", "subset_simulation",
            "lognormal_interval", "chain_gamma", "MIN_N_INTERVAL"]
 
 TARGET_ACCEPTANCE = 0.44   # Papaioannou et al. (2015), adaptive conditional sampling
@@ -95,11 +95,17 @@ class Evaluations:
     response: np.ndarray
 
 
+def check_estimate_end(status: str) -> None:
+    """ValueError unless ``status`` is one of the words an estimate ends with (vocabulary.ESTIMATE_ENDS)."""
+    if status not in ESTIMATE_ENDS:
+        raise ValueError(f"estimate status {status!r}: not one of {', '.join(ESTIMATE_ENDS)}")
+
+
 @dataclass(frozen=True)
 class SubsetResult:
     """P, its CoV estimate and log-normal interval at ``confidence``, per-level records and every
-    evaluation; ``status``: 'converged', 'certain' (every level-0 draw fails), 'impossible' (a constant
-    response below the threshold), 'stalled' (a threshold that no longer rises) or 'max_levels'."""
+    evaluation; ``status``: 'converged', 'certain', 'impossible', 'stalled' or 'max_levels' (their meanings:
+    pipeline.vocabulary.ESTIMATE_ENDS)."""
 
     pf: float
     cov: float
@@ -113,6 +119,9 @@ class SubsetResult:
     evaluations: Evaluations = field(repr=False)
     interval: str = ("log-normal from the CoV's upper bound (levels fully correlated): ln P ~ "
                      "N(ln p - s^2/2, s^2), s^2 = ln(1 + cov_upper^2)")
+
+    def __post_init__(self):
+        check_estimate_end(self.status)
 
     @property
     def n_evaluations(self) -> int:

@@ -142,15 +142,13 @@ def _figure(args, answered: bool):
 
 
 def _held(output):
-    """The estimate an earlier run of the same request wrote to ``output``: nothing is recomputed (a checkpoint
-    it left, interrupted before removing it, holds nothing more and goes)."""
+    """The estimate an earlier run of the same request wrote to ``output`` (files.outputs.reuse_answer)."""
+    from ..files.outputs import reuse_answer
     from ..files.reading import load_netcdf
     from ..studies.reliability import estimate_from_dataset
     from ..studies.reliability_checkpoint import checkpoint_path
-    print(f"rss6 reliability: {output} already answers this request: nothing is recomputed", file=sys.stderr)
-    held = estimate_from_dataset(load_netcdf(output))   # verified before the checkpoint goes
-    checkpoint_path(output).unlink(missing_ok=True)
-    return held
+    return reuse_answer(output, "reliability", lambda path: estimate_from_dataset(load_netcdf(path)),
+                        checkpoint_path(output))
 
 
 def _compute(args, event, level, cluster, output, request):

@@ -90,17 +90,11 @@ def _request(args, level) -> dict:
 
 
 def _held(output):
-    """The indices an earlier run of the same request wrote to ``output`` (a run interrupted before its charts):
-    nothing is recomputed; finished chunks it left, interrupted before removing them, go."""
-    import shutil
-
+    """The indices an earlier run of the same request wrote to ``output`` (files.outputs.reuse_answer)."""
     from ..ensemble.run import parts_dir
+    from ..files.outputs import reuse_answer
     from ..files.reading import load_netcdf
-    print(f"rss6 sensitivity: {output} already answers this request: nothing is recomputed", file=sys.stderr)
-    held = load_netcdf(output)   # verified before the chunks go
-    if parts_dir(output).exists():
-        shutil.rmtree(parts_dir(output))
-    return held
+    return reuse_answer(output, "sensitivity", load_netcdf, parts_dir(output))
 
 
 def _compute(args, level, cluster, output, request):

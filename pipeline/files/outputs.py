@@ -160,11 +160,29 @@ def answered_request(path, command: str, request: dict, create_dirs: bool = Fals
     if not (lines and lines[-1].startswith(f"rss6 {command}")):   # the last line: its own
         raise EnsembleFileError(f"{path}: exists and is not an rss6 {what or command} file; rss6 {command} does not "
                                 "overwrite it (remove it or choose another -o)")
-    said = "it records none" if held is None else request_changes(json.loads(held), request)
+    if held is None:
+        raise EnsembleFileError(f"{path}: an rss6 {command} file that records no request (an earlier rss6 "
+                                "wrote it), so it cannot show it answers this one; choose another -o, or remove it "
+                                "to replace it")
+    said = request_changes(json.loads(held), request)
     if said:
         raise EnsembleFileError(f"{path}: holds the answer to another rss6 {command} request ({said}); "
                                 "choose another -o, or remove it to replace it")
     return True
+
+
+def reuse_answer(path: Path, command: str, load, leftover: Path):
+    """What ``rss6 COMMAND``'s earlier run of the same request (:func:`answered_request`) wrote to ``path``, read
+    by ``load(path)``: nothing is recomputed. ``leftover`` (a checkpoint file or a folder of finished chunks that
+    run left, interrupted before removing it) holds nothing more and goes, once the answer has been read."""
+    import shutil
+    print(f"rss6 {command}: {path} already answers this request: nothing is recomputed", file=sys.stderr)
+    held = load(path)   # verified before the leftover goes
+    if leftover.is_dir():
+        shutil.rmtree(leftover)
+    else:
+        leftover.unlink(missing_ok=True)
+    return held
 
 
 def check_new_output(path, command: str, create_dirs: bool = False, option: str = "-o") -> Path:

@@ -24,7 +24,7 @@ from rss6core import (FINISHED, SIZE_UNIFORMS, UNIFORM_BLOCKS, clearances_from_n
 
 from ..analysis.estimators import clopper_pearson
 from ..analysis.exceedance import Event
-from ..analysis.subset import SubsetSettings, subset_simulation
+from ..analysis.subset import SubsetSettings, check_estimate_end, subset_simulation
 from ..ensemble.cluster import WORKER_TIMEOUT_S, optional_client, results_as_finished
 from ..files.records import window_summaries
 from ..files.writing import sigint_deferred
@@ -66,6 +66,9 @@ class Estimate:
     z: np.ndarray
     level: np.ndarray
     maxima: np.ndarray
+
+    def __post_init__(self):
+        check_estimate_end(self.status)   # vocabulary.ESTIMATE_ENDS
 
     def summary(self) -> dict:
         """The JSON fields (SI thresholds)."""
