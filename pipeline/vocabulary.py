@@ -8,8 +8,8 @@ from __future__ import annotations
 from rss6core import FINISHED, MODELS, model_level
 
 __all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "family_of", "WINDOWS", "window_words", "QUANTILES", "STATISTICS",
-           "REQUIRABLE", "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "ESTIMATE_ENDS", "step_measured", "STEP_WORDS",
-           "UserError", "OptionError"]
+           "REQUIRABLE", "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "ESTIMATE_ENDS", "step_measured",
+           "STEP_WORDS", "UserError", "OptionError"]
 
 QUANTITIES = ("displacement", "velocity", "acceleration")   # of the platform's pose error
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")             # translations (m), rotations (rad)
