@@ -8,7 +8,10 @@ i.e. no longer depend on its drawn initial state?
 For each quantity and direction, D(t) = rms over realisations of e(t + P) - e(t) (does a realisation
 repeat itself?) and S(t) = std over realisations of e(t) (do the realisations agree?), both divided
 by the rms of e over t >= P; printed: the time after which each stays below 0.5, 0.2, 0.1 and 0.05
-in every direction."""
+in every direction. Then, per window (startup t < t_s, steady t >= t_s, t_s the scene's steady_after_s)
+and direction, max |e| per realisation over the file's histories: the coefficient of variation of the
+displacement maxima over realisations and the medians of the displacement and acceleration maxima
+(mm, rad; m/s^2, rad/s^2)."""
 import sys
 
 import numpy as np
@@ -48,6 +51,19 @@ def main(path: str) -> None:
         e = ds["error"].sel(quantity=q).transpose("realization", "time", "direction").values
         print(f"{q}: repeats (D) " + _settles(t[:-lag], residual(e, lag).max(axis=1)))
         print(f"{q}: agrees (S) " + _settles(t, spread(e, t >= period - 1e-12).max(axis=1)))
+    t_s = parse_scene(ds.attrs["scene_toml"]).simulation.steady_after
+    scale = np.array([1e3, 1e3, 1e3, 1.0, 1.0, 1.0])   # m -> mm
+    print(f"{'':42}" + "".join(f"{d:>10}" for d in ds["direction"].values))
+    for window, rows in (("startup", t < t_s - 1e-12), ("steady", t >= t_s - 1e-12)):
+        peaks = {q: np.abs(ds["error"].sel(quantity=q).transpose("realization", "time", "direction").values[:, rows])
+                 .max(axis=1) for q in ("displacement", "acceleration")}
+        cov = peaks["displacement"].std(axis=0, ddof=1) / peaks["displacement"].mean(axis=0)
+        print(f"{window + ': displacement maxima, CoV':42}" + "".join(f"{v:10.2%}" for v in cov))
+        print(f"{window + ': displacement maxima, median (mm, rad)':42}"
+              + "".join(f"{v:10.4g}" for v in np.median(peaks["displacement"], axis=0) * scale))
+        print(f"{window + ': acceleration maxima, median':42}"
+              + "".join(f"{v:10.4g}" for v in np.median(peaks["acceleration"], axis=0)))
+
 
 if __name__ == "__main__":
     main(sys.argv[1])
