@@ -122,6 +122,9 @@ def test_simulate_json_and_netcdf(configs, tmp_path, capsys):
     for k, window in ((1, "startup"), (2, "steady")):
         assert stored[k, 2] == by_window[window]["displacement"]["z"]
     assert np.array_equal(stored[0], np.maximum(stored[1], stored[2]))
+    again = tmp_path / "again.nc"
+    assert main(["simulate", str(configs / "smoke.toml"), "--model", "elastic", "-o", str(again)]) == 0
+    assert again.read_bytes() == out_file.read_bytes()   # no wall time in the file: the same run, the same bytes
 
 
 def test_simulate_rigid_is_the_reference(capsys):

@@ -344,7 +344,7 @@ def test_sensitivity_figures_are_legible(smoke, tmp_path):
         results.append(SobolIndices(design, np.concatenate([est, est - 0.1, est + 0.1], axis=1)))
     spec = EnsembleSpec(smoke.source_text, "smoke", "quasi-static", "newmark", 1e-3, 4, 0)
     path = tmp_path / "s.nc"
-    write_netcdf(sensitivity_dataset(smoke, spec, inputs, results, 64, 0.95, 0.0), path)
+    write_netcdf(sensitivity_dataset(smoke, spec, inputs, results, 64, 0.95), path)
     figs = sensitivity_figures(load_netcdf(path), quantities=("displacement",))
     assert sorted(figs) == [f"sobol_{s}_displacement_{d}.png" for s in ("max", "mean")
                             for d in ("families", "joints")]

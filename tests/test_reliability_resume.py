@@ -37,12 +37,12 @@ def _interrupt_at(monkeypatch, batch: int) -> list:
 
 @pytest.fixture(scope="module")
 def whole(tmp_path_factory):
-    """An uninterrupted run: its JSON and file."""
+    """An uninterrupted run: its JSON, file and path."""
     out = tmp_path_factory.mktemp("whole") / "w.nc"
     buf = io.StringIO()
     with redirect_stdout(buf):
         assert main(_argv(out)) == 0
-    return json.loads(buf.getvalue()), load_netcdf(out)
+    return json.loads(buf.getvalue()), load_netcdf(out), out
 
 
 def _same_file(a, b) -> None:
@@ -66,6 +66,7 @@ def test_a_run_interrupted_between_batches_resumes_to_the_uninterrupted_result(t
     assert res == whole[0]
     assert sum(computed) == res["evaluations"] - sum(seen)   # the stored batches were not computed again
     _same_file(load_netcdf(out), whole[1])
+    assert out.read_bytes() == whole[2].read_bytes()   # no wall time or other run-dependent attribute
     assert not (tmp_path / "r.nc.checkpoint.nc").exists()
 
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import math
 import sys
-import time
 from pathlib import Path
 
 from ..ensemble.settings import resolve_cluster, resolve_level
@@ -162,7 +161,6 @@ def _compute(args, event, level, cluster, output, request):
     options = f"--event '{event.text}' --method {args.method}" + (f" -n {args.n}" if args.n else "") + \
         (f" --p0 {args.p0:g}" if args.method == "subset" else "") + f" --seed {args.seed}" + \
         (f" --cov {args.cov:g}" if args.cov else "") + (f" --budget {args.budget}" if args.budget else "")
-    start = time.perf_counter()
     found = checkpoint_path(output).exists()
     checkpoint = Checkpoint(checkpoint_path(output), {**spec.attrs(), "options": options}, args.resume)
     if args.resume and not found:
@@ -175,7 +173,7 @@ def _compute(args, event, level, cluster, output, request):
         kept = f"the evaluations so far are kept in {checkpoint.path}"
         interrupted(kept if checkpoint.batches else None, "rerun the same command with --resume to continue")
         return None
-    ds = reliability_dataset(est, event, spec, time.perf_counter() - start, options)
+    ds = reliability_dataset(est, event, spec, options)
     write_netcdf(ds.assign_attrs({REQUEST_ATTR: json.dumps(request, sort_keys=True)}), output)
     checkpoint.remove()
     return est

@@ -48,7 +48,7 @@ def main(args) -> int:
         raise SceneError(f"{args.config}: {exc}") from None
     wall = time.perf_counter() - start
     ds = run_dataset(level.scene, result, model=level.model, integrator=level.integrator, dt=level.dt,
-                     elements=level.elements, wall_time=wall, seed=args.seed, realization=args.realization)
+                     elements=level.elements, seed=args.seed, realization=args.realization)
     if result.status != FINISHED:   # its maxima would be the divergence's, not the robot's
         if args.output:
             write_netcdf(ds, args.output)

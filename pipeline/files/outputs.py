@@ -176,8 +176,8 @@ def reuse_answer(path: Path, command: str, load, leftover: Path):
     by ``load(path)``: nothing is recomputed. ``leftover`` (a checkpoint file or a folder of finished chunks that
     run left, interrupted before removing it) holds nothing more and goes, once the answer has been read."""
     import shutil
+    held = load(path)   # verified before it is said to answer, and before the leftover goes
     print(f"rss6 {command}: {path} already answers this request: nothing is recomputed", file=sys.stderr)
-    held = load(path)   # verified before the leftover goes
     if leftover.is_dir():
         shutil.rmtree(leftover)
     else:

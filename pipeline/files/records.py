@@ -132,7 +132,7 @@ _WINDOW_ATTRS = {"long_name": "analysis window: whole run, startup t < steady_af
 
 
 def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elements: int,
-                wall_time: float, seed: int | None = None, realization: int | None = None) -> xr.Dataset:
+                seed: int | None = None, realization: int | None = None) -> xr.Dataset:
     """One simulation as a self-describing Dataset: error histories, summaries, provenance (with
     the ``seed`` and ``realization`` of its clearance draw when given)."""
     drawn = {k: v for k, v in (("seed", seed), ("realization", realization)) if v is not None}
@@ -179,7 +179,6 @@ def run_dataset(scene, result, *, model: str, integrator: str, dt: float, elemen
             "status": result.status,
             "status_message": result.message,
             "steps": result.steps,
-            "wall_time_s": wall_time,
         })
 
 

@@ -356,7 +356,7 @@ def estimate_from_dataset(ds: xr.Dataset) -> Estimate:
                     ds["level"].values, ds["max_abs_error"].values)
 
 
-def reliability_dataset(est: Estimate, event: Event, spec, elapsed: float, options: str = "") -> xr.Dataset:
+def reliability_dataset(est: Estimate, event: Event, spec, options: str = "") -> xr.Dataset:
     """The CF netCDF content: every evaluation's inputs, level and maxima, and the estimate in attributes."""
     import json
 
@@ -367,7 +367,7 @@ def reliability_dataset(est: Estimate, event: Event, spec, elapsed: float, optio
                            elements=spec.elements, options=options)
     attrs = {"Conventions": "CF-1.10", "title": f"rss6 reliability of {event.text} at the {spec.model} level, "
              f"scene {scene.name!r}", "history": history, "event": event.text, "event_limit": event.limit,
-             "event_window": event.window, "seed": spec.seed, "elapsed_s": elapsed,
+             "event_window": event.window, "seed": spec.seed,
              "estimate": json.dumps({k: json_number(v) if isinstance(v, float) else v
                                      for k, v in est.summary().items()}, allow_nan=False)}
     data = {"z": (("evaluation", "input"), est.z, {"long_name": "standard normal input, Phi^-1 of the "

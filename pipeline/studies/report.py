@@ -109,8 +109,8 @@ def _elastic_run(scene, data: Path) -> Path:
             scene = parse_scene(_nominal_inputs(scene.source_text, scene.name), scene.name)
         result = simulate(scene, "elastic")
         write_netcdf(run_dataset(scene, result, model="elastic", integrator=default_integrator(scene, "elastic"),
-                                 dt=default_time_step(scene, "elastic"), elements=scene.simulation.elements_per_link,
-                                 wall_time=0.0), path)
+                                 dt=default_time_step(scene, "elastic"),
+                                 elements=scene.simulation.elements_per_link), path)
     return path
 
 

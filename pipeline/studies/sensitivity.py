@@ -258,7 +258,7 @@ def _group_inputs(inputs: ClearanceInputs, design: Design) -> list[str]:
 
 
 def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int, confidence: float,
-                        wall_time: float, window: str = "whole") -> xr.Dataset:
+                        window: str = "whole") -> xr.Dataset:
     """The indices of every design as one CF Dataset (index, bound, group, quantity, direction), of
     the statistics over the analysis ``window``."""
     groups = [g for r in results for g in r.design.groups]
@@ -304,8 +304,7 @@ def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int
                                  f"for a {100 * confidence:g} % label (interval_coverage) and sd the standard "
                                  f"deviation of the index over {RESAMPLES} bootstrap resamples of the N base rows "
                                  "(SALib)",
-              "interval_coverage": COVERAGE_NOTE,
-              "wall_time_s": wall_time}
+              "interval_coverage": COVERAGE_NOTE}
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
@@ -339,13 +338,11 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFI
     """Sobol' indices of the level ``spec.model`` with N base rows per design (a power of 2), of the
     statistics over the analysis ``window`` (WINDOWS: whole run, startup or steady); with a ``parts``
     folder (OUT.parts), the finished chunks are kept there and the rows stored there are not evaluated."""
-    import time
     _check_level(spec.model)
     if n < MIN_N or n & (n - 1):
         raise SensitivityError(f"-n {n}: the base sample must be a power of 2 of at least {MIN_N} "
                                "(Sobol' points are balanced in powers of 2; interval coverage was "
                                f"measured from {MIN_N})")
-    start = time.perf_counter()
     scene = spec.scene()
     if scene.uncertain.correlations:
         raise SensitivityError(f"{spec.source}: [correlation.{scene.uncertain.correlations[0].name}]: Sobol' "
@@ -368,8 +365,7 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFI
                          f"({len(design.groups)} groups, N = {n}) on {workers} worker(s){kept}")
             stats = evaluate_statistics(spec, inputs, u, client, window=window, parts=rows)
             results.append(sobol_indices(design, _outputs(stats), confidence, spec.seed))
-    return sensitivity_dataset(scene, spec, inputs, results, n, confidence,
-                               time.perf_counter() - start, window)
+    return sensitivity_dataset(scene, spec, inputs, results, n, confidence, window)
 
 
 def _dominant(cell) -> str:
