@@ -91,6 +91,20 @@ def test_a_left_checkpoint_needs_resume_and_a_finished_output_is_not_recomputed(
     assert "another rss6 reliability request (--seed 0 there, 4 now)" in capsys.readouterr().err
 
 
+def test_a_tampered_answer_file_is_refused_before_it_is_said_to_answer(tmp_path, capsys, whole):
+    """The rerun reads the file first: a changed estimate is one line naming it, not 'already answers'."""
+    import shutil
+
+    import netCDF4
+    out = tmp_path / "t.nc"
+    shutil.copy(whole[2], out)
+    with netCDF4.Dataset(out, "a") as nc:
+        nc.estimate = nc.estimate.replace('"pf": ', '"pf": 0.5, "was": ', 1)
+    assert main(_argv(out)) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "attribute estimate" in err and "already answers" not in err, err
+
+
 def test_resume_without_a_checkpoint_says_it_starts_from_the_first_batch(tmp_path, capsys, whole):
     out = tmp_path / "r.nc"
     assert main(_argv(out, "--resume")) == 0
