@@ -103,7 +103,7 @@ from .levels import (MODEL_LEVELS, MODELS, ModelLevel, check_uncertain_level, de
 from .quasi_static import closure_matrix
 from .models import (Level, degrees_of_freedom, natural_frequencies, prepare_level, simulate, simulate_batch,
                      stored_draw, stored_inputs)
-from .scene import CLEARANCE_RADII, MAX_ELEMENTS_PER_LINK, Scene, SceneError, load_scene, parse_scene
+from .scene import CLEARANCE_RADII, MAX_ELEMENTS_PER_LINK, Scene, SceneError, load_scene, parse_scene, toml_spelling
 from .uncertain import inputs_from_uniforms
 from .realised import realised_clearances
 from .status import FAILED, FINISHED, STATUSES
@@ -113,7 +113,8 @@ from .workspace_map import (DrawnEccentricities, StaticClosure, WorstCaseSizes, 
                             revolute_support, sampled_errors, static_closure, worst_case_error, worst_case_sizes)
 
 __version__ = "0.3.2"
-__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "CLEARANCE_RADII", "RELATIVE_BAND_REACH",
+__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "toml_spelling", "CLEARANCE_RADII",
+           "RELATIVE_BAND_REACH",
            "MODELS", "MODEL_LEVELS", "ModelLevel", "model_level", "models_with", "INTEGRATORS", "CONTACT_STARTS",
            "TOL_DISPLACEMENT", "TOL_VELOCITY", "closure_matrix",
            "simulate", "simulate_batch", "prepare_level", "Level",

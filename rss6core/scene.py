@@ -11,6 +11,7 @@ the key, then checks that the trajectory stays inside the workspace.
 from __future__ import annotations
 
 import difflib
+import json
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -38,7 +39,7 @@ MAX_ELEMENTS_PER_LINK = 64   # beam elements per crank and per rod
 __all__ = [
     "SceneError", "Scene", "Geometry", "Material", "Platform", "Trajectory", "Simulation", "Sampling", "Damping",
     "Clearances", "ContactLaw", "Tolerances", "Actuator", "DRIVES",
-    "load_scene", "parse_scene",
+    "load_scene", "parse_scene", "toml_spelling",
 ]
 
 
@@ -431,21 +432,34 @@ def _where(path: tuple[str, ...]) -> str:
     return f"[{'.'.join(path[:-1])}] {path[-1]}" if len(path) > 1 else path[0]
 
 
+def toml_spelling(value) -> str:
+    """A value as the TOML file spells it, with its kind where Python's spelling would differ."""
+    if isinstance(value, bool):
+        return f"{str(value).lower()} (a boolean)"
+    if isinstance(value, str):
+        return f"{json.dumps(value)} (a string)"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return "[" + ", ".join(toml_spelling(v).split(" (")[0] for v in value) + "]"
+    return repr(value)
+
+
 def _scalar(value, spec: _Key, path) -> float | int | str | bool:
     if spec.kind is bool:
         if not isinstance(value, bool):
-            raise SceneError(f"{_where(path)}: expected true or false, got {value!r}")
+            raise SceneError(f"{_where(path)}: expected true or false, got {toml_spelling(value)}")
         return value
     if spec.kind is str:
         if not isinstance(value, str):
-            raise SceneError(f"{_where(path)}: expected a string, got {value!r}")
+            raise SceneError(f"{_where(path)}: expected a string, got {toml_spelling(value)}")
         if spec.choices and value not in spec.choices:
             raise SceneError(f"{_where(path)}: {value!r} is not one of {', '.join(spec.choices)}")
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{_where(path)}: expected a number, got {value!r}")
+        raise SceneError(f"{_where(path)}: expected a number, got {toml_spelling(value)}")
     if spec.kind is int and not isinstance(value, int):
-        raise SceneError(f"{_where(path)}: expected an integer, got {value!r}")
+        raise SceneError(f"{_where(path)}: expected an integer, got {toml_spelling(value)}")
     if not math.isfinite(value):
         raise SceneError(f"{_where(path)}: must be finite, got {value!r}")
     bad = {_POS: value <= 0, _NONNEG: value < 0, "unit": not 0 < value <= 1}.get(spec.check, False)
@@ -462,7 +476,7 @@ def _read_key(value, spec: _Key, path):
     if spec.length is None:
         return _scalar(value, spec, path)
     if not isinstance(value, list) or len(value) != spec.length:
-        raise SceneError(f"{_where(path)}: expected a list of {spec.length} numbers, got {value!r}")
+        raise SceneError(f"{_where(path)}: expected a list of {spec.length} numbers, got {toml_spelling(value)}")
     return [_scalar(v, spec, path) for v in value]
 
 
@@ -723,6 +737,13 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
     return scene
 
 
+def _binary_kind(path) -> str:
+    """What a binary file given as a scene looks like: a netCDF file (an rss6 output?) or nothing said."""
+    with open(path, "rb") as f:
+        head = f.read(8)
+    return " (a netCDF file: an rss6 output?)" if head.startswith((b"\x89HDF", b"CDF")) else ""
+
+
 def load_scene(path: str | Path) -> Scene:
     """Load and check a scene from a TOML file; SceneError naming the file if it cannot be read.
     A ``kind = "file"`` trajectory's samples are read here and carried in the scene text (:mod:`.pose_csv`).
@@ -733,7 +754,10 @@ def load_scene(path: str | Path) -> Scene:
         text = Path(path).read_text(encoding="utf-8")
     except FileNotFoundError:
         raise SceneError(f"{path}: no such scene file") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError:
+        raise SceneError(f"{path}: not a scene file but binary{_binary_kind(path)}; a CONFIG is a scene TOML "
+                         "file or a shipped scene's name") from None
+    except OSError as exc:
         raise SceneError(f"{path}: cannot read the scene file: {exc}") from None
     try:   # a kind = "file" trajectory's CSV, relative to the scene file, into the scene text
         text = with_pose_samples(text, Path(path).parent)

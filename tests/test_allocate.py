@@ -181,8 +181,8 @@ def _costs_with(tmp_path, family: str, fit: str, value: str | None, extra: str =
     ("0.0", "the cost must be positive and finite (per joint), got 0.0"),
     ("nan", "the cost must be positive and finite (per joint), got nan"),
     ("inf", "the cost must be positive and finite (per joint), got inf"),
-    ('"cheap"', "the cost must be a number (per joint), got 'cheap'"),
-    ("true", "the cost must be a number (per joint), got True"),
+    ('"cheap"', 'the cost must be a number (per joint), got "cheap" (a string)'),
+    ("true", "the cost must be a number (per joint), got true (a boolean)"),
     (None, "missing; give a cost per joint for every fit of --classes"),
 ])
 def test_a_fit_cost_that_is_not_a_positive_number_is_named_in_one_line(configs, tmp_path, capsys, value, says):
@@ -197,7 +197,7 @@ def test_a_fit_cost_that_is_not_a_positive_number_is_named_in_one_line(configs, 
     ("[classes.spherical_B.free]\nlow_m = 0.0\nhigh_m = 1e-5\ncost = -2.0\n",
      "[classes.spherical_B.free]: the cost must be positive and finite (per joint), got -2.0"),
     ("[classes]\nspherical_B = 1\n", "classes.spherical_B must be a table ([classes.spherical_B]), got 1"),
-    ('classes = "none"\n', "classes must be a table ([classes]), got 'none'"),
+    ('classes = "none"\n', 'classes must be a table ([classes]), got "none" (a string)'),
 ])
 def test_other_costs_file_mistakes_are_named_in_one_line(configs, tmp_path, capsys, extra, says):
     path = _costs_with(tmp_path, "spherical_C", "H9/d9", "2.0", extra)

@@ -67,7 +67,10 @@ def test_an_event_over_several_directions_is_their_union():
     ("displacement:z>0.1", "missing unit"), ("force:z>1mm", "unknown quantity 'force'"),
     ("displacement:w>1mm", "unknown direction 'w'"), ("displacement:z>1mm/stedy", "unknown window 'stedy'"),
     ("displacement:z<1mm", "an event reads"), ("displacement:x,rz>1mm", "mix translations and rotations"),
-    ("displacement:z>1rad", "unknown unit 'rad'"), ("displacement:z>0.5mm@q95", "an event has no @statistic")])
+    ("displacement:z>1rad", "unknown unit 'rad'"), ("displacement:z>0.5mm@q95", "an event has no @statistic"),
+    ("displacement:z>nanmm", "value 'nan' is not a positive finite number"),
+    ("displacement:z>1e999mm", "value '1e999' is not a positive finite number"),
+    ("displacement:z>mm", "missing value after '>'")])
 def test_malformed_events_name_the_bad_token(text, token):
     with pytest.raises(EventError, match="^--event ") as info:
         parse_event(text)

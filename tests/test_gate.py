@@ -59,6 +59,8 @@ def test_window_is_parsed():
     ("displacement:x!=0.05mm@q95", "unknown operator '!='"),
     ("displacement:x 0.05mm@q95", "missing operator"),
     ("displacement:x<=mm@q95", "missing value"),
+    ("displacement:x<=nanmm@q95", "value 'nan' is not a positive finite number"),
+    ("displacement:x<=-infmm@q95", "value '-inf' is not a positive finite number"),
     ("displacement:x<=0.05@q95", "missing unit"),
     ("displacement:x<=0.05mm", "missing '@STATISTIC'"),
     ("displacement<=0.05mm@q95", "missing directions"),

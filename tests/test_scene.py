@@ -133,6 +133,26 @@ def test_missing_file_is_named(tmp_path):
         load_scene(tmp_path / "nope.toml")
 
 
+@pytest.mark.parametrize("line, said", [
+    ("elements_per_link = true", "[simulation] elements_per_link: expected a number, got true (a boolean)"),
+    ('elements_per_link = "4"', '[simulation] elements_per_link: expected a number, got "4" (a string)'),
+    ("elements_per_link = 4.5", "[simulation] elements_per_link: expected an integer, got 4.5")])
+def test_a_value_of_the_wrong_kind_is_quoted_as_toml_spells_it(paper_text, line, said):
+    with pytest.raises(SceneError, match=re.escape(said) + "$"):
+        parse_scene(_edit(paper_text, "elements_per_link = 4", line))
+
+
+def test_a_binary_file_given_as_a_scene_is_named_as_such(tmp_path):
+    """An ensemble file passed as CONFIG: what it is, not a codec error."""
+    (tmp_path / "e.nc").write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(range(128, 256)))
+    with pytest.raises(SceneError, match=r"e.nc: not a scene file but binary \(a netCDF file: an rss6 output\?\); "
+                                         "a CONFIG is a scene TOML file"):
+        load_scene(tmp_path / "e.nc")
+    (tmp_path / "b.toml").write_bytes(bytes(range(128, 256)))
+    with pytest.raises(SceneError, match=r"b.toml: not a scene file but binary; a CONFIG"):
+        load_scene(tmp_path / "b.toml")
+
+
 def test_contact_time_step_must_divide_the_time_step(paper_text):
     text = _edit(paper_text, "contact_time_step_s = 2.0e-4", "contact_time_step_s = 3.0e-4")
     with pytest.raises(SceneError, match=r"\[simulation\] contact_time_step_s"):

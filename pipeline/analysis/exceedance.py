@@ -18,7 +18,7 @@ import numpy as np
 
 from ..vocabulary import CONFIDENCE, WINDOWS, window_words
 from .estimators import clopper_pearson
-from .spec import SpecError, _NUMBER, _limit, _subject, _unit_factor
+from .spec import _NUMBER, SpecError, _limit, _subject, _unit_factor, missing_value
 
 __all__ = ["Event", "Exceedance", "EventError", "parse_event", "exceedance", "format_exceedance", "exceedance_json",
            "union_words"]
@@ -87,8 +87,8 @@ def parse_event(text: str, flag: str = "--event") -> Event:
     try:
         quantity, directions = _subject(text, subject)
         m = _NUMBER.match(rest)
-        if m is None or not np.isfinite(float(m.group(1))):
-            raise _fail(text, "missing value after '>' (e.g. 0.1mm)", flag)
+        if m is None:
+            raise _fail(text, missing_value(rest, ">", "0.1mm"), flag)
         limit = _limit(text, m)
         factor = _unit_factor(text, m.group(2).strip(), quantity, directions)
     except EventError:

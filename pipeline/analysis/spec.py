@@ -204,6 +204,14 @@ def _limit(text: str, m) -> float:
     return value
 
 
+def missing_value(rest: str, op: str, example: str) -> str:
+    """What is wrong where no number follows ``op``: a nan or inf written as the limit, or no value at all."""
+    word = re.match(r"\s*([-+]?(?:nan|inf(?:inity)?))", rest, re.IGNORECASE)
+    if word:
+        return f"value {word.group(1)!r} is not a positive finite number (a limit on |error|)"
+    return f"missing value after {op!r} (e.g. {example})"
+
+
 def parse_spec(text: str) -> Spec:
     """Parse one spec (see module doc); raises SpecError with one line on any malformed token."""
     left, at, right = text.partition("@")
@@ -213,7 +221,7 @@ def parse_spec(text: str) -> Spec:
     quantity, directions = _subject(text, subject)
     m = _NUMBER.match(rest)
     if m is None:
-        raise _fail(text, f"missing value after {op!r} (e.g. 0.05mm)")
+        raise _fail(text, missing_value(rest, op, "0.05mm"))
     value, unit = _limit(text, m), m.group(2).strip()
     factor = _unit_factor(text, unit, quantity, directions)
     if right.strip().startswith(PF):

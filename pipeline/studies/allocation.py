@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rss6core import ClearanceDraw, model_level, models_with, parse_scene, prepare_level, stored_draw
+from rss6core import ClearanceDraw, model_level, models_with, parse_scene, prepare_level, stored_draw, toml_spelling
 
 from ..analysis.estimators import one_sided_bounds
 from ..analysis.gate import Verdict, allowed_exceedances, upper_limits_problem
@@ -89,7 +89,7 @@ def _read_costs(path) -> dict:
     tables |= {f"classes.{family}": table for family, table in classes.items()} if isinstance(classes, dict) else {}
     for key, table in tables.items():
         if not isinstance(table, dict):
-            raise AllocationError(f"--costs {path}: {key} must be a table ([{key}]), got {table!r}")
+            raise AllocationError(f"--costs {path}: {key} must be a table ([{key}]), got {toml_spelling(table)}")
     unknown = sorted(set(data) - set(ALLOCATED) - {"classes"}) + sorted(set(classes) - set(ALLOCATED))
     if unknown:
         raise AllocationError(f"--costs {path}: unknown table {unknown[0]!r}; give [<family>] costs and "
@@ -101,7 +101,7 @@ def _cost(value, where: str) -> float:
     """A cost per joint from the costs file: a finite number above 0, else AllocationError naming
     ``where`` (a free class would make the cheapest allocation any set of free ones)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise AllocationError(f"{where}: the cost must be a number (per joint), got {value!r}")
+        raise AllocationError(f"{where}: the cost must be a number (per joint), got {toml_spelling(value)}")
     if not 0 < value < float("inf"):
         raise AllocationError(f"{where}: the cost must be positive and finite (per joint), got {value!r}")
     return float(value)
