@@ -163,7 +163,8 @@ def add_scheduler(p, worker_timeout: bool = True) -> None:
 def add_require(p) -> None:
     p.add_argument("--require", action="append", metavar="SPEC",
                    help="a requirement QUANTITY:DIRECTIONS OP VALUE UNIT@STATISTIC[:mean][/WINDOW], e.g. "
-                        "'displacement:x,y<=0.05mm@q95' or '...@q95/steady' (STATISTIC mean, std, q05, q50, "
+                        "'displacement:x,y<=0.05mm@q95' or '...@q95/steady' (OP <= or < for an upper limit, "
+                        ">= or > for a lower one; STATISTIC mean, std, q05, q50, "
                         "q95, q99 of the realisations' maximum |error| over the window, or with ':mean' of "
                         "their mean |error|; or pf<=P, the probability that a realisation's maximum exceeds "
                         "the limit, e.g. '...<=0.1mm@pf<=1e-3'; window whole, startup or steady; default "

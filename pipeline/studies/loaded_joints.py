@@ -80,11 +80,13 @@ def loaded_joints_note(scene, model: str, specs=(), robot: str = "the nominal ro
 def loaded_breaches(maxima: np.ndarray, limits) -> list[str]:
     """Each translation limit of ``limits`` (Spec or Event on a max |displacement| over the steady or whole
     run) that the loaded state's steady maxima (m, x y z) are already past, as "'SPEC' (z 0.288 mm)"; a limit
-    on the spread (@std) is not a limit on one robot's maximum, so it is left out."""
+    on the spread (@std) is not a limit on one robot's maximum, and a lower limit (>=, >) is not one the loaded
+    joints' added error can break, so both are left out."""
     out = []
     for limit in limits:
         if (limit.quantity != "displacement" or getattr(limit, "measure", "max") != "max"
-                or limit.window == "startup" or getattr(limit, "statistic", None) == "std"):
+                or limit.window == "startup" or getattr(limit, "statistic", None) == "std"
+                or getattr(limit, "op", "<=") not in ("<=", "<")):
             continue
         past = limit.exceeds if hasattr(limit, "exceeds") else (lambda value, spec=limit: not spec.holds(value))
         over = [f"{d} {maxima[TRANSLATIONS.index(d)] / limit.factor:.3g} {limit.unit}" for d in limit.directions
