@@ -286,3 +286,17 @@ def test_a_bare_shipped_name_beside_a_copy_of_its_file_says_which_it_reads(confi
     err = capsys.readouterr().err
     assert err.count("note: 'paper' is the shipped scene; paper.toml in this folder is not read") == 1, err
     assert main(["check", "paper.toml"]) == 0 and "shipped" not in capsys.readouterr().err
+
+
+def test_config_help_names_the_scene_of_an_output_name_only_where_a_default_output_uses_it():
+    """A command's CONFIG help says its name is the SCENE of a default output name only where another
+    option's help gives such a default (SCENE in it)."""
+    import argparse
+
+    from pipeline.cli import build_parser
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    for name, command in sub.choices.items():
+        config = [a for a in command._actions if a.dest == "config"]
+        others = " ".join(a.help or "" for a in command._actions if a.dest != "config")
+        if config:
+            assert ("SCENE" in config[0].help) == ("SCENE" in others), name

@@ -18,7 +18,7 @@ from .requirements import known_windows, robot_measures
 def add_parser(sub) -> None:
     p = sub.add_parser("allocate", help="the least-cost fit class per joint family for which requirement specs "
                                         "pass, checked by an ensemble")
-    add_scene(p)
+    add_scene(p, names_output=True)
     p.add_argument("--spec", action="append", required=True, metavar="SPEC",
                    help="an upper limit QUANTITY:DIRECTIONS <= VALUE UNIT@STATISTIC, as for rss6 budget, e.g. "
                         "'displacement:x,y,z<=0.1mm@q95' (repeatable; required)")

@@ -13,7 +13,7 @@ from .requirements import known_windows, robot_measures
 
 def add_parser(sub) -> None:
     p = sub.add_parser("budget", help="the largest common clearance scale factor for which requirement specs pass")
-    add_scene(p)
+    add_scene(p, names_output=True)
     p.add_argument("--spec", action="append", required=True, metavar="SPEC",
                    help="an upper limit QUANTITY:DIRECTIONS <= VALUE UNIT@STATISTIC, as for "
                         "rss6 run --require, e.g. 'displacement:x,y,z<=0.1mm@q95' (repeatable; required, no "

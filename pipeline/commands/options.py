@@ -98,10 +98,11 @@ WINDOW_HELP = ("analysis window of the {what}: whole (t >= the scene's settle_ti
                "its steady_after_s) or steady (from it) (default whole)")
 
 
-def add_scene(p) -> None:
+def add_scene(p, names_output: bool = False) -> None:
+    """The CONFIG argument; ``names_output``: the command names its default output after the scene."""
+    named = "; its name without .toml is the SCENE of a default output name" if names_output else ""
     p.add_argument("config", nargs="?", default="paper",
-                   help="scene TOML file or embedded scene name (default: paper); its name without .toml is "
-                        "the SCENE of a default output name")
+                   help=f"scene TOML file or embedded scene name (default: paper){named}")
 
 
 def output_stem(config: str) -> str:

@@ -20,7 +20,7 @@ def add_parser(sub) -> None:
     from ..studies.reliability import METHODS
     p = sub.add_parser("reliability", help="probability that the maximum |error| exceeds a limit (subset "
                                            "simulation or Monte Carlo), with its interval")
-    add_scene(p)
+    add_scene(p, names_output=True)
     add_model(p, "model level (default quasi-static; contact costs about 0.4 s per evaluation on the paper "
                  "scene)", default="quasi-static")
     p.add_argument("--event", required=True, metavar="EVENT",

@@ -20,7 +20,7 @@ from .requirements import annotator, known_windows, requirements, robot_measures
 def add_parser(sub) -> None:
     from ..ensemble.run import MAX_AUTO_CHUNK, MAX_AUTO_CHUNK_BY_MODEL
     p = sub.add_parser("run", help="run a Monte Carlo ensemble of clearance realisations")
-    add_scene(p)
+    add_scene(p, names_output=True)
     p.add_argument("-n", type=realisations, default=32, help="realisations (default 32)")
     p.add_argument("-o", "--output", help="ensemble netCDF file (default: SCENE_MODEL.nc); its "
                    "folder must exist unless --parents is given. Rerunning the same command "

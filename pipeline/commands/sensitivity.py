@@ -22,7 +22,7 @@ def add_parser(sub) -> None:
                                            "(and joint), with bootstrap intervals (SALib); keeps its "
                                            "finished evaluations in OUTPUT.parts, so a rerun of the same "
                                            "command resumes")
-    add_scene(p)
+    add_scene(p, names_output=True)
     add_model(p, "model level (default quasi-static; contact costs about 0.4 s per evaluation on the paper "
                  "scene)", choices=models_with("function_of_one_draw"), default="quasi-static")
     p.add_argument("-n", type=int_at_least(1, MAX_N, " (26 N evaluations with --per-joint)"), default=1024,
