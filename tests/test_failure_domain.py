@@ -3,6 +3,7 @@ standard normal space, whose failure domain is known: z given failure has mean a
 Phi(-beta) (along the design point beta alpha) and std 1 across alpha; the most probable failing
 point tends to beta alpha. Then `rss6 reliability --json --plot` end to end on the smoke scene."""
 import json
+import re
 
 import numpy as np
 import pytest
@@ -68,6 +69,9 @@ def test_inputs_no_draw_uses_are_not_ranked_and_a_ranking_within_their_noise_is_
     listed = text.split("inputs of largest shift: ")[1].split("\n")[0]
     assert "B_size" not in listed and "B_size" not in text.split("largest |z_i|: ")[1]
     assert listed.startswith("a mean +1.") and "the ranking is noise" not in text
+    families = text.split("mean shifts: ")[1].split("\n")[0]
+    assert "unused" not in families and families.startswith("first ")   # the noise is said, not ranked
+    assert re.search(r"noise: the unused inputs' shift is 0\.0\d .*not well above it is not resolved", text)
     noise = failure_domain(z, np.zeros(4000, int), z[:, 2] > 1.0, labels, groups)   # only 'unused' drives it
     assert "the ranking is noise at this sample" in format_failure_domain(noise)
 

@@ -67,14 +67,18 @@ UNUSED = "unused"   # the family of inputs no draw uses (pipeline.studies.reliab
 
 
 def _noise_note(group_shifts: list) -> list[str]:
-    """A line when no family's shift (:meth:`FailureDomain.group_shifts`) stands above that of the inputs
-    no draw uses (the noise of the means at this sample): then the ranking says nothing."""
+    """The noise of the families' shifts (:meth:`FailureDomain.group_shifts`): that of the inputs no draw uses,
+    which only chance moves. When no family stands above it the ranking says nothing; else families near it
+    are not resolved at this sample."""
     shifts = {g: s for g, s, _ in group_shifts}
     noise = shifts.pop(UNUSED, None)
-    if noise is None or not shifts or max(shifts.values()) > noise:
+    if noise is None or not shifts:
         return []
-    return [f"  no family's shift exceeds the unused inputs' ({noise:.2f}, the noise of these means): "
-            "the ranking is noise at this sample"]
+    if max(shifts.values()) <= noise:
+        return [f"  no family's shift exceeds the unused inputs' ({noise:.2f}, the noise of these means): "
+                "the ranking is noise at this sample"]
+    return [f"  noise: the unused inputs' shift is {noise:.2f} (only chance moves them; subset chains are "
+            "correlated): a family not well above it is not resolved at this sample"]
 
 
 def format_failure_domain(fd: FailureDomain, physical: list | None = None, shown: int = 8) -> str:
@@ -85,7 +89,7 @@ def format_failure_domain(fd: FailureDomain, physical: list | None = None, shown
              f"of the {fd.failing} failing evaluations of level {fd.level} against N(0, 1) "
              "(mean = shift in standard deviations, std < 1 = narrowed)",
              "  families by the rms of their inputs' mean shifts: " + ", ".join(
-                 f"{g} {s:.2f}" + (f" ({n})" if n > 1 else "") for g, s, n in groups[:shown])]
+                 [f"{g} {s:.2f}" + (f" ({n})" if n > 1 else "") for g, s, n in groups if g != UNUSED][:shown])]
     lines += _noise_note(groups)
     used = np.array([g != UNUSED for g in fd.groups])   # an input no draw uses cannot drive a failure
     order = [i for i in np.argsort(-np.abs(fd.mean)) if used[i]][:shown]
