@@ -9,7 +9,7 @@ from rss6core import FINISHED, MODELS, model_level
 
 __all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "family_of", "WINDOWS", "window_words", "QUANTILES", "STATISTICS",
            "REQUIRABLE", "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "ESTIMATE_ENDS", "step_measured",
-           "STEP_WORDS", "UserError", "OptionError"]
+           "STEP_WORDS", "counted", "UserError", "OptionError"]
 
 QUANTITIES = ("displacement", "velocity", "acceleration")   # of the platform's pose error
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")             # translations (m), rotations (rad)
@@ -60,6 +60,11 @@ ESTIMATE_ENDS = {
     "max_levels": "subset's last level ended below the limit: no estimate",
     "budget": "--budget ended the runs before the --cov target was met",
 }
+
+
+def counted(n: int, noun: str) -> str:
+    """``n`` and ``noun``, plural unless n is 1: '1 finished realisation', '4 class combinations'."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 class UserError(ValueError):

@@ -23,6 +23,15 @@ def test_published_clearance_limits(key):
     assert (lim.radial_low, lim.radial_high) == pytest.approx((lim.min_diametral / 2, lim.max_diametral / 2))
 
 
+def test_limits_are_the_tables_micrometres_as_a_scene_file_would_write_them():
+    """Whole micrometres give the metres their decimal spelling (the allocated scene's low_m = 2e-05, not
+    1.9999999999999998e-05)."""
+    for name in ("H8/e8", "H11/c11", "H7/g6"):
+        lim = fit_limits(name, 0.020)
+        for value in (lim.min_diametral, lim.max_diametral, lim.radial_low, lim.radial_high):
+            assert repr(value) == repr(float(f"{value:.6g}")), (name, value)
+
+
 def test_paper_tolerance_band_is_h11_c11_diametral():
     """configs/paper_tolerance.toml's radial band 0.110-0.370 mm is H11/c11's DIAMETRAL clearance at 18-30 mm."""
     lim = fit_limits("H11/c11", 0.020)

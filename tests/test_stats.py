@@ -380,3 +380,9 @@ def test_an_until_files_notes_give_the_widened_quantiles_floors():
     assert sds.attrs["min_n_q99"] == min_n_for_quantile(0.99, 0.975) == 368
     assert "q99: no 95 % interval below n = 368 (n = 350 here)" in notes, notes
     assert np.isnan(sds["max_abs_error"].sel(statistic="q99", bound="lower")).all()
+
+
+def test_a_count_of_one_is_singular():
+    from pipeline.vocabulary import counted
+    assert (counted(1, "finished realisation"), counted(0, "class combination"), counted(37, "draw")) == (
+        "1 finished realisation", "0 class combinations", "37 draws")

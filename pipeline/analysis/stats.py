@@ -18,7 +18,7 @@ import xarray as xr
 
 from ..files.records import empty_window, file_window_bounds
 from ..files.schema import SETTINGS
-from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, STEP_WORDS, SUMMARIES, step_measured
+from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, STEP_WORDS, SUMMARIES, counted, step_measured
 from .estimators import (BOUNDS, LOWEST_MEASURED, MAX_NOTE, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
                          bound_level, estimates_and_bounds, interval_floor, min_n_for_quantile, moment_floor,
                          short_of_label, stopped_level, replicate_groups, rqmc_intervals)
@@ -353,7 +353,7 @@ def _table_lines(sds: xr.Dataset) -> list[str]:
     """The lines of one window's table (the first one says what the rows are)."""
     from ..files.schema import display_unit
     a = sds.attrs
-    lines = [f"{a['n_finished']} finished realisations ({a['n_failed']} failed); 'max' rows: "
+    lines = [f"{counted(int(a['n_finished']), 'finished realisation')} ({a['n_failed']} failed); 'max' rows: "
              "per-realisation max |error|, 'mean' rows: per-realisation mean |error|; 'lower' and "
              f"'upper': two-sided {100 * a['confidence']:g} % confidence bounds",
              f"{'quantity':<13s}{'dir':<4s}{'of':<5s}{'unit':<8s}{'':<9s}"

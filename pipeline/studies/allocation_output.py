@@ -9,6 +9,7 @@ from ..analysis.gate import format_verdicts, overall, verdicts_json
 from ..files.schema import _provenance, command_line
 from .allocation import Allocation
 from .fits import COST_LAW
+from ..vocabulary import counted
 
 __all__ = ["format_allocation", "allocation_dataset", "allocation_json", "COST_NOTE", "SELECTION_NOTE",
            "fresh_check_command"]
@@ -38,7 +39,7 @@ def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_n
     they can say (:data:`SELECTION_NOTE`) and ``fresh_check``, the command that judges fresh draws."""
     width = 21 if a.joints else 18
     lines = [f"fit allocation: scene {scene_name}, {model} level, n = {n} realisations, "
-             f"{a.combinations} class combinations judged ({a.method})",
+             f"{counted(a.combinations, 'class combination')} judged ({a.method})",
              f"costs: {cost_note}",
              f"{'joint' if a.joints else 'family':{width}}{'class':10}{'radial band (um)':>20}{'cost/joint':>12}"
              f"{'joints':>8}"]

@@ -141,4 +141,5 @@ def fit_limits(fit: Fit | str, diameter: float) -> FitLimits:
     it_hole, it_shaft = IT_UM[fit.hole_grade][band], IT_UM[fit.shaft_grade][band]
     es_table = SHAFT_ES_UM[fit.shaft_letter]
     es = es_table[_band(d_mm, [upper for upper, _ in es_table])][1]
-    return FitLimits(fit, diameter, it_hole * 1e-6, it_shaft * 1e-6, -es * 1e-6, (it_hole + it_shaft - es) * 1e-6)
+    um = 1e6   # whole micrometres divided, not multiplied by 1e-6: 20 um is 2e-05 m, not 1.9999999999999998e-05
+    return FitLimits(fit, diameter, it_hole / um, it_shaft / um, -es / um, (it_hole + it_shaft - es) / um)
