@@ -9,6 +9,7 @@ Scenes
 - load_scene: a Scene from a TOML file.
 - MAX_ELEMENTS_PER_LINK: the most beam elements per crank and per rod a scene or --elements may ask for.
 - parse_scene: a Scene from TOML text.
+- toml_spelling: a value as a TOML file spells it (true, "4"), for messages that quote one.
 - CLEARANCE_RADII: each [clearance] key and the [contact] radius of its joint, which a clearance must stay below.
 - RELATIVE_BAND_REACH: the multiple of its nominal up to which [sampling] size_tolerance draws a size.
 
