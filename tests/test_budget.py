@@ -69,6 +69,36 @@ def test_a_plain_run_at_the_budget_passes_the_gate(answer, tmp_path, capsys):
     assert code == 0 and "verdict: pass" in printed, printed
 
 
+def test_the_answer_is_said_to_be_selected_and_a_fresh_check_is_printed(answer, configs, capsys):
+    """The pass at the answer is on the draws that chose it (at the quasi-static level its bound sits on
+    the limit), so the output says so and prints the `rss6 run` of the budget scene on the next seed
+    (review 63: fresh seeds came back undecided); the command runs and judges (pass 0, fail 1, undecided 3)."""
+    import shlex
+    import xarray as xr
+    capsys.readouterr()
+    assert main(["budget", str(configs / "smoke.toml"), "--spec", SPEC, "-n", str(N), "-o", str(answer),
+                 "--workers", "1"]) == 0   # the same request: resumed from the fixture's files
+    printed = capsys.readouterr().out
+    assert "pass (the answer, on the draws that chose it)" in printed, printed
+    note = next(line for line in printed.splitlines() if "a fresh check: " in line)
+    assert "optimistic" in note and "puts the limiting bound on the limit" in note, note
+    cmd = shlex.split(note.split("a fresh check: ")[1])
+    assert cmd[:2] == ["rss6", "run"] and cmd[cmd.index("--seed") + 1] == "1" and SPEC in cmd
+    assert main(cmd[1:] + ["--workers", "1"]) in (0, 1, 3)
+    with xr.open_dataset(cmd[cmd.index("-o") + 1]) as ds:
+        assert ds.attrs["seed"] == 1
+
+
+def test_a_fresh_check_at_another_confidence_judges_at_that_confidence(tmp_path):
+    """rss6 run's gate judges at 95 %: at another --confidence the fresh check judges the file with rss6 stats."""
+    import shlex
+    from pipeline.studies.trial import fresh_check_command
+    cmd = fresh_check_command(tmp_path / "s.toml", "paper", 60, 4, [SPEC], confidence=0.9)
+    run, stats = (shlex.split(part) for part in cmd.split(" && "))
+    assert run[run.index("--seed") + 1] == "5" and "--require" not in run
+    assert stats[:2] == ["rss6", "stats"] and stats[stats.index("--confidence") + 1] == "0.9" and SPEC in stats
+
+
 def test_the_budget_is_tight(answer, smoke):
     """A clearance 0.2 % larger than the budget no longer passes (the factor is rounded down to 4
     digits, at most 0.1 % below the exact one)."""
@@ -206,6 +236,7 @@ def test_a_pf_spec_is_swept_and_lands_at_the_largest_maximum(configs, tmp_path, 
                  "--workers", "1", "-o", str(tmp_path / "b")]) == 0
     printed = capsys.readouterr().out
     assert "measured sweep" in printed
+    assert "the sweep keeps the largest scale that passed on this seed" in printed and "--seed 1" in printed
     passes, fails = (float(w.rstrip(",")) for w in printed.split("limiting: scale ")[1].split()[0:3:2])
     assert passes <= exact < fails and fails / passes <= 1.05 + 1e-9
     code = main(["budget", str(configs / "smoke.toml"), "--spec", "displacement:z<=0.1mm@pf<=1e-3", "-n", str(N),

@@ -106,6 +106,36 @@ def test_stability_map_and_the_explicit_limit(stability_dir):
     assert (stability_dir / "stability.png").stat().st_size > 10_000
 
 
+def _sweep_runs(changes: dict) -> dict:
+    """Made-up measured runs {step: run} whose statistics differ from the finest step's by ``changes[step]``."""
+    base = np.ones((3, 6, 2))
+    return {h: {"statistics": base * (1 + c), "failed": 0, "message": "", "seconds_per_realization": 0.1}
+            for h, c in changes.items()}
+
+
+def test_the_summary_names_the_reference_and_no_accurate_step_it_cannot_show(smoke):
+    """Review 63: the finest step (the reference) was called 'largest accurate' when no coarser step was
+    within the tolerance, and at the paper level, whose velocity and acceleration errors measure the step;
+    the log rows read 'stable ' and 'inaccurateSTATISTICS...' without a separator."""
+    from pipeline.studies.stability import _rows, _stability_dataset, summary_lines
+    from pipeline.vocabulary import STEP_WORDS
+    log = []
+    rows = []
+    for level, changes in (("elastic", {1e-3: 0.0, 2e-3: 0.01, 4e-3: 0.2}), ("contact", {5e-5: 0.0, 1e-4: 1.2}),
+                           ("paper", {2.5e-4: 0.0, 5e-4: 0.01})):   # a paper row within 5 %: still not accurate
+        rows += _rows(_sweep_runs(changes), level, "newmark", 1.0, 0.2, 0.05, log.append, lambda h: f"dt {h:g} s")
+    assert log[0] == "  elastic newmark dt 0.001 s: reference (the finest step, which the others are compared with)"
+    assert log[1] == "  elastic newmark dt 0.002 s: stable"
+    assert log[2] == "  elastic newmark dt 0.004 s: inaccurate: statistics change 20.0 % vs the finest step"
+    elastic, contact, paper = summary_lines(_stability_dataset(rows, 1e-4, 0.05, 1, 0, smoke))
+    assert elastic.startswith("elastic newmark: reference 0.001 s, ") and elastic.endswith(
+        "largest step within 5 % of the reference's statistics 0.002 s"), elastic
+    assert contact.endswith("none coarser than the reference is within 5 %"), contact
+    assert "accurate" not in contact and "0.0001 s" not in contact.split("smallest failed")[1], contact
+    assert f"no step named accurate: its velocity and acceleration errors {STEP_WORDS}" in paper, paper
+    assert "0.0005" not in paper.split("smallest failed")[1], paper
+
+
 def test_pareto_front_keeps_only_undominated_settings():
     cost = np.array([1.0, 2.0, 3.0, 4.0, 0.5])
     error = np.array([0.5, 0.6, 0.1, 0.05, 0.9])

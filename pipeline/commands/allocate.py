@@ -112,7 +112,7 @@ def main(args) -> int:
         f"--spec '{s}'" for s in args.spec)
     ds = allocation_dataset(a, level.scene, level.model, level.integrator, level.dt, level.elements, opts, note)
     write_netcdf(ds, folder / "allocation.nc")
-    fresh = fresh_check_command(a, level.model, args.n, args.seed, args.spec)
+    fresh = fresh_check_command(a, level.model, args.n, args.seed, args.spec, args.confidence)
     if a.scene_path is not None:   # what the answer's robot does under its loads
         loaded = loaded_joints_meanwhile("allocate", find_scene(str(a.scene_path)), level.model, specs,
                                          "the answer's robot at its fits' middle sizes")

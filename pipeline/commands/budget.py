@@ -38,6 +38,7 @@ def main(args) -> int:
     from ..analysis.spec import SpecError, parse_spec
     from ..files.outputs import check_output_folder, claimed_output_folder, text_identity
     from ..studies.budget import budget, format_budget
+    from ..studies.trial import fresh_check_command
     try:
         specs = [parse_spec(t) for t in args.spec]
     except SpecError as exc:
@@ -56,7 +57,8 @@ def main(args) -> int:
                        args.tolerance)
         except KeyboardInterrupt:
             return interrupted(f"finished ensembles and chunks are kept in {folder}")
-    print(format_budget(b, level.scene.name, level.model))
+    fresh = fresh_check_command(b.scene_path, level.model, args.n, args.seed, args.spec, args.confidence)
+    print(format_budget(b, level.scene.name, level.model, fresh))
     note_loaded_joints("budget", find_scene(str(b.scene_path)), level.model, specs,
                        f"the answer's robot (clearances x {b.scale:.4g})")
     return 0

@@ -1,8 +1,6 @@
 """rss6 stability: time-step sweeps of each integrator, stable, inaccurate or failed."""
 from __future__ import annotations
 
-import numpy as np
-
 from ..scenes.catalogue import find_scene
 from ..vocabulary import OptionError
 from .options import add_study_arguments, positive_float, study_request
@@ -18,7 +16,7 @@ def add_parser(sub) -> None:
 
 def main(args) -> int:
     from ..files.outputs import check_output_folder, claimed_output_folder
-    from ..studies.stability import stability, write_stability
+    from ..studies.stability import stability, summary_lines, write_stability
     scene = find_scene(args.config)
     if args.horizon > scene.trajectory.duration:
         raise OptionError(f"--horizon {args.horizon:g}: longer than the scene's trajectory "
@@ -30,10 +28,7 @@ def main(args) -> int:
         ds = stability(scene, args.tolerance, args.n, args.seed, args.horizon)
         write_stability(ds, args.output)
     print(f"wrote {args.output}/stability.csv, stability.nc, stability.png")
-    for name in ds["sweep"].values:
-        print(f"{name}: " + ", ".join(
-            f"{lim.removesuffix('_s').replace('_', ' ')} "
-            + (f"{v:.3g} s" if np.isfinite(v := float(ds[lim].sel(sweep=name))) else "-")
-            for lim in ("largest_not_failed_s", "smallest_failed_s", "largest_accurate_s")))
+    for line in summary_lines(ds):
+        print(line)
     print(f"central-difference 2/omega_max: {ds.attrs['central_difference_limit_s']:.3g} s")
     return 0

@@ -8,8 +8,9 @@ import xarray as xr
 from ..analysis.gate import format_verdicts, overall, verdicts_json
 from ..files.schema import _provenance, command_line
 from .allocation import Allocation
+from ..vocabulary import CONFIDENCE, counted
 from .fits import COST_LAW
-from ..vocabulary import counted
+from .trial import SELECTION_NOTE, fresh_check_command as fresh_check
 
 __all__ = ["format_allocation", "allocation_dataset", "allocation_json", "COST_NOTE", "SELECTION_NOTE",
            "fresh_check_command"]
@@ -53,26 +54,16 @@ def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_n
     lines.append(f"scene at the answer: {a.scene_path or 'none (per-joint bands; a scene has one band a family)'}")
     lines.append(f"verification ensemble {a.ensemble_path}: {overall(list(a.verdicts))}")
     lines.append(format_verdicts(list(a.verdicts)))
-    lines.append(SELECTION_NOTE + (f"; a fresh check: {fresh_check}" if fresh_check else
+    lines.append(SELECTION_NOTE.format(what="verification") + (f"; a fresh check: {fresh_check}" if fresh_check else
                                    "; per-joint bands fit no scene, so rss6 run cannot recheck them"))
     return "\n".join(lines)
 
 
-# the verification ensemble re-simulates the search's own draws (the seed's realisations 0..n-1): it
-# checks the search (its prediction, the greedy's ensembles), not the choice made on those draws
-SELECTION_NOTE = ("the verification uses the draws that chose the answer (same seed, realisations 0..n-1), so "
-                  "its bounds are optimistic for the answer")
-
-
-def fresh_check_command(a: Allocation, model: str, n: int, seed: int, specs: list[str]) -> str | None:
-    """The `rss6 run` that judges the answer's scene on draws the search did not see (the next seed), or
+def fresh_check_command(a: Allocation, model: str, n: int, seed: int, specs: list[str],
+                        confidence: float = CONFIDENCE) -> str | None:
+    """The `rss6 run` of the answer's scene on the next seed (:func:`.trial.fresh_check_command`), or
     None for per-joint bands (no scene holds them)."""
-    if a.scene_path is None:
-        return None
-    from shlex import quote
-    output = f"{a.scene_path.with_suffix('')}_seed{seed + 1}.nc"
-    return (f"rss6 run {quote(str(a.scene_path))} --model {model} -n {n} --seed {seed + 1} -o {quote(output)} "
-            + " ".join(f"--require {quote(s)}" for s in specs))
+    return None if a.scene_path is None else fresh_check(a.scene_path, model, n, seed, specs, confidence)
 
 
 def allocation_dataset(a: Allocation, scene, model: str, integrator: str, dt: float, elements: int,

@@ -36,7 +36,7 @@ from ..ensemble.run import EnsembleSpec
 from ..scenes.variant import scene_variant
 from ..analysis.spec import PF, Spec
 from ..vocabulary import CONFIDENCE, UserError, window_words
-from .trial import Trial, run_trial
+from .trial import SELECTION_NOTE, Trial, run_trial
 
 __all__ = ["FAMILY_KEYS", "Budget", "scaled_scene", "exact_scale", "budget", "format_budget",
            "BudgetError"]
@@ -209,8 +209,9 @@ def budget(spec: EnsembleSpec, specs: list[Spec], n: int, folder, confidence: fl
     return Budget(scale, method, sizes, confidence, n, trials, limiting, scene_path)
 
 
-def format_budget(b: Budget, scene_name: str, model: str) -> str:
-    """The answer as lines: factor, method, clearances per family, the trials' verdicts."""
+def format_budget(b: Budget, scene_name: str, model: str, fresh_check: str) -> str:
+    """The answer as lines: factor, method, clearances per family, the trials' verdicts, and that the
+    answer's pass is on the draws that chose it (:data:`.trial.SELECTION_NOTE`) with ``fresh_check``."""
     lines = [f"clearance budget: scene {scene_name}, {model} level, n = {b.n} realisations per "
              f"ensemble, one-sided {100 * b.confidence:g} % bounds (a spec passes when its upper "
              "bound is within the limit)",
@@ -223,5 +224,15 @@ def format_budget(b: Budget, scene_name: str, model: str) -> str:
     for t in b.trials:
         worst = "pass" if t.passed else ("fail" if any(v.outcome == "fail" for v in t.verdicts)
                                          else "undecided")
-        lines.append(f"  {t.candidate:.{DIGITS}g}: {worst}, {t.path}")
+        answer = " (the answer, on the draws that chose it)" if t.candidate == b.scale and t.passed else ""
+        lines.append(f"  {t.candidate:.{DIGITS}g}: {worst}{answer}, {t.path}")
+    lines.append(SELECTION_NOTE.format(what="pass at the answer") + f"{SELECTION_WHY[b.method.startswith('exact')]}; "
+                 f"a fresh check: {fresh_check}")
     return "\n".join(lines)
+
+
+# why the pass at the answer is optimistic: exact scaling puts the bound on the limit by construction,
+# the sweep keeps the largest scale that passed on one seed
+SELECTION_WHY = {True: " (exact scaling puts the limiting bound on the limit, so fresh draws often come back "
+                       "undecided)",
+                 False: " (the sweep keeps the largest scale that passed on this seed)"}

@@ -17,10 +17,10 @@ from rss6core import (MODELS, Integrator, build_elastic_model, default_integrato
                       max_link_modes, models_with, natural_frequencies, quasi_static_state, simulate_elastic)
 
 from ..files.records import error_summaries
-from ..vocabulary import FINISHED
+from ..vocabulary import FINISHED, QUANTITIES, STEP_WORDS, step_measured
 from .setting import Setting, _adaptive, _contact_step, _dividing, load_compiled_kernels, measure, relative_errors
 
-__all__ = ["stability", "write_stability", "stability_figure"]
+__all__ = ["stability", "write_stability", "stability_figure", "summary_lines"]
 
 
 def _horizon(scene, duration: float):
@@ -142,8 +142,16 @@ def _rows(runs: dict, level, integrator, scale, horizon, tolerance, log, describ
                      "max_rel_change": change if np.isfinite(change) else 1e300,
                      "seconds_per_realization": runs[h]["seconds_per_realization"],
                      "velocity_mean_peak": float(np.nanmax(runs[h]["statistics"][1, :3, 0]))})
-        log(f"  {level} {integrator} {describe(h)}: {status} {reason}")
+        log(f"  {level} {integrator} {describe(h)}: {_row_words(status, reason, h == min(runs))}")
     return rows
+
+
+def _row_words(status: str, reason: str, reference: bool) -> str:
+    """A row's verdict for the log: the finest step is the reference the others are judged against, so a
+    stable one is called that (it is accurate only against itself); a reason follows its verdict after ':'."""
+    if reference and status == "stable":
+        return "reference (the finest step, which the others are compared with)"
+    return status + (f": {reason}" if reason else "") + (" (the reference)" if reference else "")
 
 
 _RUN_VARIABLES = {   # name: (CSV column, attributes)
@@ -163,6 +171,8 @@ _RUN_VARIABLES = {   # name: (CSV column, attributes)
     "reason": ("reason", {"long_name": "why not stable"}),
 }
 _LIMITS = ("largest_not_failed", "smallest_failed", "largest_accurate")
+_LIMIT_NAMES = {"largest_accurate": "largest time step coarser than the sweep's finest (the reference) within "
+                                    "the tolerance of it"}
 
 
 def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene,
@@ -175,7 +185,8 @@ def _stability_dataset(rows: list[dict], limit: float, tolerance, n, seed, scene
     names = list(dict.fromkeys(ds["sweep_name"].values))
     for lim in _LIMITS:
         ds[f"{lim}_s"] = ("sweep", [_limit(ds, name, lim) for name in names],
-                          {"units": "s", "long_name": lim.replace("_", " ") + " time step (NaN: none)"})
+                          {"units": "s", "long_name": _LIMIT_NAMES.get(lim, lim.replace("_", " ") + " time step")
+                           + " (NaN: none)"})
     ds = ds.assign_coords(sweep=names)
     ds.attrs = {"title": f"rss6 time-step stability map, scene {scene.name!r}",
                 "history": f"rss6 stability {scene.name} --tolerance {tolerance:g} -n {n} --seed {seed} "
@@ -190,13 +201,38 @@ def _sweep_name(level, integrator, scale) -> str:
 
 
 def _limit(ds, name: str, which: str) -> float:
-    """Per sweep: the largest step not failed, the smallest failed one, the largest stable one."""
+    """Per sweep: the largest step not failed, the smallest failed one, the largest stable one coarser than
+    the finest (the reference, stable against itself only)."""
     sel = ds["sweep_name"].values == name
     status, dt = ds["status"].values[sel], ds["dt_s"].values[sel]
     pick = {"largest_not_failed": (status != "failed", np.max),
             "smallest_failed": (status == "failed", np.min),
-            "largest_accurate": (status == "stable", np.max)}[which]
+            "largest_accurate": ((status == "stable") & (dt > dt.min()), np.max)}[which]
     return float(pick[1](dt[pick[0]])) if pick[0].any() else np.nan
+
+
+def summary_lines(ds: xr.Dataset) -> list[str]:
+    """Per sweep: its reference (finest) step, the largest not failed, the smallest failed, and the largest
+    step within the tolerance of the reference; at a level whose statistics measure the step, that none can be."""
+    tolerance = f"{100 * ds.attrs['tolerance']:g} %"
+    lines = []
+    for name in ds["sweep"].values:
+        sel = ds["sweep_name"].values == name
+        level, reference = ds["level"].values[sel][0], float(ds["dt_s"].values[sel].min())
+        step = {lim: float(ds[f"{lim}_s"].sel(sweep=name)) for lim in _LIMITS}
+        parts = [f"reference {reference:.3g} s"] + [
+            f"{lim.replace('_', ' ')} " + (f"{step[lim]:.3g} s" if np.isfinite(step[lim]) else "-")
+            for lim in ("largest_not_failed", "smallest_failed")]
+        accurate = step["largest_accurate"]
+        if measured := step_measured(level, QUANTITIES):
+            parts.append(f"no step named accurate: its {' and '.join(measured)} errors {STEP_WORDS} (they do not "
+                         "converge with the step)")
+        elif np.isfinite(accurate):
+            parts.append(f"largest step within {tolerance} of the reference's statistics {accurate:.3g} s")
+        else:
+            parts.append(f"none coarser than the reference is within {tolerance}")
+        lines.append(f"{name}: " + ", ".join(parts))
+    return lines
 
 
 def write_stability(ds: xr.Dataset, outdir) -> None:

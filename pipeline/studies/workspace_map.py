@@ -158,7 +158,39 @@ def map_table(ds: xr.Dataset) -> str:
                      f"{_where(ds, q95)}")
     from ..analysis.map_plots import q95_caveat
     caveat = q95_caveat(ds)
-    return "\n".join(lines + ([caveat] if caveat else []))
+    if caveat or not reachable.any():
+        return "\n".join(lines + ([caveat] if caveat else []))
+    lines.append(f"q95's largest pose per direction with its {100 * float(ds.attrs['confidence']):g} % interval, "
+                 "and the poses whose interval reaches that interval's lower end:")
+    return "\n".join(lines + [_q95_location(ds, d) for d in DIRECTIONS])
+
+
+def _q95_location(ds: xr.Dataset, d: str) -> str:
+    """Where the q95 of direction ``d`` is largest, with its interval, and whether that is resolved: other
+    poses whose interval reaches its lower end could hold the largest q95 as well (the location is noise)."""
+    family = family_of(d)
+    factor, unit = 1e3, ("mm" if family == "translation" else "mrad")
+    q95, lower, upper = (ds[f"{k}_{family}"].sel({family: d}).values for k in ("q95", "q95_lower", "q95_upper"))
+    top = np.unravel_index(np.nanargmax(q95), q95.shape)
+    reach = upper >= lower[top]    # NaN (unreachable) compares False
+    head = (f"  {d}: {q95[top] * factor:.4g} {unit} [{lower[top] * factor:.4g}, {upper[top] * factor:.4g}] at "
+            f"{_where(ds, q95)}; ")
+    if reach.sum() <= 1:
+        return head + "no other pose's interval reaches it: located at this n"
+    return head + (f"{int(reach.sum()) - 1} other poses' intervals reach it (spanning {_span(ds, reach)}): where it is "
+                   f"largest is not resolved at n = {int(ds.attrs['n_draws'])}")
+
+
+def _span(ds: xr.Dataset, mask: np.ndarray) -> str:
+    """The range of each grid axis over the poses of ``mask`` (rows, columns), in mm or deg."""
+    from ..analysis.map_plots import axis_display
+    b, a = ds["reachable"].dims
+    out = []
+    for dim, axis in ((a, 0), (b, 1)):
+        factor, unit = axis_display(ds, dim)
+        values = ds[dim].values[mask.any(axis=axis)] * factor
+        out.append(f"{dim.removeprefix('platform_')} {values.min() + 0.0:.4g} to {values.max() + 0.0:.4g} {unit}")
+    return ", ".join(out)
 
 
 def write_map(ds: xr.Dataset, outdir) -> list:
