@@ -236,3 +236,52 @@ def test_the_comparison_table_marks_what_measures_the_step_or_start_up_impacts()
                                                    + level_notes(st["contact"].attrs, {"velocity"}, {"whole"}))]
     st["contact"].attrs["contact_start"] = "equilibrium"   # no start-up impacts: nothing of the contact level
     assert not any(v for (level, _), v in _level_marks(st)[0].items() if level == "contact")
+
+
+def _with_failure(ds):
+    """``ds`` with its realisation 1 failed, as the contact level records a Newton failure."""
+    import xarray as xr
+    status, message = ds["status"].values.astype(object), ds["status_message"].values.astype(object)
+    status[1], message[1] = "failed", "Newton on the contact forces did not converge in 60 iterations at t = 0.0093 s"
+    return ds.assign(status=xr.DataArray(status, dims="realization"),
+                     status_message=xr.DataArray(message, dims="realization"))
+
+
+def test_a_failed_realisation_is_said_on_stderr_with_stats_note_and_its_reason(smoke, monkeypatch, capsys, tmp_path):
+    """The family table's head said '7 finished / 8' and nothing else: neither the console nor results.md
+    said a realisation failed, why, or that the statistics leave it out. Both now say it, in rss6 stats' words."""
+    import xarray as xr
+    from pipeline.analysis.stats import left_out_note
+    from pipeline.studies import report, report_text
+    ok = xr.Dataset({"status": ("realization", ["finished"] * 3), "status_message": ("realization", [""] * 3)},
+                    coords={"realization": [0, 1, 2]})
+    paths = {"contact": tmp_path / "smoke_contact.nc", "onlyA": tmp_path / "smoke_contact_onlyA.nc"}
+    monkeypatch.setattr(report, "run_scene", lambda *a: paths)
+    monkeypatch.setattr(report, "open_ensemble", lambda p: _with_failure(ok) if p == paths["onlyA"] else ok)
+    opened = report._open_scene("smoke", tmp_path, report.ReportPlan(3, 3), None)
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"rss6 report: {paths['onlyA']}: {left_out_note(1, 3)}. Why: 1 x Newton on the contact forces "
+                   "did not converge in 60 iterations at t = 0.0093 s"]
+    notes = report_text.failure_notes([(name, opened[role]) for name, role in report._family_runs(smoke)
+                                       if role in opened])
+    assert notes == ["", f"- only A: {left_out_note(1, 3)}. Why: 1 x Newton on the contact forces did not converge "
+                         "in 60 iterations at t = 0.0093 s."]
+    assert report_text.failure_notes([("contact", ok)]) == []
+
+
+@pytest.mark.slow   # reuses the report fixture's runs
+def test_results_md_names_a_failed_realisation_under_each_table_with_its_run(configs, report, tmp_path, monkeypatch):
+    """A failed realisation of a family run is named under the family table (count, reason, what the medians
+    leave out), and under no other table."""
+    from pipeline.studies import report as module
+    copy = tmp_path / "failed"
+    shutil.copytree(report, copy)
+    real = module.open_ensemble
+    monkeypatch.setattr(module, "open_ensemble",
+                        lambda p: _with_failure(real(p)) if str(p).endswith("_onlyC.nc") else real(p))
+    assert main(["report", str(configs / "smoke.toml"), "-o", str(copy), "-n", "3", "--family-n", "2"]) == 0
+    md = (copy / "results.md").read_text()
+    family = md.split("### Which joint family contributes most")[1].split("###")[0]
+    assert "only C (1 finished / 2)" in family
+    assert "\n- only C: 1 of 2 realisations failed and are in no statistic or bound" in family
+    assert "Why: 1 x Newton on the contact forces did not converge" in family and md.count("realisations failed") == 1

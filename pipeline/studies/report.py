@@ -15,6 +15,7 @@ then writes OUT/results.md and OUT/results/*.png from those files alone.
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -280,8 +281,7 @@ def _growth_table(scenes: list, st: dict) -> list[str]:
 def _family_table(scene, st: dict) -> list[str]:
     """Medians of the contact level with all joints and with one family at a time, and the elastic run's
     maximum; of a scene with uncertain inputs, every run at nominal inputs (the all-joints run a family run)."""
-    runs = [("all joints", st["nominal" if scene.uncertain else "contact"])] + [
-        (f"only {f}", st[f"only{f}"]) for f in FAMILY_KEYS]
+    runs = [(name, st[role]) for name, role in _family_runs(scene)]
     head = ["statistic", "dir", "unit"] + [f"{name} ({_count(sds)})" for name, sds in runs]
     rows = []
     for stat, q, d in _ROWS:
@@ -289,6 +289,13 @@ def _family_table(scene, st: dict) -> list[str]:
         rows.append([_label(stat, q), d, unit] + [_fmt(_stat(sds, stat, q, d), f) for _, sds in runs]
                     + [_fmt(_stat(st["elastic"], stat, q, d, "max"), f)])
     return _table(head + ["elastic (" + text.labelled("no clearance", scene, True, False) + ")"], rows)
+
+
+def _family_runs(scene) -> list[tuple[str, str]]:
+    """The family table's columns as (label, role): the all-joints run (at nominal inputs where the scene has
+    uncertain ones), then each family alone."""
+    return [("all joints", "nominal" if scene.uncertain else "contact")] + [(f"only {f}", f"only{f}")
+                                                                             for f in FAMILY_KEYS]
 
 
 def _window_table(sds, attrs) -> list[str]:
@@ -363,8 +370,12 @@ def _open_scene(config, data: Path, plan: ReportPlan, client) -> dict:
     def first(role, ds):
         n = plan.family_n if role.startswith("only") or role == "nominal" else plan.n
         return ds.sel(realization=ds["realization"].values < n)
-    return {k: (_open_run(p) if _one_run(k) else first(k, open_ensemble(p)))
-            for k, p in run_scene(config, data, plan, client).items()}
+    paths = run_scene(config, data, plan, client)
+    opened = {k: (_open_run(p) if _one_run(k) else first(k, open_ensemble(p))) for k, p in paths.items()}
+    for role, ds in opened.items():   # as rss6 run says it, and results.md under the tables
+        if note := text.failure_note(ds):
+            print(f"rss6 report: {paths[role]}: {note}", file=sys.stderr)
+    return opened
 
 
 def _one_run(role: str) -> bool:
@@ -390,17 +401,18 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
     md += ["### Beside the paper's numbers (docs/model.md section 9)", ""] + _inputs_paragraph(scene)
     steady = text.window_times("steady", e["contact"].attrs)
     md += [text.COMPARISON.format(whole=file_window_label("whole", e["contact"].attrs), steady=steady), ""]
-    md += _comparison_table(scene, st)
+    md += _comparison_table(scene, st) + text.failure_notes([(lv, e[lv]) for lv in _LEVELS])
     md += ["", f"### Which joint family contributes most ({text.labelled('contact level', scene, True, False)})",
            "", text.FAMILY.format(off_um=OFF * 1e6, off_percent=OFF / scene.clearance.spherical_B * 100)
            + (text.FAMILY_NOMINAL if scene.uncertain else ""), ""] + _family_table(scene, st)
+    md += text.failure_notes([(name, e[role]) for name, role in _family_runs(scene)])
     contact = e["contact"]
     by_window = ensemble_stats(contact, window=None)
     start = parse_scene(contact.attrs["scene_toml"]).simulation.contact_start
     md += ["", f"### Start-up and steady operation ({text.labelled('contact level', scene, brackets=False)})", "",
            text.WINDOWS_PARAGRAPH.format(**{w: text.window_times(w, contact.attrs) for w in ("startup", "steady")})
            + " " + text.start_text(text.START, start, contact.attrs), ""]
-    md += _window_table(by_window, contact.attrs)
+    md += _window_table(by_window, contact.attrs) + text.failure_notes([("contact", contact)])
     md += ["", "### Where we differ from the paper, and why", ""]
     return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"]), by_window, start) + [""]
 
