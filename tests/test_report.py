@@ -285,3 +285,42 @@ def test_results_md_names_a_failed_realisation_under_each_table_with_its_run(con
     assert "only C (1 finished / 2)" in family
     assert "\n- only C: 1 of 2 realisations failed and are in no statistic or bound" in family
     assert "Why: 1 x Newton on the contact forces did not converge" in family and md.count("realisations failed") == 1
+
+
+@pytest.mark.slow   # reuses the report fixture's runs, then reruns one family run's recorded command (2 realisations)
+def test_a_family_runs_history_reruns_its_file(report, tmp_path, monkeypatch):
+    """The family runs' history named the shipped scene ('rss6 run smoke --model contact ...'), whose rerun is
+    the all-joints ensemble; it now runs the variant's scene file written beside the data, and gives the file."""
+    import shlex
+    import xarray as xr
+    data = report / "results-data"
+    for family in "ACB":
+        ds = open_ensemble(data / f"smoke_contact_only{family}.nc")
+        argv = shlex.split(ds.attrs["history"])
+        assert argv[:3] == ["rss6", "run", f"smoke_contact_only{family}.toml"]
+        assert (data / argv[2]).read_text() == ds.attrs["scene_toml"]
+    monkeypatch.chdir(data)   # the history names the scene file beside the data
+    assert main(argv[1:] + ["-o", str(tmp_path / "again.nc"), "--workers", "1"]) == 0
+    again = open_ensemble(tmp_path / "again.nc")
+    xr.testing.assert_identical(again.drop_attrs(), ds.drop_attrs())
+    assert {k: str(v) for k, v in again.attrs.items() if k != "history"} == {
+        k: str(v) for k, v in ds.attrs.items() if k != "history"}
+
+
+def test_the_nominal_inputs_elastic_runs_history_reruns_it(configs, tmp_path, monkeypatch):
+    """Of a scene with uncertain inputs, the elastic run holds them at nominal: its history named the shipped
+    scene (whose elastic run draws them); it now runs the nominal variant's scene file written beside it,
+    which gives the same run."""
+    import shlex
+    import xarray as xr
+    from pipeline.studies.report import _elastic_run
+    from pipeline.scenes.catalogue import find_scene
+    path = _elastic_run(find_scene(str(configs / "paper_manufacturing.toml")), tmp_path)
+    ds = xr.load_dataset(path)
+    argv = shlex.split(ds.attrs["history"])
+    assert argv[:3] == ["rss6", "simulate", "paper_manufacturing_elastic_nominal-inputs.toml"]
+    assert (tmp_path / argv[2]).read_text() == ds.attrs["scene_toml"]
+    monkeypatch.chdir(tmp_path)
+    assert main(argv[1:] + ["-o", "again.nc"]) == 0
+    xr.testing.assert_identical(xr.load_dataset("again.nc").drop_attrs(), ds.drop_attrs())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["again.nc", path.name, argv[2]]

@@ -11,6 +11,8 @@ resume like ``rss6 run``) into DATA:
   the elastic run is ``SCENE_elastic_nominal-inputs.nc`` and it and the joint-family runs hold
   those inputs at nominal, with ``SCENE_contact_nominal-inputs.nc`` as their all-joints run, so
   that the family table attributes the clearances' error alone;
+- beside each file of such a variant of the scene, its scene text as ``<file>.toml``, which the file's
+  ``history`` runs (``rss6 run SCENE_contact_onlyA.toml ...`` in DATA gives the same file);
 then writes OUT/results.md and OUT/results/*.png from those files alone.
 """
 from __future__ import annotations
@@ -25,7 +27,7 @@ from rss6core import (MODELS, default_integrator, default_time_step, model_level
                       simulate, size_band)
 
 from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client
-from ..ensemble.run import EnsembleSpec, run_ensemble
+from ..ensemble.run import EnsembleSpec, ensemble
 from ..scenes.catalogue import find_scene
 from ..analysis.plot_common import save_figure
 from . import report_text as text
@@ -109,19 +111,39 @@ def _elastic_run(scene, data: Path) -> Path:
         if scene.uncertain:
             scene = parse_scene(_nominal_inputs(scene.source_text, scene.name), scene.name)
         result = simulate(scene, "elastic")
-        write_netcdf(run_dataset(scene, result, model="elastic", integrator=default_integrator(scene, "elastic"),
-                                 dt=default_time_step(scene, "elastic"), elements=scene.simulation.elements_per_link,
-                                 wall_time=0.0), path)
+        ds = run_dataset(scene, result, model="elastic", integrator=default_integrator(scene, "elastic"),
+                         dt=default_time_step(scene, "elastic"), elements=scene.simulation.elements_per_link,
+                         wall_time=0.0)
+        write_netcdf(ds.assign_attrs(_variant_history(ds, _variant_toml(scene.source_text, path))
+                                     if nominal else {}), path)
     return path
 
 
+def _variant_toml(text: str, path: Path) -> Path:
+    """Write the scene ``text`` of a variant run beside its file ``path`` (unless it is there already, so
+    that a rerun touches nothing); returns it."""
+    toml = path.with_suffix(".toml")
+    if not toml.is_file() or toml.read_text(encoding="utf-8") != text:
+        toml.write_text(text, encoding="utf-8")
+    return toml
+
+
+def _variant_history(ds, toml: Path) -> dict:
+    """The ``history`` of a variant run's file: its command with the variant's scene file ``toml`` (beside it)
+    for the scene's name, which would rerun the shipped scene instead."""
+    words = str(ds.attrs["history"]).split(" ")
+    return {"history": " ".join(words[:2] + [toml.name] + words[3:])}
+
+
 def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store, client) -> None:
-    """Run or resume one of the report's ensembles into ``path`` (the report reads it again, into memory)."""
+    """Run or resume one of the report's ensembles into ``path`` (the report reads it again, into memory);
+    a variant of the scene (``text`` not its own) is written beside it, which the file's history runs."""
     sim = scene.simulation
     spec = EnsembleSpec(text, source, model, default_integrator(scene, model),
                         default_time_step(scene, model), sim.elements_per_link, plan.seed, store)
-    run_ensemble(spec, n, path, workers=plan.workers, scheduler=plan.scheduler,
-                 worker_timeout=plan.worker_timeout, client=client).close()
+    toml = _variant_toml(text, path) if text != scene.source_text else None
+    ensemble(spec, n, path, workers=plan.workers, scheduler=plan.scheduler, worker_timeout=plan.worker_timeout,
+             client=client, annotate=(lambda ds: _variant_history(ds, toml)) if toml else None).dataset.close()
 
 
 def run_scene(config, data: Path, plan: ReportPlan, client=None) -> dict[str, Path]:
