@@ -236,3 +236,91 @@ def test_the_comparison_table_marks_what_measures_the_step_or_start_up_impacts()
                                                    + level_notes(st["contact"].attrs, {"velocity"}, {"whole"}))]
     st["contact"].attrs["contact_start"] = "equilibrium"   # no start-up impacts: nothing of the contact level
     assert not any(v for (level, _), v in _level_marks(st)[0].items() if level == "contact")
+
+
+def _with_failure(ds):
+    """``ds`` with its realisation 1 failed, as the contact level records a Newton failure."""
+    import xarray as xr
+    status, message = ds["status"].values.astype(object), ds["status_message"].values.astype(object)
+    status[1], message[1] = "failed", "Newton on the contact forces did not converge in 60 iterations at t = 0.0093 s"
+    return ds.assign(status=xr.DataArray(status, dims="realization"),
+                     status_message=xr.DataArray(message, dims="realization"))
+
+
+def test_a_failed_realisation_is_said_on_stderr_with_stats_note_and_its_reason(smoke, monkeypatch, capsys, tmp_path):
+    """The family table's head said '7 finished / 8' and nothing else: neither the console nor results.md
+    said a realisation failed, why, or that the statistics leave it out. Both now say it, in rss6 stats' words."""
+    import xarray as xr
+    from pipeline.analysis.stats import left_out_note
+    from pipeline.studies import report, report_text
+    ok = xr.Dataset({"status": ("realization", ["finished"] * 3), "status_message": ("realization", [""] * 3)},
+                    coords={"realization": [0, 1, 2]})
+    paths = {"contact": tmp_path / "smoke_contact.nc", "onlyA": tmp_path / "smoke_contact_onlyA.nc"}
+    monkeypatch.setattr(report, "run_scene", lambda *a: paths)
+    monkeypatch.setattr(report, "open_ensemble", lambda p: _with_failure(ok) if p == paths["onlyA"] else ok)
+    opened = report._open_scene("smoke", tmp_path, report.ReportPlan(3, 3), None)
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"rss6 report: {paths['onlyA']}: {left_out_note(1, 3)}. Why: 1 x Newton on the contact forces "
+                   "did not converge in 60 iterations at t = 0.0093 s"]
+    notes = report_text.failure_notes([(name, opened[role]) for name, role in report._family_runs(smoke)
+                                       if role in opened])
+    assert notes == ["", f"- only A: {left_out_note(1, 3)}. Why: 1 x Newton on the contact forces did not converge "
+                         "in 60 iterations at t = 0.0093 s."]
+    assert report_text.failure_notes([("contact", ok)]) == []
+
+
+@pytest.mark.slow   # reuses the report fixture's runs
+def test_results_md_names_a_failed_realisation_under_each_table_with_its_run(configs, report, tmp_path, monkeypatch):
+    """A failed realisation of a family run is named under the family table (count, reason, what the medians
+    leave out), and under no other table."""
+    from pipeline.studies import report as module
+    copy = tmp_path / "failed"
+    shutil.copytree(report, copy)
+    real = module.open_ensemble
+    monkeypatch.setattr(module, "open_ensemble",
+                        lambda p: _with_failure(real(p)) if str(p).endswith("_onlyC.nc") else real(p))
+    assert main(["report", str(configs / "smoke.toml"), "-o", str(copy), "-n", "3", "--family-n", "2"]) == 0
+    md = (copy / "results.md").read_text()
+    family = md.split("### Which joint family contributes most")[1].split("###")[0]
+    assert "only C (1 finished / 2)" in family
+    assert "\n- only C: 1 of 2 realisations failed and are in no statistic or bound" in family
+    assert "Why: 1 x Newton on the contact forces did not converge" in family and md.count("realisations failed") == 1
+
+
+@pytest.mark.slow   # reuses the report fixture's runs, then reruns one family run's recorded command (2 realisations)
+def test_a_family_runs_history_reruns_its_file(report, tmp_path, monkeypatch):
+    """The family runs' history named the shipped scene ('rss6 run smoke --model contact ...'), whose rerun is
+    the all-joints ensemble; it now runs the variant's scene file written beside the data, and gives the file."""
+    import shlex
+    import xarray as xr
+    data = report / "results-data"
+    for family in "ACB":
+        ds = open_ensemble(data / f"smoke_contact_only{family}.nc")
+        argv = shlex.split(ds.attrs["history"])
+        assert argv[:3] == ["rss6", "run", f"smoke_contact_only{family}.toml"]
+        assert (data / argv[2]).read_text() == ds.attrs["scene_toml"]
+    monkeypatch.chdir(data)   # the history names the scene file beside the data
+    assert main(argv[1:] + ["-o", str(tmp_path / "again.nc"), "--workers", "1"]) == 0
+    again = open_ensemble(tmp_path / "again.nc")
+    xr.testing.assert_identical(again.drop_attrs(), ds.drop_attrs())
+    assert {k: str(v) for k, v in again.attrs.items() if k != "history"} == {
+        k: str(v) for k, v in ds.attrs.items() if k != "history"}
+
+
+def test_the_nominal_inputs_elastic_runs_history_reruns_it(configs, tmp_path, monkeypatch):
+    """Of a scene with uncertain inputs, the elastic run holds them at nominal: its history named the shipped
+    scene (whose elastic run draws them); it now runs the nominal variant's scene file written beside it,
+    which gives the same run."""
+    import shlex
+    import xarray as xr
+    from pipeline.studies.report import _elastic_run
+    from pipeline.scenes.catalogue import find_scene
+    path = _elastic_run(find_scene(str(configs / "paper_manufacturing.toml")), tmp_path)
+    ds = xr.load_dataset(path)
+    argv = shlex.split(ds.attrs["history"])
+    assert argv[:3] == ["rss6", "simulate", "paper_manufacturing_elastic_nominal-inputs.toml"]
+    assert (tmp_path / argv[2]).read_text() == ds.attrs["scene_toml"]
+    monkeypatch.chdir(tmp_path)
+    assert main(argv[1:] + ["-o", "again.nc"]) == 0
+    xr.testing.assert_identical(xr.load_dataset("again.nc").drop_attrs(), ds.drop_attrs())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["again.nc", path.name, argv[2]]

@@ -351,3 +351,23 @@ def test_a_level_not_a_function_of_one_draw_is_refused_with_the_reasons_from_the
     assert str(caught.value) == (f"--model {model}: Sobol' indices need a level whose error is a function of "
                                  "one clearance draw (quasi-static, contact); the paper level redraws the "
                                  "clearances every step, rigid and elastic have none")
+
+
+def test_families_of_fixed_sizes_are_said_to_draw_eccentricities_not_sizes(sobol_file):
+    """On a scene of fixed clearance sizes (smoke, paper) the table read 'revolute_radial' as the clearance, though
+    its inputs are the eccentricities inside it: the header and an 'inputs' line now say so, and point to the scenes
+    that draw sizes; a family whose group holds its sizes (a [tolerance.*] band) is not named."""
+    from pipeline.studies.sensitivity import format_sensitivity
+    ds = load_netcdf(sobol_file)
+    lines = format_sensitivity(ds).splitlines()
+    assert "by joint family (eccentricity inside a fixed size: see 'inputs' below)," in lines[0]
+    inputs = [s for s in lines if s.startswith("inputs: ")]
+    assert len(inputs) == 1 and inputs[0].startswith(f"inputs: {', '.join(JOINT_FAMILIES)} (and their joints")
+    assert "drawn eccentricities inside each clearance" in inputs[0] and "paper_tolerance" in inputs[0]
+    sized = ds["group_inputs"].values.copy()
+    sized[:2] = [f"A1_radial_size {sized[0]}", f"A1_axial_size {sized[1]}"]   # the revolute families banded
+    lines = format_sensitivity(ds.assign(group_inputs=(("group",), sized))).splitlines()
+    assert [s for s in lines if s.startswith("inputs: ")][0].startswith("inputs: spherical_C, spherical_B (")
+    sized[2:4] = [f"C1_size {sized[2]}", f"B1_size {sized[3]}"]
+    lines = format_sensitivity(ds.assign(group_inputs=(("group",), sized))).splitlines()
+    assert not any(s.startswith("inputs: ") for s in lines) and "eccentricity" not in lines[0]

@@ -24,7 +24,7 @@ from .estimators import (BOUNDS, LOWEST_MEASURED, MAX_NOTE, MIN_POINTS_RQMC, STD
                          short_of_label, stopped_level, replicate_groups, rqmc_intervals)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
-           "to_json", "format_stats", "table_notes", "level_notes", "below_floor", "one_run_repeated"]
+           "to_json", "format_stats", "table_notes", "left_out_note", "level_notes", "below_floor", "one_run_repeated"]
 
 
 def windows_of(ds: xr.Dataset) -> list[str]:
@@ -259,6 +259,13 @@ def table_cell(value: float, factor: float = 1.0, width: int = 11) -> str:
     return f"{value * factor:{width}.4g}" if np.isfinite(value) else f"{'-':>{width}s}"
 
 
+def left_out_note(failed: int, total: int) -> str:
+    """What the statistics of an ensemble with ``failed`` of ``total`` realisations failed leave out, and why
+    that matters (rss6 stats' note, and rss6 report's under a table with such a run)."""
+    return (f"{failed} of {total} realisations failed and are in no statistic or bound: each describes the "
+            "robots that finished, whose errors the failed draws (often the largest) may exceed")
+
+
 def table_notes(sds: xr.Dataset) -> list[str]:
     """Why bounds are dashes (the n each interval needs, the maximum's note) and which realisations the
     statistics leave out (the failed ones)."""
@@ -279,9 +286,7 @@ def table_notes(sds: xr.Dataset) -> list[str]:
              f"coverage was measured from {100 * LOWEST_MEASURED:g} % up (docs/ensembles.md)"] \
         if replicates is None and sds.attrs["confidence"] < LOWEST_MEASURED - 1e-12 else []
     failed = int(sds.attrs.get("n_failed", 0))
-    left_out = [f"{failed} of {n + failed} realisations failed and are in no statistic or bound: each describes the "
-                "robots that finished, whose errors the failed draws (often the largest) may exceed; --require "
-                "counts them against a pass"] if failed else []
+    left_out = [left_out_note(failed, n + failed) + "; --require counts them against a pass"] if failed else []
     windows = set(windows_of(sds)) or {"whole"}
     return (left_out + _identical_note(sds) + notes + [f"max: {MAX_NOTE}"] + until + other
             + level_notes(sds.attrs, {str(q) for q in sds["quantity"].values}, windows))

@@ -11,10 +11,13 @@ resume like ``rss6 run``) into DATA:
   the elastic run is ``SCENE_elastic_nominal-inputs.nc`` and it and the joint-family runs hold
   those inputs at nominal, with ``SCENE_contact_nominal-inputs.nc`` as their all-joints run, so
   that the family table attributes the clearances' error alone;
+- beside each file of such a variant of the scene, its scene text as ``<file>.toml``, which the file's
+  ``history`` runs (``rss6 run SCENE_contact_onlyA.toml ...`` in DATA gives the same file);
 then writes OUT/results.md and OUT/results/*.png from those files alone.
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +27,7 @@ from rss6core import (MODELS, default_integrator, default_time_step, model_level
                       simulate, size_band)
 
 from ..ensemble.cluster import WORKER_TIMEOUT_S, dask_client
-from ..ensemble.run import EnsembleSpec, run_ensemble
+from ..ensemble.run import EnsembleSpec, ensemble
 from ..scenes.catalogue import find_scene
 from ..analysis.plot_common import save_figure
 from . import report_text as text
@@ -108,19 +111,38 @@ def _elastic_run(scene, data: Path) -> Path:
         if scene.uncertain:
             scene = parse_scene(_nominal_inputs(scene.source_text, scene.name), scene.name)
         result = simulate(scene, "elastic")
-        write_netcdf(run_dataset(scene, result, model="elastic", integrator=default_integrator(scene, "elastic"),
-                                 dt=default_time_step(scene, "elastic"),
-                                 elements=scene.simulation.elements_per_link), path)
+        ds = run_dataset(scene, result, model="elastic", integrator=default_integrator(scene, "elastic"),
+                         dt=default_time_step(scene, "elastic"), elements=scene.simulation.elements_per_link)
+        write_netcdf(ds.assign_attrs(_variant_history(ds, _variant_toml(scene.source_text, path))
+                                     if nominal else {}), path)
     return path
 
 
+def _variant_toml(text: str, path: Path) -> Path:
+    """Write the scene ``text`` of a variant run beside its file ``path`` (unless it is there already, so
+    that a rerun touches nothing); returns it."""
+    toml = path.with_suffix(".toml")
+    if not toml.is_file() or toml.read_text(encoding="utf-8") != text:
+        toml.write_text(text, encoding="utf-8")
+    return toml
+
+
+def _variant_history(ds, toml: Path) -> dict:
+    """The ``history`` of a variant run's file: its command with the variant's scene file ``toml`` (beside it)
+    for the scene's name, which would rerun the shipped scene instead."""
+    words = str(ds.attrs["history"]).split(" ")
+    return {"history": " ".join(words[:2] + [toml.name] + words[3:])}
+
+
 def _ensemble(scene, text, source, model, n, path, plan: ReportPlan, store, client) -> None:
-    """Run or resume one of the report's ensembles into ``path`` (the report reads it again, into memory)."""
+    """Run or resume one of the report's ensembles into ``path`` (the report reads it again, into memory);
+    a variant of the scene (``text`` not its own) is written beside it, which the file's history runs."""
     sim = scene.simulation
     spec = EnsembleSpec(text, source, model, default_integrator(scene, model),
                         default_time_step(scene, model), sim.elements_per_link, plan.seed, store)
-    run_ensemble(spec, n, path, workers=plan.workers, scheduler=plan.scheduler,
-                 worker_timeout=plan.worker_timeout, client=client).close()
+    toml = _variant_toml(text, path) if text != scene.source_text else None
+    ensemble(spec, n, path, workers=plan.workers, scheduler=plan.scheduler, worker_timeout=plan.worker_timeout,
+             client=client, annotate=(lambda ds: _variant_history(ds, toml)) if toml else None).dataset.close()
 
 
 def run_scene(config, data: Path, plan: ReportPlan, client=None) -> dict[str, Path]:
@@ -280,8 +302,7 @@ def _growth_table(scenes: list, st: dict) -> list[str]:
 def _family_table(scene, st: dict) -> list[str]:
     """Medians of the contact level with all joints and with one family at a time, and the elastic run's
     maximum; of a scene with uncertain inputs, every run at nominal inputs (the all-joints run a family run)."""
-    runs = [("all joints", st["nominal" if scene.uncertain else "contact"])] + [
-        (f"only {f}", st[f"only{f}"]) for f in FAMILY_KEYS]
+    runs = [(name, st[role]) for name, role in _family_runs(scene)]
     head = ["statistic", "dir", "unit"] + [f"{name} ({_count(sds)})" for name, sds in runs]
     rows = []
     for stat, q, d in _ROWS:
@@ -289,6 +310,13 @@ def _family_table(scene, st: dict) -> list[str]:
         rows.append([_label(stat, q), d, unit] + [_fmt(_stat(sds, stat, q, d), f) for _, sds in runs]
                     + [_fmt(_stat(st["elastic"], stat, q, d, "max"), f)])
     return _table(head + ["elastic (" + text.labelled("no clearance", scene, True, False) + ")"], rows)
+
+
+def _family_runs(scene) -> list[tuple[str, str]]:
+    """The family table's columns as (label, role): the all-joints run (at nominal inputs where the scene has
+    uncertain ones), then each family alone."""
+    return [("all joints", "nominal" if scene.uncertain else "contact")] + [(f"only {f}", f"only{f}")
+                                                                             for f in FAMILY_KEYS]
 
 
 def _window_table(sds, attrs) -> list[str]:
@@ -363,8 +391,12 @@ def _open_scene(config, data: Path, plan: ReportPlan, client) -> dict:
     def first(role, ds):
         n = plan.family_n if role.startswith("only") or role == "nominal" else plan.n
         return ds.sel(realization=ds["realization"].values < n)
-    return {k: (_open_run(p) if _one_run(k) else first(k, open_ensemble(p)))
-            for k, p in run_scene(config, data, plan, client).items()}
+    paths = run_scene(config, data, plan, client)
+    opened = {k: (_open_run(p) if _one_run(k) else first(k, open_ensemble(p))) for k, p in paths.items()}
+    for role, ds in opened.items():   # as rss6 run says it, and results.md under the tables
+        if note := text.failure_note(ds):
+            print(f"rss6 report: {paths[role]}: {note}", file=sys.stderr)
+    return opened
 
 
 def _one_run(role: str) -> bool:
@@ -390,17 +422,18 @@ def _scene_section(scene, e: dict, st: dict, figs: Path, rel) -> list[str]:
     md += ["### Beside the paper's numbers (docs/model.md section 9)", ""] + _inputs_paragraph(scene)
     steady = text.window_times("steady", e["contact"].attrs)
     md += [text.COMPARISON.format(whole=file_window_label("whole", e["contact"].attrs), steady=steady), ""]
-    md += _comparison_table(scene, st)
+    md += _comparison_table(scene, st) + text.failure_notes([(lv, e[lv]) for lv in _LEVELS])
     md += ["", f"### Which joint family contributes most ({text.labelled('contact level', scene, True, False)})",
            "", text.FAMILY.format(off_um=OFF * 1e6, off_percent=OFF / scene.clearance.spherical_B * 100)
            + (text.FAMILY_NOMINAL if scene.uncertain else ""), ""] + _family_table(scene, st)
+    md += text.failure_notes([(name, e[role]) for name, role in _family_runs(scene)])
     contact = e["contact"]
     by_window = ensemble_stats(contact, window=None)
     start = parse_scene(contact.attrs["scene_toml"]).simulation.contact_start
     md += ["", f"### Start-up and steady operation ({text.labelled('contact level', scene, brackets=False)})", "",
            text.WINDOWS_PARAGRAPH.format(**{w: text.window_times(w, contact.attrs) for w in ("startup", "steady")})
            + " " + text.start_text(text.START, start, contact.attrs), ""]
-    md += _window_table(by_window, contact.attrs)
+    md += _window_table(by_window, contact.attrs) + text.failure_notes([("contact", contact)])
     md += ["", "### Where we differ from the paper, and why", ""]
     return md + _explanations(scene, st, float(e["paper"].attrs["time_step_s"]), by_window, start) + [""]
 

@@ -1,6 +1,9 @@
 """The prose of ``rss6 report`` as templates; pipeline.studies.report fills the fields from the statistics
 Dataset of each file (pipeline.analysis.stats.ensemble_stats).  Numbers in mm, mm/s, mm/s^2."""
+from ..analysis.stats import left_out_note
+from ..analysis.summary import failure_reasons
 from ..files.records import file_window_label
+from ..vocabulary import FINISHED
 
 
 INTRO = (
@@ -155,3 +158,22 @@ def labelled(name: str, scene, nominal: bool = False, brackets: bool = True) -> 
     after a comma (``brackets`` False, for a name in brackets already)."""
     what = contents(scene, nominal)
     return name if not what else f"{name} ({what})" if brackets else f"{name}, {what}"
+
+
+def failure_note(ds) -> str:
+    """What the statistics of ensemble ``ds`` leave out (rss6 stats' note) and why its failed realisations failed
+    (their status messages); '' when none failed or ``ds`` is a single run."""
+    if "status" not in ds.variables:
+        return ""
+    lines = failure_reasons(ds)
+    if not lines:
+        return ""
+    failed, total = int((ds["status"].values.astype(str) != FINISHED).sum()), ds.sizes["realization"]
+    return f"{left_out_note(failed, total)}. Why: " + "; ".join(line.strip() for line in lines[1:])
+
+
+def failure_notes(runs: list) -> list[str]:
+    """A blank line and one bullet per failed run of a table's ``runs`` [(label, ensemble Dataset)]; none when
+    every realisation finished, so that a table never leaves failed realisations out silently."""
+    bullets = [f"- {label}: {note.rstrip('.')}." for label, ds in runs if (note := failure_note(ds))]
+    return [""] + bullets if bullets else []

@@ -382,13 +382,14 @@ def _dominant(cell) -> str:
 def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
     """A table of the family indices of ``statistic``: per quantity and direction, each family's
     total index with its interval, and the family of largest total index (with the runner-up when
-    their intervals overlap)."""
+    their intervals overlap); below it, what a family of fixed sizes draws (:func:`_fixed_size_note`)."""
     da = ds[f"{statistic}_sobol"].sel(group=[g for g, d in zip(ds["group"].values, ds["group_design"].values)
                                              if d == "families"])
     conf = f"{100 * float(ds.attrs['confidence']):g} %"
     head = "".join(f"{g:>24s}" for g in da["group"].values)
     window = ds[f"{statistic}_sobol"].attrs.get("analysis_window", "whole run")
-    by = "joint family" + (" and uncertain input" if set(da["group"].values) - set(JOINT_FAMILIES) else "")
+    fixed = " (eccentricity inside a fixed size: see 'inputs' below)" if _fixed_size_families(ds) else ""
+    by = "joint family" + fixed + (" and uncertain input" if set(da["group"].values) - set(JOINT_FAMILIES) else "")
     lines = [f"total Sobol' indices ST of the per-realisation {statistic} by {by}, "
              f"{ds.attrs['model']} level, {window}, N = {ds.attrs['n_base_samples']}, "
              f"[{conf} bootstrap interval, {SHORT_COVERAGE}]",
@@ -399,7 +400,27 @@ def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
             text = "".join(f"{e:8.3f} [{lo:6.3f},{hi:6.3f}]" for e, lo, hi in
                            zip(*(cell.sel(bound=b).values for b in BOUNDS)))
             lines.append(f"{q:<13s}{d:<4s}{text}  {_dominant(cell)}")
-    return "\n".join(lines + _outside_note(da.sel(index="ST", bound="estimate"), ds.attrs["n_base_samples"]))
+    return "\n".join(lines + _fixed_size_note(ds)
+                     + _outside_note(da.sel(index="ST", bound="estimate"), ds.attrs["n_base_samples"]))
+
+
+def _fixed_size_families(ds: xr.Dataset) -> list[str]:
+    """The joint families whose group holds no size input: the scene fixes their clearance sizes."""
+    return [str(g) for g, d, inputs in zip(ds["group"].values, ds["group_design"].values, ds["group_inputs"].values)
+            if d == "families" and g in JOINT_FAMILIES and "_size" not in str(inputs)]
+
+
+def _fixed_size_note(ds: xr.Dataset) -> list[str]:
+    """What the groups of fixed-size families draw: the eccentricities inside each clearance, not its size, so their
+    indices say nothing of what tightening gains, and where that question is answered."""
+    fixed = _fixed_size_families(ds)
+    if not fixed:
+        return []
+    return [f"inputs: {', '.join(fixed)} (and their joints with --per-joint): this scene fixes their clearance "
+            "sizes, so the inputs are the drawn eccentricities inside each clearance (the joint's state within its "
+            "play), not the sizes; a small index does not mean that tightening that play gains nothing. Which size "
+            "to tighten: a scene that draws the sizes ([tolerance.*] bands as paper_tolerance, size_tolerance, "
+            "[uncertain.*] inputs) or rss6 allocate"]
 
 
 def format_joints(ds: xr.Dataset, statistic: str = "max_abs_error", top: int = 3) -> str:
