@@ -87,6 +87,7 @@ def test_command_verifies_and_writes(configs, tmp_path, capsys):
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["verification"] == "pass"
     assert out["total_cost"] < out["uniform_cost"]
+    assert out["predicted_upper_si_unit"] == {SPEC: "m"}
     import xarray as xr
     with xr.open_dataset(tmp_path / "a b" / "allocation.nc") as ds:
         assert list(ds["fit_class"].values) == [c["class"] for c in out["classes"]]
@@ -98,6 +99,19 @@ def test_command_verifies_and_writes(configs, tmp_path, capsys):
     assert main(cmd[1:]) in (0, 1, 3)
     with xr.open_dataset(cmd[cmd.index("-o") + 1]) as ds, xr.open_dataset(out["verification_file"]) as searched:
         assert ds.attrs["seed"] == 1 and searched.attrs["seed"] == 0
+
+
+def test_the_answers_predicted_values_are_in_each_specs_unit_and_a_pf_one_is_named_for_what_it_is():
+    """A rotation spec's value in its own unit (not mm), and a pf spec's value is the (k+1)-th largest maximum
+    that must meet the limit, not an upper bound of the probability."""
+    from types import SimpleNamespace
+
+    from pipeline.studies.allocation_output import _predicted_line
+    a = SimpleNamespace(method="exhaustive, linear scaling", predicted={
+        "displacement:rx<=2mrad@q95": 1.5e-3, "displacement:x,y,z<=0.1mm@pf<=1e-1": 0.9978e-4})
+    line = _predicted_line(a, 60)
+    assert "displacement:rx<=2mrad@q95: 1.5 mrad" in line and "predicted by the linear scaling" in line
+    assert "pf<=1e-1: the (k+1)-th largest maximum of n = 60, 0.09978 mm" in line
 
 
 def _refused(args, capsys, *words):

@@ -48,15 +48,28 @@ def format_allocation(a: Allocation, scene_name: str, model: str, n: int, cost_n
         band = f"{c.low * 1e6:.4g}-{c.high * 1e6:.4g}"
         lines.append(f"{label:{width}}{c.name:10}{band:>20}{c.cost:12.4g}{1 if a.joints else 6:8d}")
     lines.append(f"total cost {a.cost:.4g}; {_saving(a)}")
-    how = "predicted by the linear scaling" if "linear scaling" in a.method else "measured"
-    lines.append(f"upper bounds at the answer ({how}): " + "; ".join(f"{k}: {v * 1e3:.4g} mm"
-                                                                      for k, v in a.predicted.items()))
+    lines.append(_predicted_line(a, n))
     lines.append(f"scene at the answer: {a.scene_path or 'none (per-joint bands; a scene has one band a family)'}")
     lines.append(f"verification ensemble {a.ensemble_path}: {overall(list(a.verdicts))}")
     lines.append(format_verdicts(list(a.verdicts)))
     lines.append(SELECTION_NOTE.format(what="verification") + (f"; a fresh check: {fresh_check}" if fresh_check else
                                    "; per-joint bands fit no scene, so rss6 run cannot recheck them"))
     return "\n".join(lines)
+
+
+def _predicted_line(a: Allocation, n: int) -> str:
+    """What the search judged each spec by at the answer, in the spec's own unit: the one-sided upper bound of
+    its statistic, or for a pf spec the (k+1)-th largest maximum, which must meet the limit for at most the k
+    exceedances its pf bound allows at n."""
+    from ..analysis.spec import PF, parse_spec
+    how = "predicted by the linear scaling" if "linear scaling" in a.method else "measured"
+    said = []
+    for text, value in a.predicted.items():
+        spec = parse_spec(text)
+        shown = f"{value / spec.factor:.4g} {spec.unit}"
+        said.append(f"{text}: {shown}" if spec.statistic != PF else
+                    f"{text}: the (k+1)-th largest maximum of n = {n}, {shown} (k: the exceedances pf allows)")
+    return f"at the answer ({how}), the statistic's upper bound: " + "; ".join(said)
 
 
 def fresh_check_command(a: Allocation, model: str, n: int, seed: int, specs: list[str],
@@ -102,6 +115,12 @@ def allocation_dataset(a: Allocation, scene, model: str, integrator: str, dt: fl
     return ds
 
 
+def _si_units(predicted: dict) -> dict:
+    """Each spec's SI unit (m, rad and their rates), that of its predicted value."""
+    from ..analysis.spec import parse_spec, si_unit
+    return {text: si_unit(spec.quantity, spec.directions[0]) for text, spec in ((t, parse_spec(t)) for t in predicted)}
+
+
 def allocation_json(a: Allocation) -> dict:
     """The allocation as plain data (SI)."""
     joints = a.joints or (None,) * len(a.classes)
@@ -110,7 +129,8 @@ def allocation_json(a: Allocation) -> dict:
                         for j, c in zip(joints, a.classes)],
             "total_cost": a.cost, "uniform_class": a.uniform[0].name if a.uniform else None,
             "uniform_cost": a.uniform_cost, "combinations_judged": a.combinations, "method": a.method,
-            "predicted_upper": a.predicted, "verification": overall(list(a.verdicts)),
+            "predicted_upper": a.predicted, "predicted_upper_si_unit": _si_units(a.predicted),
+            "verification": overall(list(a.verdicts)),
             "verification_file": str(a.ensemble_path), "verification_draws": "the search's own (optimistic)",
             "scene": a.scene_path and str(a.scene_path),
             "verdicts": verdicts_json(list(a.verdicts))}
