@@ -108,6 +108,7 @@ def test_simulate_json_and_netcdf(configs, tmp_path, capsys):
         assert set(out[stat]) == {"displacement", "velocity", "acceleration"}
         assert set(out[stat]["velocity"]) == {"x", "y", "z", "rx", "ry", "rz"}
     assert out["wall_time_s"] > 0 and out["status"] == "finished"
+    assert out["unit"]["acceleration"]["z"] == "m s-2" and out["unit"]["velocity"]["rx"] == "rad s-1"   # SI, named
     with netCDF4.Dataset(out_file) as nc:
         assert nc.Conventions == "CF-1.10" and nc.model == "elastic"
         assert nc.variables["error_velocity_rotation"].dimensions == ("elapsed_time", "rotation")
