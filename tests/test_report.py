@@ -324,3 +324,24 @@ def test_the_nominal_inputs_elastic_runs_history_reruns_it(configs, tmp_path, mo
     assert main(argv[1:] + ["-o", "again.nc"]) == 0
     xr.testing.assert_identical(xr.load_dataset("again.nc").drop_attrs(), ds.drop_attrs())
     assert sorted(p.name for p in tmp_path.iterdir()) == ["again.nc", path.name, argv[2]]
+
+
+def test_the_largest_family_is_said_unresolved_where_its_median_interval_does_not_clear_the_others():
+    """The report names the family with the largest median peak; where its median's lower bound does not
+    clear another's upper bound, it says so (a review found A over B at n = 8 with overlapping intervals)."""
+    import xarray as xr
+
+    from pipeline.studies.report import _largest_family
+
+    def stats(median, lower, upper, n=8):
+        values = np.full((1, 3, 1, 1), np.nan)
+        values[0, :, 0, 0] = (median, lower, upper)
+        return xr.Dataset({"max_abs_error": (("statistic", "bound", "quantity", "direction"), values)},
+                          coords={"statistic": ["q50"], "bound": ["estimate", "lower", "upper"],
+                                  "quantity": ["acceleration"], "direction": ["z"]}, attrs={"n_finished": n})
+    st = {"onlyA": stats(97.1, 39.6, 126.9), "onlyB": stats(91.6, 50.2, 108.8), "onlyC": stats(30.9, 20.0, 35.0)}
+    family, share, said = _largest_family(st, "max", "acceleration", "z")
+    assert (family, round(share, 3)) == ("A", round(97.1 / (97.1 + 91.6 + 30.9), 3))
+    assert said == "; not resolved at n = 8: its median's interval does not clear B's"
+    st["onlyB"] = stats(30.0, 20.0, 39.0, 100)
+    assert _largest_family(st, "max", "acceleration", "z")[2] == ""

@@ -334,10 +334,17 @@ def _window_table(sds, attrs) -> list[str]:
     return _table(head, rows)
 
 
-def _largest_family(st: dict, stat, q, d) -> tuple[str, float]:
+def _largest_family(st: dict, stat, q, d) -> tuple[str, float, str]:
+    """The family whose run has the largest median, its share of the three medians, and whether the data
+    resolve it: its median's lower bound above every other's upper bound (else said, with the runner-up)."""
     values = {f: _stat(st[f"only{f}"], stat, q, d) for f in FAMILY_KEYS}
     best = max(values, key=values.get)
-    return best, values[best] / max(sum(values.values()), 1e-300)
+    lower = _stat(st[f"only{best}"], stat, q, d, bound="lower")
+    overlapping = [f for f in FAMILY_KEYS if f != best and not lower > _stat(st[f"only{f}"], stat, q, d, bound="upper")]
+    n = int(st[f"only{best}"].attrs["n_finished"])
+    said = (f"; not resolved at n = {n}: its median's interval does not clear {' and '.join(overlapping)}'s"
+            if overlapping else "")
+    return best, values[best] / max(sum(values.values()), 1e-300), said
 
 
 def _displacement_fields(scene, st: dict, paper_dx: float) -> dict:
@@ -374,13 +381,13 @@ def _explanations(scene, st: dict, dt: float, by_window, start: str) -> list[str
     pa = PAPER_VALUES[("max", "acceleration", "z")].get(mm)
     if pa is not None:
         la, ca = (_stat(st[lv], "max", "acceleration", "z") for lv in ("paper", "contact"))
-        fam, share = _largest_family(st, "max", "acceleration", "z")
+        fam, share, resolved = _largest_family(st, "max", "acceleration", "z")
         startup, steady = (_stat(in_window(by_window, w), "max", "acceleration", "z") for w in ("startup", "steady"))
         out.append(text.ACCELERATION.format(paper_a=pa * 1e3, paper_level_a=la * 1e3, contact_a=ca * 1e3,
                                             startup_a=startup * 1e3, steady_a=steady * 1e3,
                                             steady=text.window_times("steady", by_window.attrs),
                                             start=text.start_text(text.START_PEAKS, start, by_window.attrs),
-                                            family=fam, share=100 * share, family_what=(
+                                            family=fam, share=100 * share, resolved=resolved, family_what=(
                                                 f" ({text.contents(scene, nominal=True)})" if scene.uncertain else "")))
     return out
 

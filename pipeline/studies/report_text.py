@@ -87,7 +87,7 @@ ACCELERATION = (
     "runs from rss6's value to that model's (x 99-198, y 144-285, z 377-689 mm/s^2; rx 2.27-5.42, "
     "ry 5.05-8.17, rz 1.15-1.60 rad/s^2; docs/accelerations.md). Of the three joint families "
     "switched on one at a time{family_what}, {family} gives the largest median peak over the whole run "
-    "({share:.0f} % of the three runs' sum).")
+    "({share:.0f} % of the three runs' sum{resolved}).")
 
 START_PEAKS = {
     "drawn": ("The start-up peaks are impacts: the joints, started off their walls, fall onto them "
