@@ -145,6 +145,21 @@ def test_no_qmc_interval_once_a_realisation_failed():
     assert np.isfinite(sds["max_abs_error"].sel(bound="lower", statistic="mean")).all()
 
 
+def test_no_bound_of_a_statistic_of_abs_error_is_below_zero_with_two_replicates():
+    """Student t over R = 2 replicates (t = 12.7) reaches below 0 on skewed |error| data; the file's
+    bounds are raised to 0 there (a statistic of |error| is >= 0, so coverage is kept), the upper bounds
+    are the t interval's."""
+    x = np.random.default_rng(4).lognormal(0.0, 1.5, size=(64, 6))   # 2 x 32 points
+    sds = ensemble_stats(_ensemble(x, range(64), {"sampler": "qmc", "qmc_replicates": 2, "seed": 0}))
+    raw = rqmc_intervals(x.reshape(32, 2, 6).swapaxes(0, 1), 0.95)            # (statistic, 2, 6)
+    assert (raw[:, 0] < 0).sum() >= 3                                          # the data do reach below 0
+    for name in ("max_abs_error", "mean_abs_error"):
+        got = sds[name].sel(quantity="displacement").transpose("statistic", "bound", "direction").values
+        bounds = got[:, 1:]
+        assert np.nanmin(bounds) >= 0.0
+        assert np.allclose(bounds, np.maximum(raw, 0.0), equal_nan=True)
+
+
 # --- coverage ------------------------------------------------------------------------
 
 def _linear_map(scene, instants: int) -> np.ndarray:

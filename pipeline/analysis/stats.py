@@ -21,7 +21,7 @@ from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, STEP_WORDS, SUMMARIES, counted, step_measured
 from .estimators import (BOUNDS, LOWEST_MEASURED, MAX_NOTE, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
                          bound_level, estimates_and_bounds, interval_floor, min_n_for_quantile, moment_floor,
-                         short_of_label, stopped_level, replicate_groups, rqmc_intervals)
+                         short_of_label, stopped_level, replicate_groups, rqmc_intervals, clipped_at_zero)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
            "to_json", "format_stats", "table_notes", "left_out_note", "level_notes", "below_floor", "one_run_repeated"]
@@ -156,6 +156,7 @@ def _column_stats(x: np.ndarray, realizations, finished: np.ndarray, design, con
         level = bound_level("mean", confidence, stopped_by_width, rqmc=True)
         flat[:, 1:] = _rqmc_bounds(x, realizations, finished, design.replicates,
                                    2 * level - 1 if one_sided else level)
+    flat[:, 1:] = clipped_at_zero(flat[:, 1:])      # statistics of |error| are >= 0
     return flat
 
 
