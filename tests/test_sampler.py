@@ -160,6 +160,21 @@ def test_no_bound_of_a_statistic_of_abs_error_is_below_zero_with_two_replicates(
         assert np.allclose(bounds, np.maximum(raw, 0.0), equal_nan=True)
 
 
+@pytest.mark.parametrize("replicates", [2, 4, 8, 16])
+def test_a_replicate_count_whose_coverage_was_not_measured_is_said_so_in_the_notes(replicates):
+    """benchmarks/rqmc_coverage.py measured the t interval's coverage at R = 2, 4 and 8 (docs/ensembles.md);
+    at any other R the table notes (kept by the statistics file as table_notes) say it is unmeasured."""
+    from pipeline.analysis.stats import format_stats, table_notes
+    x = np.random.default_rng(6).gamma(2.0, size=(16 * replicates, 6))
+    sds = ensemble_stats(_ensemble(x, range(len(x)), {"sampler": "qmc", "qmc_replicates": replicates, "seed": 0}))
+    (qmc_note,) = [t for t in table_notes(sds) if t.startswith("randomised QMC")]
+    said = f"at R = {replicates} the t interval's coverage is unmeasured"
+    assert (said in qmc_note) == (replicates == 16), qmc_note
+    assert (said in format_stats(sds)) == (replicates == 16)
+    if replicates == 16:
+        assert "RQMC coverage measured with 2, 4 and 8 replicates (docs/ensembles.md)" in qmc_note
+
+
 # --- coverage ------------------------------------------------------------------------
 
 def _linear_map(scene, instants: int) -> np.ndarray:

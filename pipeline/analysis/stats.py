@@ -21,7 +21,8 @@ from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, STEP_WORDS, SUMMARIES, counted, step_measured
 from .estimators import (BOUNDS, LOWEST_MEASURED, MAX_NOTE, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
                          bound_level, estimates_and_bounds, interval_floor, min_n_for_quantile, moment_floor,
-                         short_of_label, stopped_level, replicate_groups, rqmc_intervals, clipped_at_zero)
+                         short_of_label, stopped_level, replicate_groups, rqmc_intervals, clipped_at_zero,
+                         replicates_note)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
            "to_json", "format_stats", "table_notes", "left_out_note", "level_notes", "below_floor", "one_run_repeated"]
@@ -297,8 +298,9 @@ def table_notes(sds: xr.Dataset) -> list[str]:
              f"{k}: no {conf:g} % interval at any n: {short_of_label(k)}" for k, v in need.items()
              if v is None or n < v]
     if replicates is not None:
+        unmeasured = replicates_note(replicates)
         notes.insert(0, f"randomised QMC, {replicates} replicates: intervals are Student t over "
-                        "the replicates (none if a realisation failed)")
+                        "the replicates (none if a realisation failed)" + (f"; {unmeasured}" if unmeasured else ""))
     until = [f"--until: {sds.attrs['interval_after_until']}"] if "interval_after_until" in sds.attrs else []
     other = [f"confidence {conf:g} %: the quantiles' intervals are exact at any level, but the mean's and std's "
              f"coverage was measured from {100 * LOWEST_MEASURED:g} % up (docs/ensembles.md)"] \
