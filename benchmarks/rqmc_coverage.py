@@ -1,14 +1,15 @@
 """Coverage of the randomised-QMC intervals (``--sampler qmc``) per statistic and points per replicate.
 
-Run on demand: ``python benchmarks/rqmc_coverage.py [--points 128 256 512 1024] [--reps R]`` (default
-2000 runs per size; about 3 minutes).  ``--until`` instead measures the intervals where ``rss6 run --until``
-stops (pipeline.analysis.until; 1000 runs per target, about 10 minutes): checked at the rule's sample sizes,
-stopping at the first n where the relative half-width meets the target, with the bounds at the label's 95 %
-(``plain``) and at the rule's widened level :data:`pipeline.analysis.until.LEVEL` (``rss6``).
+Run on demand: ``python benchmarks/rqmc_coverage.py [--points 128 256 512 1024] [--reps N] [--replicates R]``
+(default 2000 runs per size, R = 8; about 3 minutes, less at fewer replicates).  ``--until`` instead measures
+the intervals where ``rss6 run --until`` stops (pipeline.analysis.until; 1000 runs per target, R = 8, about 10
+minutes): checked at the rule's sample sizes, stopping at the first n where the relative half-width meets the
+target, with the bounds at the label's 95 % (``plain``) and at the rule's widened level
+:data:`pipeline.analysis.until.LEVEL` (``rss6``).
 
 The output is benchmarks/sobol_coverage.py's maximum over time of |sum_i c_i(t) e_i| (24 uniform inputs in
 4 groups), the clearance response's shape at the quasi-static level; its true statistics come from 4e6 plain
-draws.  Each run draws R = 8 scrambled Sobol' replicates of m points and takes
+draws.  Each run draws R = 8 (``--replicates``) scrambled Sobol' replicates of m points and takes
 :func:`pipeline.analysis.estimators.rqmc_intervals` at 95 %; the table gives the share of runs whose
 interval covers each truth, also below the statistic's floor MIN_POINTS_RQMC (marked).  tests/test_sampler.py
 measures the paper scene's own response at m = 128 (500 runs, slow).
@@ -55,6 +56,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, nargs="+", default=[128, 256, 512, 1024])
     parser.add_argument("--reps", type=int, default=None, help="runs per cell (default 2000; --until 1000)")
+    parser.add_argument("--replicates", type=int, default=R, help=f"scrambled replicates per run (default {R})")
     parser.add_argument("--until", action="store_true", help="coverage where rss6 run --until stops")
     args = parser.parse_args(argv)
     model, rng = response, np.random.default_rng(7)
@@ -71,13 +73,13 @@ def main(argv=None) -> None:
     args.reps = args.reps or 2000
     floors = dict(MIN_POINTS_RQMC)
     MIN_POINTS_RQMC.update(dict.fromkeys(MIN_POINTS_RQMC, 1))   # measure below the floors too (marked *)
-    print(f"points per replicate m (R = {R}), coverage of the 95 % interval over {args.reps} runs; * below the "
-          f"statistic's floor ({', '.join(f'{s} {floors[s]}' for s in truth)}), where rss6 gives none")
+    print(f"points per replicate m (R = {args.replicates}), coverage of the 95 % interval over {args.reps} runs; "
+          f"* below the statistic's floor ({', '.join(f'{s} {floors[s]}' for s in truth)}), where rss6 gives none")
     for m in args.points:
         hits = dict.fromkeys(truth, 0)
         for run in range(args.reps):
             groups = np.stack([model(qmc.Sobol(D, scramble=True, seed=np.random.default_rng([run, k, m])).random(m))
-                               for k in range(R)])[:, :, None]
+                               for k in range(args.replicates)])[:, :, None]
             iv = rqmc_intervals(groups, 0.95)
             for s in truth:
                 i = STATISTICS.index(s)

@@ -145,6 +145,36 @@ def test_no_qmc_interval_once_a_realisation_failed():
     assert np.isfinite(sds["max_abs_error"].sel(bound="lower", statistic="mean")).all()
 
 
+def test_no_bound_of_a_statistic_of_abs_error_is_below_zero_with_two_replicates():
+    """Student t over R = 2 replicates (t = 12.7) reaches below 0 on skewed |error| data; the file's
+    bounds are raised to 0 there (a statistic of |error| is >= 0, so coverage is kept), the upper bounds
+    are the t interval's."""
+    x = np.random.default_rng(4).lognormal(0.0, 1.5, size=(64, 6))   # 2 x 32 points
+    sds = ensemble_stats(_ensemble(x, range(64), {"sampler": "qmc", "qmc_replicates": 2, "seed": 0}))
+    raw = rqmc_intervals(x.reshape(32, 2, 6).swapaxes(0, 1), 0.95)            # (statistic, 2, 6)
+    assert (raw[:, 0] < 0).sum() >= 3                                          # the data do reach below 0
+    for name in ("max_abs_error", "mean_abs_error"):
+        got = sds[name].sel(quantity="displacement").transpose("statistic", "bound", "direction").values
+        bounds = got[:, 1:]
+        assert np.nanmin(bounds) >= 0.0
+        assert np.allclose(bounds, np.maximum(raw, 0.0), equal_nan=True)
+
+
+@pytest.mark.parametrize("replicates", [2, 4, 8, 16])
+def test_a_replicate_count_whose_coverage_was_not_measured_is_said_so_in_the_notes(replicates):
+    """benchmarks/rqmc_coverage.py measured the t interval's coverage at R = 2, 4 and 8 (docs/ensembles.md);
+    at any other R the table notes (kept by the statistics file as table_notes) say it is unmeasured."""
+    from pipeline.analysis.stats import format_stats, table_notes
+    x = np.random.default_rng(6).gamma(2.0, size=(16 * replicates, 6))
+    sds = ensemble_stats(_ensemble(x, range(len(x)), {"sampler": "qmc", "qmc_replicates": replicates, "seed": 0}))
+    (qmc_note,) = [t for t in table_notes(sds) if t.startswith("randomised QMC")]
+    said = f"at R = {replicates} the t interval's coverage is unmeasured"
+    assert (said in qmc_note) == (replicates == 16), qmc_note
+    assert (said in format_stats(sds)) == (replicates == 16)
+    if replicates == 16:
+        assert "RQMC coverage measured with 2, 4 and 8 replicates (docs/ensembles.md)" in qmc_note
+
+
 # --- coverage ------------------------------------------------------------------------
 
 def _linear_map(scene, instants: int) -> np.ndarray:

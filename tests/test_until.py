@@ -247,7 +247,8 @@ def test_the_statistics_of_a_run_stopped_by_its_intervals_take_the_quantiles_at_
     """A file written by --until, met or stopped at its cap, takes its quantiles' bounds at LEVEL
     (97.5 % for 95 %) and says why in its statistics' attributes and table; the same data without
     the until attributes, like a plain run, at the label's 95 %."""
-    from pipeline.analysis.stats import UNTIL_NOTE, ensemble_stats, format_stats, in_window
+    from pipeline.analysis.stats import ensemble_stats, format_stats, in_window
+    from pipeline.analysis.stats import until_note
     from pipeline.analysis.until import run_until
     from pipeline.ensemble.run import EnsembleSpec
     from pipeline.files.reading import load_netcdf
@@ -269,7 +270,7 @@ def test_the_statistics_of_a_run_stopped_by_its_intervals_take_the_quantiles_at_
             got = sds["max_abs_error"].sel(quantity="displacement", statistic="q50", bound=["lower", "upper"]).values
             assert np.array_equal(got, quantile_interval(x, 0.5, level))
             assert ("interval_after_until" in sds.attrs) == noted
-            assert (format_stats(sds).splitlines()[-1] == f"  --until: {UNTIL_NOTE}") == noted
+            assert (format_stats(sds).splitlines()[-1] == f"  --until: {until_note('mc')}") == noted
     assert not np.array_equal(quantile_interval(x, 0.5, LEVEL), quantile_interval(x, 0.5, 0.95))
 
 
@@ -301,3 +302,35 @@ def test_one_rule_says_which_bounds_a_file_until_wrote_widens():
     rows = estimates_and_bounds(x, 0.95, stopped_by_width=True)
     assert np.array_equal(rows[STATISTICS.index("mean"), 1:], mean_interval(x, 0.95))
     assert np.array_equal(rows[STATISTICS.index("q95"), 1:], quantile_interval(np.sort(x, axis=0), 0.95, 0.975))
+
+
+def test_a_qmc_file_until_wrote_says_every_statistic_is_widened_with_the_rqmc_coverages():
+    """With --sampler qmc every statistic's bounds are widened (the mean's too), so the note of such a file says
+    so with rqmc_coverage.py --until's numbers, not the plain Monte Carlo ones ("the mean's ... not widened");
+    every number of either note is docs/ensembles.md's."""
+    import re
+    from pathlib import Path
+
+    from pipeline.analysis.estimators import replicate_groups, rqmc_intervals
+    from pipeline.analysis.stats import STOP_COVERAGE, format_stats, until_note
+    x = np.random.default_rng(5).gamma(2.0, size=(128, 6))              # 8 replicates x 16 points
+    data = np.zeros((3, 128, 6))
+    data[0] = x
+    ds = xr.Dataset({"max_abs_error": (("quantity", "realization", "direction"), data),
+                     "mean_abs_error": (("quantity", "realization", "direction"), data),
+                     "status": ("realization", np.array(["finished"] * 128, dtype=object))},
+                    coords={"realization": np.arange(128), "quantity": ["displacement", "velocity", "acceleration"],
+                            "direction": ["x", "y", "z", "rx", "ry", "rz"]},
+                    attrs={"sampler": "qmc", "qmc_replicates": 8, "seed": 0, "until_rule": "stop at ..."})
+    sds = ensemble_stats(ds)
+    got = sds["max_abs_error"].sel(quantity="displacement", statistic="mean", bound=["lower", "upper"]).values
+    want = rqmc_intervals(replicate_groups(x, np.arange(128), 8), LEVEL)[STATISTICS.index("mean")]
+    assert np.allclose(got, want)                                       # the mean is widened on a qmc file
+    note = sds.attrs["interval_after_until"]
+    assert note == until_note("qmc") and format_stats(sds).splitlines()[-1] == f"  --until: {note}"
+    assert "every statistic's bounds" in note and "mean 96.7 %, q95 95.4 %" in note and "not widened" not in note
+    assert "not widened" in until_note("mc") and "94.3" not in until_note("mc")
+    docs = " ".join((Path(__file__).parents[1] / "docs" / "ensembles.md").read_text().split())
+    for sampler in STOP_COVERAGE:
+        for number in re.findall(r"\d+\.\d(?:-\d+\.\d)? %", until_note(sampler)):
+            assert number in docs, (sampler, number)

@@ -78,9 +78,12 @@ biased by O(1/m); coverage measured in tests/test_sampler.py and, per m, by
 benchmarks/rqmc_coverage.py: on a maximum over time the q99 interval covered
 90.7, 92.2, 93.9 and 94.3 % at m = 128, 256, 512, 1024 (2000 runs each), hence
 its floor of 1024; q95 93.8-94.0 % at 128-256, 94.9 % at 512, hence its floor of
-512), never for the
+512; with 2 and 4 replicates every statistic covered 94.1-95.6 % and 93.7-95.9 % from its
+floor, ``--replicates``; at other R it is unmeasured, which ``replicates_note`` says), never for the
 maximum, and not at all if a realisation failed (a replicate with holes is no
-longer a scrambled net).  Point estimates stay those of all n realisations.
+longer a scrambled net).  Point estimates stay those of all n realisations.  The statistics
+files raise bounds below 0 to 0 (``clipped_at_zero``: every summary is of |error|, and the
+t factor over R = 2 replicates, 12.7, reaches below 0 on a spread-out statistic).
 """
 from __future__ import annotations
 
@@ -100,7 +103,8 @@ __all__ = ["BOUNDS", "MIN_N_MEAN", "MIN_N_STD", "STD_WIDENING", "UNTIL_WIDENING"
            "quantile_ranks", "min_n_for_quantile", "quantile_estimates", "quantile_interval", "BoundRanks",
            "one_sided_ranks", "quantile_bounds", "quantile_decision_n", "mean_interval", "mean_bounds",
            "running_mean_interval", "std_interval", "estimates", "one_sided_bounds", "stopped_level", "bound_level",
-           "estimates_and_bounds", "replicate_groups", "rqmc_intervals", "interval_floor", "no_interval_at"]
+           "estimates_and_bounds", "replicate_groups", "rqmc_intervals", "interval_floor", "no_interval_at",
+           "clipped_at_zero", "MEASURED_REPLICATES", "replicates_note"]
 
 BOUNDS = ("estimate", "lower", "upper")
 MIN_N_MEAN = 16     # smallest n whose coverage reaches the label on the measured laws (module doc)
@@ -113,6 +117,7 @@ LOWEST_MEASURED = 0.8   # the lowest two-sided level at which those floors' cove
 STD_WIDENING = 0.6  # Bonett's interval is computed at the level 1 - STD_WIDENING (1 - confidence)
 UNTIL_WIDENING = 0.5  # n chosen by the intervals' widths: bounds at 1 - UNTIL_WIDENING (1 - confidence)
 MIN_POINTS_RQMC = {"mean": 16, "std": 32, "q05": 128, "q50": 16, "q95": 512, "q99": 1024}
+MEASURED_REPLICATES = (2, 4, 8)   # the R at which benchmarks/rqmc_coverage.py measured those floors' coverage
 MAX_NOTE = ("no interval: the sample maximum estimates no population parameter; the next "
             "realisation exceeds it with probability 1/(n + 1)")
 _RTOL = 1e-12       # binomial coverage computed in floating point
@@ -428,6 +433,27 @@ def rqmc_intervals(groups: np.ndarray, confidence: float) -> np.ndarray:
     out = np.stack([centre - half, centre + half], axis=1)
     enough = np.array([R >= 2 and m >= MIN_POINTS_RQMC.get(s, np.inf) for s in STATISTICS])
     return np.where(enough[:, None, None], out, np.nan)
+
+
+def clipped_at_zero(bounds: np.ndarray) -> np.ndarray:
+    """Bounds of statistics of a non-negative quantity (every rss6 summary is a max or mean of |error|) with
+    those below 0 raised to 0; NaN stays NaN.
+
+    The true mean, std or quantile of such a quantity is >= 0, so an interval [l, u] covers it exactly when
+    [max(l, 0), max(u, 0)] does, and a one-sided lower bound l holds exactly when max(l, 0) does: clipping
+    keeps every interval's and bound's coverage and removes only values no such law can take.  Student t
+    over few replicates (R = 2: t = 12.7) or a small skewed sample's mean interval reach below 0 otherwise."""
+    return np.maximum(bounds, 0.0)
+
+
+def replicates_note(replicates: int) -> str | None:
+    """Where a QMC file's replicate count R is not one whose intervals' coverage was measured
+    (MEASURED_REPLICATES), a note saying so; None where it is."""
+    if replicates in MEASURED_REPLICATES:
+        return None
+    counts = ", ".join(map(str, MEASURED_REPLICATES[:-1])) + f" and {MEASURED_REPLICATES[-1]}"
+    return (f"RQMC coverage measured with {counts} replicates (docs/ensembles.md); at R = {replicates} the t "
+            "interval's coverage is unmeasured")
 
 
 def interval_floor(statistic: str, confidence: float, replicates: int | None = None) -> int | None:

@@ -21,7 +21,8 @@ from ..files.schema import SETTINGS
 from ..vocabulary import CONFIDENCE, FINISHED, QUANTILES, STATISTICS, STEP_WORDS, SUMMARIES, counted, step_measured
 from .estimators import (BOUNDS, LOWEST_MEASURED, MAX_NOTE, MIN_POINTS_RQMC, STD_WIDENING, UNTIL_WIDENING,
                          bound_level, estimates_and_bounds, interval_floor, min_n_for_quantile, moment_floor,
-                         short_of_label, stopped_level, replicate_groups, rqmc_intervals)
+                         short_of_label, stopped_level, replicate_groups, rqmc_intervals, clipped_at_zero,
+                         replicates_note)
 
 __all__ = ["SOURCE_ATTRS", "windows_of", "in_window", "finished_values", "ensemble_stats", "json_number",
            "to_json", "format_stats", "table_notes", "left_out_note", "level_notes", "below_floor", "one_run_repeated"]
@@ -156,6 +157,7 @@ def _column_stats(x: np.ndarray, realizations, finished: np.ndarray, design, con
         level = bound_level("mean", confidence, stopped_by_width, rqmc=True)
         flat[:, 1:] = _rqmc_bounds(x, realizations, finished, design.replicates,
                                    2 * level - 1 if one_sided else level)
+    flat[:, 1:] = clipped_at_zero(flat[:, 1:])      # statistics of |error| are >= 0
     return flat
 
 
@@ -206,13 +208,30 @@ def _attrs(ds, n: int, failed: int, confidence: float, stopped_by_width: bool, r
                                   + ", ".join(f"{v} ({k})" for k, v in needed.items()),
             "interval_max": MAX_NOTE,
             **{f"min_n_{k}": v for k, v in needed.items()},
-            **({"interval_after_until": UNTIL_NOTE} if stopped_by_width else {})}
+            **({"interval_after_until": until_note(str(ds.attrs.get("sampler", "mc")))} if stopped_by_width else {})}
 
 
-UNTIL_NOTE = (f"this run chose n by its own intervals' widths (rss6 run --until), which costs them coverage (q95 at "
-              f"95 %: 92.3-93.4 %), so its quantiles' bounds (with --sampler qmc every statistic's) are taken at "
-              f"the level 1 - {UNTIL_WIDENING:g} (1 - confidence): 95.4-98.0 % at the stop, the mean's 94.5-95.8 % "
-              f"unwidened (python benchmarks/until_coverage.py; rqmc_coverage.py --until)")
+# the coverages where --until stops that docs/ensembles.md ("Run until known") gives, per sampler, their one copy in
+# code: whose bounds are widened, their coverage at the label's 95 %, at the widened level, and the benchmark
+STOP_COVERAGE = {
+    "mc": ("its quantiles'", "q95 92.3-93.4 %, q50 94.2-95.1 %",
+           "q95 96.1-96.6 %, q50 97.0-98.0 %; the mean's interval is not widened and covers 94.5-95.8 %",
+           "python benchmarks/until_coverage.py"),
+    "qmc": ("every statistic's", "mean 94.3 %, q95 91.4 %",
+            "mean 96.7 %, q95 95.4 % (8 replicates; every width comes from the replicates' spread)",
+            "python benchmarks/rqmc_coverage.py --until"),
+}
+
+
+def until_note(sampler: str = "mc") -> str:
+    """What the statistics of a --until run say about their widened bounds (``interval_after_until``): what
+    was widened for the file's ``sampler`` ('mc' or 'qmc') and that sampler's measured coverages."""
+    widened, plain, at_level, command = STOP_COVERAGE[sampler]
+    flag = " --sampler qmc" if sampler == "qmc" else ""
+    return (f"this run chose n by its own intervals' widths (rss6 run --until{flag}), which costs them coverage "
+            f"(95 % bounds at the stop covered {plain}), so {widened} bounds are taken at the level "
+            f"1 - {UNTIL_WIDENING:g} (1 - confidence) ({100 * stopped_level(CONFIDENCE, True):g} % for 95 %), "
+            f"covering {at_level} at the stop ({command}; docs/ensembles.md)")
 
 
 def json_number(v):
@@ -279,8 +298,9 @@ def table_notes(sds: xr.Dataset) -> list[str]:
              f"{k}: no {conf:g} % interval at any n: {short_of_label(k)}" for k, v in need.items()
              if v is None or n < v]
     if replicates is not None:
+        unmeasured = replicates_note(replicates)
         notes.insert(0, f"randomised QMC, {replicates} replicates: intervals are Student t over "
-                        "the replicates (none if a realisation failed)")
+                        "the replicates (none if a realisation failed)" + (f"; {unmeasured}" if unmeasured else ""))
     until = [f"--until: {sds.attrs['interval_after_until']}"] if "interval_after_until" in sds.attrs else []
     other = [f"confidence {conf:g} %: the quantiles' intervals are exact at any level, but the mean's and std's "
              f"coverage was measured from {100 * LOWEST_MEASURED:g} % up (docs/ensembles.md)"] \

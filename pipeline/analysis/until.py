@@ -14,9 +14,9 @@ Stopping rule: the ensemble is checked only at the fixed sample sizes of
 never of timing), and stops at the first one where every target is met.  A
 statistic without an interval at that n (below its minimum n) is not met.  The
 intervals are those of pipeline/analysis/estimators.py at the run's confidence (95 %), the
-quantiles' taken at the widened level LEVEL (97.5 %): choosing n by an interval's own width
-costs it coverage (:data:`pipeline.analysis.stats.UNTIL_NOTE`), and every later statistic of
-the file is taken the same way.  The file at the final n is the file of a plain ``-n FINAL``
+quantiles' (with ``--sampler qmc`` every statistic's) taken at the widened level LEVEL (97.5 %):
+choosing n by an interval's own width costs it coverage (:func:`pipeline.analysis.stats.until_note`), and
+every later statistic of the file is taken the same way.  The file at the final n is the file of a plain ``-n FINAL``
 run plus the ``until_*`` attributes.  A file that already holds realisations (a resumed
 run) is checked at its own n first.
 """
