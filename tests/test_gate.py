@@ -541,3 +541,15 @@ def test_whole_run_verdicts_of_a_contact_level_file_point_to_the_steady_window()
     from pipeline.analysis.gate import verdicts_with_note      # what rss6 run and rss6 stats print
     assert verdicts_with_note(whole, contact) == format_verdicts(whole) + "\n" + start_up_note(whole, contact)
     assert verdicts_with_note(steady, contact) == format_verdicts(steady)
+
+
+def test_every_undecided_row_without_an_n_says_why_and_bounds_stay_apart_from_the_limit():
+    """Review 63b #11 and #4: a 99 % std verdict (no bound at any n) read 'undecided -' with its reason in the
+    JSON only; the bounds column ran into the limit ('[0.3795, 0.3803]<= 0.381 m/s^2')."""
+    (v,) = judge_all([parse_spec("displacement:x<=1mm@std")], _ensemble(_symmetric(300, 1e-4, 2e-5)), 0.99)
+    assert (v.outcome, v.n_needed, v.reason) == ("undecided", None, "no 99 % one-sided bound at any n "
+                                                 "(docs/ensembles.md)")
+    row = format_verdicts([v]).splitlines()[2]
+    assert row.endswith(f"undecided - ({v.reason})"), row
+    w = dataclasses.replace(v, lower=0.37948, upper=0.38033, limit=0.381, unit="m/s^2", factor=1.0, op="<=")
+    assert "0.3803]  <= 0.381 m/s^2" in format_verdicts([w]), format_verdicts([w])

@@ -390,17 +390,24 @@ def format_verdicts(verdicts: list[Verdict]) -> str:
     lines = [f"requirements ({rule}; n = {verdicts[0].n} finished realisations"
              + (f"; {failed} failed, so a limit they meet is undecided" if failed else "")
              + "; estimate and bounds in the unit of the spec's limit)",
-             f"{'spec':<{width}s}{'dir':<4s}{'window':<9s}{'estimate':>11s}{'bounds':>24s}{'limit':>14s}  "
+             f"{'spec':<{width}s}{'dir':<4s}{'window':<9s}{'estimate':>11s}{'bounds':>24s}  {'limit':>14s}  "
              f"{'verdict':<10s}n to decide"]
     for v in verdicts:
         bounds = f"[{_num(v.lower, v.factor, v.limit)}, {_num(v.upper, v.factor, v.limit)}]"
-        need = "" if v.outcome != "undecided" else (str(v.n_needed) if v.n_needed else "-")
         estimate = _num(v.estimate, v.factor, v.limit)
-        lines.append(f"{v.spec:<{width}s}{v.direction:<4s}{v.window or 'whole':<9s}{estimate:>11s}{bounds:>24s}"
-                     f"{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  {v.outcome:<10s}{need}")
+        lines.append(f"{v.spec:<{width}s}{v.direction:<4s}{v.window or 'whole':<9s}{estimate:>11s}{bounds:>24s}  "
+                     f"{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  {v.outcome:<10s}{_to_decide(v)}")
     counts = ", ".join(f"{sum(v.outcome == o for v in verdicts)} {o}" for o in OUTCOMES)
     lines.append(f"verdict: {overall(verdicts)} ({counts})")
     return "\n".join(lines)
+
+
+def _to_decide(v: Verdict) -> str:
+    """The 'n to decide' cell: empty for a decided verdict, the n that would likely decide, else '-' and why
+    none is given (the reason the JSON carries)."""
+    if v.outcome != "undecided":
+        return ""
+    return str(v.n_needed) if v.n_needed else f"- ({v.reason})"
 
 
 def overall(verdicts: list[Verdict]) -> str:
