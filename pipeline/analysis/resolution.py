@@ -1,7 +1,8 @@
 """The spread (SI) below which a level's per-realisation values are numerical noise, per quantity.
 
 A histogram of values within it would show noise: the ensemble figures draw a note instead; ``rss6 stats``
-says that such values' intervals measure numerical noise (:func:`resolution_attrs`)."""
+says that such values' intervals measure numerical noise (:func:`resolution_attrs`), and the requirement
+gate leaves a limit within the level's accuracy of its estimate undecided (pipeline.analysis.gate)."""
 from __future__ import annotations
 
 import os
@@ -43,6 +44,16 @@ class Resolution:
 
     def limit(self, value: float) -> float:
         return max(self.absolute, self.relative * abs(value))
+
+    @property
+    def round_off(self) -> bool:
+        """Whether this is round-off only: no numerical error beyond double precision's (ROUND_OFF)."""
+        return self.relative <= ROUND_OFF and self.absolute <= ROUND_OFF_FLOOR
+
+    def error(self, value: float) -> float:
+        """The numerical error of one value, or of a statistic of values, near ``value`` against the
+        converged model: half the resolution, the spread of two values each off by it the other way."""
+        return self.limit(value) / 2
 
 
 def within_resolution(values, resolution: Resolution) -> bool:
