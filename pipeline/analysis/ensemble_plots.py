@@ -17,7 +17,7 @@ from .envelopes import draw_envelope, envelope_marks, marked_windows, steady_sam
 from .estimators import estimates, moment_floor, running_mean_interval
 from .plot_common import (FAMILY_DIRECTIONS, SI_UNITS, family_units, figure_legend, figure_title, panel_grid,
                           plain_ticks, plt, save_figures, si_text)
-from .resolution import Resolution, resolutions
+from .resolution import Resolution, resolutions, within_resolution
 from .stats import ensemble_stats, in_window
 
 __all__ = ["ensemble_figures", "plot_ensemble", "BARS_TOP"]
@@ -94,7 +94,7 @@ def _histogram_panel(ax, peak, q95, panel: _Panel) -> None:
     x = peak[np.isfinite(peak)]
     if not x.size:
         return
-    if np.ptp(x) <= panel.resolution.limit(np.max(x)):
+    if within_resolution(x, panel.resolution):
         _unresolved_note(ax, x, panel)
         return
     x = x * f

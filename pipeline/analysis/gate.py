@@ -18,6 +18,11 @@ ensemble, the smallest n at which the binomial bound decides if the share of vio
 realisations stays as it is; otherwise from the bound's 1/sqrt(n) shrinkage about an
 unchanged estimate (never below the smallest n at which the bound exists).
 
+A limit within the level's numerical error of the estimate (half its resolution: the contact level's
+accuracy against a converged reference, pipeline.analysis.resolution; for a std, that of the largest
+value; none at levels resolved to round-off) is undecided with no n: any decision there would be on
+numerical noise, which more realisations do not shrink.
+
 Exit codes (:func:`exit_code`): 0 every verdict passes, 1 any fails, 3 none fails but
 some are undecided ("needs more realisations"); 2 stays the CLI's for usage errors.
 """
@@ -233,6 +238,27 @@ def _level(spec: Spec, bounds, confidence: float, replicates: int | None) -> flo
     return bound_level(spec.statistic, confidence, "interval_after_until" in bounds.attrs, replicates is not None)
 
 
+def _resolutions(ds, quantity: str) -> dict:
+    """The level's resolution per direction (:func:`.resolution.resolutions`; imported here: it draws on the
+    plots' helpers)."""
+    from .resolution import resolutions
+    return resolutions(ds, quantity)
+
+
+def _within_accuracy(spec: Spec, ev: _Evidence, res) -> str | None:
+    """Why ``spec``'s limit cannot be decided at the level: it lies within the level's numerical error
+    (:meth:`.resolution.Resolution.error`) of the estimate, that of the largest value for a std; else None.
+    A level resolved to round-off leaves such limits (the estimate itself, to 1e-9) to the bounds' reasons."""
+    if res.round_off:
+        return None
+    scale = float(np.max(np.abs(ev.values), initial=0.0)) if spec.statistic == "std" else ev.estimate
+    band = res.error(scale)
+    if not (np.isfinite(ev.estimate) and abs(spec.limit - ev.estimate) <= band):
+        return None
+    return (f"the limit lies within {_num(band, spec.factor)} {spec.unit} of the estimate, the level's numerical "
+            f"error there (half of its resolution, {res.source}): no n decides on numerical noise")
+
+
 def _judge(spec: Spec, ds, bounds) -> list[Verdict]:
     """Verdicts of one spec, one per direction, from the ensemble ``ds`` and its one-sided bounds."""
     da, values = _select(spec=spec, stats=bounds), _values(ds, spec)
@@ -240,7 +266,7 @@ def _judge(spec: Spec, ds, bounds) -> list[Verdict]:
     failed = int(bounds.attrs.get("n_failed", 0))
     replicates = bounds.attrs.get("qmc_replicates")
     replicates = None if replicates is None else int(replicates)
-    at = _level(spec, bounds, confidence, replicates)
+    at, res = _level(spec, bounds, confidence, replicates), _resolutions(ds, spec.quantity)
     rule = _rule(spec, at, replicates) + ("" if at == confidence else
                                           f" (for a {100 * confidence:g} % label: the run chose n by its widths)")
     out = []
@@ -248,6 +274,8 @@ def _judge(spec: Spec, ds, bounds) -> list[Verdict]:
         ev = _Evidence(*(float(da.sel(direction=d, bound=b)) for b in ("estimate", "lower", "upper")),
                        values=values.sel(direction=d).values)
         outcome, need, reason = _decision(spec, ev, n, failed, at, replicates)
+        if d in res and (noise := _within_accuracy(spec, ev, res[d])):
+            outcome, need, reason = "undecided", None, noise
         out.append(Verdict(spec.text, spec.quantity, d, spec.statistic, spec.measure, spec.window or "whole",
                            spec.op, spec.limit, spec.unit, spec.factor, ev.estimate,
                            json_number(ev.lower), json_number(ev.upper),
@@ -390,17 +418,24 @@ def format_verdicts(verdicts: list[Verdict]) -> str:
     lines = [f"requirements ({rule}; n = {verdicts[0].n} finished realisations"
              + (f"; {failed} failed, so a limit they meet is undecided" if failed else "")
              + "; estimate and bounds in the unit of the spec's limit)",
-             f"{'spec':<{width}s}{'dir':<4s}{'window':<9s}{'estimate':>11s}{'bounds':>24s}{'limit':>14s}  "
+             f"{'spec':<{width}s}{'dir':<4s}{'window':<9s}{'estimate':>11s}{'bounds':>24s}  {'limit':>14s}  "
              f"{'verdict':<10s}n to decide"]
     for v in verdicts:
         bounds = f"[{_num(v.lower, v.factor, v.limit)}, {_num(v.upper, v.factor, v.limit)}]"
-        need = "" if v.outcome != "undecided" else (str(v.n_needed) if v.n_needed else "-")
         estimate = _num(v.estimate, v.factor, v.limit)
-        lines.append(f"{v.spec:<{width}s}{v.direction:<4s}{v.window or 'whole':<9s}{estimate:>11s}{bounds:>24s}"
-                     f"{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  {v.outcome:<10s}{need}")
+        lines.append(f"{v.spec:<{width}s}{v.direction:<4s}{v.window or 'whole':<9s}{estimate:>11s}{bounds:>24s}  "
+                     f"{v.op + ' ' + _num(v.limit, v.factor) + ' ' + v.unit:>14s}  {v.outcome:<10s}{_to_decide(v)}")
     counts = ", ".join(f"{sum(v.outcome == o for v in verdicts)} {o}" for o in OUTCOMES)
     lines.append(f"verdict: {overall(verdicts)} ({counts})")
     return "\n".join(lines)
+
+
+def _to_decide(v: Verdict) -> str:
+    """The 'n to decide' cell: empty for a decided verdict, the n that would likely decide, else '-' and why
+    none is given (the reason the JSON carries)."""
+    if v.outcome != "undecided":
+        return ""
+    return str(v.n_needed) if v.n_needed else f"- ({v.reason})"
 
 
 def overall(verdicts: list[Verdict]) -> str:

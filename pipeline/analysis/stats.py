@@ -286,8 +286,9 @@ def left_out_note(failed: int, total: int) -> str:
 
 
 def table_notes(sds: xr.Dataset) -> list[str]:
-    """Why bounds are dashes (the n each interval needs, the maximum's note) and which realisations the
-    statistics leave out (the failed ones)."""
+    """Why bounds are dashes (the n each interval needs, the maximum's note), which realisations the
+    statistics leave out (the failed ones) and which intervals measure numerical noise (the attribute
+    within_resolution: pipeline.analysis.resolution.resolution_attrs)."""
     n, conf = sds.attrs["n_finished"], 100 * sds.attrs["confidence"]
     replicates = sds.attrs.get("qmc_replicates")
     replicates = None if replicates is None else int(replicates)
@@ -308,7 +309,8 @@ def table_notes(sds: xr.Dataset) -> list[str]:
     failed = int(sds.attrs.get("n_failed", 0))
     left_out = [left_out_note(failed, n + failed) + "; --require counts them against a pass"] if failed else []
     windows = set(windows_of(sds)) or {"whole"}
-    return (left_out + _identical_note(sds) + notes + [f"max: {MAX_NOTE}"] + until + other
+    noise = [t for t in str(sds.attrs.get("within_resolution", "")).split("\n") if t]   # resolution_attrs
+    return (left_out + _identical_note(sds) + noise + notes + [f"max: {MAX_NOTE}"] + until + other
             + level_notes(sds.attrs, {str(q) for q in sds["quantity"].values}, windows))
 
 

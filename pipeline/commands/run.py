@@ -128,6 +128,7 @@ def _report(args, level, outcome, until, output, specs: list, verdicts: list, no
     """Print what was written, the statistics, the verdicts and ``note`` (what they leave out); the exit
     code."""
     from ..analysis.gate import exit_code, verdicts_with_note
+    from ..analysis.resolution import resolution_attrs
     from ..analysis.stats import ensemble_stats, format_stats
     from ..analysis.summary import every_realisation_failed, failure_reasons
     ds = outcome.dataset
@@ -141,7 +142,8 @@ def _report(args, level, outcome, until, output, specs: list, verdicts: list, no
     shown = {"quantity": list(QUANTITIES) if dynamic else ["displacement"],
              "window": ["whole", "steady"] if dynamic else ["whole"]}
     sds = ensemble_stats(ds, window=None)
-    print(format_stats(sds.sel({k: v for k, v in shown.items() if k in sds.dims})))
+    sds = sds.sel({k: v for k, v in shown.items() if k in sds.dims})
+    print(format_stats(sds.assign_attrs(resolution_attrs(sds, ds))))
     if not dynamic:
         print(f"(displacement only; rss6 stats {output} shows velocity and acceleration too)")
     code = 0 if until is None else _until_verdict(until, args.n)

@@ -39,6 +39,7 @@ def main(args) -> int:
     from ..analysis.gate import check_confidence, exit_code, start_up_note, verdicts_json, verdicts_with_note
     from ..analysis.exceedance import exceedance_json, format_exceedance
     from ..analysis.stats import ensemble_stats, format_stats, table_notes, to_json
+    from ..analysis.resolution import resolution_attrs
     from ..analysis.summary import every_realisation_failed
     from ..files.opening import open_results
     from ..files.outputs import check_new_output
@@ -68,6 +69,7 @@ def main(args) -> int:
     verdicts = judge(ds, specs, args.confidence)
     probabilities = _probabilities(ds, events, args.confidence)
     sds = _selection(full, args)
+    sds = sds.assign_attrs(resolution_attrs(sds, ds))   # intervals of a spread the level does not resolve
     notes = table_notes(sds)   # what the text table says under its numbers, kept by the file and the JSON too
     if args.output:
         write_netcdf(sds.assign_attrs(verdict_attrs(verdicts) if specs else {}, table_notes="\n".join(notes)),
