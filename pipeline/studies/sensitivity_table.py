@@ -89,7 +89,7 @@ def _noise_note(ds: xr.Dataset, statistic: str) -> list[str]:
         return []
     rows = [(str(q), str(d)) for q in noise["quantity"].values for d in noise["direction"].values
             if bool(noise.sel(quantity=q, direction=d))]
-    sources = dict.fromkeys(resolutions(ds, q)[d].source for q, d in rows)
+    sources = dict.fromkeys(resolutions(ds, q)[d].source.split(", x ")[0] for q, d in rows)   # gains: in the file
     named = ", ".join(f"{q} {d}" for q, d in rows[:6]) + (", ..." if len(rows) > 6 else "")
     return [f"note: {len(rows)} rows ({named}): the {statistic} differs over the evaluated rows by less than the "
             f"{ds.attrs['model']} level resolves ({'; '.join(sources)}; the plots' test), so their indices rank "
