@@ -241,7 +241,7 @@ def test_cli_runs_resumes_and_writes_json(tmp_path, capsys):
     assert js["window"] == "whole" and js["analysis_window"] == "whole run"
     assert js["mean_abs_error"]["velocity"]["z"]["correlation"] is not None
     assert js["table_notes"][0].startswith(step_note.removeprefix("note: "))
-    assert first.attrs["table_notes"] == js["table_notes"][0]
+    assert first.attrs["table_notes"] == "\n".join(js["table_notes"])
     xr.testing.assert_identical(load_netcdf(out).drop_attrs(), first.drop_attrs())
 
 
@@ -261,3 +261,57 @@ def test_an_answer_to_another_request_is_refused_not_overwritten(tmp_path):
     xr.Dataset(attrs={"history": f"{HISTORY} smoke"}).to_netcdf(out)
     with pytest.raises(EnsembleFileError, match=r"F.nc: an rss6 multifidelity file that records no request"):
         check_multifidelity_output(out, request)
+
+
+def test_the_mf_interval_has_at_least_the_plain_means_floor_at_each_level():
+    """Review 63b #3: at 99 % the MF mean had an interval at N = 32 where the plain mean (rss6 stats) has none below
+    64; its floor is now the larger of MIN_N_MF and estimators.moment_floor, none where the mean has none."""
+    from pipeline.analysis.estimators import moment_floor
+    from pipeline.studies.multifidelity import mf_floor
+    assert [mf_floor(c) for c in (0.75, 0.95, 0.99, 0.999, 0.9999)] == [MIN_N_MF, MIN_N_MF, 64, 128, None]
+    assert mf_floor(0.99) == moment_floor("mean", 0.99)
+    for n, given in ((32, False), (64, True)):
+        y, x = _pairs(LAWS["normal"], 0.8, n, 4 * n, 1, seed=2)
+        cv = control_variate_mean(y, x, 0.99)
+        assert np.isfinite(cv.lower).all() == given and np.isfinite(cv.estimate).all()
+
+
+def test_other_levels_say_their_coverage_and_the_high_only_dash(configs):
+    """The MF bounds' coverage was measured at 95 % only: at other levels the table, the file and the JSON say so;
+    below 80 % also rss6 stats' 'measured from 80 % up'; a dash in the high-only column gets rss6 stats' reason."""
+    from pipeline.studies.multifidelity import interval_notes, to_json
+    assert interval_notes(0.95, 32) == []
+    notes = interval_notes(0.99, 32)
+    assert notes[0].startswith("MF bounds at 99 %: coverage measured at 95 % only") and "N = 64" in notes[0]
+    assert notes[1] == "high only: no 99 % interval below n = 64 (n = 32 here), as rss6 stats' mean"
+    assert interval_notes(0.99, 64)[1:] == []
+    low = interval_notes(0.75, 32)
+    assert len(low) == 2 and "coverage measured at 95 % only" in low[0]
+    assert low[1].startswith("confidence 75 %: the high-only mean's coverage was measured from 80 % up")
+    assert "no 99.99 % interval at any n" in interval_notes(0.9999, 500)[-1]
+    high = _ensemble(configs, "smoke", "paper", range(4))
+    low_level = _ensemble(configs, "smoke", "quasi-static", range(8))
+    mds = multifidelity_dataset(high, low_level, 0.99, ("h.nc", "l.nc"))
+    assert mds.attrs["min_n_multifidelity"] == 64 and "NaN for N < 64" in mds.attrs["interval_multifidelity"]
+    assert "coverage measured at 95 % only" in mds.attrs["interval_coverage"]
+    assert "coverage measured at 95 % only" in to_json(mds)["interval_coverage"]
+    text = format_multifidelity(mds)
+    assert "MF: no 99 % interval below N = 64 (N = 4 here)" in text
+    assert "high only: no 99 % interval below n = 64 (n = 4 here)" in text
+    at95 = multifidelity_dataset(high, low_level, CONF, ("h.nc", "l.nc"))
+    assert "measured at 95 % only" not in format_multifidelity(at95)
+
+
+def test_rows_where_the_control_variate_costs_precision_are_named(configs):
+    """Review 63b #10: VR < 1 (|rho| small: the fitted coefficient costs more than it gains) had no note unless
+    --cost-ratio was given; now the rows are named and the high-only mean called the better estimate there."""
+    high = _ensemble(configs, "smoke", "paper", range(4))
+    low = _ensemble(configs, "smoke", "quasi-static", range(8))
+    mds = multifidelity_dataset(high, low, CONF, ("h.nc", "l.nc"))
+    vr = mds["max_abs_error_variance_reduction"]
+    assert (vr < 1).any()   # N = 4 pairs: the coefficient costs (N - 3)/(N - 2) = 1/2 at least
+    note = [s.strip() for s in format_multifidelity(mds).splitlines() if s.strip().startswith("VR < 1")]
+    assert len(note) == 1 and f"VR < 1 in {int((vr < 1).sum())} rows" in note[0]
+    assert "the high-only mean is the better estimate there" in note[0]
+    paying = mds.assign(max_abs_error_variance_reduction=vr.clip(1.5, None))
+    assert not any("VR < 1" in s for s in format_multifidelity(paying).splitlines())

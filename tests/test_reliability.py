@@ -161,3 +161,29 @@ def test_an_event_every_draw_exceeds_has_no_cov_and_stops_the_cov_rule(tmp_path,
     assert res["lower"] == pytest.approx(0.025 ** (1 / 1000), rel=1e-9) and res["upper"] == 1.0
     assert main([*argv[:-1], str(tmp_path / "text.nc")]) == 0
     assert "no CoV" in capsys.readouterr().out
+
+
+def test_a_subset_interval_at_another_level_says_its_coverage_was_measured_at_95_only(tmp_path, capsys):
+    """Review 63b #3: a 99 % (or 75 %) subset interval was printed from a floor and a log-normal interval measured
+    at 95 % only, without a note; now the text, the JSON and the file say so. Exact binomial intervals (mc, or a
+    level 0 that decides) hold at any level and get no note; nor does a 95 % one."""
+    from dataclasses import replace
+
+    from pipeline.studies.reliability import coverage_note, estimate_from_dataset
+    out = tmp_path / "s99.nc"
+    capsys.readouterr()
+    assert main(["reliability", "smoke", "--event", RARE, "-n", "300", "--confidence", "0.99", "--workers", "1",
+                 "-o", str(out), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["lower"] is not None and res["coverage_note"].startswith("99 % interval: coverage measured at "
+                                                                         "95 % only")
+    ds = load_netcdf(out)
+    assert ds.attrs["interval_coverage"] == res["coverage_note"]
+    est = estimate_from_dataset(ds)
+    assert main(["reliability", "smoke", "--event", RARE, "-n", "300", "--confidence", "0.99", "--workers", "1",
+                 "-o", str(out)]) == 0   # read back: the text says it too
+    assert f"note: {res['coverage_note']}" in capsys.readouterr().out.splitlines()
+    assert coverage_note(replace(est, confidence=0.95)) is None
+    assert coverage_note(replace(est, confidence=0.75)).startswith("75 % interval: coverage measured at 95 % only")
+    assert coverage_note(replace(est, method="mc", interval="Clopper-Pearson exact binomial interval")) is None
+    assert coverage_note(replace(est, interval="exact binomial (Clopper-Pearson) of 3 of 300 level-0 draws")) is None

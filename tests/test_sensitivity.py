@@ -246,7 +246,10 @@ def test_sensitivity_file(sobol_file):
     assert ds.attrs["window"] == "whole" and da.attrs["analysis_window"] == "whole run"
     assert ds.attrs["evaluations_families"] == 64 * 6 and ds.attrs["evaluations_joints"] == 64 * 20
     est, lo, hi = (da.sel(bound=b).values for b in ("estimate", "lower", "upper"))
-    assert np.all(lo <= est) and np.all(est <= hi) and np.isfinite(est).all()
+    assert np.all(lo <= hi) and np.isfinite(est).all()
+    # the bounds clipped to [0, 1], where every index lies (the estimates not: their noise is noted)
+    assert np.all(lo >= 0) and np.all(hi <= 1) and "clipped to [0, 1]" in ds.attrs["interval_method"]
+    assert np.all(lo <= np.clip(est, 0, 1)) and np.all(np.clip(est, 0, 1) <= hi)
 
 
 def test_sensitivity_is_reproducible_across_workers(sobol_file, configs, tmp_path):
@@ -294,7 +297,7 @@ def main_code(argv) -> int:
 def test_the_joint_table_lists_the_largest_joints_from_the_file(sobol_file):
     """--per-joint: per quantity and direction the three joints of largest ST, largest first, with
     the intervals the file holds; no table without the joint design."""
-    from pipeline.studies.sensitivity import format_joints
+    from pipeline.studies.sensitivity_table import format_joints
     ds = load_netcdf(sobol_file)
     lines = format_joints(ds).splitlines()
     assert len(lines) == 2 + 18 and "of 18; all in the file" in lines[0]
@@ -311,24 +314,24 @@ def test_the_joint_table_lists_the_largest_joints_from_the_file(sobol_file):
 def test_total_estimates_outside_zero_one_get_a_note_naming_the_worst(sobol_file):
     """No index lies outside [0, 1], but an estimate at small N can: the table says so and names the
     estimate farthest out; with every estimate inside, no note."""
-    from pipeline.studies.sensitivity import format_sensitivity
+    from pipeline.studies.sensitivity_table import format_sensitivity
     ds = load_netcdf(sobol_file)
     inside = ds.assign(max_abs_error_sobol=ds["max_abs_error_sobol"].clip(0, 1))
-    assert "note:" not in format_sensitivity(inside)
+    assert "ST estimates lie outside" not in format_sensitivity(inside)
     # the label comes with its coverage on a maximum over time (benchmarks/sobol_coverage.py)
     assert format_sensitivity(inside).splitlines()[0].endswith(
         "[95 % bootstrap interval, z widened: >= 96 % measured on a maximum over time, docs/ensembles.md]")
     st = inside["max_abs_error_sobol"]
     st.loc[dict(index="ST", bound="estimate", group="spherical_B", quantity="velocity", direction="rz")] = 1.4
     st.loc[dict(index="ST", bound="estimate", group="revolute_axial", quantity="velocity", direction="x")] = -0.1
-    note = format_sensitivity(inside.assign(max_abs_error_sobol=st)).splitlines()[-1]
+    note = [s for s in format_sensitivity(inside.assign(max_abs_error_sobol=st)).splitlines() if "outside" in s][0]
     assert note.startswith("note: 2 ST estimates lie outside [0, 1] (e.g. 1.400, spherical_B on velocity rz)")
     assert "N = 64" in note
 
 
 def test_the_largest_family_is_named_with_its_overlap():
     import xarray as xr
-    from pipeline.studies.sensitivity import _dominant
+    from pipeline.studies.sensitivity_table import _dominant
 
     def cell(est, half):
         est = np.asarray(est)
@@ -357,7 +360,7 @@ def test_families_of_fixed_sizes_are_said_to_draw_eccentricities_not_sizes(sobol
     """On a scene of fixed clearance sizes (smoke, paper) the table read 'revolute_radial' as the clearance, though
     its inputs are the eccentricities inside it: the header and an 'inputs' line now say so, and point to the scenes
     that draw sizes; a family whose group holds its sizes (a [tolerance.*] band) is not named."""
-    from pipeline.studies.sensitivity import format_sensitivity
+    from pipeline.studies.sensitivity_table import format_sensitivity
     ds = load_netcdf(sobol_file)
     lines = format_sensitivity(ds).splitlines()
     assert "by joint family (eccentricity inside a fixed size: see 'inputs' below)," in lines[0]
@@ -371,3 +374,87 @@ def test_families_of_fixed_sizes_are_said_to_draw_eccentricities_not_sizes(sobol
     sized[2:4] = [f"C1_size {sized[2]}", f"B1_size {sized[3]}"]
     lines = format_sensitivity(ds.assign(group_inputs=(("group",), sized))).splitlines()
     assert not any(s.startswith("inputs: ") for s in lines) and "eccentricity" not in lines[0]
+
+
+def test_bounds_are_clipped_to_zero_one_with_a_note(paper):
+    """A total index lies in [0, 1], so the bootstrap's normal interval estimate -+ z sd is clipped there (review
+    63b #11: 0.674 [-0.062, 1.409] was printed); the estimate is not, and the table says so."""
+    from pipeline.studies.sensitivity import sobol_indices
+    design = designs(clearance_inputs(paper), False)[0]
+    u = sample_design(design, 64, 0)
+    y = np.random.default_rng(0).normal(size=(len(u), 1)) + u[:, :1]   # mostly noise: wide intervals
+    values = sobol_indices(design, y, 0.95, 0).values
+    assert np.nanmin(values[:, 1:]) >= 0 and np.nanmax(values[:, 1:]) <= 1
+    assert (values[:, 1:] == 0).any() or (values[:, 1:] == 1).any()   # some bound was clipped
+
+
+def test_the_table_says_when_bounds_are_clipped(sobol_file):
+    from pipeline.studies.sensitivity_table import format_sensitivity
+    ds = load_netcdf(sobol_file)
+    st = ds["max_abs_error_sobol"].clip(0.01, 0.99)
+    assert "clipped to [0, 1]" not in format_sensitivity(ds.assign(max_abs_error_sobol=st))
+    st.loc[dict(index="ST", bound="upper", group="spherical_B", quantity="velocity", direction="rz")] = 1.0
+    assert "note: interval bounds are clipped to [0, 1]" in format_sensitivity(ds.assign(max_abs_error_sobol=st))
+
+
+def test_a_label_other_than_95_says_its_coverage_was_not_measured(configs, tmp_path, capsys):
+    """The coverage was measured at 95 % only (benchmarks/sobol_coverage.py): at 90 % the table head, a note and the
+    file say so, and the file's interval_coverage names the run's label and widened level (review 63b #2)."""
+    from pipeline.studies.sensitivity import COVERAGE_NOTE, SHORT_COVERAGE, interval_coverage
+    path = tmp_path / "s90.nc"
+    assert main(["sensitivity", str(configs / "smoke.toml"), "-n", "64", "--workers", "1", "--no-plots",
+                 "--confidence", "0.9", "-o", str(path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    head = [s for s in lines if s.startswith("total Sobol'")][0]
+    assert SHORT_COVERAGE not in head and head.endswith("[90 % bootstrap interval, z widened, coverage measured "
+                                                        "at 95 % only (docs/ensembles.md)]"), head
+    assert any(s.startswith("note: 90 % intervals: coverage measured at 95 % only") for s in lines)
+    ds = load_netcdf(path)
+    assert ds.attrs["interval_coverage"].startswith("90 % intervals, z at the level 1 - SOBOL_WIDENING "
+                                                    "(1 - confidence) (99 %): coverage measured at 95 % only")
+    assert "for a 90 % label" in ds.attrs["interval_method"]
+    assert interval_coverage(0.95) == COVERAGE_NOTE
+
+
+def test_a_drawn_start_and_unresolved_outputs_are_said(sobol_file):
+    """Contact level (review 63b #5): on the whole or startup window with a drawn start, the drawn-start note
+    rss6 stats prints (analysis.stats.level_notes); where the outputs' spread is within the level's resolution
+    (analysis.resolution, the plots' test), the indices are noise: a note, and no largest family for those rows."""
+    from pipeline.analysis.resolution import resolutions
+    from pipeline.analysis.stats import level_notes
+    from pipeline.studies.sensitivity_table import NOISE, format_joints, format_sensitivity
+    ds = load_netcdf(sobol_file)
+    table = format_sensitivity(ds)
+    assert NOISE not in table and "numerical noise" not in table and "drawn start" not in table
+    assert (ds["max_abs_error_spread"] > ds["max_abs_error_resolution"]).all()   # quasi-static: all resolved
+    contact = ds.assign_attrs(model="contact", contact_start="drawn")
+    drawn = level_notes(contact.attrs, {"displacement"}, {"whole"})
+    assert drawn and f"note: {drawn[0]}" in format_sensitivity(contact).splitlines()
+    assert "drawn start" not in format_sensitivity(contact.assign_attrs(window="steady"))
+    spread = contact["max_abs_error_spread"].copy()
+    spread.loc[dict(quantity="acceleration")] = 0.01 * contact["max_abs_error_resolution"].sel(quantity="acceleration")
+    lines = format_sensitivity(contact.assign(max_abs_error_spread=spread)).splitlines()
+    rows = [s for s in lines if s.startswith("acceleration ")]
+    assert len(rows) == 6 and all(s.endswith(NOISE) for s in rows)
+    assert not any(s.endswith(NOISE) for s in lines if s.startswith("displacement "))
+    note = [s for s in lines if "numerical noise" in s]
+    assert len(note) == 1 and note[0].startswith("note: 6 rows (acceleration x, acceleration y")
+    assert f"than the contact level resolves ({resolutions(contact, 'acceleration')['x'].source};" in note[0]
+    joints = format_joints(contact.assign(max_abs_error_spread=spread)).splitlines()
+    assert all("noise" in s for s in joints if s.startswith("acceleration "))
+
+
+def test_the_spread_test_is_the_plots(smoke):
+    """The file's spread and resolution per output: round-off at the quasi-static level (pipeline.analysis.resolution
+    via the sensitivity file's attributes), so an output that varies by 1e-12 relative is unresolved."""
+    from pipeline.studies.sensitivity import _spread_variables
+    from pipeline.studies.sensitivity_table import unresolved_outputs
+    import xarray as xr
+    stats = np.random.default_rng(1).uniform(1e-4, 2e-4, size=(64, 2, 3, 6))
+    stats[:, 0, 0, 2] = 1e-4 * (1 + 1e-12 * np.arange(64))
+    attrs = {"model": "quasi-static", "scene_toml": smoke.source_text}
+    data = _spread_variables(attrs, stats)
+    ds = xr.Dataset(data, coords={"quantity": ["displacement", "velocity", "acceleration"],
+                                  "direction": ["x", "y", "z", "rx", "ry", "rz"]})
+    noise = unresolved_outputs(ds)
+    assert bool(noise.sel(quantity="displacement", direction="z")) and int(noise.sum()) == 1

@@ -21,8 +21,8 @@ def _sobol_panel(ax, da, groups: list[str], direction: str) -> None:
     for k, (index, shift) in enumerate((("S1", -0.2), ("ST", 0.2))):
         cell = da.sel(index=index, direction=direction)
         est = cell.sel(bound="estimate").values
-        err = np.abs(np.stack([est - cell.sel(bound="lower").values,
-                               cell.sel(bound="upper").values - est]))
+        err = np.maximum(np.stack([est - cell.sel(bound="lower").values,   # bounds clipped to [0, 1], estimates
+                                   cell.sel(bound="upper").values - est]), 0)   # not: one may lie outside its interval
         ax.bar(x + shift, est, width=0.4, yerr=err, capsize=2, color=f"C{k}", label=index,
                error_kw={"lw": 0.8})
     ax.set_xticks(x, [_GROUP_LABELS.get(g, g) for g in groups], fontsize=8,

@@ -183,14 +183,15 @@ def _report(args, est, event, level, output, figure, note, wrote: bool = True) -
     """Print the estimate and what fails (text or JSON); write the figure if asked. ``wrote``: whether this run
     wrote ``output`` (else it answers from the file of an earlier run)."""
     from ..analysis.failure_domain import failure_domain_json, format_failure_domain
-    from ..studies.reliability import what_fails
+    from ..studies.reliability import coverage_note, what_fails
     fd, physical = what_fails(est, event, level.scene, level.model)
     if figure is not None:
         from ..analysis.reliability_plots import plot_reliability
         plot_reliability(est, event, fd, figure, f"rss6 reliability: P({event.text}) = {est.pf:.3g}, scene "
                                                  f"{level.scene.name}, {level.model} level, {output.name}")
     if args.json:
-        out = _strict(est.summary()) | {"failure_domain": failure_domain_json(fd, physical) if fd else None}
+        out = _strict(est.summary()) | {"coverage_note": coverage_note(est),
+                                        "failure_domain": failure_domain_json(fd, physical) if fd else None}
         out |= note.json()
         print(json.dumps(out, indent=2))
         return
@@ -209,11 +210,13 @@ def _strict(summary: dict) -> dict:
 def _text(est, event, output, wrote: bool = True) -> str:
     """The estimate in a few lines (the first: the file written, or read back)."""
     from ..analysis.exceedance import union_words
+    from ..studies.reliability import coverage_note
     levels = ", ".join(f"{e}" for e in est.evaluations_per_level)
     interval = (f"{100 * est.confidence:g} % interval [{est.lower:.4g}, {est.upper:.4g}] ({est.interval})"
                 if math.isfinite(est.lower) else f"no {100 * est.confidence:g} % interval: {est.interval}")
     event_line = f"P({event.text}){union_words(event.directions)} over the {window_words(event.window)}"
     cov = f"CoV {est.cov:.3g}" if math.isfinite(est.cov) else "no CoV (none at a probability of 0 or 1)"
+    note = coverage_note(est)
     return (f"{'wrote' if wrote else 'read back'} {output}\n"
             f"{event_line} = {est.pf:.4g} by {est.method}, {cov}; {interval}\n"
-            f"{est.level.size} evaluations (per level: {levels}); {est.message}")
+            f"{est.level.size} evaluations (per level: {levels}); {est.message}" + (f"\nnote: {note}" if note else ""))

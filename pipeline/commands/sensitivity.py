@@ -48,7 +48,7 @@ def main(args) -> int:
     from ..analysis.sensitivity_plots import plot_sensitivity
     from ..files.outputs import OutputLock, answered_request, check_output_folder, claimed_output_folder
     from ..files.reading import load_netcdf
-    from ..studies.sensitivity import format_joints, format_sensitivity
+    from ..studies.sensitivity_table import format_joints, format_sensitivity
     cluster = resolve_cluster(args.workers)
     level = resolve_level(find_scene(args.config), args.config, model=args.model)
     output = Path(args.output or f"{output_stem(args.config)}_{level.model}_sobol.nc")

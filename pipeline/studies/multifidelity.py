@@ -58,13 +58,14 @@ from scipy import stats as sps
 
 from rss6core import FINISHED, models_with
 
-from ..analysis.estimators import BOUNDS, mean_interval, moment_floor
+from ..analysis.estimators import BOUNDS, LOWEST_MEASURED, mean_interval, moment_floor, short_of_label
 from ..analysis.stats import below_floor, in_window, json_number, table_cell
 from ..files.outputs import REQUEST_ATTR  # noqa: F401  (re-exported: the attribute of the request a file answers)
 from ..files.records import file_window_label
 from ..vocabulary import CONFIDENCE, SUMMARIES
 
-__all__ = ["MIN_N_MF", "MF_WIDENING", "width_cost", "ESTIMATORS", "ControlVariateMean", "control_variate_mean",
+__all__ = ["MIN_N_MF", "MF_WIDENING", "mf_floor", "interval_notes", "result_notes", "width_cost", "ESTIMATORS",
+           "ControlVariateMean", "control_variate_mean",
            "variance_reduction", "estimated_variance_reduction", "adjusted_correlation",
            "optimal_low_ratio", "cost_ratio", "paired_values", "multifidelity_dataset",
            "format_multifidelity", "to_json", "level_paths"]
@@ -76,13 +77,44 @@ SKEWED_COVERAGE = ("the union of Student t and the residuals' skewness-corrected
                    "confidence): a 95 % interval covered 95.5-98.3 % on margins of skewness 2-2.9 at "
                    "N = 32-64 (python benchmarks/multifidelity_coverage.py)")
 ESTIMATORS = ("multifidelity", "high_only")
+MEASURED_LEVEL = CONFIDENCE   # the one label benchmarks/multifidelity_coverage.py measured (it has no level option)
+
+
+def mf_floor(confidence: float) -> int | None:
+    """Smallest N with a multi-fidelity interval at ``confidence``: MIN_N_MF (measured at 95 %), and at least the
+    plain mean's floor at that level (pipeline.analysis.estimators.moment_floor: 64 at 99 %), as the high-only
+    column's; None where the plain mean has none at any n."""
+    floor = moment_floor("mean", confidence)
+    return None if floor is None else max(MIN_N_MF, floor)
+
+
+def interval_notes(confidence: float, n_high: int) -> list[str]:
+    """What the intervals at ``confidence`` rest on, for the table's notes, the JSON and the file: the MF
+    bounds' coverage measured at 95 % only, the high-only mean's measured from LOWEST_MEASURED up (rss6 stats'
+    note), and why the high-only column (the plain mean, as rss6 stats gives it) is a dash."""
+    conf, notes = f"{100 * confidence:g} %", []
+    if abs(confidence - MEASURED_LEVEL) > 1e-12:
+        floor = mf_floor(confidence)
+        given = (f"at this label they are given from N = {floor} (the larger of {MIN_N_MF} and the plain mean's "
+                 "floor)" if floor is not None else "none at any N, as the plain mean's")
+        notes.append(f"MF bounds at {conf}: coverage measured at 95 % only (python benchmarks/multifidelity_coverage"
+                     f".py); {given}")
+    if confidence < LOWEST_MEASURED - 1e-12:
+        notes.append(f"confidence {conf}: the high-only mean's coverage was measured from "
+                     f"{100 * LOWEST_MEASURED:g} % up (docs/ensembles.md), as rss6 stats says")
+    plain = moment_floor("mean", confidence)
+    if plain is None:
+        notes.append(f"high only: no {conf} interval at any n: {short_of_label('mean')} (rss6 stats' mean)")
+    elif n_high < plain:
+        notes.append(f"high only: no {conf} interval below n = {plain} (n = {n_high} here), as rss6 stats' mean")
+    return notes
 
 
 @dataclass(frozen=True)
 class ControlVariateMean:
     """The multi-fidelity mean per cell (arrays over the trailing axes of the data)."""
     estimate: np.ndarray
-    lower: np.ndarray            # NaN below MIN_N_MF
+    lower: np.ndarray            # NaN below mf_floor(confidence)
     upper: np.ndarray
     correlation: np.ndarray      # sample correlation of Y and X on the N pairs
     coefficient: np.ndarray      # alpha, the fitted control-variate coefficient
@@ -164,7 +196,8 @@ def control_variate_mean(y: np.ndarray, x: np.ndarray, confidence: float = CONFI
     resid = dy - alpha * dx
     se = np.sqrt((resid ** 2).sum(axis=0) / (n - 2) / n + alpha ** 2 * x.var(axis=0, ddof=1) / m)
     lower, upper = _interval(estimate, resid, se, 1.0 - MF_WIDENING * (1.0 - confidence))
-    given = n >= MIN_N_MF
+    floor = mf_floor(confidence)
+    given = floor is not None and n >= floor
     lower, upper = np.where(given, lower, np.nan), np.where(given, upper, np.nan)
     vr = estimated_variance_reduction(rho, n, m)
     return ControlVariateMean(estimate, lower, upper, rho, alpha, vr, n * vr, n, m)
@@ -287,7 +320,8 @@ def _costs(ds: xr.Dataset, y: np.ndarray, name: str, cost: float, width, confide
     z = sps.norm.ppf(0.5 + confidence / 2)
     plain = np.maximum(np.ceil((z * y.std(axis=0, ddof=1) / (width * mean)) ** 2),
                        moment_floor("mean", confidence) or np.nan)
-    high = np.maximum(np.ceil(plain * widened * (1 - (1 - 1 / ratio) * rho ** 2)), MIN_N_MF)   # none below
+    high = np.maximum(np.ceil(plain * widened * (1 - (1 - 1 / ratio) * rho ** 2)),   # none below its floor
+                      mf_floor(confidence) or np.nan)
     return out | {
         f"{name}_plain_n_for_width": (cells, plain, {**one, "long_name": "plain MC high "
                                       "realisations for the relative half-width"}),
@@ -325,10 +359,13 @@ def _attrs(high, low, confidence, sources, n_pairs: int, cost, width) -> dict:
             "confidence": confidence,
             "estimator": "two-model multi-fidelity Monte Carlo (control variate, optimal fitted "
                          "coefficient, low mean from all low realisations)",
-            "interval_multifidelity": f"{SKEWED_COVERAGE}; NaN for N < {MIN_N_MF}",
+            "interval_multifidelity": f"{SKEWED_COVERAGE}; NaN for "
+                                      + (f"N < {mf_floor(confidence)}" if mf_floor(confidence) else "every N"),
             "interval_high_only": "pipeline.analysis.estimators mean interval; NaN for "
                                   f"{below_floor('mean', confidence)}",
-            "min_n_multifidelity": MIN_N_MF,
+            "min_n_multifidelity": mf_floor(confidence) or 0,   # 0: none at any N
+            "interval_coverage": "; ".join(interval_notes(confidence, n_pairs))
+            or "measured at 95 % (interval_multifidelity, interval_high_only)",
             "statistics_offered": "mean only (quantiles and exceedance probabilities: see "
                                   "pipeline/multifidelity.py)",
             **({"cost_high_over_low": cost} if cost is not None else {}),
@@ -399,12 +436,34 @@ def format_multifidelity(mds: xr.Dataset, name: str = "max_abs_error") -> str:
     if "plain_n_for_width" in extra:
         notes.append(f"n MC, N MF, M MF: realisations for a half-width of "
                      f"{100 * a['relative_half_width']:g} % of the mean (normal approximation)")
-    if a["n_high"] < MIN_N_MF:
-        notes.append(f"MF: no {100 * a['confidence']:g} % interval below N = {MIN_N_MF} "
-                     f"(N = {a['n_high']} here); rho, VR, n_eq and every size and cost column are point "
-                     f"estimates from these {a['n_high']} pairs, without an interval")
+    floor = mf_floor(a["confidence"])
+    if floor is None or a["n_high"] < floor:
+        notes.append(f"MF: no {100 * a['confidence']:g} % interval "
+                     + (f"below N = {floor}" if floor else "at any N") + f" (N = {a['n_high']} here); rho, VR, n_eq "
+                     f"and every size and cost column are point estimates from these {a['n_high']} pairs, "
+                     "without an interval")
     notes.append(f"MF bounds: {SKEWED_COVERAGE}")
+    notes += result_notes(mds, name)
     return "\n".join(lines + ["notes:"] + [f"  {t}" for t in notes])
+
+
+def result_notes(mds: xr.Dataset, name: str = "max_abs_error") -> list[str]:
+    """The notes on a file's intervals (:func:`interval_notes`) and where its control variate costs precision
+    (:func:`_costly_note`): the table's, and its JSON's and file's table_notes."""
+    return interval_notes(float(mds.attrs["confidence"]), int(mds.attrs["n_high"])) + _costly_note(mds, name)
+
+
+def _costly_note(mds: xr.Dataset, name: str) -> list[str]:
+    """Rows whose VR is below 1: the control variate adds variance there (|rho| too small to pay for the
+    fitted coefficient), so the high-only mean is the better estimate (docs/ensembles.md: it gains nothing)."""
+    vr = mds[f"{name}_variance_reduction"]
+    rows = [f"{q} {d}" for q in vr["quantity"].values for d in vr["direction"].values
+            if float(vr.sel(quantity=q, direction=d)) < 1]
+    if not rows:
+        return []
+    named = "all" if len(rows) == vr.size else ", ".join(rows[:6]) + (", ..." if len(rows) > 6 else "")
+    return [f"VR < 1 in {len(rows)} rows ({named}): the control variate costs precision there (|rho| small), "
+            "the high-only mean is the better estimate there; where it gains nothing, use plain rss6 run"]
 
 
 def check_multifidelity_output(path, request: dict, create_dirs: bool = False):

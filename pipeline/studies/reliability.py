@@ -33,7 +33,7 @@ from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
 __all__ = ["ReliabilityError", "Estimate", "input_dimension", "input_labels", "physical_inputs", "what_fails",
            "evaluate", "reliability", "check_subset_budget", "subset_levels_within", "estimate_from_dataset",
            "largest_response",
-           "reliability_dataset", "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
+           "reliability_dataset", "coverage_note", "METHODS", "MC_BLOCK", "IN_PROCESS_ROWS"]
 
 METHODS = ("subset", "mc")
 MC_BLOCK = 1000          # plain Monte Carlo draws block b of z from SeedSequence([seed, MC_TAG, b])
@@ -76,6 +76,19 @@ class Estimate:
                 "confidence": self.confidence, "cov": self.cov, "evaluations": int(self.level.size),
                 "evaluations_per_level": list(self.evaluations_per_level), "thresholds": list(self.thresholds),
                 "interval": self.interval, "status": self.status, "message": self.message}
+
+
+def coverage_note(est: Estimate) -> str | None:
+    """Why a subset interval at a label other than 95 % has no measured coverage: its log-normal interval and the
+    floor of MIN_N_INTERVAL draws per level were measured with 95 % intervals only (docs/reliability.md,
+    benchmarks/subset_verification.py); None at 95 % and for the exact binomial (Clopper-Pearson) intervals of
+    plain Monte Carlo and of a level 0 that decides, which hold at any level."""
+    from ..analysis.subset import MIN_N_INTERVAL
+    if est.method != "subset" or est.interval.startswith("exact binomial") or abs(est.confidence - CONFIDENCE) < 1e-12:
+        return None
+    return (f"{100 * est.confidence:g} % interval: coverage measured at 95 % only (docs/reliability.md, python "
+            f"benchmarks/subset_verification.py; so is its floor of {MIN_N_INTERVAL} draws per level); --method mc's "
+            "exact interval holds at any level")
 
 
 def input_dimension(scene, model: str, source: str = "") -> int:
@@ -368,6 +381,7 @@ def reliability_dataset(est: Estimate, event: Event, spec, options: str = "") ->
     attrs = {"Conventions": "CF-1.10", "title": f"rss6 reliability of {event.text} at the {spec.model} level, "
              f"scene {scene.name!r}", "history": history, "event": event.text, "event_limit": event.limit,
              "event_window": event.window, "seed": spec.seed,
+             "interval_coverage": coverage_note(est) or "measured at this level (docs/reliability.md)",
              "estimate": json.dumps({k: json_number(v) if isinstance(v, float) else v
                                      for k, v in est.summary().items()}, allow_nan=False)}
     data = {"z": (("evaluation", "input"), est.z, {"long_name": "standard normal input, Phi^-1 of the "

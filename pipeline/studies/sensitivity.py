@@ -31,15 +31,16 @@ from rss6core import (FINISHED, UNIFORM_BLOCKS, ClearanceDraw, clearances_from_n
 
 from ..ensemble.cluster import WORKER_TIMEOUT_S, optional_client, results_as_finished
 from ..files.records import check_window, window_label, window_summaries
-from ..files.schema import JOINTS, _provenance, _unit_table, command_line
+from ..files.schema import JOINTS, MIXED_UNITS, _provenance, _unit_table, command_line
 from ..files.writing import sigint_deferred
 from .sensitivity_parts import RowParts, parts_manifest
 from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, UserError, WINDOWS
+from ..analysis.resolution import resolutions
 
 __all__ = ["JOINT_FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
            "clearance_draws_from_uniforms", "Design", "designs", "sample_design",
            "evaluate_statistics", "SobolIndices", "sobol_indices", "sensitivity", "sensitivity_dataset",
-           "format_sensitivity", "format_joints", "SensitivityError", "RowParts", "parts_manifest"]
+           "SensitivityError", "RowParts", "parts_manifest", "coverage_caveat", "interval_coverage", "UNMEASURED"]
 
 JOINT_FAMILIES = ("revolute_radial", "revolute_axial", "spherical_C", "spherical_B")
 LEVELS = models_with("function_of_one_draw")   # the levels whose error is a function of one draw
@@ -55,6 +56,28 @@ COVERAGE_NOTE = ("95 % intervals, z at the level 1 - SOBOL_WIDENING (1 - confide
                  "S1 97.4-99.2 %, ST 99.2-100 % at N = 256 there, and 99.1-99.3 % on the closed-form case "
                  "(quasi-static displacement at one instant, tests/test_sensitivity.py)")
 SHORT_COVERAGE = "z widened: >= 96 % measured on a maximum over time, docs/ensembles.md"   # the table's caveat
+MEASURED_LEVEL = CONFIDENCE              # the one label whose coverage benchmarks/sobol_coverage.py measured
+UNMEASURED = "coverage measured at 95 % only"   # the caveat at any other label
+
+
+def measured(confidence: float) -> bool:
+    """Whether the intervals' coverage was measured at the label ``confidence`` (95 % only)."""
+    return abs(confidence - MEASURED_LEVEL) < 1e-12
+
+
+def coverage_caveat(confidence: float) -> str:
+    """The table head's caveat of a ``confidence`` label: the coverage measured at 95 %, else that none was."""
+    return SHORT_COVERAGE if measured(confidence) else f"z widened, {UNMEASURED} (docs/ensembles.md)"
+
+
+def interval_coverage(confidence: float) -> str:
+    """The file's ``interval_coverage``: COVERAGE_NOTE at 95 %; at another label, its widened level and that its
+    coverage was not measured, then what was measured at 95 %."""
+    if measured(confidence):
+        return COVERAGE_NOTE
+    return (f"{100 * confidence:g} % intervals, z at the level 1 - SOBOL_WIDENING (1 - confidence) "
+            f"({100 * (1 - SOBOL_WIDENING * (1 - confidence)):g} %): {UNMEASURED}, not at this label. At 95 %: "
+            + COVERAGE_NOTE)
 
 
 class SensitivityError(UserError):
@@ -232,7 +255,10 @@ def sobol_indices(design: Design, y: np.ndarray, confidence: float, seed: int,
     """SALib's first-order and total indices of every output column of y (rows, outputs), with
     estimate -+ z sd(bootstrap) bounds, z at the level 1 - ``widening`` (1 - confidence): at the
     label's own z (``widening`` 1) they covered 88.6-93.4 % on a maximum over time at N = 64
-    (COVERAGE_NOTE); NaN for an output that does not vary."""
+    (COVERAGE_NOTE); the bounds clipped to [0, 1], where every index lies (which keeps their coverage:
+    an index is in the interval exactly when it is in the clipped one), the estimates not (their
+    noise shows there, :func:`pipeline.studies.sensitivity_table._outside_note`); NaN for an output that
+    does not vary."""
     from SALib.analyze import sobol
     groups = len(design.groups)
     out = np.full((len(INDICES), len(BOUNDS), groups, y.shape[1]), np.nan)
@@ -246,7 +272,7 @@ def sobol_indices(design: Design, y: np.ndarray, confidence: float, seed: int,
                                 seed=_salib_seed(seed, design.name, "bootstrap"))
         for i, name in enumerate(INDICES):
             est, half = np.asarray(res[name]), np.asarray(res[f"{name}_conf"])
-            out[i, :, :, k] = np.stack([est, est - half, est + half])
+            out[i, :, :, k] = np.stack([est, np.clip(est - half, 0, 1), np.clip(est + half, 0, 1)])
     return SobolIndices(design, out)
 
 
@@ -258,9 +284,10 @@ def _group_inputs(inputs: ClearanceInputs, design: Design) -> list[str]:
 
 
 def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int, confidence: float,
-                        window: str = "whole") -> xr.Dataset:
+                        window: str = "whole", stats: np.ndarray | None = None) -> xr.Dataset:
     """The indices of every design as one CF Dataset (index, bound, group, quantity, direction), of
-    the statistics over the analysis ``window``."""
+    the statistics over the analysis ``window``; with every evaluated row's statistics ``stats`` (rows, 2,
+    3, 6), also the outputs' spread over the rows and the level's resolution (:func:`_spread_variables`)."""
     groups = [g for r in results for g in r.design.groups]
     data = {}
     for s, name in enumerate(SUMMARIES):
@@ -303,9 +330,32 @@ def sensitivity_dataset(scene, spec, inputs, results: list[SobolIndices], n: int
                                  f"{100 * (1 - SOBOL_WIDENING * (1 - confidence)):g} % two-sided quantile "
                                  f"for a {100 * confidence:g} % label (interval_coverage) and sd the standard "
                                  f"deviation of the index over {RESAMPLES} bootstrap resamples of the N base rows "
-                                 "(SALib)",
-              "interval_coverage": COVERAGE_NOTE}
+                                 "(SALib), clipped to [0, 1] where every index lies (which keeps the coverage); "
+                                 "the estimates are not clipped",
+              "interval_coverage": interval_coverage(confidence)}
+    if stats is not None:
+        data |= _spread_variables(attrs, stats)
     return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _spread_variables(attrs: dict, stats: np.ndarray) -> dict:
+    """Per statistic, the spread (max - min, SI) of each output over the evaluated rows ``stats`` (rows, 2, 3, 6)
+    and the spread the level resolves there (pipeline.analysis.resolution, the test the ensemble plots make):
+    where the spread is within it, the outputs differ by numerical noise and their indices rank that noise."""
+    from types import SimpleNamespace
+    file = SimpleNamespace(attrs=attrs)   # resolutions() reads a file's model and scene
+    out = {}
+    for s, name in enumerate(SUMMARIES):
+        spread, top = np.ptp(stats[:, s], axis=0), np.max(stats[:, s], axis=0)
+        limit = np.array([[resolutions(file, q)[d].limit(top[i, j]) for j, d in enumerate(DIRECTIONS)]
+                          for i, q in enumerate(QUANTITIES)])
+        cells = ("quantity", "direction")
+        out[f"{name}_spread"] = (cells, spread, {"long_name": f"spread (max - min) of {name} over the evaluated "
+                                                 "rows", "units": MIXED_UNITS})
+        out[f"{name}_resolution"] = (cells, limit, {
+            "long_name": f"spread of {name} below which the level does not resolve it (its indices then rank "
+                         "numerical noise; pipeline/analysis/resolution.py)", "units": MIXED_UNITS})
+    return out
 
 
 def _outputs(stats: np.ndarray) -> np.ndarray:
@@ -354,7 +404,7 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFI
                                "Sobol' index is defined")
     inputs = clearance_inputs(scene)
     manifest = parts_manifest(spec, n, per_joint, window, parts) if parts else None
-    results = []
+    results, evaluated = [], []
     with optional_client(workers) as client:
         for design in designs(inputs, per_joint):
             u = sample_design(design, n, spec.seed)
@@ -365,94 +415,5 @@ def sensitivity(spec, n: int, per_joint: bool = False, confidence: float = CONFI
                          f"({len(design.groups)} groups, N = {n}) on {workers} worker(s){kept}")
             stats = evaluate_statistics(spec, inputs, u, client, window=window, parts=rows)
             results.append(sobol_indices(design, _outputs(stats), confidence, spec.seed))
-    return sensitivity_dataset(scene, spec, inputs, results, n, confidence, window)
-
-
-def _dominant(cell) -> str:
-    """The group of largest total index; with the runner-up named when their intervals overlap."""
-    est, lo, hi = (cell.sel(bound=b).values for b in BOUNDS)
-    if not np.isfinite(est).any():
-        return "-"
-    order = np.argsort(-np.nan_to_num(est, nan=-np.inf))
-    names = [str(g) for g in cell["group"].values]
-    top, second = order[0], order[1]
-    return names[top] + ("" if lo[top] > hi[second] else f" (overlaps {names[second]})")
-
-
-def format_sensitivity(ds: xr.Dataset, statistic: str = "max_abs_error") -> str:
-    """A table of the family indices of ``statistic``: per quantity and direction, each family's
-    total index with its interval, and the family of largest total index (with the runner-up when
-    their intervals overlap); below it, what a family of fixed sizes draws (:func:`_fixed_size_note`)."""
-    da = ds[f"{statistic}_sobol"].sel(group=[g for g, d in zip(ds["group"].values, ds["group_design"].values)
-                                             if d == "families"])
-    conf = f"{100 * float(ds.attrs['confidence']):g} %"
-    head = "".join(f"{g:>24s}" for g in da["group"].values)
-    window = ds[f"{statistic}_sobol"].attrs.get("analysis_window", "whole run")
-    fixed = " (eccentricity inside a fixed size: see 'inputs' below)" if _fixed_size_families(ds) else ""
-    by = "joint family" + fixed + (" and uncertain input" if set(da["group"].values) - set(JOINT_FAMILIES) else "")
-    lines = [f"total Sobol' indices ST of the per-realisation {statistic} by {by}, "
-             f"{ds.attrs['model']} level, {window}, N = {ds.attrs['n_base_samples']}, "
-             f"[{conf} bootstrap interval, {SHORT_COVERAGE}]",
-             f"{'quantity':<13s}{'dir':<4s}{head}  largest"]
-    for q in ds["quantity"].values:
-        for d in ds["direction"].values:
-            cell = da.sel(index="ST", quantity=q, direction=d)
-            text = "".join(f"{e:8.3f} [{lo:6.3f},{hi:6.3f}]" for e, lo, hi in
-                           zip(*(cell.sel(bound=b).values for b in BOUNDS)))
-            lines.append(f"{q:<13s}{d:<4s}{text}  {_dominant(cell)}")
-    return "\n".join(lines + _fixed_size_note(ds)
-                     + _outside_note(da.sel(index="ST", bound="estimate"), ds.attrs["n_base_samples"]))
-
-
-def _fixed_size_families(ds: xr.Dataset) -> list[str]:
-    """The joint families whose group holds no size input: the scene fixes their clearance sizes."""
-    return [str(g) for g, d, inputs in zip(ds["group"].values, ds["group_design"].values, ds["group_inputs"].values)
-            if d == "families" and g in JOINT_FAMILIES and "_size" not in str(inputs)]
-
-
-def _fixed_size_note(ds: xr.Dataset) -> list[str]:
-    """What the groups of fixed-size families draw: the eccentricities inside each clearance, not its size, so their
-    indices say nothing of what tightening gains, and where that question is answered."""
-    fixed = _fixed_size_families(ds)
-    if not fixed:
-        return []
-    return [f"inputs: {', '.join(fixed)} (and their joints with --per-joint): this scene fixes their clearance "
-            "sizes, so the inputs are the drawn eccentricities inside each clearance (the joint's state within its "
-            "play), not the sizes; a small index does not mean that tightening that play gains nothing. Which size "
-            "to tighten: a scene that draws the sizes ([tolerance.*] bands as paper_tolerance, size_tolerance, "
-            "[uncertain.*] inputs) or rss6 allocate"]
-
-
-def format_joints(ds: xr.Dataset, statistic: str = "max_abs_error", top: int = 3) -> str:
-    """With the joint design (--per-joint): per quantity and direction the ``top`` joints of largest
-    total index with their intervals, largest first, and whether the first two intervals overlap
-    (:func:`_dominant`); empty without it."""
-    joints = [g for g in JOINTS if g in ds["group"].values]
-    if not joints:
-        return ""
-    da = ds[f"{statistic}_sobol"].sel(group=joints, index="ST")
-    lines = [f"the {top} joints of largest total index ST of the per-realisation {statistic}, largest "
-             f"first (of {len(joints)}; all in the file)", f"{'quantity':<13s}{'dir':<4s}ST [interval]"]
-    for q in ds["quantity"].values:
-        for d in ds["direction"].values:
-            cell = da.sel(quantity=q, direction=d)
-            est = cell.sel(bound="estimate").values
-            order = np.argsort(-np.nan_to_num(est, nan=-np.inf))[:top]
-            text = ", ".join(f"{joints[i]} {est[i]:.3f} [{float(cell.sel(bound='lower')[i]):.3f},"
-                             f"{float(cell.sel(bound='upper')[i]):.3f}]" for i in order)
-            overlap = "  (the first two overlap)" if "overlaps" in _dominant(cell) else ""
-            lines.append(f"{q:<13s}{d:<4s}{text}{overlap}")
-    return "\n".join(lines)
-
-
-def _outside_note(st: xr.DataArray, n: int) -> list[str]:
-    """A note line when total-index estimates fall outside [0, 1], where no index lies: the
-    estimator's sampling noise at this N, which the intervals show."""
-    outside = (st < 0) | (st > 1)
-    if not outside.any():
-        return []
-    worst = abs(st - st.clip(0, 1)).where(outside).argmax(...)
-    cell = st.isel(worst)
-    return [f"note: {int(outside.sum())} ST estimates lie outside [0, 1] (e.g. {float(cell):.3f}, "
-            f"{cell['group'].item()} on {cell['quantity'].item()} {cell['direction'].item()}): sampling "
-            f"noise of the estimator at N = {n}, not an index outside [0, 1]; a larger -n narrows it"]
+            evaluated.append(stats)
+    return sensitivity_dataset(scene, spec, inputs, results, n, confidence, window, np.concatenate(evaluated))
