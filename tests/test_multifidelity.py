@@ -239,6 +239,7 @@ def test_cli_runs_resumes_and_writes_json(tmp_path, capsys):
     js = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(c))
     assert js["n_high"] == 32 and js["max_abs_error"]["displacement"]["x"]["multifidelity_lower"]
     assert js["window"] == "whole" and js["analysis_window"] == "whole run"
+    assert js["unit"]["velocity"]["z"] == "m s-1" and js["unit"]["acceleration"]["ry"] == "rad s-2"   # SI, named
     assert js["mean_abs_error"]["velocity"]["z"]["correlation"] is not None
     assert js["table_notes"][0].startswith(step_note.removeprefix("note: "))
     assert first.attrs["table_notes"] == "\n".join(js["table_notes"])

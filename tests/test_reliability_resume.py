@@ -63,7 +63,8 @@ def test_a_run_interrupted_between_batches_resumes_to_the_uninterrupted_result(t
     computed = _interrupt_at(monkeypatch, 10 ** 6)   # only counts what the resumed run computes
     assert main(_argv(out, "--resume")) == 0
     res = json.loads(capsys.readouterr().out)
-    assert res == whole[0]
+    assert res == whole[0] and res["si_unit"] == "m"   # RARE is a displacement: its thresholds are in m
+    assert whole[1].attrs["event_limit_unit"] == "m"
     assert sum(computed) == res["evaluations"] - sum(seen)   # the stored batches were not computed again
     _same_file(load_netcdf(out), whole[1])
     assert out.read_bytes() == whole[2].read_bytes()   # no wall time or other run-dependent attribute

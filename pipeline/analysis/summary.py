@@ -156,14 +156,13 @@ def error_summary(ds) -> dict:
     """JSON-ready max and mean |error| per quantity and direction of a run Dataset, SI: the whole run
     under ``max_abs_error``/``mean_abs_error``, the startup and steady windows under
     ``max_abs_error_by_window``/``mean_abs_error_by_window`` ({window: {quantity: {direction: value}}})."""
-    from ..files.schema import UNITS
-    from ..vocabulary import DIRECTIONS, FAMILIES, family_of
+    from ..files.schema import unit_json
     from .stats import in_window
     out = {"steady_after_s": float(ds.attrs["steady_after_s"]), "settle_time_s": float(ds.attrs["settle_time_s"])}
     for name in ("max_abs_error", "mean_abs_error"):
         out[name] = _table(in_window(ds, "whole")[name])
         out[f"{name}_by_window"] = {w: _table(in_window(ds, w)[name]) for w in ("startup", "steady")}
-    out["unit"] = {q: {d: UNITS[q][list(FAMILIES).index(family_of(d))] for d in DIRECTIONS} for q in UNITS}
+    out["unit"] = unit_json()
     return out
 
 

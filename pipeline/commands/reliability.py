@@ -190,7 +190,9 @@ def _report(args, est, event, level, output, figure, note, wrote: bool = True) -
         plot_reliability(est, event, fd, figure, f"rss6 reliability: P({event.text}) = {est.pf:.3g}, scene "
                                                  f"{level.scene.name}, {level.model} level, {output.name}")
     if args.json:
-        out = _strict(est.summary()) | {"coverage_note": coverage_note(est),
+        from ..analysis.spec import si_unit
+        out = _strict(est.summary()) | {"si_unit": si_unit(event.quantity, event.directions[0]),
+                                        "coverage_note": coverage_note(est),
                                         "failure_domain": failure_domain_json(fd, physical) if fd else None}
         out |= note.json()
         print(json.dumps(out, indent=2))

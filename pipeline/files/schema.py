@@ -19,7 +19,7 @@ from ..vocabulary import DIRECTIONS, FAMILIES, QUANTITIES, UserError
 
 __all__ = ["UNITS", "MIXED_UNITS", "display_unit", "SETTINGS", "settings_attrs", "PROVENANCE", "ENSEMBLE_ATTRS",
            "IDENTITY", "ensemble_identity", "identity", "command_line", "derived_history", "JOINTS",
-           "EnsembleFileError", "CHECKSUM", "ALTERED", "cf_encode", "cf_decode", "labelled"]
+           "EnsembleFileError", "CHECKSUM", "ALTERED", "cf_encode", "cf_decode", "labelled", "unit_json"]
 
 UNITS = {"displacement": ("m", "rad"), "velocity": ("m s-1", "rad s-1"),
          "acceleration": ("m s-2", "rad s-2")}
@@ -96,6 +96,11 @@ def derived_history(source: xr.Dataset, line: str) -> str:
     derives a file appends itself)."""
     previous = str(source.attrs.get("history", "")).strip()
     return f"{previous}\n{line}" if previous else line
+
+
+def unit_json() -> dict:
+    """{quantity: {direction: SI unit}}: what a JSON output says its bare SI numbers are in."""
+    return {q: {d: str(u) for d, u in zip(DIRECTIONS, row)} for q, row in zip(QUANTITIES, _unit_table())}
 
 
 def _unit_table() -> np.ndarray:

@@ -389,6 +389,8 @@ def to_json(mds: xr.Dataset) -> dict:
                for e in ESTIMATORS for b in BOUNDS},
             **{f: json_number(mds[f"{name}_{f}"].sel(quantity=q, direction=d)) for f in fields}}
             for d in mds.direction.values} for q in mds.quantity.values}
+    from ..files.schema import unit_json
+    out["unit"] = unit_json()
     return out
 
 

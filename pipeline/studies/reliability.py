@@ -24,6 +24,7 @@ from rss6core import (FINISHED, SIZE_UNIFORMS, UNIFORM_BLOCKS, clearances_from_n
 
 from ..analysis.estimators import clopper_pearson
 from ..analysis.exceedance import Event
+from ..analysis.spec import si_unit
 from ..analysis.subset import SubsetSettings, check_estimate_end, subset_simulation
 from ..ensemble.cluster import WORKER_TIMEOUT_S, optional_client, results_as_finished
 from ..files.records import window_summaries
@@ -380,6 +381,7 @@ def reliability_dataset(est: Estimate, event: Event, spec, options: str = "") ->
                            elements=spec.elements, options=options)
     attrs = {"Conventions": "CF-1.10", "title": f"rss6 reliability of {event.text} at the {spec.model} level, "
              f"scene {scene.name!r}", "history": history, "event": event.text, "event_limit": event.limit,
+             "event_limit_unit": si_unit(event.quantity, event.directions[0]),
              "event_window": event.window, "seed": spec.seed,
              "interval_coverage": coverage_note(est) or "measured at this level (docs/reliability.md)",
              "estimate": json.dumps({k: json_number(v) if isinstance(v, float) else v
