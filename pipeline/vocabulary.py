@@ -8,8 +8,8 @@ from __future__ import annotations
 from rss6core import FINISHED, MODELS, model_level
 
 __all__ = ["QUANTITIES", "DIRECTIONS", "FAMILIES", "family_of", "WINDOWS", "window_words", "QUANTILES", "STATISTICS",
-           "REQUIRABLE", "SUMMARIES", "STORES", "CONFIDENCE", "FINISHED", "ESTIMATE_ENDS", "step_measured",
-           "STEP_WORDS", "counted", "UserError", "OptionError"]
+           "REQUIRABLE", "SUMMARIES", "STORES", "CONFIDENCE", "UNMEASURED_LEVEL", "at_measured_level", "FINISHED",
+           "ESTIMATE_ENDS", "step_measured", "STEP_WORDS", "counted", "UserError", "OptionError"]
 
 QUANTITIES = ("displacement", "velocity", "acceleration")   # of the platform's pose error
 DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")             # translations (m), rotations (rad)
@@ -36,6 +36,14 @@ REQUIRABLE = tuple(s for s in STATISTICS if s != "max")   # those with an interv
 SUMMARIES = ("max_abs_error", "mean_abs_error")   # per-realisation summaries over a window
 STORES = ("summary", "full")   # --store: summaries only, or also the error histories
 CONFIDENCE = 0.95   # the default confidence of every interval, bound and verdict
+# the Sobol', multi-fidelity and subset-simulation intervals' coverage was measured at CONFIDENCE only
+UNMEASURED_LEVEL = f"coverage measured at {100 * CONFIDENCE:g} % only"   # said at any other label
+
+
+def at_measured_level(confidence: float) -> bool:
+    """Whether ``confidence`` is the label (CONFIDENCE) at which the Sobol', multi-fidelity and subset intervals'
+    coverage was measured (their benchmarks have no level option)."""
+    return abs(confidence - CONFIDENCE) < 1e-12
 
 
 STEP_WORDS = ("come from eccentricities redrawn every step and grow as the step shrinks: they measure the step, "

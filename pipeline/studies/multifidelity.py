@@ -62,7 +62,7 @@ from ..analysis.estimators import BOUNDS, LOWEST_MEASURED, mean_interval, moment
 from ..analysis.stats import below_floor, in_window, json_number, table_cell
 from ..files.outputs import REQUEST_ATTR  # noqa: F401  (re-exported: the attribute of the request a file answers)
 from ..files.records import file_window_label
-from ..vocabulary import CONFIDENCE, SUMMARIES
+from ..vocabulary import CONFIDENCE, SUMMARIES, UNMEASURED_LEVEL, at_measured_level
 
 __all__ = ["MIN_N_MF", "MF_WIDENING", "mf_floor", "interval_notes", "result_notes", "width_cost", "ESTIMATORS",
            "ControlVariateMean", "control_variate_mean",
@@ -77,7 +77,6 @@ SKEWED_COVERAGE = ("the union of Student t and the residuals' skewness-corrected
                    "confidence): a 95 % interval covered 95.5-98.3 % on margins of skewness 2-2.9 at "
                    "N = 32-64 (python benchmarks/multifidelity_coverage.py)")
 ESTIMATORS = ("multifidelity", "high_only")
-MEASURED_LEVEL = CONFIDENCE   # the one label benchmarks/multifidelity_coverage.py measured (it has no level option)
 
 
 def mf_floor(confidence: float) -> int | None:
@@ -93,11 +92,11 @@ def interval_notes(confidence: float, n_high: int) -> list[str]:
     bounds' coverage measured at 95 % only, the high-only mean's measured from LOWEST_MEASURED up (rss6 stats'
     note), and why the high-only column (the plain mean, as rss6 stats gives it) is a dash."""
     conf, notes = f"{100 * confidence:g} %", []
-    if abs(confidence - MEASURED_LEVEL) > 1e-12:
+    if not at_measured_level(confidence):
         floor = mf_floor(confidence)
         given = (f"at this label they are given from N = {floor} (the larger of {MIN_N_MF} and the plain mean's "
                  "floor)" if floor is not None else "none at any N, as the plain mean's")
-        notes.append(f"MF bounds at {conf}: coverage measured at 95 % only (python benchmarks/multifidelity_coverage"
+        notes.append(f"MF bounds at {conf}: {UNMEASURED_LEVEL} (python benchmarks/multifidelity_coverage"
                      f".py); {given}")
     if confidence < LOWEST_MEASURED - 1e-12:
         notes.append(f"confidence {conf}: the high-only mean's coverage was measured from "

@@ -29,7 +29,7 @@ from ..analysis.subset import SubsetSettings, check_estimate_end, subset_simulat
 from ..ensemble.cluster import WORKER_TIMEOUT_S, optional_client, results_as_finished
 from ..files.records import window_summaries
 from ..files.writing import sigint_deferred
-from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, WINDOWS, UserError
+from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, UNMEASURED_LEVEL, WINDOWS, UserError, at_measured_level
 
 __all__ = ["ReliabilityError", "Estimate", "input_dimension", "input_labels", "physical_inputs", "what_fails",
            "evaluate", "reliability", "check_subset_budget", "subset_levels_within", "estimate_from_dataset",
@@ -85,9 +85,9 @@ def coverage_note(est: Estimate) -> str | None:
     benchmarks/subset_verification.py); None at 95 % and for the exact binomial (Clopper-Pearson) intervals of
     plain Monte Carlo and of a level 0 that decides, which hold at any level."""
     from ..analysis.subset import MIN_N_INTERVAL
-    if est.method != "subset" or est.interval.startswith("exact binomial") or abs(est.confidence - CONFIDENCE) < 1e-12:
+    if est.method != "subset" or est.interval.startswith("exact binomial") or at_measured_level(est.confidence):
         return None
-    return (f"{100 * est.confidence:g} % interval: coverage measured at 95 % only (docs/reliability.md, python "
+    return (f"{100 * est.confidence:g} % interval: {UNMEASURED_LEVEL} (docs/reliability.md, python "
             f"benchmarks/subset_verification.py; so is its floor of {MIN_N_INTERVAL} draws per level); --method mc's "
             "exact interval holds at any level")
 

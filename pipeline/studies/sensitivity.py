@@ -34,7 +34,8 @@ from ..files.records import check_window, window_label, window_summaries
 from ..files.schema import JOINTS, MIXED_UNITS, _provenance, _unit_table, command_line
 from ..files.writing import sigint_deferred
 from .sensitivity_parts import RowParts, parts_manifest
-from ..vocabulary import CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, UserError, WINDOWS
+from ..vocabulary import (CONFIDENCE, DIRECTIONS, QUANTITIES, SUMMARIES, UNMEASURED_LEVEL, UserError, WINDOWS,
+                          at_measured_level)
 from ..analysis.resolution import resolutions
 
 __all__ = ["JOINT_FAMILIES", "LEVELS", "INDICES", "ClearanceInputs", "clearance_inputs",
@@ -56,13 +57,8 @@ COVERAGE_NOTE = ("95 % intervals, z at the level 1 - SOBOL_WIDENING (1 - confide
                  "S1 97.4-99.2 %, ST 99.2-100 % at N = 256 there, and 99.1-99.3 % on the closed-form case "
                  "(quasi-static displacement at one instant, tests/test_sensitivity.py)")
 SHORT_COVERAGE = "z widened: >= 96 % measured on a maximum over time, docs/ensembles.md"   # the table's caveat
-MEASURED_LEVEL = CONFIDENCE              # the one label whose coverage benchmarks/sobol_coverage.py measured
-UNMEASURED = "coverage measured at 95 % only"   # the caveat at any other label
-
-
-def measured(confidence: float) -> bool:
-    """Whether the intervals' coverage was measured at the label ``confidence`` (95 % only)."""
-    return abs(confidence - MEASURED_LEVEL) < 1e-12
+UNMEASURED = UNMEASURED_LEVEL   # the caveat at any label but the one benchmarks/sobol_coverage.py measured
+measured = at_measured_level
 
 
 def coverage_caveat(confidence: float) -> str:
