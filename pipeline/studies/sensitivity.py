@@ -340,11 +340,12 @@ def _spread_variables(attrs: dict, stats: np.ndarray) -> dict:
     where the spread is within it, the outputs differ by numerical noise and their indices rank that noise."""
     from types import SimpleNamespace
     file = SimpleNamespace(attrs=attrs)   # resolutions() reads a file's model and scene
+    levels = [resolutions(file, q) for q in QUANTITIES]   # once per quantity: each parses the scene
     out = {}
     for s, name in enumerate(SUMMARIES):
         spread, top = np.ptp(stats[:, s], axis=0), np.max(stats[:, s], axis=0)
-        limit = np.array([[resolutions(file, q)[d].limit(top[i, j]) for j, d in enumerate(DIRECTIONS)]
-                          for i, q in enumerate(QUANTITIES)])
+        limit = np.array([[levels[i][d].limit(top[i, j]) for j, d in enumerate(DIRECTIONS)]
+                          for i in range(len(QUANTITIES))])
         cells = ("quantity", "direction")
         out[f"{name}_spread"] = (cells, spread, {"long_name": f"spread (max - min) of {name} over the evaluated "
                                                  "rows", "units": MIXED_UNITS})
